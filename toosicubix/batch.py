@@ -1,0 +1,271 @@
+"""Fit every vehicle of an annotation file and write the outputs: the job behind ``toosicubix fit``.
+
+Outputs in the output folder:
+
+- ``label_2/<image id>.txt``: KITTI labels (camera-0 frame when the camera is a KITTI ``P``), one file per
+  image, vehicles that failed left out. KITTI stores yaw only: pitch and roll are dropped there.
+- ``results.json``: every vehicle, with its full rotation, or its status "failed" and the reason.
+
+Every file is written atomically; ``results.json`` last. One vehicle that fails, even by an unexpected
+error, never stops the batch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .camera import Camera
+from .formats import kitti
+from .formats.results import (
+    RESULTS_FILENAME,
+    ImageResult,
+    VehicleResult,
+    dumps,
+    read_results,
+    results_to_json,
+)
+from .geometry import (
+    box2d_of_points,
+    clip_cuboid_to_near_plane,
+    cuboid_corners_cam,
+    ypr_from_R_cam_vehicle,
+)
+from .io_utils import atomic_write_text
+from .model import Image, Vehicle, load_images
+from .parts import build_parts_model
+from .priors import Priors, SizePrior, load_priors
+from .schemas import InputFileError
+from .solver import FitResult, SolverOptions, fit_vehicle
+
+LABEL_DIR = "label_2"
+
+
+class OutputFolderError(ValueError):
+    """The output folder cannot be used (for instance, it holds label files toosicubix did not write)."""
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """What a batch did."""
+
+    images: int
+    vehicles: int
+    ok: int
+    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason)
+    out_dir: Path
+
+
+def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
+    """Every vehicle's prototype must be in the priors table.
+
+    Raises
+    ------
+    InputFileError
+        Naming each vehicle's JSON path and listing the known prototypes.
+    """
+    known = sorted(priors)
+    problems = [
+        (f"{v.json_path}.prototype", f"unknown prototype {v.prototype!r}; known: {', '.join(known)}")
+        for im in images for v in im.vehicles if v.prototype not in priors
+    ]
+    if problems:
+        raise InputFileError(source, problems)
+
+
+def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions) -> VehicleResult:
+    """Fit one vehicle and describe it as results.json does; never raises."""
+    try:
+        parts = build_parts_model(vehicle.parts)
+        fit = fit_vehicle(parts, camera, prior, options)
+    except Exception as exc:  # one vehicle must never stop the batch
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return VehicleResult(
+            id=vehicle.id, status="failed", prototype=vehicle.prototype,
+            error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
+            details={"kitti_type": prior.kitti_type},
+        )
+    return _vehicle_result(vehicle, camera, prior, parts.click_labels, parts.param_names, fit)
+
+
+def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, click_labels: tuple[str, ...],
+                    param_names: tuple[str, ...], fit: FitResult) -> VehicleResult:
+    details: dict[str, Any] = {
+        "kitti_type": prior.kitti_type,
+        "constraints": fit.constraints,
+        "clicks": fit.n_clicks,
+        "aux_unknowns": fit.n_aux,
+    }
+    if not fit.ok:
+        details["solver"] = _solver_details(fit)
+        return VehicleResult(id=vehicle.id, status="failed", error=fit.reason, prototype=vehicle.prototype,
+                             box2d=vehicle.box2d, details=details)
+    R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
+    box2d, truncated = _box2d(vehicle, camera, R, t, d)
+    ry, pitch, roll = ypr_from_R_cam_vehicle(R)
+    details.update({
+        "box2d_source": "annotated" if vehicle.box2d is not None else "projected",
+        "truncated": truncated,
+        "yaw_pitch_roll_deg": np.rad2deg([ry, pitch, roll]).tolist(),
+        "rms_px": fit.rms_px,
+        "residuals_px": fit.residuals_px.tolist(),
+        "click_labels": list(click_labels),
+        "cost": fit.cost,
+        "prior_mahalanobis2": fit.cost_prior,
+        "parameters": {name: float(v) for name, v in zip(param_names[3:], fit.p[3:], strict=True)},
+        "solver": _solver_details(fit),
+    })
+    return VehicleResult(id=vehicle.id, status="ok", error=None, prototype=vehicle.prototype, R_cam_vehicle=R,
+                         t_cam_vehicle=t, dimensions=d, box2d=box2d, details=details)
+
+
+def _solver_details(fit: FitResult) -> dict[str, Any]:
+    return {"starts": fit.starts, "starts_from_lines": fit.starts_from_lines,
+            "descent_iterations": fit.descent_iterations, "refine_iterations": fit.refine_iterations,
+            "initial_cost": fit.initial_cost}
+
+
+def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
+    """The label's 2D box (annotated, else the projected cuboid clipped to the image) and the
+    truncation: the share of the projected cuboid's box outside the image."""
+    points_cam = clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, d))
+    uv = camera.project(points_cam)
+    full = box2d_of_points(uv)
+    truncated = 0.0
+    clipped = full
+    if camera.image_size is not None:
+        clipped = box2d_of_points(uv, camera.image_size)
+        area = (full[2] - full[0]) * (full[3] - full[1])
+        inside = max(clipped[2] - clipped[0], 0.0) * max(clipped[3] - clipped[1], 0.0)
+        truncated = float(np.clip(1.0 - inside / area, 0.0, 1.0)) if area > 0 else 0.0
+    box = vehicle.box2d if vehicle.box2d is not None else clipped
+    return np.asarray(box, dtype=float), truncated
+
+
+def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
+    """The KITTI label lines of an image's successful fits (pitch and roll dropped)."""
+    lines = []
+    for v in image_result.vehicles:
+        if not v.ok:
+            continue
+        obj = kitti.object_from_pose(
+            v.details["kitti_type"], v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
+            truncated=v.details.get("truncated", 0.0), occluded=kitti.OCCLUSION_UNKNOWN, score=1.0,
+        )
+        lines.append(kitti.format_label_line(obj))
+    return lines
+
+
+def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
+               progress: Callable[[int], None] | None = None) -> list[ImageResult]:
+    """Fit every vehicle of every image.
+
+    Parameters
+    ----------
+    progress : called with the number of vehicles just finished
+    """
+    results = []
+    for im in images:
+        vehicles = []
+        for v in im.vehicles:
+            vehicles.append(fit_one(v, im.camera, priors[v.prototype], options))
+            if progress is not None:
+                progress(1)
+        results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
+                                   image_size=im.camera.image_size, vehicles=vehicles))
+    return results
+
+
+def prepare_output_dir(out_dir: Path) -> set[str]:
+    """Create the output folder; return the label files an earlier run of toosicubix wrote there.
+
+    Raises
+    ------
+    OutputFolderError
+        ``label_2`` holds label files but no ``results.json`` says toosicubix wrote them: they may be
+        someone's ground truth, and are never overwritten.
+    """
+    label_dir = out_dir / LABEL_DIR
+    existing = sorted(p.name for p in label_dir.glob("*.txt")) if label_dir.is_dir() else []
+    results_path = out_dir / RESULTS_FILENAME
+    if existing and not results_path.is_file():
+        raise OutputFolderError(
+            f"{label_dir} holds {len(existing)} label files that toosicubix did not write (no {RESULTS_FILENAME} "
+            f"beside it); they may be ground truth. Choose another output folder."
+        )
+    previous: set[str] = set()
+    if results_path.is_file():
+        try:
+            previous = {f"{im.id}.txt" for im in read_results(results_path)}
+        except ValueError:
+            previous = set()
+    label_dir.mkdir(parents=True, exist_ok=True)
+    return previous
+
+
+def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult], header: dict[str, Any]) -> None:
+    """Write the KITTI label files, then results.json, each atomically; remove label files of an earlier
+    run that this run did not write."""
+    previous = prepare_output_dir(out_dir)
+    label_dir = out_dir / LABEL_DIR
+    written = set()
+    for im, res in zip(images, results, strict=True):
+        lines = kitti_lines(res, im.camera)
+        atomic_write_text(label_dir / f"{im.id}.txt", "".join(f"{ln}\n" for ln in lines))
+        written.add(f"{im.id}.txt")
+    atomic_write_text(out_dir / RESULTS_FILENAME, dumps(results_to_json(results, header)))
+    for stale in sorted(previous - written):
+        (label_dir / stale).unlink(missing_ok=True)
+
+
+def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
+             options: SolverOptions | None = None,
+             progress: Callable[[int], None] | None = None,
+             on_start: Callable[[int], None] | None = None) -> BatchSummary:
+    """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
+
+    Parameters
+    ----------
+    annotations : the annotation file (v1)
+    out_dir : output folder, created when missing
+    priors_path : a priors file; the bundled one when None
+    options : solver settings
+    progress : called with the number of vehicles just finished
+    on_start : called once with the number of vehicles to fit
+
+    Raises
+    ------
+    InputFileError
+        Bad annotation or priors file, unknown prototype: nothing is written.
+    OutputFolderError
+        The output folder holds label files toosicubix did not write.
+    """
+    annotations, out_dir = Path(annotations), Path(out_dir)
+    options = options or SolverOptions()
+    images = load_images(annotations)
+    priors = load_priors(priors_path)
+    check_prototypes(images, priors, annotations)
+    prepare_output_dir(out_dir)  # fail before the work, not after
+    if on_start is not None:
+        on_start(sum(len(im.vehicles) for im in images))
+    results = fit_images(images, priors, options, progress)
+    header = {
+        "generator": f"toosicubix {__version__}",
+        "annotations": str(annotations),
+        "annotations_sha256": hashlib.sha256(annotations.read_bytes()).hexdigest(),
+        "priors": priors.source if priors_path is not None else "bundled",
+        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px},
+        "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
+                 "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
+    }
+    write_outputs(out_dir, images, results, header)
+    failed = [(im.id, v.id, v.error or "") for im in results for v in im.vehicles if not v.ok]
+    n = sum(len(im.vehicles) for im in results)
+    return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir)

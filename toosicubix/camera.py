@@ -1,0 +1,97 @@
+"""The camera: intrinsics, optional lens distortion, and KITTI's per-camera offset.
+
+A KITTI projection matrix is ``P = K [I | t]``: a point in the rectified camera-0 frame (``rect``)
+projects through ``K (X_rect + t)``. Fitting uses ``K`` alone, so poses come out in the frame
+``cam = rect + t`` (camera 2 for ``P2``); ``t_cam_rect`` turns them back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .geometry import project_pinhole
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A calibrated camera.
+
+    Attributes
+    ----------
+    K : (3, 3) intrinsics, last row (0, 0, 1)
+    distortion : (k,) OpenCV coefficients, or None for an ideal pinhole
+    t_cam_rect : (3,) ``X_cam = X_rect + t_cam_rect``; zero unless built from a KITTI ``P``
+    image_size : (width, height) in pixels, or None
+    """
+
+    K: np.ndarray
+    distortion: np.ndarray | None = None
+    t_cam_rect: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    image_size: tuple[int, int] | None = None
+
+    @classmethod
+    def from_P(cls, P: np.ndarray, image_size: tuple[int, int] | None = None,
+               distortion: np.ndarray | None = None) -> Camera:
+        """Camera of a KITTI-style ``P = K [I | t]`` (3, 4)."""
+        P = np.asarray(P, dtype=float)
+        K = P[:, :3].copy()
+        return cls(K=K, distortion=distortion, t_cam_rect=np.linalg.solve(K, P[:, 3]), image_size=image_size)
+
+    @property
+    def has_distortion(self) -> bool:
+        return self.distortion is not None and bool(np.any(self.distortion != 0.0))
+
+    def normalize(self, uv: np.ndarray) -> np.ndarray:
+        """Normalized, undistorted image points ``u = K^-1 (x, y, 1)``.
+
+        Parameters
+        ----------
+        uv : (N, 2) pixels
+
+        Returns
+        -------
+        (N, 3) array, last column 1
+        """
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if self.has_distortion:
+            xy = _undistort_points(uv, self.K, self.distortion)
+        else:
+            xy = (uv - self.K[:2, 2]) @ np.linalg.inv(self.K[:2, :2]).T
+        return np.column_stack([xy, np.ones(len(xy))])
+
+    def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
+        """Where ``uv`` (N, 2) would be seen by the ideal pinhole ``K``: (N, 2) pixels."""
+        if not self.has_distortion:
+            return np.asarray(uv, dtype=float).reshape(-1, 2)
+        return project_pinhole(self.K, self.normalize(uv))
+
+    def project(self, points_cam: np.ndarray) -> np.ndarray:
+        """Pixels of camera-frame points, with lens distortion.
+
+        Parameters
+        ----------
+        points_cam : (N, 3), z > 0
+
+        Returns
+        -------
+        uv : (N, 2)
+        """
+        points_cam = np.asarray(points_cam, dtype=float).reshape(-1, 3)
+        if not self.has_distortion:
+            return project_pinhole(self.K, points_cam)
+        uv, _ = cv2.projectPoints(points_cam, np.zeros(3), np.zeros(3), self.K, self.distortion)
+        return uv.reshape(-1, 2)
+
+
+def _undistort_points(uv: np.ndarray, K: np.ndarray, distortion: np.ndarray) -> np.ndarray:
+    src = uv.reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+        out = cv2.undistortPointsIter(src, K, distortion, None, None, _UNDISTORT_CRITERIA)
+    else:  # OpenCV 5 takes the criteria in undistortPoints itself
+        out = cv2.undistortPoints(src, K, distortion, criteria=_UNDISTORT_CRITERIA)
+    return out.reshape(-1, 2)

@@ -1,0 +1,224 @@
+"""KITTI object and tracking labels, and calibration files.
+
+Label line (object benchmark)::
+
+    type truncated occluded alpha x1 y1 x2 y2 h w l x y z ry [score]
+
+Tracking labels put ``frame track_id`` in front. ``(h, w, l)`` are ``(dz, dy, dx)``; ``(x, y, z)`` is the
+bottom centre in the rectified camera-0 frame (``rect``); ``ry`` turns about camera y, so
+``R_cam_vehicle = R_y(ry) @ R_LEVEL_VEHICLE``. A KITTI file cannot hold pitch or roll: writing one
+drops them (results.json keeps the full rotation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import Camera
+from ..geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
+from . import FormatError
+
+#: KITTI's code for "occlusion unknown", written for fitted objects.
+OCCLUSION_UNKNOWN = 3
+
+
+@dataclass(frozen=True)
+class KittiObject:
+    """One label line.
+
+    Attributes
+    ----------
+    type : str, e.g. 'Car'
+    truncated : float in [0, 1] (tracking labels: 0, 1, 2)
+    occluded : int, 0 visible, 1 partly, 2 largely occluded, 3 unknown
+    alpha : float, observation angle, radians
+    box2d : (4,) (x1, y1, x2, y2) pixels
+    dimensions : (3,) ``(dx, dy, dz)`` = (l, w, h), metres
+    location_rect : (3,) bottom centre in camera-0 coordinates, metres
+    rotation_y : float, radians
+    score : float or None
+    frame, track_id : int or None, tracking labels only
+    line : int or None, where it was read (1-based)
+    """
+
+    type: str
+    truncated: float
+    occluded: int
+    alpha: float
+    box2d: np.ndarray
+    dimensions: np.ndarray
+    location_rect: np.ndarray
+    rotation_y: float
+    score: float | None = None
+    frame: int | None = None
+    track_id: int | None = None
+    line: int | None = field(default=None, compare=False)
+
+    @property
+    def R_cam_vehicle(self) -> np.ndarray:
+        """Rotation implied by ``rotation_y`` (zero pitch and roll), (3, 3)."""
+        return R_cam_vehicle_from_ypr(self.rotation_y)
+
+    def t_cam_vehicle(self, t_cam_rect: np.ndarray) -> np.ndarray:
+        """Bottom centre in the frame of the camera whose offset from camera 0 is ``t_cam_rect``, (3,)."""
+        return self.location_rect + np.asarray(t_cam_rect, dtype=float)
+
+
+def object_from_pose(
+    type_: str,
+    R_cam_vehicle: np.ndarray,
+    t_cam_vehicle: np.ndarray,
+    dimensions: np.ndarray,
+    camera: Camera,
+    box2d: np.ndarray,
+    truncated: float = 0.0,
+    occluded: int = OCCLUSION_UNKNOWN,
+    score: float | None = 1.0,
+) -> KittiObject:
+    """The KITTI label of a fitted cuboid; pitch and roll are dropped.
+
+    Parameters
+    ----------
+    R_cam_vehicle : (3, 3), t_cam_vehicle : (3,)
+        Pose in the frame where ``camera.K`` applies (camera 2 for ``P2``).
+    dimensions : (3,) ``(dx, dy, dz)``
+    camera : its ``t_cam_rect`` moves the location to camera 0.
+    """
+    location_rect = np.asarray(t_cam_vehicle, dtype=float) - camera.t_cam_rect
+    ry, _, _ = ypr_from_R_cam_vehicle(np.asarray(R_cam_vehicle, dtype=float))
+    alpha = float(wrap_angle(ry - math.atan2(location_rect[0], location_rect[2])))
+    return KittiObject(
+        type=type_, truncated=float(truncated), occluded=int(occluded), alpha=alpha,
+        box2d=np.asarray(box2d, dtype=float), dimensions=np.asarray(dimensions, dtype=float),
+        location_rect=location_rect, rotation_y=float(wrap_angle(ry)), score=score,
+    )
+
+
+def format_label_line(obj: KittiObject) -> str:
+    """One label line: 15 fields, 16 with a score; single spaces; no frame or track id."""
+    dx, dy, dz = obj.dimensions
+    fields = [
+        obj.type, f"{obj.truncated:.2f}", f"{obj.occluded:d}", f"{obj.alpha:.6f}",
+        *(f"{v:.2f}" for v in obj.box2d),
+        f"{dz:.4f}", f"{dy:.4f}", f"{dx:.4f}",
+        *(f"{v:.4f}" for v in obj.location_rect),
+        f"{obj.rotation_y:.6f}",
+    ]
+    if obj.score is not None:
+        fields.append(f"{obj.score:.4f}")
+    return " ".join(fields)
+
+
+def parse_label_line(text: str, file: str | Path = "<label>", line: int | None = None,
+                     tracking: bool = False) -> KittiObject:
+    """Parse one object (15 or 16 fields) or tracking (17 or 18 fields) label line.
+
+    Raises
+    ------
+    FormatError
+        Wrong field count, a number that does not parse or is not finite, non-positive dimensions.
+    """
+    tokens = text.split()
+    offset = 2 if tracking else 0
+    if len(tokens) not in (15 + offset, 16 + offset):
+        kind = "tracking" if tracking else "object"
+        raise FormatError(file, f"expected {15 + offset} or {16 + offset} fields in a KITTI {kind} label, "
+                                f"got {len(tokens)}: {text.strip()[:80]!r}", line)
+    try:
+        frame = int(tokens[0]) if tracking else None
+        track_id = int(tokens[1]) if tracking else None
+        values = [float(v) for v in tokens[offset + 1:]]
+    except ValueError as exc:
+        raise FormatError(file, f"expected numbers after the type: {exc}", line) from None
+    if not all(math.isfinite(v) for v in values):
+        raise FormatError(file, f"expected finite numbers, got {text.strip()[:80]!r}", line)
+    truncated, occluded, alpha = values[0], values[1], values[2]
+    h, w, l_ = values[7:10]
+    obj_type = tokens[offset]
+    if obj_type != "DontCare" and min(h, w, l_) <= 0.0:
+        raise FormatError(file, f"expected positive h, w, l, got {h}, {w}, {l_}", line)
+    return KittiObject(
+        type=obj_type, truncated=truncated, occluded=int(occluded), alpha=alpha,
+        box2d=np.array(values[3:7]), dimensions=np.array([l_, w, h]), location_rect=np.array(values[10:13]),
+        rotation_y=values[13], score=values[14] if len(values) == 15 else None,
+        frame=frame, track_id=track_id, line=line,
+    )
+
+
+def read_label_file(path: str | Path) -> list[KittiObject]:
+    """All objects of a KITTI object label file (blank lines skipped)."""
+    path = Path(path)
+    text = _read_text(path)
+    return [parse_label_line(ln, path, i) for i, ln in enumerate(text.splitlines(), 1) if ln.strip()]
+
+
+def read_tracking_file(path: str | Path) -> dict[int, list[KittiObject]]:
+    """A KITTI tracking label file, objects grouped by frame number."""
+    path = Path(path)
+    frames: dict[int, list[KittiObject]] = {}
+    for i, ln in enumerate(_read_text(path).splitlines(), 1):
+        if ln.strip():
+            obj = parse_label_line(ln, path, i, tracking=True)
+            frames.setdefault(int(obj.frame), []).append(obj)  # type: ignore[arg-type]
+    return frames
+
+
+@dataclass(frozen=True)
+class KittiCalib:
+    """A KITTI calibration file: ``P0`` ... ``P3`` (3, 4), ``R0_rect`` (3, 3), and the rest as read."""
+
+    P: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    R0_rect: np.ndarray
+    extra: dict[str, np.ndarray]
+
+    def camera(self, index: int = 2, image_size: tuple[int, int] | None = None) -> Camera:
+        """The camera of ``P<index>``."""
+        return Camera.from_P(self.P[index], image_size=image_size)
+
+
+_CALIB_ALIASES = {"R_rect": "R0_rect", "Tr_velo_cam": "Tr_velo_to_cam", "Tr_imu_velo": "Tr_imu_to_velo"}
+
+
+def read_calib(path: str | Path) -> KittiCalib:
+    """Read an object-style (``P2:``, ``R0_rect:``) or tracking-style (``R_rect``) calibration file."""
+    path = Path(path)
+    entries: dict[str, np.ndarray] = {}
+    for i, ln in enumerate(_read_text(path).splitlines(), 1):
+        if not ln.strip():
+            continue
+        key, sep, rest = ln.partition(":")
+        if not sep:
+            key, _, rest = ln.strip().partition(" ")
+        key = _CALIB_ALIASES.get(key.strip(), key.strip())
+        try:
+            entries[key] = np.array([float(v) for v in rest.split()])
+        except ValueError:
+            raise FormatError(path, f"expected numbers after {key!r}", i) from None
+    P = []
+    for k in range(4):
+        value = entries.get(f"P{k}")
+        if value is None or value.size != 12:
+            raise FormatError(path, f"expected a line 'P{k}:' with 12 numbers")
+        P.append(value.reshape(3, 4))
+    R0 = entries.get("R0_rect", np.eye(3).ravel())
+    if R0.size != 9:
+        raise FormatError(path, f"expected 9 numbers for R0_rect, got {R0.size}")
+    extra = {k: v for k, v in entries.items() if k not in {"P0", "P1", "P2", "P3", "R0_rect"}}
+    return KittiCalib(P=tuple(P), R0_rect=R0.reshape(3, 3), extra=extra)  # type: ignore[arg-type]
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
+
+
+__all__ = [
+    "OCCLUSION_UNKNOWN", "KittiCalib", "KittiObject", "format_label_line", "object_from_pose",
+    "parse_label_line", "read_calib", "read_label_file", "read_tracking_file",
+]

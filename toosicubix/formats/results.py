@@ -1,0 +1,181 @@
+"""``results.json``: what ``toosicubix fit`` found for every vehicle, with full rotations.
+
+Layout (keys may be added; these keep their names and meanings)::
+
+    {"toosicubix_results": 1, "generator": "toosicubix 0.1.0", "annotations": "...", "settings": {...},
+     "images": [{"id": "000123", "camera": {"K": [[...]], "t_cam_rect": [...], "image_size": [w, h]},
+                 "vehicles": [{"id": "3", "status": "ok", "error": null, "prototype": "Car",
+                               "R_cam_vehicle": [[...]], "t_cam_vehicle": [...], "dimensions": [...], ...}]}],
+     "summary": {...}}
+
+``t_cam_vehicle`` is in the frame where the image's ``K`` applies; ``X_rect = X_cam - t_cam_rect``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import FormatError
+
+RESULTS_VERSION = 1
+RESULTS_FILENAME = "results.json"
+#: Where ``fit`` writes and ``eval`` reads when no folder is given (relative to the working directory).
+DEFAULT_OUTPUT_DIR = "toosicubix-out"
+
+
+@dataclass(frozen=True)
+class VehicleResult:
+    """One vehicle's fit. Pose fields are None when ``status == "failed"``.
+
+    Attributes
+    ----------
+    R_cam_vehicle : (3, 3) or None
+    t_cam_vehicle : (3,) or None, bottom-face centre in the camera frame of ``K``
+    dimensions : (3,) or None, ``(dx, dy, dz)`` metres
+    box2d : (4,) or None, ``(x1, y1, x2, y2)`` pixels
+    details : every other key of the vehicle's JSON object, as read or to be written
+    """
+
+    id: str
+    status: str
+    error: str | None
+    prototype: str
+    R_cam_vehicle: np.ndarray | None = None
+    t_cam_vehicle: np.ndarray | None = None
+    dimensions: np.ndarray | None = None
+    box2d: np.ndarray | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class ImageResult:
+    """One image's fits and the camera they are expressed in.
+
+    Attributes
+    ----------
+    K : (3, 3)
+    t_cam_rect : (3,) zero unless the camera came from a KITTI ``P``
+    image_size : (width, height) or None
+    """
+
+    id: str
+    K: np.ndarray
+    t_cam_rect: np.ndarray
+    image_size: tuple[int, int] | None
+    vehicles: list[VehicleResult]
+
+
+def _array(value: np.ndarray | None) -> Any:
+    return None if value is None else np.asarray(value, dtype=float).tolist()
+
+
+def vehicle_to_json(v: VehicleResult) -> dict[str, Any]:
+    """The JSON object of one vehicle, fixed keys first."""
+    out: dict[str, Any] = {
+        "id": v.id, "status": v.status, "error": v.error, "prototype": v.prototype,
+        "R_cam_vehicle": _array(v.R_cam_vehicle), "t_cam_vehicle": _array(v.t_cam_vehicle),
+        "dimensions": _array(v.dimensions), "box2d": _array(v.box2d),
+    }
+    out.update(v.details)
+    return out
+
+
+def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The whole document: ``header`` keys, then ``images`` and a ``summary`` of counts."""
+    n_ok = sum(v.ok for im in images for v in im.vehicles)
+    n_all = sum(len(im.vehicles) for im in images)
+    doc: dict[str, Any] = {"toosicubix_results": RESULTS_VERSION, **(header or {})}
+    doc["images"] = [
+        {
+            "id": im.id,
+            "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
+                       "image_size": list(im.image_size) if im.image_size else None},
+            "vehicles": [vehicle_to_json(v) for v in im.vehicles],
+        }
+        for im in images
+    ]
+    doc["summary"] = {"images": len(images), "vehicles": n_all, "ok": n_ok, "failed": n_all - n_ok}
+    return doc
+
+
+def dumps(doc: dict[str, Any]) -> str:
+    """JSON text with NaN and infinities refused (they are not JSON)."""
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+
+
+def read_results(path: str | Path) -> list[ImageResult]:
+    """Read a ``results.json`` written by ``toosicubix fit``.
+
+    Raises
+    ------
+    FormatError
+        Not JSON, or a required key missing or malformed (the message gives its JSON path).
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
+    if not isinstance(doc, dict) or doc.get("toosicubix_results") != RESULTS_VERSION:
+        raise FormatError(path, f"$.toosicubix_results: expected {RESULTS_VERSION} (a toosicubix results file)")
+    images = []
+    for i, im in enumerate(_get(doc, "images", list, path, "$")):
+        where = f"$.images[{i}]"
+        camera = _get(im, "camera", dict, path, where)
+        K = _matrix(camera.get("K"), (3, 3), path, f"{where}.camera.K")
+        t_cam_rect = _matrix(camera.get("t_cam_rect", [0.0, 0.0, 0.0]), (3,), path, f"{where}.camera.t_cam_rect")
+        size = camera.get("image_size")
+        vehicles = []
+        for j, v in enumerate(_get(im, "vehicles", list, path, where)):
+            vw = f"{where}.vehicles[{j}]"
+            status = _get(v, "status", str, path, vw)
+            posed = status == "ok"
+            details = {k: val for k, val in v.items() if k not in _FIXED_KEYS}
+            vehicles.append(VehicleResult(
+                id=str(_get(v, "id", str, path, vw)), status=status, error=v.get("error"),
+                prototype=str(v.get("prototype", "")),
+                R_cam_vehicle=_matrix(v.get("R_cam_vehicle"), (3, 3), path, f"{vw}.R_cam_vehicle") if posed else None,
+                t_cam_vehicle=_matrix(v.get("t_cam_vehicle"), (3,), path, f"{vw}.t_cam_vehicle") if posed else None,
+                dimensions=_matrix(v.get("dimensions"), (3,), path, f"{vw}.dimensions") if posed else None,
+                box2d=_matrix(v["box2d"], (4,), path, f"{vw}.box2d") if v.get("box2d") is not None else None,
+                details=details,
+            ))
+        images.append(ImageResult(
+            id=str(_get(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
+            image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
+        ))
+    return images
+
+
+_FIXED_KEYS = {"id", "status", "error", "prototype", "R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"}
+
+
+def _get(obj: Any, key: str, kind: type, path: Path, where: str) -> Any:
+    if not isinstance(obj, dict) or key not in obj:
+        raise FormatError(path, f"{where}.{key}: missing")
+    value = obj[key]
+    if not isinstance(value, kind):
+        raise FormatError(path, f"{where}.{key}: expected {kind.__name__}, got {type(value).__name__}")
+    return value
+
+
+def _matrix(value: Any, shape: tuple[int, ...], path: Path, where: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != shape or not all(math.isfinite(x) for x in arr.ravel()):
+        raise FormatError(path, f"{where}: expected finite numbers of shape {shape}, got {value!r:.60}")
+    return arr

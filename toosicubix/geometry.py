@@ -1,0 +1,274 @@
+"""Rotations, projections and cuboids: the geometry every other module shares.
+
+Frames (see README, "Conventions"):
+
+- ``vehicle``: origin at the centre of the cuboid's bottom face; X forward, Y left, Z up.
+- ``cam``: x right, y down, z forward (OpenCV). ``X_cam = R_cam_vehicle @ X_vehicle + t_cam_vehicle``.
+
+Angles are radians; names ending in ``_deg`` are degrees. Rotations compose by their names:
+``R_a_b @ R_b_c`` is ``R_a_c``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Vehicle axes in KITTI's object frame: ``R_cam_vehicle = R_y(ry) @ R_KITTI_VEHICLE`` for an upright
+#: vehicle. Vehicle X (forward) -> camera x, vehicle Y (left) -> camera z, vehicle Z (up) -> camera -y.
+R_LEVEL_VEHICLE = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+# Corner signs in the vehicle frame, as (sx, sy, top): x = sx*dx/2, y = sy*dy/2, z = top*dz.
+# Order: bottom face counter-clockwise from front-left seen from above, then the top face likewise.
+_CORNER_SIGNS = np.array(
+    [
+        [1, 1, 0], [-1, 1, 0], [-1, -1, 0], [1, -1, 0],
+        [1, 1, 1], [-1, 1, 1], [-1, -1, 1], [1, -1, 1],
+    ],
+    dtype=float,
+)
+
+
+def hat(omega: np.ndarray) -> np.ndarray:
+    """Skew-symmetric matrix of a 3-vector: ``hat(a) @ b == cross(a, b)``.
+
+    Parameters
+    ----------
+    omega : (3,) array
+
+    Returns
+    -------
+    (3, 3) array
+    """
+    wx, wy, wz = omega
+    return np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+
+
+def so3_exp(omega: np.ndarray) -> np.ndarray:
+    """Exponential map of SO(3) (Rodrigues' formula), exact near zero.
+
+    Parameters
+    ----------
+    omega : (3,) array
+        Axis times angle, radians.
+
+    Returns
+    -------
+    (3, 3) rotation matrix
+    """
+    omega = np.asarray(omega, dtype=float)
+    theta2 = float(omega @ omega)
+    W = hat(omega)
+    if theta2 < 1e-12:
+        # Taylor series to second order; the error is O(theta^4) < 1e-24.
+        a = 1.0 - theta2 / 6.0
+        b = 0.5 - theta2 / 24.0
+    else:
+        theta = np.sqrt(theta2)
+        a = np.sin(theta) / theta
+        b = (1.0 - np.cos(theta)) / theta2
+    return np.eye(3) + a * W + b * (W @ W)
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Logarithm of SO(3): the rotation vector ``omega`` with ``so3_exp(omega) == R``.
+
+    Accurate for angles near 0 and near pi.
+
+    Parameters
+    ----------
+    R : (3, 3) rotation matrix
+
+    Returns
+    -------
+    (3,) array, norm in [0, pi]
+    """
+    R = np.asarray(R, dtype=float)
+    cos_theta = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    axis_sin = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2.0
+    sin_theta = float(np.linalg.norm(axis_sin))
+    theta = float(np.arctan2(sin_theta, cos_theta))
+    if theta < 1e-6:
+        # R ~ I + hat(omega) + O(theta^2).
+        return axis_sin * (1.0 + theta * theta / 6.0)
+    if np.pi - theta > 1e-3:
+        return axis_sin * (theta / sin_theta)
+    # Near pi the vector part vanishes; the symmetric part is cos(theta) I + (1 - cos(theta)) a a^T exactly.
+    A = ((R + R.T) / 2.0 - cos_theta * np.eye(3)) / (1.0 - cos_theta)
+    k = int(np.argmax(np.diag(A)))
+    axis = A[:, k] / np.sqrt(max(A[k, k], 1e-300))
+    axis /= np.linalg.norm(axis)
+    if axis @ axis_sin < 0.0:
+        axis = -axis
+    return axis * theta
+
+
+def geodesic_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    """Angle of the rotation ``R_a @ R_b.T``, radians in [0, pi].
+
+    Computed from the vector part and the trace together, so it stays accurate for tiny angles.
+    """
+    D = np.asarray(R_a, dtype=float) @ np.asarray(R_b, dtype=float).T
+    s = np.linalg.norm([D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]]) / 2.0
+    c = (np.trace(D) - 1.0) / 2.0
+    return float(np.arctan2(s, c))
+
+
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The rotation closest to ``M`` in Frobenius norm (SVD projection, det +1)."""
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def rot_x(angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the x axis, (3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the y axis, (3, 3): ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the z axis, (3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
+    """Wrap radians to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def R_cam_vehicle_from_ypr(ry: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """Rotation from KITTI yaw plus the vehicle's own pitch and roll.
+
+    ``R_cam_vehicle = R_y(ry) @ R_LEVEL_VEHICLE @ R_Y(pitch) @ R_X(roll)``, where ``R_Y`` and
+    ``R_X`` turn about the vehicle's own left (Y) and forward (X) axes. Positive pitch puts the nose
+    down; positive roll lowers the right side. ``ry`` is KITTI's ``rotation_y``: the vehicle faces
+    camera +x at 0 and turns about camera y.
+
+    Returns
+    -------
+    (3, 3) rotation matrix ``R_cam_vehicle``
+    """
+    return rot_y(ry) @ R_LEVEL_VEHICLE @ rot_y(pitch) @ rot_x(roll)
+
+
+def ypr_from_R_cam_vehicle(R_cam_vehicle: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of :func:`R_cam_vehicle_from_ypr`: ``(ry, pitch, roll)`` in radians.
+
+    ``ry = atan2(-f_z, f_x)`` with ``f = R e_x`` the forward axis in camera coordinates, as KITTI
+    defines it; pitch in [-pi/2, pi/2].
+    """
+    f_cam = R_cam_vehicle[:, 0]
+    ry = float(np.arctan2(-f_cam[2], f_cam[0]))
+    R_level_vehicle = R_LEVEL_VEHICLE.T @ rot_y(ry).T @ R_cam_vehicle
+    pitch = float(np.arctan2(-R_level_vehicle[2, 0], np.hypot(R_level_vehicle[0, 0], R_level_vehicle[1, 0])))
+    roll = float(np.arctan2(R_level_vehicle[2, 1], R_level_vehicle[2, 2]))
+    return ry, pitch, roll
+
+
+def cuboid_corners_vehicle(dimensions: np.ndarray) -> np.ndarray:
+    """The 8 corners of a cuboid in its own vehicle frame (origin at the bottom-face centre).
+
+    Parameters
+    ----------
+    dimensions : (3,) array
+        ``(dx, dy, dz)`` = (length, width, height), metres.
+
+    Returns
+    -------
+    corners_vehicle : (8, 3) array
+        Bottom face first (front-left, rear-left, rear-right, front-right), then the top face.
+    """
+    dx, dy, dz = np.asarray(dimensions, dtype=float)
+    scale = np.array([dx / 2.0, dy / 2.0, dz])
+    return _CORNER_SIGNS * scale
+
+
+def cuboid_corners_cam(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> np.ndarray:
+    """The 8 corners of a posed cuboid in camera coordinates, (8, 3), same order as
+    :func:`cuboid_corners_vehicle`."""
+    return cuboid_corners_vehicle(dimensions) @ np.asarray(R_cam_vehicle).T + np.asarray(t_cam_vehicle)
+
+
+def project_pinhole(K: np.ndarray, points_cam: np.ndarray) -> np.ndarray:
+    """Project camera-frame points with an ideal pinhole ``K`` (no distortion).
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics
+    points_cam : (N, 3) array, z > 0 for a meaningful result
+
+    Returns
+    -------
+    uv : (N, 2) pixels
+    """
+    homog = np.asarray(points_cam, dtype=float) @ np.asarray(K, dtype=float).T
+    return homog[:, :2] / homog[:, 2:3]
+
+
+def box2d_of_points(uv: np.ndarray, image_size: tuple[int, int] | None = None) -> np.ndarray:
+    """Axis-aligned box ``(x1, y1, x2, y2)`` around pixels, clipped to ``(width, height)`` if given.
+
+    Parameters
+    ----------
+    uv : (N, 2) pixels
+    image_size : (width, height) or None
+
+    Returns
+    -------
+    (4,) array
+    """
+    x1, y1 = uv.min(axis=0)
+    x2, y2 = uv.max(axis=0)
+    box = np.array([x1, y1, x2, y2], dtype=float)
+    if image_size is not None:
+        w, h = image_size
+        box[[0, 2]] = np.clip(box[[0, 2]], 0.0, w - 1.0)
+        box[[1, 3]] = np.clip(box[[1, 3]], 0.0, h - 1.0)
+    return box
+
+
+def box2d_iou(box_a: np.ndarray, box_b: np.ndarray) -> float:
+    """IoU of two axis-aligned boxes ``(x1, y1, x2, y2)``; 0 when either has no area."""
+    ix = max(0.0, min(box_a[2], box_b[2]) - max(box_a[0], box_b[0]))
+    iy = max(0.0, min(box_a[3], box_b[3]) - max(box_a[1], box_b[1]))
+    inter = ix * iy
+    area_a = max(0.0, box_a[2] - box_a[0]) * max(0.0, box_a[3] - box_a[1])
+    area_b = max(0.0, box_b[2] - box_b[0]) * max(0.0, box_b[3] - box_b[1])
+    union = area_a + area_b - inter
+    return float(inter / union) if union > 0.0 else 0.0
+
+
+#: The 12 edges of a cuboid as pairs of corner indices (order of :func:`cuboid_corners_vehicle`).
+CUBOID_EDGES = (
+    (0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7),
+)
+
+
+def clip_cuboid_to_near_plane(corners_cam: np.ndarray, z_near: float = 0.1) -> np.ndarray:
+    """The corners in front of ``z = z_near`` plus where the cuboid's edges cross that plane.
+
+    Projecting these gives the image extent of a cuboid that reaches behind the camera.
+
+    Parameters
+    ----------
+    corners_cam : (8, 3)
+    z_near : metres
+
+    Returns
+    -------
+    (M, 3) array, M may be 0 when the cuboid lies wholly behind the plane
+    """
+    z = corners_cam[:, 2]
+    points = [corners_cam[z >= z_near]]
+    for i, j in CUBOID_EDGES:
+        if (z[i] - z_near) * (z[j] - z_near) < 0.0:
+            s = (z_near - z[i]) / (z[j] - z[i])
+            points.append((corners_cam[i] + s * (corners_cam[j] - corners_cam[i]))[None, :])
+    return np.concatenate(points, axis=0)

@@ -1,0 +1,226 @@
+"""Fit one vehicle's cuboid from its clicks: the paper's three stages.
+
+(a) starting yaws from image lines (:mod:`.init`); (b) coordinate descent on the 3D cost from every
+start (:mod:`.descent`); (c) Levenberg-Marquardt on the pixel cost (:mod:`.refine`).
+
+Choosing among starts: the 3D cost of stage (b) falls when the vehicle shrinks toward the camera, so
+starts are never compared by it. Each descent result is moved to the scale its size prior prefers
+(the pixel data term does not change with scale; a negative scale turns a mirrored, behind-the-camera
+answer around), must then have positive dimensions and every point in front of the camera, and is
+ranked by the pixel cost. The best few with distinct rotations are refined, and the lowest final
+pixel cost wins.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..camera import Camera
+from ..geometry import R_cam_vehicle_from_ypr, geodesic_angle
+from ..parts import PartsModel
+from ..priors import SizePrior
+from .descent import descend
+from .init import yaw_candidates
+from .problem import Problem
+from .refine import MIN_DEPTH, refine, residuals_and_jacobian
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Settings of the solver.
+
+    Attributes
+    ----------
+    lambda_3d : weight of the size prior in the 3D cost of the coordinate descent (``lambda``)
+    lambda_px : weight of the size prior in the pixel cost (``lambda_p``), px^2 per unit of squared
+        Mahalanobis distance
+    min_constraints : fewer constraints than this fail the vehicle (6: pose, with the prior's 3 for size)
+    sweep_starts : yaws spread over the circle tried besides the line-based ones (0: the paper's starts only)
+    descent_iterations, descent_tolerance : stopping rules of stage (b); the descent only has to reach the
+        refinement's basin, which Levenberg-Marquardt then finishes
+    refine_starts : how many of the best, mutually distinct descent results stage (c) refines
+    distinct_deg : descent results whose rotations differ by less than this count as one
+    refine_iterations : iteration cap of stage (c)
+    rank_tolerance : a vehicle fails as degenerate when the column-scaled Jacobian at the optimum has a
+        singular value below this fraction of its largest
+    """
+
+    lambda_3d: float = 1.0
+    lambda_px: float = 1.0
+    min_constraints: int = 6
+    sweep_starts: int = 12
+    descent_iterations: int = 5
+    descent_tolerance: float = 1e-8
+    refine_starts: int = 4
+    distinct_deg: float = 2.0
+    refine_iterations: int = 100
+    rank_tolerance: float = 1e-8
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """The fit of one vehicle; the pose fields are None when ``status == 'failed'``.
+
+    Attributes
+    ----------
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) bottom-face centre; p : (P,) all unknowns
+    dimensions : (3,) ``(dx, dy, dz)`` metres
+    cost : pixel cost at the optimum (px^2 + lambda_px Mahalanobis^2)
+    residuals_px : (N, 2) projected minus clicked, undistorted pixels
+    constraints : 2 per click minus the auxiliary unknowns
+    timings : seconds per stage
+    """
+
+    status: str
+    reason: str | None
+    constraints: int
+    n_clicks: int
+    n_aux: int
+    R_cam_vehicle: np.ndarray | None = None
+    t_cam_vehicle: np.ndarray | None = None
+    p: np.ndarray | None = None
+    cost: float | None = None
+    cost_prior: float | None = None
+    residuals_px: np.ndarray | None = None
+    starts: int = 0
+    starts_from_lines: bool = False
+    descent_iterations: int = 0
+    refine_iterations: int = 0
+    initial_cost: float | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def dimensions(self) -> np.ndarray | None:
+        return None if self.p is None else self.p[:3]
+
+    @property
+    def rms_px(self) -> float | None:
+        if self.residuals_px is None or len(self.residuals_px) == 0:
+            return None
+        return float(np.sqrt(np.mean(np.sum(self.residuals_px ** 2, axis=1))))
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    R: np.ndarray
+    t: np.ndarray
+    p: np.ndarray
+    cost_px: float
+
+
+def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
+                options: SolverOptions | None = None) -> FitResult:
+    """Fit a cuboid to one vehicle's clicks.
+
+    Parameters
+    ----------
+    parts : the vehicle's linear parts model
+    camera : intrinsics (and distortion) of its image
+    prior : size prior of its prototype
+    options : solver settings; defaults when None
+
+    Returns
+    -------
+    FitResult
+        ``status='failed'`` with a reason when the clicks are too few or degenerate; never raises for
+        bad geometry.
+    """
+    options = options or SolverOptions()
+    t_start = time.perf_counter()
+    counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
+    if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
+        return FitResult("failed", _too_few(parts, options.min_constraints), **counts)
+
+    problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px)
+    yaws, from_lines = yaw_candidates(parts, problem.u, options.sweep_starts)
+    t_init = time.perf_counter()
+
+    candidates: list[_Candidate] = []
+    descent_iterations = 0
+    for ry in yaws:
+        d = descend(problem, R_cam_vehicle_from_ypr(ry), options.descent_iterations, options.descent_tolerance)
+        descent_iterations += d.iterations
+        s = problem.prior_scale(d.p)
+        if not np.isfinite(s) or s == 0.0:
+            continue
+        p, t = s * d.p, s * d.t_cam_vehicle
+        if np.all(p[:3] > 0) and problem.min_depth(d.R_cam_vehicle, t, p) > MIN_DEPTH:
+            candidates.append(_Candidate(d.R_cam_vehicle, t, p, problem.cost_px(d.R_cam_vehicle, t, p)))
+    t_descent = time.perf_counter()
+    base = {"starts": len(yaws), "starts_from_lines": from_lines, "descent_iterations": descent_iterations}
+    if not candidates:
+        return FitResult("failed", "degenerate clicks: no start led to a cuboid in front of the camera",
+                         **counts, **base)
+
+    chosen = _distinct_best(candidates, options.refine_starts, np.deg2rad(options.distinct_deg))
+    best = None
+    refine_iterations = 0
+    for c in chosen:
+        r = refine(problem, c.R, c.t, c.p, max_iterations=options.refine_iterations)
+        refine_iterations += r.iterations
+        if best is None or r.cost < best.cost:
+            best = r
+    t_refine = time.perf_counter()
+    timings = {"init": t_init - t_start, "descent": t_descent - t_init, "refine": t_refine - t_descent}
+
+    degenerate = _degeneracy(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.rank_tolerance)
+    residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
+    prior_r = problem.prior_residual(best.p)
+    common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
+                  timings={**timings, "total": time.perf_counter() - t_start})
+    if degenerate:
+        return FitResult("failed", degenerate, **common)
+    return FitResult(
+        "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
+        cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, **common,
+    )
+
+
+def _distinct_best(candidates: list[_Candidate], k: int, min_angle: float) -> list[_Candidate]:
+    chosen: list[_Candidate] = []
+    for c in sorted(candidates, key=lambda c: c.cost_px):
+        if all(geodesic_angle(c.R, o.R) >= min_angle for o in chosen):
+            chosen.append(c)
+            if len(chosen) == k:
+                break
+    return chosen
+
+
+_BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")
+
+
+def _degeneracy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, tolerance: float) -> str | None:
+    """A reason when the clicks and the prior leave a direction of the unknowns undetermined, else None."""
+    _, J = residuals_and_jacobian(problem, R, t, p)
+    norms = np.linalg.norm(J, axis=0)
+    if np.any(norms == 0.0):
+        names = _unknown_names(problem)
+        missing = [names[i] for i in np.flatnonzero(norms == 0.0)]
+        return f"degenerate clicks: nothing constrains {', '.join(missing)}"
+    _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    if s[-1] >= tolerance * s[0]:
+        return None
+    names = _unknown_names(problem)
+    null = np.abs(Vt[-1])
+    involved = sorted({names[i] for i in np.flatnonzero(null > 0.3 * null.max())})
+    return f"degenerate clicks: they do not determine {', '.join(involved)} (Jacobian rank deficient)"
+
+
+def _unknown_names(problem: Problem) -> list[str]:
+    return [*_BLOCKS, *problem.parts.param_names]
+
+
+def _too_few(parts: PartsModel, needed: int) -> str:
+    return (f"too few constraints: {parts.n_clicks} clicked points give {parts.constraints} "
+            f"(2 per point minus {parts.n_aux} auxiliary unknowns); at least {needed} are needed to place "
+            f"the cuboid with its size prior, 8 to fix its shape from the clicks alone")
+
+
+__all__ = ["FitResult", "SolverOptions", "fit_vehicle"]
