@@ -17,12 +17,8 @@ from .conftest import REPO
 SAMPLE = REPO / "samples" / "annotations.json"
 
 
-def run(*args: str, cwd: Path | None = None):
-    runner = CliRunner()
-    if cwd is None:
-        return runner.invoke(main, list(args))
-    with runner.isolated_filesystem(temp_dir=cwd):
-        return runner.invoke(main, list(args))
+def run(*args: str):
+    return CliRunner().invoke(main, list(args))
 
 
 def sample_doc() -> dict:
@@ -67,13 +63,12 @@ def test_sample_fit_matches_its_ground_truth(tmp_path):
             np.testing.assert_allclose(fitted.box2d, gt.box2d, atol=0.1)
 
 
-def test_default_output_folder_is_what_eval_reads(tmp_path):
-    runner = CliRunner()
-    with runner.isolated_filesystem(temp_dir=tmp_path):
-        result = runner.invoke(main, ["fit", str(SAMPLE)])
-        assert result.exit_code == 0, result.output
-        assert Path("toosicubix-out/results.json").is_file()
-        assert Path("toosicubix-out/label_2/000001.txt").is_file()
+def test_default_output_folder_is_what_eval_reads(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = run("fit", str(SAMPLE))
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "toosicubix-out" / "results.json").is_file()
+    assert (tmp_path / "toosicubix-out" / "label_2" / "000001.txt").is_file()
 
 
 def test_one_unsolvable_vehicle_does_not_stop_the_batch(tmp_path):

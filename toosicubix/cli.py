@@ -133,6 +133,77 @@ class _ProgressBar:
 
 
 # --- eval: owned by the evaluation module; keep edits inside this section ---------------------------------
+@main.command("eval")
+@click.argument("out", required=False, default=DEFAULT_OUTPUT_DIR, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--kitti", "kitti_dir", type=click.Path(path_type=Path), default=None,
+              help="KITTI object ground truth: a root with label_2/ and calib/, or a folder of label .txt files "
+                   "(calib then looked for beside it). Example: --kitti data/kitti")
+@click.option("--kitti-tracking", "tracking_dir", type=click.Path(path_type=Path), default=None,
+              help="KITTI tracking ground truth: a root with label_02/<seq>.txt and calib/<seq>.txt; image ids are "
+                   "<seq>_<frame as 6 digits>. Example: --kitti-tracking data/kitti_tracking")
+@click.option("--cityscapes", "cityscapes_dir", type=click.Path(path_type=Path), default=None,
+              help="Cityscapes 3D ground truth: a folder searched recursively for *_gtBbox3d.json; image id = file "
+                   "stem without _gtBbox3d. Example: --cityscapes gtBbox3d/val")
+@click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
+              help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
+@click.option("--classes", default=None,
+              help="Comma-separated ground-truth classes to score, case-insensitive [default: Car,Van,Truck for "
+                   "KITTI; car,truck,bus,caravan,trailer,train for Cityscapes]. Example: --classes Car,Van")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the summary, every matched object and the unmatched ones as JSON. "
+                   "Example: --json eval.json")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write one CSV row per matched object. Example: --csv eval.csv")
+@click.option("-q", "--quiet", is_flag=True, help="No warnings or notes on stderr; the table still goes to stdout.")
+def eval_command(out: Path, kitti_dir: Path | None, tracking_dir: Path | None, cityscapes_dir: Path | None,
+                 min_iou: float, classes: str | None, json_path: Path | None, csv_path: Path | None,
+                 quiet: bool) -> None:
+    """Score fitted cuboids against KITTI or Cityscapes 3D ground truth, as the paper's Evaluation does.
+
+    Reads OUT (a `toosicubix fit` output folder, default toosicubix-out): results.json with full rotations,
+    else label_2/*.txt read as yaw only. Pairs each predicted image with its ground truth by id (file stem),
+    matches objects by 2D box IoU (Hungarian), and reports per metric the mean and median: exact 3D IoU with
+    full rotations, sIoU, E_R (degrees), E_t, E_d, E_comb, plus KITTI's yaw-only IoU for comparison; then
+    breakdowns by depth and occlusion, and the unmatched objects. Poses are compared in the camera frame of
+    the prediction's K. The table goes to stdout, warnings to stderr.
+
+    Exit code 0 on success, 2 for a missing folder, a malformed file or a predicted image without ground truth.
+
+    \b
+    Example:
+      toosicubix eval --kitti data/kitti
+      toosicubix eval runs/kitti-out --kitti data/kitti --json eval.json --csv eval.csv
+    """
+    from .evaluation import EvalOptions, EvaluationInputError, evaluate_folder, format_report, write_csv, write_json
+    from .formats import FormatError
+
+    given = [(kind, path) for kind, path in (("kitti", kitti_dir), ("kitti-tracking", tracking_dir),
+                                             ("cityscapes", cityscapes_dir)) if path is not None]
+    if len(given) != 1:
+        raise click.UsageError("give exactly one ground truth: --kitti DIR, --kitti-tracking DIR or --cityscapes DIR")
+    gt_kind, gt_dir = given[0]
+    class_list = tuple(c.strip() for c in classes.split(",") if c.strip()) if classes is not None else None
+    if class_list is not None and not class_list:
+        raise click.BadParameter("expected at least one class name", param_hint="--classes")
+    try:
+        result = evaluate_folder(out, gt_kind, gt_dir, EvalOptions(min_iou=min_iou, classes=class_list))
+    except (EvaluationInputError, FormatError) as exc:
+        raise BadInput(str(exc)) from None
+    if not quiet:
+        for warning in result.warnings:
+            click.echo(f"warning: {warning}", err=True)
+    click.echo(format_report(result), nl=False)
+    try:
+        if json_path is not None:
+            write_json(result, json_path)
+        if csv_path is not None:
+            write_csv(result, csv_path)
+    except OSError as exc:
+        raise BadInput(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+    if not quiet:
+        written = [str(p) for p in (json_path, csv_path) if p is not None]
+        if written:
+            click.echo(f"wrote {' and '.join(written)}", err=True)
 # --- end of eval -----------------------------------------------------------------------------------------
 
 
