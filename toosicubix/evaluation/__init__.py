@@ -1,0 +1,54 @@
+"""Scoring fitted cuboids against KITTI and Cityscapes 3D ground truth (paper section "Evaluation Metrics").
+
+Layers, each a small module: :mod:`.cuboid` (the posed box), :mod:`.iou` (exact 3D IoU with full
+rotations; KITTI's yaw-only variant), :mod:`.metrics` (IoU, sIoU, E_R, E_t, E_d, E_comb as pure
+functions), :mod:`.ground_truth` and :mod:`.predictions` (readers into one per-image form),
+:mod:`.matching` (Hungarian pairing on 2D IoU), :mod:`.evaluate` (the pipeline) and :mod:`.report`
+(aggregates, table, JSON, CSV). Nothing here imports the solver or the CLI.
+
+Example
+-------
+>>> from toosicubix.evaluation import EvalOptions, evaluate_folder, format_report
+>>> result = evaluate_folder("toosicubix-out", "kitti", "data/kitti", EvalOptions(min_iou=0.5))  # doctest: +SKIP
+>>> print(format_report(result))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from .cuboid import Cuboid
+from .errors import EvaluationInputError
+from .evaluate import EvalOptions, evaluate, evaluate_folder
+from .ground_truth import (
+    CityscapesGroundTruth,
+    GroundTruthSource,
+    GtImage,
+    GtObject,
+    KittiObjectGroundTruth,
+    KittiTrackingGroundTruth,
+    open_ground_truth,
+)
+from .iou import intersection_volume_3d, iou_3d, iou_bev_height_yaw
+from .matching import Matching, box_iou_matrix, match_boxes
+from .metrics import (
+    ObjectMetrics,
+    combined_error,
+    dimension_error,
+    object_metrics,
+    rotation_error_deg,
+    scale_factor,
+    scaled_iou,
+    translation_error,
+)
+from .predictions import Predictions, PredImage, PredObject, load_predictions
+from .records import EvaluationResult, MatchedObject, UnscoredObject
+from .report import format_report, result_to_csv, result_to_json, summarize, write_csv, write_json
+
+__all__ = [
+    "CityscapesGroundTruth", "Cuboid", "EvalOptions", "EvaluationInputError", "EvaluationResult", "GroundTruthSource",
+    "GtImage", "GtObject", "KittiObjectGroundTruth", "KittiTrackingGroundTruth", "MatchedObject", "Matching",
+    "ObjectMetrics", "PredImage", "PredObject", "Predictions", "UnscoredObject", "box_iou_matrix", "combined_error",
+    "dimension_error", "evaluate", "evaluate_folder", "format_report", "intersection_volume_3d", "iou_3d",
+    "iou_bev_height_yaw", "load_predictions", "match_boxes", "object_metrics", "open_ground_truth",
+    "result_to_csv", "result_to_json", "rotation_error_deg", "scale_factor", "scaled_iou", "summarize",
+    "translation_error", "write_csv", "write_json",
+]

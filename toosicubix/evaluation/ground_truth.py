@@ -1,0 +1,356 @@
+"""Ground truth from KITTI object labels, KITTI tracking labels or Cityscapes 3D, in one per-image form.
+
+Every source turns one image id into a :class:`GtImage`: its objects as cuboids in the ground
+truth's own frame ``rect`` plus ``t_cam_rect``, the offset of the camera whose ``K`` applies
+(``X_cam = X_rect + t_cam_rect``):
+
+- KITTI: ``rect`` is camera 0; ``t_cam_rect = K^-1 P2[:, 3]`` from the frame's (or sequence's) calib
+  file, about 6 cm; None when there is no calib file, so the caller must supply it.
+- Cityscapes 3D: boxes are converted from the ego frame straight into the camera frame of ``K``, so
+  ``rect`` is that frame and ``t_cam_rect`` is zero.
+
+Image ids: KITTI object ``000123`` (``label_2/000123.txt``); KITTI tracking ``<seq>_<frame as 6
+digits>``, e.g. ``0010_000123`` (``label_02/0010.txt``, frame 123); Cityscapes the file stem without
+``_gtBbox3d``, e.g. ``aachen_000000_000019`` (a trailing ``_leftImg8bit`` on the asked id is ignored).
+Only images that are asked for are read.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..formats import kitti
+from ..formats.cityscapes import read_gtbbox3d
+from .cuboid import Cuboid
+from .errors import EvaluationInputError
+
+#: Classes scored by default, compared case-insensitively.
+KITTI_DEFAULT_CLASSES = ("Car", "Van", "Truck")
+CITYSCAPES_DEFAULT_CLASSES = ("car", "truck", "bus", "caravan", "trailer", "train")
+#: Class of a Cityscapes ``ignore`` region (it has no 3D box and is never scored).
+CITYSCAPES_IGNORE_CLASS = "ignore"
+
+
+@dataclass(frozen=True)
+class GtObject:
+    """One ground-truth object.
+
+    Attributes
+    ----------
+    index : position among the image's objects as read (0-based, all classes)
+    cls : KITTI type ('Car', 'DontCare', ...) or Cityscapes label ('car', ...)
+    cuboid_rect : the cuboid in the ground truth's ``rect`` frame, or None (KITTI DontCare, Cityscapes ignore)
+    box2d : (4,) ``(x1, y1, x2, y2)`` pixels (Cityscapes: the amodal box)
+    truncation : KITTI truncation (fraction; tracking labels 0, 1, 2) or Cityscapes fraction; None if absent
+    occlusion : KITTI occlusion level 0-3, else None
+    occlusion_fraction : Cityscapes occlusion in [0, 1], else None
+    track_id : KITTI tracking track id, Cityscapes instanceId, else None
+    source : where it was read: ``file:line`` or ``file $.objects[i]``
+    subtype : Cityscapes ``3d.type`` (e.g. 'Mid Size Car'), else ''
+    """
+
+    index: int
+    cls: str
+    cuboid_rect: Cuboid | None
+    box2d: np.ndarray
+    truncation: float | None
+    occlusion: int | None
+    occlusion_fraction: float | None
+    track_id: int | None
+    source: str
+    subtype: str = ""
+
+
+@dataclass(frozen=True)
+class GtImage:
+    """The ground truth of one image.
+
+    Attributes
+    ----------
+    id : image id
+    objects : every object read, all classes
+    t_cam_rect : (3,) ``X_cam = X_rect + t_cam_rect`` for the camera whose ``K`` applies; None when
+        unknown (KITTI without a calib file)
+    K : (3, 3) intrinsics of that camera, or None when unknown
+    source : the label file read (tracking: ``file`` plus ``frame N``)
+    calib_source : the calibration read, or None
+    """
+
+    id: str
+    objects: tuple[GtObject, ...]
+    t_cam_rect: np.ndarray | None
+    K: np.ndarray | None
+    source: str
+    calib_source: str | None = None
+
+
+class GroundTruthSource:
+    """A ground-truth dataset opened for reading, image by image.
+
+    Attributes
+    ----------
+    kind : 'kitti', 'kitti-tracking' or 'cityscapes'
+    root : the folder given
+    default_classes : classes scored when none are asked for
+    occlusion_kind : 'level' (KITTI 0-3) or 'fraction' (Cityscapes)
+    """
+
+    kind: str = ""
+    default_classes: tuple[str, ...] = ()
+    occlusion_kind: str = "level"
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise EvaluationInputError(f"{self.root}: ground-truth folder not found ({self.kind})")
+
+    def image_ids(self) -> list[str]:
+        """Every image id that has ground truth, sorted."""
+        raise NotImplementedError
+
+    def resolve_id(self, image_id: str) -> str:
+        """The ground-truth id a prediction's image id pairs with (the same id unless a source says otherwise)."""
+        return image_id
+
+    def load(self, image_id: str) -> GtImage:
+        """The ground truth of one image.
+
+        Raises
+        ------
+        EvaluationInputError
+            No ground truth for that id; the message names the path that was expected.
+        FormatError
+            A malformed file (file and line, or JSON path).
+        """
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        """One line saying what is read, for reports."""
+        return f"{self.kind} ground truth in {self.root}"
+
+
+def _find_label_dir(root: Path, name: str, kind: str) -> tuple[Path, Path | None]:
+    """``(label folder, calib folder or None)`` of a KITTI root or a bare label folder."""
+    for candidate in (root / name, root / "training" / name):
+        if candidate.is_dir():
+            calib = candidate.parent / "calib"
+            return candidate, calib if calib.is_dir() else None
+    if any(root.glob("*.txt")):
+        calib = root.parent / "calib"
+        return root, calib if calib.is_dir() else None
+    raise EvaluationInputError(
+        f"{root}: expected a KITTI {kind} root with {name}/ (and calib/), or a folder of .txt label files; "
+        f"found neither"
+    )
+
+
+def _kitti_gt_object(obj: kitti.KittiObject, index: int, source: Path) -> GtObject:
+    cuboid = None
+    if obj.type != "DontCare":
+        cuboid = Cuboid(obj.R_cam_vehicle, obj.location_rect, obj.dimensions)
+    return GtObject(
+        index=index, cls=obj.type, cuboid_rect=cuboid, box2d=np.asarray(obj.box2d, dtype=float),
+        truncation=float(obj.truncated), occlusion=int(obj.occluded), occlusion_fraction=None,
+        track_id=obj.track_id, source=f"{source}:{obj.line}",
+    )
+
+
+def _calib_offset(calib_path: Path | None) -> tuple[np.ndarray | None, np.ndarray | None, str | None]:
+    """``(t_cam_rect, K, source)`` of camera 2 from a calib file, or Nones when there is none."""
+    if calib_path is None or not calib_path.is_file():
+        return None, None, None
+    camera = kitti.read_calib(calib_path).camera(2)
+    return camera.t_cam_rect, camera.K, str(calib_path)
+
+
+class KittiObjectGroundTruth(GroundTruthSource):
+    """KITTI object-benchmark labels: ``DIR/label_2/<id>.txt`` with ``DIR/calib/<id>.txt``, or ``DIR/<id>.txt``
+    with the calib folder at ``DIR/../calib``."""
+
+    kind = "kitti"
+    default_classes = KITTI_DEFAULT_CLASSES
+
+    def __init__(self, root: str | Path):
+        super().__init__(root)
+        self.label_dir, self.calib_dir = _find_label_dir(self.root, "label_2", "object")
+
+    def image_ids(self) -> list[str]:
+        return sorted(p.stem for p in self.label_dir.glob("*.txt"))
+
+    def load(self, image_id: str) -> GtImage:
+        path = self.label_dir / f"{image_id}.txt"
+        if not path.is_file():
+            raise EvaluationInputError(f"no ground truth for image {image_id!r}: expected {path}")
+        objects = tuple(_kitti_gt_object(obj, i, path) for i, obj in enumerate(kitti.read_label_file(path)))
+        calib = self.calib_dir / f"{image_id}.txt" if self.calib_dir is not None else None
+        t_cam_rect, K, calib_source = _calib_offset(calib)
+        return GtImage(id=image_id, objects=objects, t_cam_rect=t_cam_rect, K=K, source=str(path),
+                       calib_source=calib_source)
+
+    def describe(self) -> str:
+        calib = self.calib_dir if self.calib_dir is not None else "none found"
+        return f"KITTI object labels in {self.label_dir} (calib: {calib})"
+
+
+_TRACKING_ID = re.compile(r"^(\d+)_(\d+)$")
+
+
+def tracking_image_id(sequence: str, frame: int) -> str:
+    """The image id of a tracking frame: ``<seq>_<frame as 6 digits>``, e.g. ``0010_000123``."""
+    return f"{sequence}_{frame:06d}"
+
+
+class KittiTrackingGroundTruth(GroundTruthSource):
+    """KITTI tracking labels: ``DIR/label_02/<seq>.txt`` with ``DIR/calib/<seq>.txt``; image ids
+    ``<seq>_<frame as 6 digits>``."""
+
+    kind = "kitti-tracking"
+    default_classes = KITTI_DEFAULT_CLASSES
+
+    def __init__(self, root: str | Path):
+        super().__init__(root)
+        self.label_dir, self.calib_dir = _find_label_dir(self.root, "label_02", "tracking")
+        self._sequences: dict[str, dict[int, list[kitti.KittiObject]]] = {}
+
+    def image_ids(self) -> list[str]:
+        """Frames 0 to the last labelled frame of every sequence (a frame without rows has no objects)."""
+        ids = []
+        for path in sorted(self.label_dir.glob("*.txt")):
+            # Only the frame column is needed here: a cheap scan instead of a full parse.
+            last = -1
+            for line in path.read_text(encoding="utf-8").splitlines():
+                first = line.split(maxsplit=1)[:1]
+                if first and first[0].isdigit():
+                    last = max(last, int(first[0]))
+            ids.extend(tracking_image_id(path.stem, f) for f in range(last + 1))
+        return ids
+
+    def _sequence(self, sequence: str) -> dict[int, list[kitti.KittiObject]]:
+        if sequence not in self._sequences:
+            self._sequences[sequence] = kitti.read_tracking_file(self.label_dir / f"{sequence}.txt")
+        return self._sequences[sequence]
+
+    def load(self, image_id: str) -> GtImage:
+        m = _TRACKING_ID.match(image_id)
+        if m is None:
+            raise EvaluationInputError(
+                f"image id {image_id!r} is not a KITTI tracking id: expected <sequence>_<frame>, e.g. 0010_000123")
+        sequence, frame = m.group(1), int(m.group(2))
+        path = self.label_dir / f"{sequence}.txt"
+        if not path.is_file():
+            raise EvaluationInputError(f"no ground truth for image {image_id!r}: expected {path} (sequence {sequence})")
+        # A frame without rows has no labelled objects.
+        rows = self._sequence(sequence).get(frame, [])
+        objects = tuple(_kitti_gt_object(obj, i, path) for i, obj in enumerate(rows))
+        calib = self.calib_dir / f"{sequence}.txt" if self.calib_dir is not None else None
+        t_cam_rect, K, calib_source = _calib_offset(calib)
+        return GtImage(id=image_id, objects=objects, t_cam_rect=t_cam_rect, K=K, source=f"{path} frame {frame}",
+                       calib_source=calib_source)
+
+    def describe(self) -> str:
+        calib = self.calib_dir if self.calib_dir is not None else "none found"
+        return f"KITTI tracking labels in {self.label_dir} (calib: {calib})"
+
+
+_GTBBOX3D_SUFFIX = "_gtBbox3d"
+_IMAGE_SUFFIXES = ("_leftImg8bit", "_gtBbox3d")
+
+
+class CityscapesGroundTruth(GroundTruthSource):
+    """Cityscapes 3D ``*_gtBbox3d.json`` files anywhere under ``DIR`` (other ``*.json`` files are read too);
+    image id = file stem without ``_gtBbox3d``."""
+
+    kind = "cityscapes"
+    default_classes = CITYSCAPES_DEFAULT_CLASSES
+    occlusion_kind = "fraction"
+
+    def __init__(self, root: str | Path):
+        super().__init__(root)
+        self._files: dict[str, Path] = {}
+        self._clashes: dict[str, list[Path]] = {}
+        for path in sorted(self.root.rglob("*.json")):
+            stem = path.stem
+            preferred = stem.endswith(_GTBBOX3D_SUFFIX)
+            image_id = stem[: -len(_GTBBOX3D_SUFFIX)] if preferred else stem
+            known = self._files.get(image_id)
+            if known is None:
+                self._files[image_id] = path
+            elif preferred and not known.stem.endswith(_GTBBOX3D_SUFFIX):
+                self._files[image_id] = path
+            elif preferred == known.stem.endswith(_GTBBOX3D_SUFFIX):
+                self._clashes.setdefault(image_id, [known]).append(path)
+        if not self._files:
+            raise EvaluationInputError(
+                f"{self.root}: no Cityscapes 3D *_gtBbox3d.json files found (searched recursively)")
+
+    def image_ids(self) -> list[str]:
+        return sorted(self._files)
+
+    def resolve_id(self, image_id: str) -> str:
+        if image_id in self._files:
+            return image_id
+        for suffix in _IMAGE_SUFFIXES:
+            if image_id.endswith(suffix) and image_id[: -len(suffix)] in self._files:
+                return image_id[: -len(suffix)]
+        return image_id
+
+    def load(self, image_id: str) -> GtImage:
+        gt_id = self.resolve_id(image_id)
+        if gt_id in self._clashes:
+            files = ", ".join(str(p) for p in self._clashes[gt_id])
+            raise EvaluationInputError(f"image {image_id!r}: several ground-truth files have that name: {files}")
+        path = self._files.get(gt_id)
+        if path is None:
+            raise EvaluationInputError(
+                f"no ground truth for image {image_id!r}: "
+                f"expected a file {gt_id}{_GTBBOX3D_SUFFIX}.json under {self.root}")
+        ann = read_gtbbox3d(path)
+        objects = []
+        for box in ann.objects:
+            R_cam_vehicle, t_cam_vehicle = box.pose_cam(ann.camera)
+            objects.append(GtObject(
+                index=box.index, cls=box.label, cuboid_rect=Cuboid(R_cam_vehicle, t_cam_vehicle, box.dimensions),
+                box2d=box.box2d_amodal, truncation=box.truncation, occlusion=None, occlusion_fraction=box.occlusion,
+                track_id=box.instance_id, source=f"{path} $.objects[{box.index}]", subtype=box.type,
+            ))
+        for region in ann.ignore:
+            objects.append(GtObject(
+                index=len(ann.objects) + region.index, cls=CITYSCAPES_IGNORE_CLASS, cuboid_rect=None,
+                box2d=region.box2d, truncation=None, occlusion=None, occlusion_fraction=None,
+                track_id=region.instance_id, source=f"{path} $.ignore[{region.index}]",
+            ))
+        return GtImage(id=gt_id, objects=tuple(objects), t_cam_rect=np.zeros(3), K=ann.camera.K, source=str(path),
+                       calib_source=str(path))
+
+    def describe(self) -> str:
+        return f"Cityscapes 3D gtBbox3d files under {self.root} ({len(self._files)} images)"
+
+
+#: The ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` sources by kind.
+SOURCES: dict[str, type[GroundTruthSource]] = {
+    "kitti": KittiObjectGroundTruth,
+    "kitti-tracking": KittiTrackingGroundTruth,
+    "cityscapes": CityscapesGroundTruth,
+}
+
+
+def open_ground_truth(kind: str, root: str | Path) -> GroundTruthSource:
+    """Open a ground-truth folder.
+
+    Parameters
+    ----------
+    kind : 'kitti', 'kitti-tracking' or 'cityscapes'
+    root : the folder
+
+    Raises
+    ------
+    EvaluationInputError
+        Unknown kind, missing folder, or a folder without the expected files.
+    """
+    if kind not in SOURCES:
+        raise EvaluationInputError(f"unknown ground-truth kind {kind!r}; expected one of {', '.join(SOURCES)}")
+    return SOURCES[kind](root)

@@ -1,0 +1,255 @@
+"""Aggregates of an evaluation and its outputs: the terminal table, JSON and CSV.
+
+Every metric is reported as mean (as the paper does) and median, over all matched objects and per
+bin of ground-truth depth (z in the camera frame) and of occlusion (KITTI level; Cityscapes
+occlusion fraction binned, see :data:`OCCLUSION_FRACTION_BINS`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..io_utils import atomic_write_text
+from .records import EvaluationResult, MatchedObject
+
+#: Depth bins over the ground truth's z, metres: [lo, hi).
+DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 50.0), (50.0, math.inf))
+#: KITTI occlusion levels.
+OCCLUSION_LEVELS = {0: "0 fully visible", 1: "1 partly occluded", 2: "2 largely occluded", 3: "3 unknown"}
+#: Cityscapes occlusion-fraction bins: [lo, hi), the last one closed.
+OCCLUSION_FRACTION_BINS: tuple[tuple[float, float], ...] = ((0.0, 0.1), (0.1, 0.4), (0.4, 0.7), (0.7, 1.0))
+
+#: (summary key of the mean, summary key of the median, attribute of ObjectMetrics), in the paper's order.
+_STAT_KEYS = (
+    ("iou_mean", "iou_median", "iou"),
+    ("siou_mean", "siou_median", "siou"),
+    ("e_r_mean_deg", "e_r_median_deg", "e_r_deg"),
+    ("e_t_mean", "e_t_median", "e_t"),
+    ("e_d_mean", "e_d_median", "e_d"),
+    ("e_comb_mean", "e_comb_median", "e_comb"),
+    ("iou_kitti_mean", "iou_kitti_median", "iou_kitti"),
+)
+
+
+def metric_stats(records: Sequence[MatchedObject]) -> dict[str, float | None]:
+    """Mean and median of every metric over ``records``; None when there are none.
+
+    Keys: ``iou_mean``, ``iou_median``, ``siou_mean``, ..., ``e_r_mean_deg``, ``e_r_median_deg``, ...,
+    ``iou_kitti_mean``, ``iou_kitti_median``.
+    """
+    out: dict[str, float | None] = {}
+    for mean_key, median_key, attr in _STAT_KEYS:
+        values = np.array([getattr(r.metrics, attr) for r in records], dtype=float)
+        out[mean_key] = float(values.mean()) if len(values) else None
+        out[median_key] = float(np.median(values)) if len(values) else None
+    return out
+
+
+def summarize(result: EvaluationResult) -> dict[str, Any]:
+    """The summary block: counts, then mean and median of every metric over the matched objects."""
+    return {
+        "n_matched": len(result.matched),
+        "n_unmatched_pred": len(result.unmatched_pred),
+        "n_unmatched_gt": len(result.unmatched_gt),
+        "n_failed_pred": len(result.failed_pred),
+        "n_gt_excluded": sum(result.gt_excluded.values()),
+        "n_images": result.n_images,
+        "n_gt_images_without_pred": result.n_gt_images_without_pred,
+        **metric_stats(result.matched),
+    }
+
+
+def _bin_label(lo: float, hi: float, unit: str = "") -> str:
+    return f"{lo:g}+{unit}" if math.isinf(hi) else f"{lo:g}-{hi:g}{unit}"
+
+
+def _breakdown(records: Sequence[MatchedObject], bins: Sequence[tuple[str, Callable[[MatchedObject], bool]]]
+               ) -> list[dict[str, Any]]:
+    rows = []
+    for label, belongs in bins:
+        members = [r for r in records if belongs(r)]
+        rows.append({"bin": label, "n": len(members), **metric_stats(members)})
+    return rows
+
+
+def depth_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
+    """Statistics per ground-truth depth bin (:data:`DEPTH_BINS`; a depth below 0 counts in the first)."""
+    bins = []
+    for k, (lo, hi) in enumerate(DEPTH_BINS):
+        low = -math.inf if k == 0 else lo
+        bins.append((_bin_label(lo, hi, " m"), lambda r, low=low, hi=hi: low <= r.depth < hi))
+    return _breakdown(records, bins)
+
+
+def occlusion_breakdown(records: Sequence[MatchedObject], kind: str) -> list[dict[str, Any]]:
+    """Statistics per KITTI occlusion level (``kind='level'``) or Cityscapes occlusion-fraction bin
+    (``kind='fraction'``, :data:`OCCLUSION_FRACTION_BINS`); objects without the field go to 'unknown'."""
+    if kind == "level":
+        bins = [(label, lambda r, level=level: r.occlusion == level) for level, label in OCCLUSION_LEVELS.items()]
+        bins.append(("unknown", lambda r: r.occlusion not in OCCLUSION_LEVELS))
+    else:
+        bins = []
+        for k, (lo, hi) in enumerate(OCCLUSION_FRACTION_BINS):
+            last = k == len(OCCLUSION_FRACTION_BINS) - 1
+            bins.append((f"{lo:g}-{hi:g}", lambda r, lo=lo, hi=hi, last=last: r.occlusion_fraction is not None
+                         and lo <= r.occlusion_fraction and (r.occlusion_fraction < hi or last)))
+        bins.append(("unknown", lambda r: r.occlusion_fraction is None))
+    return [row for row in _breakdown(records, bins) if row["n"] > 0 or row["bin"] != "unknown"]
+
+
+def breakdowns(result: EvaluationResult) -> dict[str, Any]:
+    """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``."""
+    return {
+        "depth": depth_breakdown(result.matched),
+        "occlusion": occlusion_breakdown(result.matched, result.occlusion_kind),
+        "occlusion_kind": "KITTI occlusion level" if result.occlusion_kind == "level"
+        else "Cityscapes occlusion fraction",
+    }
+
+
+# --- terminal table ---------------------------------------------------------------------------------------
+
+_COLUMNS = (("IoU", "iou"), ("sIoU", "siou"), ("E_R deg", "e_r_deg"), ("E_t", "e_t"), ("E_d", "e_d"),
+            ("E_comb", "e_comb"), ("IoU_KITTI", "iou_kitti"))
+
+
+def _cell(value: float | None, attr: str) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.2f}" if attr == "e_r_deg" else f"{value:.3f}"
+
+
+def _table(rows: list[tuple[str, int, dict[str, Any], str]], label_width: int) -> list[str]:
+    """Rows ``(label, n, stats, 'mean' or 'median')`` under a header of the metric names."""
+    header = f"{'':<{label_width}} {'n':>5}" + "".join(f" {name:>9}" for name, _ in _COLUMNS)
+    lines = [header]
+    for label, n, stats, which in rows:
+        cells = "".join(f" {_cell(stats[_stat_key(attr, which)], attr):>9}" for _, attr in _COLUMNS)
+        lines.append(f"{label:<{label_width}} {n:>5}{cells}")
+    return lines
+
+
+def _stat_key(attr: str, which: str) -> str:
+    mean_key, median_key, _ = next(k for k in _STAT_KEYS if k[2] == attr)
+    return mean_key if which == "mean" else median_key
+
+
+def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
+    """The terminal report: the paper's table (mean and median of every metric), breakdowns by depth and
+    occlusion (means), then the counts and the first unmatched, failed and excluded objects."""
+    s = result.settings
+    stats = metric_stats(result.matched)
+    n = len(result.matched)
+    lines = [
+        f"predictions: {s.get('predictions_source', '?')} (rotations: {s.get('rotations', '?')})",
+        f"ground truth: {s.get('ground_truth_source', '?')}",
+        f"paired by 2D box IoU >= {s.get('min_iou', '?')}; classes: {', '.join(s.get('classes', []))}",
+        "",
+        *_table([("mean", n, stats, "mean"), ("median", n, stats, "median")], 20),
+        "",
+        "By ground-truth depth (means):",
+        *_table([(r["bin"], r["n"], r, "mean") for r in depth_breakdown(result.matched)], 20),
+        "",
+        ("By KITTI occlusion level (means):" if result.occlusion_kind == "level"
+         else "By Cityscapes occlusion fraction (means):"),
+        *_table([(r["bin"], r["n"], r, "mean") for r in occlusion_breakdown(result.matched, result.occlusion_kind)],
+                20),
+        "",
+        f"images scored: {result.n_images}; ground-truth images without predictions (not scored): "
+        f"{result.n_gt_images_without_pred} of {result.n_gt_images}",
+        f"matched: {n}; unmatched predictions: {len(result.unmatched_pred)}; unmatched ground truth: "
+        f"{len(result.unmatched_gt)}; failed predictions: {len(result.failed_pred)}",
+    ]
+    if result.gt_excluded:
+        listed = ", ".join(f"{cls} {count}" for cls, count in result.gt_excluded.items())
+        lines.append(f"ground truth not scored (class filter): {listed}")
+    for title, items in (("unmatched predictions", result.unmatched_pred),
+                         ("unmatched ground truth", result.unmatched_gt),
+                         ("failed predictions", result.failed_pred)):
+        if not items:
+            continue
+        lines.append(f"{title}:")
+        for u in items[:max_listed]:
+            box = "" if u.box2d is None else " box " + " ".join(f"{v:.1f}" for v in u.box2d)
+            lines.append(f"  image {u.image_id} id {u.id} ({u.cls}){box}, best 2D IoU {u.best_iou_2d:.2f}: "
+                         f"{u.reason}")
+        if len(items) > max_listed:
+            lines.append(f"  ... and {len(items) - max_listed} more (see --json)")
+    return "\n".join(lines) + "\n"
+
+
+# --- JSON and CSV -----------------------------------------------------------------------------------------
+
+def _finite(value: Any) -> Any:
+    """JSON has no NaN or infinity: such floats become None, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _pose(c: Any) -> dict[str, Any]:
+    return {"R_cam_vehicle": c.R_cam_vehicle.tolist(), "t_cam_vehicle": c.t_cam_vehicle.tolist(),
+            "dimensions": c.dimensions.tolist()}
+
+
+def result_to_json(result: EvaluationResult) -> dict[str, Any]:
+    """The JSON document: ``summary`` (counts, mean and median of every metric), ``objects`` (one per match,
+    with both poses in the camera frame of K), the unmatched, failed and excluded objects, breakdowns,
+    warnings and settings."""
+    return _finite({
+        "generator": f"toosicubix {__version__}",
+        "summary": summarize(result),
+        "objects": [{**r.row(), "pred": _pose(r.pred), "gt": _pose(r.gt)} for r in result.matched],
+        "unmatched_pred": [u.row() for u in result.unmatched_pred],
+        "unmatched_gt": [u.row() for u in result.unmatched_gt],
+        "failed_pred": [u.row() for u in result.failed_pred],
+        "gt_excluded": result.gt_excluded,
+        "breakdowns": breakdowns(result),
+        "warnings": list(result.warnings),
+        "settings": result.settings,
+    })
+
+
+#: CSV columns, one row per matched object.
+CSV_COLUMNS = (
+    "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
+    "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
+    "iou_kitti", "yaw_only", "pred_source", "gt_source",
+)
+
+
+def result_to_csv(result: EvaluationResult) -> str:
+    """CSV text: a header of :data:`CSV_COLUMNS`, then one row per matched object (empty cell for None)."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for r in result.matched:
+        writer.writerow({k: "" if v is None else v for k, v in r.row().items()})
+    return buffer.getvalue()
+
+
+def write_json(result: EvaluationResult, path: str | Path) -> None:
+    """Write :func:`result_to_json` atomically (the parent folder is created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(result_to_json(result), indent=1, allow_nan=False) + "\n")
+
+
+def write_csv(result: EvaluationResult, path: str | Path) -> None:
+    """Write :func:`result_to_csv` atomically (the parent folder is created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, result_to_csv(result))
