@@ -23,6 +23,7 @@ from toosicubix.geometry import (
     clip_cuboid_to_near_plane,
     cuboid_corners_cam,
 )
+from toosicubix.solver.plausibility import unseen_clicks
 from toosicubix.synthesis import PartSpec, render_parts
 
 HERE = Path(__file__).resolve().parent
@@ -47,10 +48,10 @@ SCENES = {
         "camera": "kitti",
         "vehicles": [
             ("1", "Car", -70.0, (3.2, 1.62, 14.0), (4.1, 1.72, 1.46), [
-                *wheels("rear-left", "front-left", "rear-right"),
+                *wheels("rear-right", "front-right", "rear-left"),
                 PartSpec("symmetry", "rear", {"Y": 0.62, "Z": 0.88}),
                 PartSpec("point", "rear-center", {"Z": 0.55}),
-                PartSpec("point", "edge-rear-left", {"Z": 1.1}),
+                PartSpec("point", "edge-rear-right", {"Z": 1.1}),
             ]),
             ("2", "Van", 95.0, (-4.5, 1.70, 24.0), (5.0, 1.9, 2.1), [
                 *wheels("front-left", "front-right"),
@@ -72,7 +73,7 @@ SCENES = {
         "camera": "wide",
         "vehicles": [
             ("1", "Mid Size Car", 130.0, (2.5, 1.50, 9.0), (4.3, 1.74, 1.50), [
-                *wheels("front-right", "front-left", "rear-right"),
+                *wheels("front-right", "front-left", "rear-left"),
                 PartSpec("symmetry", "front", {"Y": 0.65, "Z": 0.7}),
                 PartSpec("point", "edge-front-right", {"Z": 1.0}),
                 PartSpec("point", "top-center", {"X": -0.2}),
@@ -91,9 +92,10 @@ SCENES = {
         "camera": "wide",
         "vehicles": [
             ("7", "Car", 40.0, (-3.0, 1.55, 16.0), (4.4, 1.80, 1.45), [
-                *wheels("front-left", "rear-left", "rear-right"),
-                PartSpec("symmetry", "rear", {"Y": 0.7, "Z": 0.9}),
-                PartSpec("point", "corner-bottom-rear-left"),
+                *wheels("front-left", "front-right", "rear-right"),
+                PartSpec("symmetry", "front", {"Y": 0.7, "Z": 0.6}),
+                PartSpec("point", "corner-bottom-front-right"),
+                PartSpec("point", "edge-rear-right", {"Z": 0.8}),
                 PartSpec("direction", "backward", {"X": 2.0, "Y": 0.9, "Z": 0.6}),
                 PartSpec("direction", "rightward", {"X": -2.2, "Y": 0.45, "Z": 1.0}),
                 PartSpec("direction", "downward", {"X": -2.2, "Y": 0.9, "Z": 1.3}),
@@ -144,6 +146,9 @@ def main() -> None:
             R = R_cam_vehicle_from_ypr(np.deg2rad(ry_deg))
             t, dims = np.array(t), np.array(dims)
             parts = render_parts(specs, R, t, dims, camera, wheel_x=(0.32 * dims[0], -0.30 * dims[0]))
+            labels = tuple(label for part in parts for label in part.click_labels)
+            unseen = unseen_clicks(labels, R, t, dims)
+            assert not unseen, f"image {image_id} vehicle {vid}: {unseen} are on faces the camera cannot see"
             corners_uv = camera.project(clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, dims)))
             box = box2d_of_points(corners_uv, size)
             vehicles.append({

@@ -22,7 +22,7 @@ from toosicubix.solver.descent import DescentResult, descend, solve_pose, solve_
 from toosicubix.solver.init import YAW_SWEEP, line_rows, yaw_candidates, yaw_from_lines
 from toosicubix.solver.observability import determines_8dof, undetermined_directions
 from toosicubix.solver.problem import Problem
-from toosicubix.solver.refine import refine, residuals_and_jacobian
+from toosicubix.solver.refine import levenberg_marquardt, residuals_and_jacobian
 
 from .scenes import CAMERA, VIEW_YAW, random_scene
 
@@ -232,8 +232,9 @@ def test_starts_are_not_compared_by_the_shrinking_3d_cost(rng, monkeypatch):
     true = DescentResult(scene.R_cam_vehicle, scene.t_cam_vehicle, scene.p_true,
                          problem.cost_3d(scene.R_cam_vehicle, scene.t_cam_vehicle, scene.p_true), 1, "converged")
     assert wrong.cost < true.cost  # the trap
-    results = iter([wrong, wrong, true] + [wrong] * 40)  # the true pose comes from the third start
-    monkeypatch.setattr(solver_module, "descend", lambda *args, **kwargs: next(results))
+    # The true pose comes from the third start.
+    monkeypatch.setattr(solver_module, "descend_all",
+                        lambda problem, R_start, *args: [wrong, wrong, true] + [wrong] * (len(R_start) - 3))
     fit = fit_vehicle(scene.model, CAMERA, CAR, replace(EXACT, refine_starts=1, refine_iterations=0))
     # No refinement at all: the choice alone must land on the true pose.
     assert np.rad2deg(geodesic_angle(fit.R_cam_vehicle, scene.R_cam_vehicle)) < 1e-9
@@ -243,6 +244,6 @@ def test_refine_reaches_zero_residual_from_a_perturbed_start(rng):
     scene = random_scene(rng, "oblique-rear-right")
     problem = Problem.build(scene.model, CAMERA, CAR, 1.0, 1e-6)
     R0 = scene.R_cam_vehicle @ so3_exp(np.deg2rad([2.0, -1.0, 3.0]))
-    result = refine(problem, R0, scene.t_cam_vehicle * 1.02, scene.p_true * 1.02)
+    result = levenberg_marquardt(problem, R0, scene.t_cam_vehicle * 1.02, scene.p_true * 1.02)
     assert result.cost < 1e-6 * result.initial_cost
     assert np.rad2deg(geodesic_angle(result.R_cam_vehicle, scene.R_cam_vehicle)) < 0.01

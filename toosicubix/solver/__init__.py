@@ -8,7 +8,9 @@ starts are never compared by it. Each descent result is moved to the scale its s
 (the pixel data term does not change with scale; a negative scale turns a mirrored, behind-the-camera
 answer around), must then have positive dimensions and every point in front of the camera, and is
 ranked by the pixel cost. The best few with distinct rotations are refined, and the lowest final
-pixel cost wins.
+pixel cost wins among the plausible answers (:mod:`.plausibility`: roughly upright, every clicked part on
+a face turned to the camera); an implausible answer is returned only when no plausible one was found,
+with a warning.
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ from ..camera import Camera
 from ..geometry import R_cam_vehicle_from_ypr, geodesic_angle
 from ..parts import PartsModel
 from ..priors import SizePrior
-from .descent import descend
+from .descent import descend_all
 from .init import yaw_candidates
+from .plausibility import implausibility
 from .problem import Problem
-from .refine import MIN_DEPTH, refine, residuals_and_jacobian
+from .refine import MIN_DEPTH, levenberg_marquardt, residuals_and_jacobian
 
 
 @dataclass(frozen=True)
@@ -46,6 +49,8 @@ class SolverOptions:
     refine_iterations : iteration cap of stage (c)
     rank_tolerance : a vehicle fails as degenerate when the column-scaled Jacobian at the optimum has a
         singular value below this fraction of its largest
+    max_tilt_deg : answers whose up axis leans more than this from the camera's up direction are
+        implausible (a camera on a vehicle sees vehicles upright); None turns the check off
     """
 
     lambda_3d: float = 1.0
@@ -58,6 +63,7 @@ class SolverOptions:
     distinct_deg: float = 2.0
     refine_iterations: int = 100
     rank_tolerance: float = 1e-8
+    max_tilt_deg: float | None = 45.0
 
 
 @dataclass(frozen=True)
@@ -91,6 +97,7 @@ class FitResult:
     refine_iterations: int = 0
     initial_cost: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -113,6 +120,7 @@ class _Candidate:
     t: np.ndarray
     p: np.ndarray
     cost_px: float
+    implausible: str | None
 
 
 def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
@@ -139,34 +147,50 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         return FitResult("failed", _too_few(parts, options.min_constraints), **counts)
 
     problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px)
+    max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
     yaws, from_lines = yaw_candidates(parts, problem.u, options.sweep_starts)
     t_init = time.perf_counter()
 
     candidates: list[_Candidate] = []
     descent_iterations = 0
-    for ry in yaws:
-        d = descend(problem, R_cam_vehicle_from_ypr(ry), options.descent_iterations, options.descent_tolerance)
+    R_starts = np.array([R_cam_vehicle_from_ypr(ry) for ry in yaws])
+    for d in descend_all(problem, R_starts, options.descent_iterations, options.descent_tolerance):
         descent_iterations += d.iterations
         s = problem.prior_scale(d.p)
         if not np.isfinite(s) or s == 0.0:
             continue
         p, t = s * d.p, s * d.t_cam_vehicle
         if np.all(p[:3] > 0) and problem.min_depth(d.R_cam_vehicle, t, p) > MIN_DEPTH:
-            candidates.append(_Candidate(d.R_cam_vehicle, t, p, problem.cost_px(d.R_cam_vehicle, t, p)))
+            why = implausibility(parts.click_labels, d.R_cam_vehicle, t, p[:3], max_tilt)
+            candidates.append(_Candidate(d.R_cam_vehicle, t, p, problem.cost_px(d.R_cam_vehicle, t, p), why))
     t_descent = time.perf_counter()
     base = {"starts": len(yaws), "starts_from_lines": from_lines, "descent_iterations": descent_iterations}
     if not candidates:
         return FitResult("failed", "degenerate clicks: no start led to a cuboid in front of the camera",
                          **counts, **base)
 
-    chosen = _distinct_best(candidates, options.refine_starts, np.deg2rad(options.distinct_deg))
-    best = None
-    refine_iterations = 0
-    for c in chosen:
-        r = refine(problem, c.R, c.t, c.p, max_iterations=options.refine_iterations)
+    # Refine the best distinct starts, plausible ones first, until enough plausible answers are in hand.
+    ordered = _distinct(sorted(candidates, key=lambda c: (c.implausible is not None, c.cost_px)),
+                        np.deg2rad(options.distinct_deg))
+    best, best_any = None, None
+    refine_iterations, n_plausible = 0, 0
+    for c in ordered[: 2 * options.refine_starts]:
+        r = levenberg_marquardt(problem, c.R, c.t, c.p, max_iterations=options.refine_iterations)
         refine_iterations += r.iterations
-        if best is None or r.cost < best.cost:
-            best = r
+        why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt)
+        if best_any is None or r.cost < best_any[0].cost:
+            best_any = (r, why)
+        if why is None:
+            n_plausible += 1
+            if best is None or r.cost < best.cost:
+                best = r
+            if n_plausible >= options.refine_starts:
+                break
+    warnings: tuple[str, ...] = ()
+    if best is None:
+        best = best_any[0]
+        warnings = (f"no plausible answer found; returning one that is {best_any[1]}",)
+    chosen = ordered
     t_refine = time.perf_counter()
     timings = {"init": t_init - t_start, "descent": t_descent - t_init, "refine": t_refine - t_descent}
 
@@ -174,7 +198,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
-                  timings={**timings, "total": time.perf_counter() - t_start})
+                  timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings)
     if degenerate:
         return FitResult("failed", degenerate, **common)
     return FitResult(
@@ -183,14 +207,13 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     )
 
 
-def _distinct_best(candidates: list[_Candidate], k: int, min_angle: float) -> list[_Candidate]:
-    chosen: list[_Candidate] = []
-    for c in sorted(candidates, key=lambda c: c.cost_px):
-        if all(geodesic_angle(c.R, o.R) >= min_angle for o in chosen):
-            chosen.append(c)
-            if len(chosen) == k:
-                break
-    return chosen
+def _distinct(candidates: list[_Candidate], min_angle: float) -> list[_Candidate]:
+    """The candidates in the given order, leaving out any within ``min_angle`` of an earlier one."""
+    kept: list[_Candidate] = []
+    for c in candidates:
+        if all(geodesic_angle(c.R, o.R) >= min_angle for o in kept):
+            kept.append(c)
+    return kept
 
 
 _BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")

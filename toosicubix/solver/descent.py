@@ -40,35 +40,63 @@ class DescentResult:
     stopped: str
 
 
-def solve_shape(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Minimize the 3D cost over ``(p, t)`` for a fixed rotation.
+def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimize the 3D cost over ``(p, t)`` for each of several fixed rotations at once.
 
     Parameters
     ----------
-    R_cam_vehicle : (3, 3)
+    R_cam_vehicle : (S, 3, 3)
 
     Returns
     -------
-    p : (P,), t_cam_vehicle : (3,)
+    p : (S, P), t_cam_vehicle : (S, 3)
     """
     A, u = problem.A, problem.u
     N, _, P = A.shape
-    RA = np.einsum("ij,njk->nik", R_cam_vehicle, A)  # (N, 3, P): R A_i
+    S = len(R_cam_vehicle)
+    RA = np.einsum("sij,njk->snik", R_cam_vehicle, A)  # (S, N, 3, P): R A_i
     # M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t.
-    B = RA[:, :2, :] - u[:, :2, None] * RA[:, 2:3, :]  # (N, 2, P)
-    Mt = np.zeros((N, 2, 3))
-    Mt[:, 0, 0] = 1.0
-    Mt[:, 1, 1] = 1.0
-    Mt[:, :, 2] = -u[:, :2]
-    design = np.concatenate([B, Mt], axis=2).reshape(2 * N, P + 3)
+    B = RA[:, :, :2, :] - u[None, :, :2, None] * RA[:, :, 2:3, :]  # (S, N, 2, P)
+    design = np.empty((S, N, 2, P + 3))
+    design[..., :P] = B
+    design[..., P:] = _translation_block(u)[None]
+    design = design.reshape(S, 2 * N, P + 3)
     w = np.sqrt(problem.lambda_3d)
     prior_rows = np.zeros((3, P + 3))
     prior_rows[:, :3] = w * problem.prior.sqrt_information
     prior_rhs = w * problem.prior.sqrt_information @ problem.prior.mean
-    lhs = np.vstack([design, prior_rows])
-    rhs = np.concatenate([np.zeros(2 * N), prior_rhs])
-    x, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
-    return x[:P], x[P:]
+    # Normal equations: (P + 3) unknowns, a few dozen rows. A ridge of 1e-12 of the mean diagonal keeps an
+    # auxiliary unknown that no click constrains at zero instead of making the system singular.
+    normal = np.matmul(design.transpose(0, 2, 1), design) + prior_rows.T @ prior_rows
+    ridge = 1e-12 * np.trace(normal, axis1=1, axis2=2) / (P + 3)
+    normal[:, np.arange(P + 3), np.arange(P + 3)] += ridge[:, None]
+    rhs = np.broadcast_to(prior_rows.T @ prior_rhs, (S, P + 3))
+    x = np.linalg.solve(normal, rhs[..., None])[..., 0]
+    return x[:, :P], x[:, P:]
+
+
+def _translation_block(u: np.ndarray) -> np.ndarray:
+    """``M_i`` for every click: (N, 2, 3)."""
+    M = np.zeros((len(u), 2, 3))
+    M[:, 0, 0] = 1.0
+    M[:, 1, 1] = 1.0
+    M[:, :, 2] = -u[:, :2]
+    return M
+
+
+def solve_shape(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimize the 3D cost over ``(p, t)`` for one fixed rotation (3, 3): ``p`` (P,), ``t`` (3,)."""
+    p, t = solve_shapes(problem, R_cam_vehicle[None])
+    return p[0], t[0]
+
+
+def costs_3d(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The 3D cost of several poses at once: ``R`` (S, 3, 3), ``t`` (S, 3), ``p`` (S, P) -> (S,)."""
+    X = np.einsum("njk,sk->snj", problem.A, p)  # (S, N, 3) vehicle frame
+    Y = np.einsum("sij,snj->sni", R_cam_vehicle, X) + t_cam_vehicle[:, None, :]
+    e = Y[..., :2] - problem.u[None, :, :2] * Y[..., 2:3]
+    r = (p[:, :3] - problem.prior.mean) @ problem.prior.sqrt_information.T
+    return np.sum(e * e, axis=(1, 2)) + problem.lambda_3d * np.sum(r * r, axis=1)
 
 
 def solve_pose(problem: Problem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -90,39 +118,60 @@ def solve_pose(problem: Problem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return R, np.asarray(tvecs[0], dtype=float).ravel()
 
 
-def descend(problem: Problem, R_cam_vehicle: np.ndarray, max_iterations: int = 30,
-            rel_tolerance: float = 1e-8) -> DescentResult:
-    """Coordinate descent from a starting rotation.
+def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30,
+                rel_tolerance: float = 1e-8) -> list[DescentResult]:
+    """Coordinate descent from several starting rotations, in lockstep (the shape steps are batched).
 
     Parameters
     ----------
-    R_cam_vehicle : (3, 3) start
-    max_iterations : rounds of (p, t) then (R, t)
-    rel_tolerance : stop when a round lowers the cost by less than this fraction
+    R_start : (S, 3, 3) starts
+    max_iterations : rounds of (R, t) then (p, t) after the first (p, t) step
+    rel_tolerance : a start stops when a round lowers its cost by less than this fraction
 
     Returns
     -------
-    DescentResult
+    list of DescentResult, one per start
     """
-    R = R_cam_vehicle
-    p, t = solve_shape(problem, R)
-    cost = problem.cost_3d(R, t, p)
-    stopped = "max-iterations"
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):
-        pose = solve_pose(problem, p)
-        if pose is None:
-            stopped = "SQPnP found no pose (clustered or collinear points)"
-            iterations -= 1
+    R = np.array(R_start, dtype=float)
+    S = len(R)
+    p, t = solve_shapes(problem, R)
+    cost = costs_3d(problem, R, t, p)
+    iterations = np.zeros(S, dtype=int)
+    stopped = ["max-iterations"] * S
+    active = np.ones(S, dtype=bool)
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(active)
+        if len(idx) == 0:
             break
-        R_new, _ = pose
-        p_new, t_new = solve_shape(problem, R_new)
-        new_cost = problem.cost_3d(R_new, t_new, p_new)
-        if new_cost > cost:  # cannot happen in exact arithmetic; guards against SQPnP's local answers
-            stopped = "converged"
+        moved = []
+        for k in idx:
+            pose = solve_pose(problem, p[k])
+            if pose is None:
+                stopped[k] = "SQPnP found no pose (clustered or collinear points)"
+                active[k] = False
+            else:
+                moved.append((k, pose[0]))
+        if not moved:
             break
-        R, p, t, old, cost = R_new, p_new, t_new, cost, new_cost
-        if old - cost <= rel_tolerance * max(old, 1e-300):
-            stopped = "converged"
-            break
-    return DescentResult(R, t, p, cost, iterations, stopped)
+        ks = np.array([k for k, _ in moved])
+        R_new = np.array([Rk for _, Rk in moved])
+        p_new, t_new = solve_shapes(problem, R_new)
+        new_cost = costs_3d(problem, R_new, t_new, p_new)
+        for j, k in enumerate(ks):
+            if new_cost[j] > cost[k]:  # cannot happen in exact arithmetic; guards against SQPnP's local answers
+                stopped[k] = "converged"
+                active[k] = False
+                continue
+            old = cost[k]
+            R[k], p[k], t[k], cost[k] = R_new[j], p_new[j], t_new[j], new_cost[j]
+            iterations[k] += 1
+            if old - cost[k] <= rel_tolerance * max(old, 1e-300):
+                stopped[k] = "converged"
+                active[k] = False
+    return [DescentResult(R[k], t[k], p[k], float(cost[k]), int(iterations[k]), stopped[k]) for k in range(S)]
+
+
+def descend(problem: Problem, R_cam_vehicle: np.ndarray, max_iterations: int = 30,
+            rel_tolerance: float = 1e-8) -> DescentResult:
+    """Coordinate descent from one starting rotation (3, 3); see :func:`descend_all`."""
+    return descend_all(problem, R_cam_vehicle[None], max_iterations, rel_tolerance)[0]

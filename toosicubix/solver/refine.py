@@ -6,9 +6,9 @@ Unknowns: a rotation increment ``delta`` (3,), ``t`` (3,) and ``p`` (P,). The ro
 SO(3) through the exponential map, ``R <- R exp([delta]x)``, so the Jacobian of ``Y_i = R X_i + t`` is
 ``-R [X_i]x`` for ``delta``, ``I`` for ``t`` and ``R A_i`` for ``p``.
 
-Damping follows Nielsen: ``(J^T J + mu D) step = -J^T r`` with ``D`` the (floored) diagonal of ``J^T J``;
-``mu`` shrinks after a good step and grows after a rejected one. Steps that put a clicked point or the
-bottom centre behind the camera, or make a dimension non-positive, are rejected.
+Damping: ``(J^T J + mu D) step = -J^T r`` with ``D`` the (floored) diagonal of ``J^T J``; ``mu`` shrinks
+fivefold after a step the linear model predicted well, grows tenfold after a rejected one. Steps that put a
+clicked point or the bottom centre behind the camera, or make a dimension non-positive, are rejected.
 """
 
 from __future__ import annotations
@@ -94,16 +94,18 @@ def _feasible(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> 
     return bool(np.all(p[:3] > 0.0)) and problem.min_depth(R, t, p) > MIN_DEPTH
 
 
-def refine(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
-           max_iterations: int = 100, gradient_tolerance: float = 1e-10, step_tolerance: float = 1e-12,
-           cost_tolerance: float = 1e-14) -> RefineResult:
+def levenberg_marquardt(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
+           max_iterations: int = 100, gradient_tolerance: float = 1e-8, step_tolerance: float = 1e-10,
+           cost_tolerance: float = 1e-10) -> RefineResult:
     """Levenberg-Marquardt from a feasible start.
 
     Parameters
     ----------
     R_cam_vehicle : (3, 3); t_cam_vehicle : (3,); p : (P,)
-    gradient_tolerance : stop when ``max |J^T r| <= gradient_tolerance * (1 + cost)``
-    step_tolerance : stop when the step is this small relative to the parameters
+    gradient_tolerance : stop when the residual is this close to orthogonal to every Jacobian column
+        (the largest ``|J_j^T r| / (|J_j| |r|)``, MINPACK's gtol)
+    step_tolerance : stop when an accepted step changes the rotation by less than this many radians and
+        ``t``, ``p`` by less than this fraction of their size
     cost_tolerance : stop when an accepted step lowers the cost by less than this fraction
 
     Returns
@@ -115,50 +117,51 @@ def refine(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarra
     r, J = residuals_and_jacobian(problem, R, t, p)
     cost = float(r @ r)
     initial_cost = cost
-    mu, nu = 1e-4, 2.0
+    mu = 1e-3
     stopped = "max-iterations"
     iterations = 0
     while iterations < max_iterations:
         iterations += 1
         g = J.T @ r
-        if np.max(np.abs(g)) <= gradient_tolerance * (1.0 + cost):
+        column_norms = np.sqrt(np.einsum("ij,ij->j", J, J))
+        if cost == 0.0 or np.max(np.abs(g) / np.maximum(column_norms, 1e-300)) <= gradient_tolerance * np.sqrt(cost):
             stopped = "gradient"
             break
         H = J.T @ J
-        D = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
+        D = np.maximum(column_norms**2, 1e-12 * max(float(np.max(column_norms)) ** 2, 1e-300))
+        H_damped = H.copy()
+        H_damped[np.diag_indices_from(H)] += mu * D
         try:
-            step = np.linalg.solve(H + mu * np.diag(D), -g)
+            step = np.linalg.solve(H_damped, -g)
         except np.linalg.LinAlgError:
-            mu *= nu
-            nu *= 2.0
+            mu *= 10.0
             continue
-        scale = np.linalg.norm(np.concatenate([t, p])) + 1.0
-        if np.linalg.norm(step) <= step_tolerance * scale:
-            stopped = "step"
-            break
         R_new = R @ so3_exp(step[:3])
         t_new = t + step[3:6]
         p_new = p + step[6:6 + n_p]
-        accepted = False
+        rho = -1.0
         if _feasible(problem, R_new, t_new, p_new):
             r_new, _ = residuals_and_jacobian(problem, R_new, t_new, p_new, with_jacobian=False)
             new_cost = float(r_new @ r_new)
             predicted = float(step @ (mu * D * step - g))  # cost drop predicted by the linear model
             rho = (cost - new_cost) / predicted if predicted > 0 else -1.0
-            if rho > 0:
-                accepted = True
-                R, t, p = R_new, t_new, p_new
-                r, J = residuals_and_jacobian(problem, R, t, p)
-                drop = cost - new_cost
-                cost = new_cost
-                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-                nu = 2.0
-                if drop <= cost_tolerance * max(cost, 1e-300):
-                    stopped = "cost"
-                    break
-        if not accepted:
-            mu *= nu
-            nu *= 2.0
+        if rho > 0:
+            size = np.linalg.norm(t) + np.linalg.norm(p) + 1.0
+            small_step = (np.max(np.abs(step[:3])) <= step_tolerance
+                          and np.linalg.norm(step[3:]) <= step_tolerance * size)
+            R, t, p = R_new, t_new, p_new
+            r, J = residuals_and_jacobian(problem, R, t, p)
+            drop = cost - new_cost
+            cost = new_cost
+            mu = max(mu * (0.2 if rho > 0.75 else 1.0 if rho > 0.25 else 2.0), 1e-15)
+            if small_step:
+                stopped = "step"
+                break
+            if drop <= cost_tolerance * cost:
+                stopped = "cost"
+                break
+        else:
+            mu *= 10.0
             if mu > 1e16:
                 stopped = "damping"
                 break
@@ -166,4 +169,3 @@ def refine(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarra
     U, _, Vt = np.linalg.svd(R)
     R = U @ Vt
     return RefineResult(R, t, p, cost, initial_cost, iterations, stopped)
-

@@ -1,0 +1,87 @@
+"""Is a fitted pose one a person could have clicked? Two checks that the pixel cost cannot make.
+
+With few clicks, a mirrored solution (the vehicle upside down, or turned end for end and tilted) can fit
+the clicks as well as the true one. Two facts rule most of them out:
+
+- **Upright**: a camera on a vehicle or a pole sees other vehicles roughly upright. The angle between the
+  vehicle's up axis (Z) and the camera's up direction (-y) stays far below ``max_tilt``.
+- **Seen faces**: every clicked part lies on a face of the cuboid that is turned to the camera (a tyre
+  also from its end of the vehicle, under the bumper; an edge or a corner from any adjacent face). A
+  face seen within ``GRAZING_DEG`` of edge-on still counts, for noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: A face this close to edge-on (degrees) still counts as turned to the camera.
+GRAZING_DEG = 5.0
+
+_FACE_NORMALS = {
+    "front": np.array([1.0, 0.0, 0.0]), "rear": np.array([-1.0, 0.0, 0.0]),
+    "left": np.array([0.0, 1.0, 0.0]), "right": np.array([0.0, -1.0, 0.0]),
+    "top": np.array([0.0, 0.0, 1.0]),
+}
+
+
+def tilt(R_cam_vehicle: np.ndarray) -> float:
+    """Angle (radians) between the vehicle's up axis and the camera's up direction (-y)."""
+    return float(np.arccos(np.clip(-R_cam_vehicle[1, 2], -1.0, 1.0)))
+
+
+def faces_of_click(label: str) -> tuple[str, ...] | None:
+    """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
+    if label.startswith("direction-"):
+        return None
+    if label.startswith("symmetry-"):
+        face = label.split("/")[0].removeprefix("symmetry-")
+        return ("top",) if face == "roof" else (face,)
+    words = label.split("-")
+    if words[0] == "wheel":
+        return (words[2], words[1])
+    if words[0] in ("front", "rear"):
+        return (words[0],)
+    if words[0] == "top":
+        return ("top",)
+    if words[0] == "edge":
+        return (words[1], words[2])
+    # corner-{top,bottom}-{front,rear}-{left,right}: the bottom face is never seen
+    return tuple(w for w in words[1:] if w != "bottom")
+
+
+def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
+                           dimensions: np.ndarray) -> dict[str, bool]:
+    """For each face but the bottom: is it turned to the camera (within the grazing tolerance)?"""
+    camera_vehicle = R_cam_vehicle.T @ (-np.asarray(t_cam_vehicle, dtype=float))
+    dx, dy, dz = dimensions
+    centres = {"front": (dx / 2, 0, dz / 2), "rear": (-dx / 2, 0, dz / 2), "left": (0, dy / 2, dz / 2),
+               "right": (0, -dy / 2, dz / 2), "top": (0, 0, dz)}
+    sin_grazing = np.sin(np.deg2rad(GRAZING_DEG))
+    out = {}
+    for face, normal in _FACE_NORMALS.items():
+        to_camera = camera_vehicle - np.array(centres[face])
+        out[face] = bool(normal @ to_camera > -sin_grazing * np.linalg.norm(to_camera))
+    return out
+
+
+def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
+                  dimensions: np.ndarray) -> list[str]:
+    """The clicked parts that would lie on faces turned away from the camera."""
+    visible = faces_turned_to_camera(R_cam_vehicle, t_cam_vehicle, dimensions)
+    out = []
+    for label in click_labels:
+        faces = faces_of_click(label)
+        if faces is not None and not any(visible[f] for f in faces):
+            out.append(label)
+    return out
+
+
+def implausibility(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
+                   dimensions: np.ndarray, max_tilt: float | None) -> str | None:
+    """Why a pose is implausible, or None when it passes both checks."""
+    if max_tilt is not None and tilt(R_cam_vehicle) > max_tilt:
+        return f"tilted {np.rad2deg(tilt(R_cam_vehicle)):.0f} degrees from upright"
+    unseen = unseen_clicks(click_labels, R_cam_vehicle, t_cam_vehicle, dimensions)
+    if unseen:
+        return f"clicked parts on faces turned away from the camera: {', '.join(sorted(set(unseen)))}"
+    return None
