@@ -13,6 +13,7 @@ import pytest
 
 import toosicubix.solver as solver_module
 from toosicubix.camera import Camera
+from toosicubix.evaluation import Cuboid, iou_3d, scaled_iou
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle, so3_exp
 from toosicubix.model import Part
 from toosicubix.parts import build_parts_model
@@ -30,6 +31,11 @@ CAR = load_priors()["Car"]
 EXACT = SolverOptions(lambda_px=1e-6)
 DETERMINED_VIEWS = ["oblique-front-left", "oblique-rear-right"]
 PARTIAL_VIEWS = ["front", "rear", "side"]
+
+
+def cuboids(fit, scene) -> tuple[Cuboid, Cuboid]:
+    return (Cuboid(fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions),
+            Cuboid(scene.R_cam_vehicle, scene.t_cam_vehicle, scene.dimensions))
 
 
 def scaled_errors(fit, scene) -> tuple[float, float, float]:
@@ -151,8 +157,8 @@ def test_noise_free_clicks_determining_8dof_are_fitted_exactly(view, seed):
     assert fit.ok, fit.reason
     e_r, e_t, e_d = scaled_errors(fit, scene)
     assert e_r < 0.01
-    # sIoU >= 0.999 needs every scaled coordinate within ~0.05 % of the box size; 1 mm is far inside that.
-    assert e_t < 1e-3 and e_d < 1e-3
+    assert scaled_iou(*cuboids(fit, scene)) >= 0.999
+    assert e_t < 1e-3 and e_d < 1e-3  # the same, in metres after scaling
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -177,6 +183,7 @@ def test_prior_centred_on_the_true_size_gives_the_full_cuboid(view, seed):
     prior = SizePrior.from_mean_cov("exact", scene.dimensions, CAR.cov)
     fit = fit_vehicle(scene.model, CAMERA, prior, SolverOptions())  # default weights
     assert fit.ok, fit.reason
+    assert iou_3d(*cuboids(fit, scene)) >= 0.99
     np.testing.assert_allclose(fit.t_cam_vehicle, scene.t_cam_vehicle, atol=1e-3)
     np.testing.assert_allclose(fit.dimensions, scene.dimensions, atol=1e-3)
     assert np.rad2deg(geodesic_angle(fit.R_cam_vehicle, scene.R_cam_vehicle)) < 0.01
