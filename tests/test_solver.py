@@ -172,7 +172,8 @@ def test_views_missing_a_dimension_still_give_the_rotation(view, seed):
     fit = fit_vehicle(scene.model, CAMERA, CAR, EXACT)
     assert fit.ok, fit.reason
     assert scaled_errors(fit, scene)[0] < 0.01
-    assert fit.rms_px < 1e-4
+    # The only misfit is the prior's pull: cost <= lambda_px * Mahalanobis^2 ~ 1e-6 * 10, so rms ~ 1e-3 px.
+    assert fit.rms_px < 1e-3
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -254,3 +255,10 @@ def test_refine_reaches_zero_residual_from_a_perturbed_start(rng):
     result = levenberg_marquardt(problem, R0, scene.t_cam_vehicle * 1.02, scene.p_true * 1.02)
     assert result.cost < 1e-6 * result.initial_cost
     assert np.rad2deg(geodesic_angle(result.R_cam_vehicle, scene.R_cam_vehicle)) < 0.01
+
+
+def test_rotations_from_yaws_match_the_kitti_convention(rng):
+    from toosicubix.solver.init import rotations_from_yaws
+
+    yaws = rng.uniform(-np.pi, np.pi, 7)
+    np.testing.assert_allclose(rotations_from_yaws(yaws), [R_cam_vehicle_from_ypr(y) for y in yaws], atol=1e-15)

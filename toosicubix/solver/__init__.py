@@ -16,19 +16,18 @@ with a warning.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..camera import Camera
-from ..geometry import R_cam_vehicle_from_ypr, geodesic_angle
 from ..parts import PartsModel
 from ..priors import SizePrior
-from .descent import descend_all
-from .init import yaw_candidates
+from .descent import DescentResult, descend_all, solve_shapes
+from .init import rotations_from_yaws, yaw_candidates
 from .plausibility import implausibility
 from .problem import Problem
-from .refine import MIN_DEPTH, levenberg_marquardt, residuals_and_jacobian
+from .refine import MIN_DEPTH, levenberg_marquardt_batch, residuals_and_jacobian, residuals_batch
 
 
 @dataclass(frozen=True)
@@ -42,11 +41,16 @@ class SolverOptions:
         Mahalanobis distance
     min_constraints : fewer constraints than this fail the vehicle (6: pose, with the prior's 3 for size)
     sweep_starts : yaws spread over the circle tried besides the line-based ones (0: the paper's starts only)
+    descent_starts : how many starts, the best by pixel cost after the first shape step, continue the descent
+        with SQPnP rounds (None: all)
     descent_iterations, descent_tolerance : stopping rules of stage (b); the descent only has to reach the
         refinement's basin, which Levenberg-Marquardt then finishes
-    refine_starts : how many of the best, mutually distinct descent results stage (c) refines
+    refine_starts : how many of the best, mutually distinct descent results stage (c) refines together
+        (and how many more when none of them ends plausible)
     distinct_deg : descent results whose rotations differ by less than this count as one
     refine_iterations : iteration cap of stage (c)
+    abandon_factor, abandon_after : a refinement is dropped when after ``abandon_after`` iterations its
+        cost is still above ``abandon_factor`` times the lowest in its batch
     rank_tolerance : a vehicle fails as degenerate when the column-scaled Jacobian at the optimum has a
         singular value below this fraction of its largest
     max_tilt_deg : answers whose up axis leans more than this from the camera's up direction are
@@ -57,11 +61,14 @@ class SolverOptions:
     lambda_px: float = 1.0
     min_constraints: int = 6
     sweep_starts: int = 12
-    descent_iterations: int = 5
+    descent_starts: int | None = 10
+    descent_iterations: int = 1
     descent_tolerance: float = 1e-8
     refine_starts: int = 4
     distinct_deg: float = 2.0
     refine_iterations: int = 100
+    abandon_factor: float = 2.0
+    abandon_after: int = 10
     rank_tolerance: float = 1e-8
     max_tilt_deg: float | None = 45.0
 
@@ -152,40 +159,49 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_init = time.perf_counter()
 
     candidates: list[_Candidate] = []
-    descent_iterations = 0
-    R_starts = np.array([R_cam_vehicle_from_ypr(ry) for ry in yaws])
-    for d in descend_all(problem, R_starts, options.descent_iterations, options.descent_tolerance):
-        descent_iterations += d.iterations
-        s = problem.prior_scale(d.p)
-        if not np.isfinite(s) or s == 0.0:
-            continue
-        p, t = s * d.p, s * d.t_cam_vehicle
-        if np.all(p[:3] > 0) and problem.min_depth(d.R_cam_vehicle, t, p) > MIN_DEPTH:
-            why = implausibility(parts.click_labels, d.R_cam_vehicle, t, p[:3], max_tilt)
-            candidates.append(_Candidate(d.R_cam_vehicle, t, p, problem.cost_px(d.R_cam_vehicle, t, p), why))
+    R_starts = rotations_from_yaws(yaws)
+    descents = _descend(problem, R_starts, options)
+    descent_iterations = sum(d.iterations for d in descents)
+    R_d = np.array([d.R_cam_vehicle for d in descents])
+    t_d, p_d = _at_signed_prior_scale(problem, np.array([d.t_cam_vehicle for d in descents]),
+                                      np.array([d.p for d in descents]))
+    depths = problem.points_vehicle_batch(p_d) @ R_d[:, 2, :, None]
+    valid = (np.all(np.isfinite(p_d), axis=1) & np.all(p_d[:, :3] > 0, axis=1) & (t_d[:, 2] > MIN_DEPTH)
+             & (depths[..., 0].min(axis=1) + t_d[:, 2] > MIN_DEPTH))
+    if valid.any():
+        r, _ = residuals_batch(problem, R_d[valid], t_d[valid], p_d[valid], False, None, False)
+        costs = np.einsum("km,km->k", r, r)
+        candidates = [_Candidate(R_d[i], t_d[i], p_d[i], float(c), None)
+                      for i, c in zip(np.flatnonzero(valid), costs, strict=True)]
     t_descent = time.perf_counter()
     base = {"starts": len(yaws), "starts_from_lines": from_lines, "descent_iterations": descent_iterations}
     if not candidates:
         return FitResult("failed", "degenerate clicks: no start led to a cuboid in front of the camera",
                          **counts, **base)
 
-    # Refine the best distinct starts, plausible ones first, until enough plausible answers are in hand.
-    ordered = _distinct(sorted(candidates, key=lambda c: (c.implausible is not None, c.cost_px)),
-                        np.deg2rad(options.distinct_deg))
+    # Refine the best distinct starts in lockstep, plausible ones first; a start still far above the
+    # best after a few iterations is abandoned. A second batch runs when the first found nothing plausible.
+    ordered = _plausible_first(candidates, parts.click_labels, max_tilt, np.deg2rad(options.distinct_deg),
+                               options.refine_starts)
     best, best_any = None, None
-    refine_iterations, n_plausible = 0, 0
-    for c in ordered[: 2 * options.refine_starts]:
-        r = levenberg_marquardt(problem, c.R, c.t, c.p, max_iterations=options.refine_iterations)
-        refine_iterations += r.iterations
-        why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt)
-        if best_any is None or r.cost < best_any[0].cost:
-            best_any = (r, why)
-        if why is None:
-            n_plausible += 1
-            if best is None or r.cost < best.cost:
+    refine_iterations = 0
+    k = options.refine_starts
+    for batch in (ordered[:k], ordered[k:2 * k]):
+        if not batch or best is not None:
+            break
+        results = levenberg_marquardt_batch(
+            problem, np.array([c.R for c in batch]), np.array([c.t for c in batch]), np.array([c.p for c in batch]),
+            max_iterations=options.refine_iterations, abandon_factor=options.abandon_factor,
+            abandon_after=options.abandon_after, max_tilt=max_tilt)
+        for r in results:
+            refine_iterations += r.iterations
+            if r.stopped == "abandoned":
+                continue
+            why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt)
+            if best_any is None or r.cost < best_any[0].cost:
+                best_any = (r, why)
+            if why is None and (best is None or r.cost < best.cost):
                 best = r
-            if n_plausible >= options.refine_starts:
-                break
     warnings: tuple[str, ...] = ()
     if best is None:
         best = best_any[0]
@@ -207,13 +223,56 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     )
 
 
-def _distinct(candidates: list[_Candidate], min_angle: float) -> list[_Candidate]:
-    """The candidates in the given order, leaving out any within ``min_angle`` of an earlier one."""
-    kept: list[_Candidate] = []
-    for c in candidates:
-        if all(geodesic_angle(c.R, o.R) >= min_angle for o in kept):
-            kept.append(c)
-    return kept
+def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions) -> list[DescentResult]:
+    """Stage (b) from every start. Every start takes the first step (shape and translation for its
+    rotation); the ``descent_starts`` best of them by the pixel cost at their prior scale go on with
+    SQPnP rounds, the others stop there (a stopping rule: a start that fits the clicks far worse than
+    others rarely wins, and each SQPnP call costs as much as the rest of a round)."""
+    p0, t0 = solve_shapes(problem, R_starts)
+    keep = np.arange(len(R_starts))
+    if options.descent_starts is not None and len(R_starts) > options.descent_starts:
+        t_s, p_s = _at_signed_prior_scale(problem, t0, p0)
+        r, _ = residuals_batch(problem, R_starts, t_s, p_s, False, None, False)
+        score = np.where(np.all(np.isfinite(r), axis=1), np.einsum("km,km->k", r, r), np.inf)
+        keep = np.sort(np.argsort(score)[: options.descent_starts])
+    results = [DescentResult(R_starts[k], t0[k], p0[k], float("nan"), 0, "not continued")
+               for k in range(len(R_starts))]
+    for k, d in zip(keep, descend_all(problem, R_starts[keep], options.descent_iterations,
+                                      options.descent_tolerance, (p0[keep], t0[keep])), strict=True):
+        results[k] = d
+    return results
+
+
+def _at_signed_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Move each descent result (B, 3), (B, P) to the scale its prior prefers, which may be negative: that
+    turns a mirrored, behind-the-camera answer around (the pixel data term is the same for both)."""
+    W = problem.prior.sqrt_information
+    Wd = p[:, :3] @ W.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (Wd @ (W @ problem.prior.mean)) / np.einsum("ki,ki->k", Wd, Wd)
+    return s[:, None] * t, s[:, None] * p
+
+
+def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...], max_tilt: float | None,
+                     min_angle: float, wanted: int) -> list[_Candidate]:
+    """Candidates by cost, leaving out any within ``min_angle`` of a cheaper one, the plausible ones first;
+    stops looking once ``wanted`` plausible ones are found."""
+    plausible: list[_Candidate] = []
+    implausible: list[_Candidate] = []
+    kept = np.zeros((0, 3, 3))
+    min_trace = 1.0 + 2.0 * np.cos(min_angle)  # trace(R_a R_b^T) above this: closer than min_angle
+    for c in sorted(candidates, key=lambda c: c.cost_px):
+        if np.any(np.einsum("kij,ij->k", kept, c.R) > min_trace):
+            continue
+        kept = np.concatenate([kept, c.R[None]])
+        why = implausibility(click_labels, c.R, c.t, c.p[:3], max_tilt)
+        if why is None:
+            plausible.append(c)
+            if len(plausible) == wanted:
+                break
+        else:
+            implausible.append(replace(c, implausible=why))
+    return plausible + implausible
 
 
 _BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")

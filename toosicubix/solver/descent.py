@@ -92,7 +92,7 @@ def solve_shape(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarray
 
 def costs_3d(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
     """The 3D cost of several poses at once: ``R`` (S, 3, 3), ``t`` (S, 3), ``p`` (S, P) -> (S,)."""
-    X = np.einsum("njk,sk->snj", problem.A, p)  # (S, N, 3) vehicle frame
+    X = problem.points_vehicle_batch(p)  # (S, N, 3) vehicle frame
     Y = np.einsum("sij,snj->sni", R_cam_vehicle, X) + t_cam_vehicle[:, None, :]
     e = Y[..., :2] - problem.u[None, :, :2] * Y[..., 2:3]
     r = (p[:, :3] - problem.prior.mean) @ problem.prior.sqrt_information.T
@@ -118,8 +118,8 @@ def solve_pose(problem: Problem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return R, np.asarray(tvecs[0], dtype=float).ravel()
 
 
-def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30,
-                rel_tolerance: float = 1e-8) -> list[DescentResult]:
+def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30, rel_tolerance: float = 1e-8,
+                first_step: tuple[np.ndarray, np.ndarray] | None = None) -> list[DescentResult]:
     """Coordinate descent from several starting rotations, in lockstep (the shape steps are batched).
 
     Parameters
@@ -127,6 +127,7 @@ def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30,
     R_start : (S, 3, 3) starts
     max_iterations : rounds of (R, t) then (p, t) after the first (p, t) step
     rel_tolerance : a start stops when a round lowers its cost by less than this fraction
+    first_step : ``(p, t)`` of the first step, (S, P) and (S, 3), when the caller has already solved it
 
     Returns
     -------
@@ -134,7 +135,7 @@ def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30,
     """
     R = np.array(R_start, dtype=float)
     S = len(R)
-    p, t = solve_shapes(problem, R)
+    p, t = solve_shapes(problem, R) if first_step is None else (first_step[0].copy(), first_step[1].copy())
     cost = costs_3d(problem, R, t, p)
     iterations = np.zeros(S, dtype=int)
     stopped = ["max-iterations"] * S

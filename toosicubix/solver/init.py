@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import R_LEVEL_VEHICLE
 from ..parts import PartsModel
 
 #: Offsets tried around each line-based yaw, radians.
@@ -78,9 +79,17 @@ def yaw_candidates(parts: PartsModel, u: np.ndarray, sweep: int = 12,
     if ry is None:
         return YAW_SWEEP.copy(), False
     bases = np.array([ry, ry + np.pi])
-    yaws = list((bases[:, None] + YAW_OFFSETS[None, :]).ravel())
-    for extra in np.linspace(0.0, 2.0 * np.pi, sweep, endpoint=False) if sweep > 0 else []:
-        gaps = np.abs(np.angle(np.exp(1j * (np.array(yaws) - extra))))
-        if gaps.min() >= min_separation:
-            yaws.append(extra)
-    return np.array(yaws), True
+    line_yaws = (bases[:, None] + YAW_OFFSETS[None, :]).ravel()
+    if sweep <= 0:
+        return line_yaws, True
+    extra = np.linspace(0.0, 2.0 * np.pi, sweep, endpoint=False)
+    gaps = np.abs(np.angle(np.exp(1j * (extra[:, None] - line_yaws[None, :])))).min(axis=1)
+    return np.concatenate([line_yaws, extra[gaps >= min_separation]]), True
+
+
+def rotations_from_yaws(yaws: np.ndarray) -> np.ndarray:
+    """``R_y(ry) @ R_LEVEL_VEHICLE`` for each yaw (k,): (k, 3, 3), upright vehicles."""
+    c, s = np.cos(yaws), np.sin(yaws)
+    R_y = np.zeros((len(yaws), 3, 3))
+    R_y[:, 0, 0], R_y[:, 0, 2], R_y[:, 1, 1], R_y[:, 2, 0], R_y[:, 2, 2] = c, s, 1.0, -s, c
+    return R_y @ R_LEVEL_VEHICLE

@@ -44,17 +44,24 @@ class Problem:
     prior: SizePrior
     lambda_3d: float
     lambda_px: float
+    A_rows: np.ndarray  # (3N, P): A stacked, so that the points of a batch of p are one matrix product
+    A_mean: np.ndarray  # (3, P): the centroid of the clicked points is A_mean @ p
 
     @classmethod
     def build(cls, parts: PartsModel, camera: Camera, prior: SizePrior, lambda_3d: float,
               lambda_px: float) -> Problem:
         u = camera.normalize(parts.uv)
         uv = u[:, :2] @ camera.K[:2, :2].T + camera.K[:2, 2]
-        return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px)
+        A = parts.A
+        return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, A.reshape(-1, A.shape[2]), A.mean(axis=0))
 
     @property
     def A(self) -> np.ndarray:
         return self.parts.A
+
+    def points_vehicle_batch(self, p: np.ndarray) -> np.ndarray:
+        """The clicked points for each ``p`` of a batch (B, P): (B, N, 3), vehicle frame."""
+        return (p @ self.A_rows.T).reshape(len(p), -1, 3)
 
     def points_cam(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
         """``Y_i = R X_i + t`` for every click: (N, 3)."""
