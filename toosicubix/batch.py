@@ -15,10 +15,12 @@ from __future__ import annotations
 import hashlib
 import traceback
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from . import __version__
@@ -163,21 +165,42 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     return lines
 
 
+def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions]) -> VehicleResult:
+    return fit_one(*task)
+
+
+def _worker_init() -> None:
+    cv2.setNumThreads(1)  # one process per core; no threads on top
+
+
 def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
-               progress: Callable[[int], None] | None = None) -> list[ImageResult]:
+               progress: Callable[[int], None] | None = None, jobs: int = 1) -> list[ImageResult]:
     """Fit every vehicle of every image.
 
     Parameters
     ----------
     progress : called with the number of vehicles just finished
+    jobs : worker processes; the results are the same for any number (each vehicle is fitted on its own,
+        deterministically, and the results come back in input order)
     """
-    results = []
-    for im in images:
-        vehicles = []
-        for v in im.vehicles:
-            vehicles.append(fit_one(v, im.camera, priors[v.prototype], options))
+    tasks = [(v, im.camera, priors[v.prototype], options) for im in images for v in im.vehicles]
+    fitted: list[VehicleResult] = []
+    if jobs > 1 and len(tasks) > 1:
+        chunk = max(1, min(64, len(tasks) // (4 * jobs)))
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+            for result in pool.map(_fit_task, tasks, chunksize=chunk):
+                fitted.append(result)
+                if progress is not None:
+                    progress(1)
+    else:
+        for task in tasks:
+            fitted.append(_fit_task(task))
             if progress is not None:
                 progress(1)
+    results, start = [], 0
+    for im in images:
+        vehicles = fitted[start:start + len(im.vehicles)]
+        start += len(im.vehicles)
         results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
                                    image_size=im.camera.image_size, vehicles=vehicles))
     return results
@@ -228,7 +251,7 @@ def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult]
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
              options: SolverOptions | None = None,
              progress: Callable[[int], None] | None = None,
-             on_start: Callable[[int], None] | None = None) -> BatchSummary:
+             on_start: Callable[[int], None] | None = None, jobs: int = 1) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -239,6 +262,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     options : solver settings
     progress : called with the number of vehicles just finished
     on_start : called once with the number of vehicles to fit
+    jobs : worker processes (the output does not depend on it)
 
     Raises
     ------
@@ -255,7 +279,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     prepare_output_dir(out_dir)  # fail before the work, not after
     if on_start is not None:
         on_start(sum(len(im.vehicles) for im in images))
-    results = fit_images(images, priors, options, progress)
+    results = fit_images(images, priors, options, progress, jobs)
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),

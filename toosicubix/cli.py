@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import click
+import numpy as np
 
 from . import __version__
 from .formats.results import DEFAULT_OUTPUT_DIR
@@ -67,9 +68,11 @@ def schema_command() -> None:
               default=SolverOptions.lambda_px, show_default=True,
               help="Weight of the size prior in the pixel cost, in px^2 per squared Mahalanobis unit: the click "
                    "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more.")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes; the output is the same for any number.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
 def fit_command(annotations: Path, out_dir: Path, priors_path: Path | None, lambda_3d: float, lambda_px: float,
-                quiet: bool) -> None:
+                jobs: int, quiet: bool) -> None:
     """Fit a 3D cuboid to every annotated vehicle.
 
     Reads ANNOTATIONS (annotation file v1, see `toosicubix schema`) and writes OUT/label_2/<image id>.txt
@@ -82,6 +85,7 @@ def fit_command(annotations: Path, out_dir: Path, priors_path: Path | None, lamb
     \b
     Example:
       toosicubix fit samples/annotations.json -o toosicubix-out
+      toosicubix fit big.json --jobs 2
     """
     from .batch import OutputFolderError, fit_file
     from .schemas import InputFileError
@@ -89,7 +93,8 @@ def fit_command(annotations: Path, out_dir: Path, priors_path: Path | None, lamb
     options = replace(SolverOptions(), lambda_3d=lambda_3d, lambda_px=lambda_px)
     bar = _ProgressBar(quiet)
     try:
-        summary = fit_file(annotations, out_dir, priors_path, options, progress=bar.update, on_start=bar.start)
+        summary = fit_file(annotations, out_dir, priors_path, options, progress=bar.update, on_start=bar.start,
+                           jobs=jobs)
     except (InputFileError, OutputFolderError) as exc:
         raise BadInput(str(exc)) from None
     finally:
@@ -106,6 +111,103 @@ def fit_command(annotations: Path, out_dir: Path, priors_path: Path | None, lamb
         if len(summary.failed) > 20:
             click.echo(f"  ... and {len(summary.failed) - 20} more failed vehicles (see results.json)", err=True)
     sys.exit(EXIT_SOME_FAILED if summary.failed else EXIT_OK)
+
+
+def _parse_sequences(value: str | None) -> tuple[str, ...] | None:
+    """'0010-0020' or '0001,0005,0007' -> sequence names."""
+    if value is None:
+        return None
+    names: list[str] = []
+    for item in value.split(","):
+        item = item.strip()
+        first, dash, last = item.partition("-")
+        if not (first.isdigit() and (not dash or last.isdigit())):
+            raise click.BadParameter(f"expected sequence numbers like 0010-0020 or 0001,0005, got {item!r}",
+                                     param_hint="--sequences")
+        width = len(first)
+        names += [f"{n:0{width}d}" for n in range(int(first), int(last if dash else first) + 1)]
+    return tuple(names)
+
+
+@main.command("simulate")
+@click.option("--kitti", "kitti_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="KITTI object ground truth: a folder with label_2/ and calib/.")
+@click.option("--kitti-tracking", "tracking_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="KITTI tracking ground truth: a folder with label_02/ and calib/.")
+@click.option("-o", "--out", "annotations", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Annotation file to write (format v1).")
+@click.option("--gt-out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Where to write the simulated vehicles' ground truth as a KITTI object folder (label_2/, "
+                   "calib/) for `toosicubix eval --kitti`. Default: <annotation file without .json>_gt/.")
+@click.option("--noise", "noise_px", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+              help="Gaussian click noise, pixels per coordinate.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (per vehicle streams).")
+@click.option("--exact-placement", is_flag=True,
+              help="Put every part exactly where the parts model says (default: varied as on real vehicles).")
+@click.option("--max-clicks", type=click.IntRange(min=1), default=12, show_default=True,
+              help="The most clicked points per vehicle.")
+@click.option("--classes", default="Car,Van,Truck", show_default=True, help="KITTI types to simulate.")
+@click.option("--max-truncation", type=float, default=0.0, show_default=True,
+              help="Keep vehicles truncated at most this much (object labels: fraction; tracking: 0, 1, 2).")
+@click.option("--max-occlusion", type=click.IntRange(0, 3), default=1, show_default=True,
+              help="Keep vehicles occluded at most this much (0 visible, 1 partly, 2 largely).")
+@click.option("--min-depth", type=float, default=3.0, show_default=True, help="Metres.")
+@click.option("--max-depth", type=float, default=60.0, show_default=True, help="Metres.")
+@click.option("--min-box-height", type=float, default=25.0, show_default=True, help="2D box height, pixels.")
+@click.option("--frames-per-track", type=click.IntRange(min=1), default=3, show_default=True,
+              help="Tracking labels: at most this many frames per track, evenly spread.")
+@click.option("--sequences", default=None, help="Tracking labels: e.g. 0010-0020 or 0001,0005 (default: all).")
+def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotations: Path, gt_out: Path | None,
+                     noise_px: float, seed: int, exact_placement: bool, max_clicks: int, classes: str,
+                     max_truncation: float, max_occlusion: int, min_depth: float, max_depth: float,
+                     min_box_height: float, frames_per_track: int, sequences: str | None) -> None:
+    """Simulate a person clicking parts on real ground-truth cuboids (no public human clicks exist).
+
+    Selects vehicles from KITTI object or tracking labels, places the parts a person would click (tyre
+    contacts, light pairs, badges, vertical edges, roof pairs, box corners, a ground arrow for straight
+    views), keeps those a person could see, adds click noise, and writes an annotation file plus the
+    selected vehicles' ground truth in KITTI format. Tracking images get ids <sequence>_<frame:06d>.
+    The annotator model is described in `toosicubix.simulate`. Simulated clicks are not human clicks.
+
+    \b
+    Example:
+      toosicubix simulate --kitti-tracking data/kitti_tracking --sequences 0010-0020 -o sim.json
+      toosicubix fit sim.json && toosicubix eval --kitti sim_gt
+    """
+    from .formats import FormatError
+    from .simulate import (
+        AnnotatorOptions,
+        SelectionOptions,
+        select_kitti_object,
+        select_kitti_tracking,
+        simulate,
+        write_simulation,
+    )
+
+    if (kitti_dir is None) == (tracking_dir is None):
+        raise click.UsageError("give exactly one of --kitti DIR and --kitti-tracking DIR")
+    selection = SelectionOptions(
+        classes=tuple(c.strip() for c in classes.split(",") if c.strip()), max_truncation=max_truncation,
+        max_occlusion=max_occlusion, min_depth=min_depth, max_depth=max_depth, min_box_height=min_box_height,
+        frames_per_track=frames_per_track, sequences=_parse_sequences(sequences),
+    )
+    try:
+        if kitti_dir is not None:
+            vehicles = select_kitti_object(kitti_dir, selection)
+        else:
+            vehicles = select_kitti_tracking(tracking_dir, selection)
+    except FormatError as exc:
+        raise BadInput(str(exc)) from None
+    simulated = simulate(vehicles, AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement,
+                                                    max_clicks=max_clicks, seed=seed))
+    gt_dir = gt_out or annotations.with_name(annotations.stem + "_gt")
+    write_simulation(simulated, annotations, gt_dir)
+    clicks = [sv.n_clicks for sv in simulated]
+    images = len({sv.source.image_id for sv in simulated})
+    few = sum(1 for c in clicks if c < 3)
+    click.echo(f"simulated {len(simulated)} vehicles in {images} images -> {annotations} (clicks per vehicle: "
+               f"median {int(np.median(clicks)) if clicks else 0}, {few} with fewer than 3); ground truth -> {gt_dir}",
+               err=True)
 
 
 class _ProgressBar:

@@ -7,8 +7,9 @@ SO(3) through the exponential map about a pivot ``c`` (the centroid of the click
 ``R <- R exp([delta]x)``, ``t <- t + dt + (R_old - R_new) c``, so the Jacobian of ``Y_i = R X_i + t`` is
 ``-R [X_i - c]x`` for ``delta``, ``I`` for ``t`` and ``R A_i`` for ``p``.
 
-Damping: ``(J^T J + mu D) step = -J^T r`` with ``D`` the (floored) diagonal of ``J^T J``; ``mu`` shrinks
-fivefold after a step the linear model predicted well, grows tenfold after a rejected one. Steps that put a
+Damping: ``(J^T J + mu D) step = -J^T r`` with ``D`` the (floored) diagonal of ``J^T J``; ``mu`` follows
+Nielsen's rule: after a step with gain ratio ``rho`` it is multiplied by ``max(1/3, 1 - (2 rho - 1)^3)``,
+after a rejected step by ``nu``, which doubles with each rejection in a row. Steps that put a
 clicked point or the bottom centre behind the camera, make a dimension non-positive, or tilt an upright start
 past the plausible bound, are rejected.
 
@@ -187,6 +188,7 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     n = J.shape[2]
     diagonal = np.arange(n)
     mu = np.full(B, 1e-3)
+    nu = np.full(B, 2.0)
     iterations = np.zeros(B, dtype=int)
     status = np.full(B, _RUNNING)
     size = np.linalg.norm(t, axis=1) + np.linalg.norm(p, axis=1) + 1.0
@@ -238,7 +240,8 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
                 rho[feasible] = np.where(predicted > 0, (cost[idx[feasible]] - new_cost[feasible]) / predicted, -1.0)
         accept = rho > 0
         rejected = idx[~accept]
-        mu[rejected] *= 10.0
+        mu[rejected] *= nu[rejected]
+        nu[rejected] *= 2.0
         status[rejected[mu[rejected] > 1e16]] = _DAMPING
         if not accept.any():
             continue
@@ -253,7 +256,8 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
         drop = cost[ka] - new_cost[accept]
         cost[ka] = new_cost[accept]
         ra = rho[accept]
-        mu[ka] = np.maximum(mu[ka] * np.where(ra > 0.75, 0.2, np.where(ra > 0.25, 1.0, 2.0)), 1e-15)
+        mu[ka] = np.maximum(mu[ka] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * ra - 1.0) ** 3), 1e-15)
+        nu[ka] = 2.0
         status[ka[(drop <= cost_tolerance * cost[ka]) & ~small]] = _COST
         status[ka[small]] = _STEP
     status[status == _RUNNING] = _MAX_ITERATIONS
