@@ -262,3 +262,13 @@ def test_rotations_from_yaws_match_the_kitti_convention(rng):
 
     yaws = rng.uniform(-np.pi, np.pi, 7)
     np.testing.assert_allclose(rotations_from_yaws(yaws), [R_cam_vehicle_from_ypr(y) for y in yaws], atol=1e-15)
+
+
+def test_an_arrow_without_length_fails_the_vehicle_not_the_file():
+    parts = [Part("point", n, np.array([[400.0 + 60 * i, 250.0 - 5 * i]]), "$")
+             for i, n in enumerate(["wheel-front-left", "wheel-rear-left", "wheel-rear-right", "corner-top-rear-left"])]
+    parts.append(Part("direction", "forward", np.array([[500.0, 260.0], [500.3, 260.2]]), "$"))
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR)
+    assert fit.status == "failed"
+    assert fit.reason == ("degenerate clicks: the forward arrow of annotation parts[4] is 0.36 px long "
+                          "(an arrow needs at least 1 px)")

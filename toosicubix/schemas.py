@@ -89,12 +89,6 @@ class DirectionAnnotation(_Model):
     tail: Pixel
     head: Pixel
 
-    @model_validator(mode="after")
-    def _ensure_length(self) -> DirectionAnnotation:
-        if np.hypot(self.head[0] - self.tail[0], self.head[1] - self.tail[1]) < 1.0:
-            raise ValueError("expected an arrow at least 1 px long, got tail and head at the same pixel")
-        return self
-
 
 PartAnnotation = Annotated[
     PointAnnotation | SymmetryAnnotation | DirectionAnnotation, Field(discriminator="kind")

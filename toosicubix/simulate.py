@@ -385,6 +385,8 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
         if clicks + len(uv) > options.max_clicks:
             continue
         noisy = uv + rng.normal(0.0, options.noise_px, uv.shape) if options.noise_px > 0 else uv
+        if len(noisy) == 2 and np.linalg.norm(noisy[1] - noisy[0]) < MIN_PAIR_SEPARATION_PX:
+            continue  # the person sees the two clicks land on one spot and leaves the pair out
         k = len(specs)
         parts.append(Part(spec.kind, spec.name, noisy, f"simulated[{k}]"))
         specs.append(_model_spec(spec, d))

@@ -66,7 +66,7 @@ class SolverOptions:
     descent_tolerance: float = 1e-8
     refine_starts: int = 4
     distinct_deg: float = 2.0
-    refine_iterations: int = 100
+    refine_iterations: int = 200
     abandon_factor: float = 2.0
     abandon_after: int = 10
     rank_tolerance: float = 1e-8
@@ -152,6 +152,9 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
     if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
         return FitResult("failed", _too_few(parts, options.min_constraints), **counts)
+    short = _short_arrows(parts)
+    if short:
+        return FitResult("failed", f"degenerate clicks: {short}", **counts)
 
     problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px)
     max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
@@ -297,6 +300,22 @@ def _degeneracy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, t
 
 def _unknown_names(problem: Problem) -> list[str]:
     return [*_BLOCKS, *problem.parts.param_names]
+
+
+#: An arrow shorter than this (pixels) has no direction.
+MIN_ARROW_PX = 1.0
+
+
+def _short_arrows(parts: PartsModel) -> str | None:
+    """A description of the direction arrows whose tail and head are less than MIN_ARROW_PX apart."""
+    found = []
+    for i, label in enumerate(parts.click_labels):
+        if label.startswith("direction-") and label.endswith("/tail"):
+            length = float(np.linalg.norm(parts.uv[i + 1] - parts.uv[i]))
+            if length < MIN_ARROW_PX:
+                found.append(f"the {label.split('/')[0].removeprefix('direction-')} arrow of annotation "
+                             f"parts[{parts.click_part[i]}] is {length:.2f} px long")
+    return "; ".join(found) + f" (an arrow needs at least {MIN_ARROW_PX:g} px)" if found else None
 
 
 def _too_few(parts: PartsModel, needed: int) -> str:

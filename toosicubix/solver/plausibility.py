@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
-GRAZING_DEG = 5.0
+GRAZING_DEG = 15.0
 
 _FACE_NORMALS = {
     "front": np.array([1.0, 0.0, 0.0]), "rear": np.array([-1.0, 0.0, 0.0]),

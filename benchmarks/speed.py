@@ -1,0 +1,147 @@
+"""Speed and memory of ``toosicubix fit`` on simulated clicks over real KITTI tracking ground truth.
+
+1. Per-vehicle fit time in one process: ``toosicubix.batch.fit_one`` (parts model, solver, result) on
+   every vehicle of the accuracy benchmark's test split at 1 px click noise; median, p95 and mean, over
+   all vehicles and over those fitted (vehicles with too few clicks return at once).
+2. Throughput of the command line with ``--jobs 1`` and ``--jobs 2`` on the same annotation file of
+   ``--throughput-vehicles`` vehicles (wall time, process start included), and whether the outputs are
+   byte-identical.
+3. Peak memory (maximum resident set size) of ``toosicubix fit --jobs 1`` on 1,000 and 10,000 vehicles,
+   each run in a fresh process.
+
+Run from the repository root (about four minutes on 2 cores):
+
+    python benchmarks/speed.py [--json benchmarks/results/speed.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import SPLITS, default_data_dir, machine
+
+from toosicubix.batch import fit_one
+from toosicubix.model import Vehicle
+from toosicubix.priors import load_priors
+from toosicubix.simulate import (
+    AnnotatorOptions,
+    SelectionOptions,
+    select_kitti_tracking,
+    simulate,
+    write_simulation,
+)
+from toosicubix.solver import SolverOptions
+
+_PEAK_MEMORY_CHILD = """
+import resource, sys
+from toosicubix.cli import main
+try:
+    main(sys.argv[1:], standalone_mode=False)
+except SystemExit:
+    pass
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def per_vehicle_times(data: Path) -> dict:
+    vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))
+    simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
+    priors = load_priors()
+    options = SolverOptions()
+    tasks = [(Vehicle(sv.source.vehicle_id, sv.source.label.type, sv.source.label.box2d, tuple(sv.parts), "$"),
+              sv.source.camera, priors[sv.source.label.type]) for sv in simulated]
+    for task in tasks[:20]:  # warm-up: imports, caches
+        fit_one(*task, options)
+    times, fitted = [], []
+    for task in tasks:
+        start = time.perf_counter()
+        result = fit_one(*task, options)
+        elapsed = time.perf_counter() - start
+        times.append(elapsed)
+        if result.ok:
+            fitted.append(elapsed)
+
+    def stats(values: list[float]) -> dict:
+        ms = np.array(values) * 1e3
+        return {"n": len(ms), "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+                "mean_ms": float(ms.mean())}
+
+    return {"all": stats(times), "fitted": stats(fitted)}
+
+
+def annotation_file(data: Path, n: int, folder: Path) -> Path:
+    """An annotation file of the first ``n`` vehicles of all tracking sequences, every frame, 1 px noise."""
+    vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(frames_per_track=None))[:n]
+    if len(vehicles) < n:
+        sys.exit(f"only {len(vehicles)} vehicles available, {n} asked")
+    path = folder / f"annotations-{n}.json"
+    write_simulation(simulate(vehicles, AnnotatorOptions(noise_px=1.0)), path, folder / f"gt-{n}")
+    return path
+
+
+def fit_cli(annotations: Path, out: Path, jobs: int) -> float:
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "toosicubix", "fit", str(annotations), "-o", str(out), "-q",
+                    "--jobs", str(jobs)], check=False)
+    return time.perf_counter() - start
+
+
+def peak_memory_mb(annotations: Path, out: Path) -> float:
+    output = subprocess.run([sys.executable, "-c", _PEAK_MEMORY_CHILD, "fit", str(annotations), "-o", str(out),
+                             "-q"], capture_output=True, text=True, check=True).stdout
+    return int(output.strip().splitlines()[-1]) / 1024.0  # ru_maxrss is in KiB on Linux
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=default_data_dir())
+    parser.add_argument("--throughput-vehicles", type=int, default=3000)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+    if not (args.data / "kitti_tracking").is_dir():
+        sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
+    report: dict = {"machine": machine()}
+    print(f"machine: {report['machine']}", flush=True)
+
+    report["per_vehicle"] = per_vehicle_times(args.data)
+    for which, s in report["per_vehicle"].items():
+        print(f"fit time per vehicle ({which}, n={s['n']}): median {s['median_ms']:.2f} ms, p95 {s['p95_ms']:.1f} ms, "
+              f"mean {s['mean_ms']:.2f} ms", flush=True)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        n = args.throughput_vehicles
+        ann = annotation_file(args.data, n, folder)
+        seconds = {jobs: fit_cli(ann, folder / f"out-j{jobs}", jobs) for jobs in (1, 2)}
+        identical = filecmp.cmp(folder / "out-j1" / "results.json", folder / "out-j2" / "results.json", shallow=False)
+        report["throughput"] = {
+            "vehicles": n, "seconds": seconds, "vehicles_per_second": {j: n / s for j, s in seconds.items()},
+            "speedup_jobs2": seconds[1] / seconds[2], "identical_output": identical,
+        }
+        print(f"throughput, {n} vehicles: --jobs 1 {n / seconds[1]:.0f}/s ({seconds[1]:.1f} s), --jobs 2 "
+              f"{n / seconds[2]:.0f}/s ({seconds[2]:.1f} s): {seconds[1] / seconds[2]:.2f}x; outputs identical: "
+              f"{identical}", flush=True)
+
+        report["peak_memory_mb"] = {}
+        for size in (1000, 10000):
+            ann = annotation_file(args.data, size, folder)
+            peak = peak_memory_mb(ann, folder / f"mem-{size}")
+            report["peak_memory_mb"][size] = peak
+            print(f"peak memory, {size} vehicles, --jobs 1: {peak:.0f} MB", flush=True)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
