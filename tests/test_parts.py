@@ -51,6 +51,13 @@ def points_of(specs: list[PartSpec]) -> np.ndarray:
         (PartSpec("direction", "rightward", {"X": 0.1, "Y": 1.0, "Z": 0.3}), [[0.1, 1.0, 0.3], [0.1, -0.8, 0.3]]),
         (PartSpec("direction", "upward", {"X": 0.1, "Y": 1.0, "Z": 0.3}), [[0.1, 1.0, 0.3], [0.1, 1.0, 1.8]]),
         (PartSpec("direction", "downward", {"X": 0.1, "Y": 1.0, "Z": 0.3}), [[0.1, 1.0, 0.3], [0.1, 1.0, -1.2]]),
+        (PartSpec("length", "plate-rear", {"Y": 0.26, "Z": 0.5}, known=(0.52, 0.01)),
+         [[-2.0, 0.26, 0.5], [-2.0, -0.26, 0.5]]),
+        (PartSpec("length", "plate-front", {"Y": 0.26, "Z": 0.4}, known=(0.52, 0.01)),
+         [[2.0, 0.26, 0.4], [2.0, -0.26, 0.4]]),
+        (PartSpec("length", "wheelbase-left", known=(2.55, 0.01)), [[1.3, 0.9, 0.0], [-1.2, 0.9, 0.0]]),
+        (PartSpec("length", "tyre-front-right", {"Zt": 0.65}, known=(0.65, 0.01)),
+         [[1.3, -0.9, 0.0], [1.3, -0.9, 0.65]]),
     ],
 )
 def test_points_follow_the_design_table(spec, expected):
@@ -116,3 +123,22 @@ def test_click_labels_follow_annotation_order():
     model = build_parts_model([pair("symmetry", "front"), point("top-center")])
     assert model.click_labels == ("symmetry-front/left", "symmetry-front/right", "top-center")
     np.testing.assert_array_equal(model.click_part, [0, 0, 1])
+
+
+@pytest.mark.parametrize(("spec", "value"), [
+    (PartSpec("length", "plate-rear", {"Y": 0.26, "Z": 0.5}, known=(0.52, 0.01)), 0.52),  # 2 Y
+    (PartSpec("length", "wheelbase-right", known=(2.5, 0.01)), 2.5),  # Xwf - Xwr
+    (PartSpec("length", "tyre-rear-left", {"Zt": 0.64}, known=(0.64, 0.01)), 0.64),  # Zt
+])
+def test_length_annotations_give_a_measurement(spec, value):
+    parts, p = true_parameters([spec], D, WHEELS)
+    (m,) = build_parts_model(parts).measurements
+    assert m.metres == value and m.sigma == 0.01 and m.label == f"length {spec.name}"
+    assert m.coefficients @ p == pytest.approx(value if spec.name != "wheelbase-right" else WHEELS[0] - WHEELS[1])
+
+
+def test_known_dimensions_are_measurements():
+    model = build_parts_model([point("corner-top-front-left")], {"dx": (4.5, 0.02), "dz": (1.4, 0.03)})
+    got = [(m.label, m.metres, m.sigma) for m in model.measurements]
+    assert got == [("known dx", 4.5, 0.02), ("known dz", 1.4, 0.03)]
+    np.testing.assert_array_equal(model.measurements[0].coefficients, [1.0, 0.0, 0.0])

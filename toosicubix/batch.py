@@ -16,7 +16,7 @@ import hashlib
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,11 +41,13 @@ from .geometry import (
     ypr_from_R_cam_vehicle,
 )
 from .io_utils import atomic_write_text
-from .model import Image, Vehicle, load_images
-from .parts import build_parts_model
+from .model import GroundPlane, Image, Vehicle, load_images, with_ground
+from .parts import PartsModel, build_parts_model
 from .priors import Priors, SizePrior, load_priors
 from .schemas import InputFileError
-from .solver import FitResult, SolverOptions, fit_vehicle
+from .solver import FitResult, SolverOptions, fit_vehicle, scale_shares
+from .solver.joint import JointVehicle, fit_jointly
+from .solver.problem import Problem
 
 LABEL_DIR = "label_2"
 
@@ -63,6 +65,7 @@ class BatchSummary:
     ok: int
     failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason)
     out_dir: Path
+    scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -82,11 +85,12 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
         raise InputFileError(source, problems)
 
 
-def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions) -> VehicleResult:
+def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
+            ground: GroundPlane | None = None) -> VehicleResult:
     """Fit one vehicle and describe it as results.json does; never raises."""
     try:
-        parts = build_parts_model(vehicle.parts)
-        fit = fit_vehicle(parts, camera, prior, options)
+        parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
+        fit = fit_vehicle(parts, camera, prior, options, ground)
     except Exception as exc:  # one vehicle must never stop the batch
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return VehicleResult(
@@ -94,16 +98,28 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
             error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
             details={"kitti_type": prior.kitti_type},
         )
-    return _vehicle_result(vehicle, camera, prior, parts.click_labels, parts.param_names, fit)
+    return _vehicle_result(vehicle, camera, prior, parts, fit, ground)
 
 
-def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, click_labels: tuple[str, ...],
-                    param_names: tuple[str, ...], fit: FitResult) -> VehicleResult:
+def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]:
+    """What besides the clicks shapes a vehicle's fit."""
+    return {
+        "size_prior": True,
+        "upright": ground is not None,
+        "ground_contact": ground is not None and ground.camera_height is not None,
+        "known_sizes": [m.label for m in parts.measurements],
+    }
+
+
+def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
+                    ground: GroundPlane | None) -> VehicleResult:
+    click_labels, param_names = parts.click_labels, parts.param_names
     details: dict[str, Any] = {
         "kitti_type": prior.kitti_type,
         "constraints": fit.constraints,
         "clicks": fit.n_clicks,
         "aux_unknowns": fit.n_aux,
+        "cues": active_cues(parts, ground),
     }
     if not fit.ok:
         details["solver"] = _solver_details(fit)
@@ -122,6 +138,9 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, click_la
         "cost": fit.cost,
         "prior_mahalanobis2": fit.cost_prior,
         "parameters": {name: float(v) for name, v in zip(param_names[3:], fit.p[3:], strict=True)},
+        "scale_from": fit.scale_from,
+        "scale_shares": fit.scale_shares,
+        "warnings": list(fit.warnings),
         "solver": _solver_details(fit),
     })
     return VehicleResult(id=vehicle.id, status="ok", error=None, prototype=vehicle.prototype, R_cam_vehicle=R,
@@ -165,7 +184,7 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     return lines
 
 
-def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions]) -> VehicleResult:
+def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None]) -> VehicleResult:
     return fit_one(*task)
 
 
@@ -174,7 +193,8 @@ def _worker_init() -> None:
 
 
 def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
-               progress: Callable[[int], None] | None = None, jobs: int = 1) -> list[ImageResult]:
+               progress: Callable[[int], None] | None = None, jobs: int = 1,
+               joint_ground: bool = False) -> list[ImageResult]:
     """Fit every vehicle of every image.
 
     Parameters
@@ -182,8 +202,10 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
     progress : called with the number of vehicles just finished
     jobs : worker processes; the results are the same for any number (each vehicle is fitted on its own,
         deterministically, and the results come back in input order)
+    joint_ground : then refine each image's vehicles together with its ground plane (images with a
+        ground block); the camera height may be unknown
     """
-    tasks = [(v, im.camera, priors[v.prototype], options) for im in images for v in im.vehicles]
+    tasks = [(v, im.camera, priors[v.prototype], options, im.ground) for im in images for v in im.vehicles]
     fitted: list[VehicleResult] = []
     if jobs > 1 and len(tasks) > 1:
         chunk = max(1, min(64, len(tasks) // (4 * jobs)))
@@ -201,9 +223,64 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
     for im in images:
         vehicles = fitted[start:start + len(im.vehicles)]
         start += len(im.vehicles)
+        ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
+        if joint_ground and im.ground is not None:
+            vehicles, ground = fit_image_jointly(im, vehicles, priors, options)
         results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
-                                   image_size=im.camera.image_size, vehicles=vehicles))
+                                   image_size=im.camera.image_size, vehicles=vehicles, ground=ground))
     return results
+
+
+def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | None = None,
+                 normal: np.ndarray | None = None) -> dict[str, Any]:
+    return {
+        "normal": (ground.normal if normal is None else normal).tolist(),
+        "camera_height": ground.camera_height if camera_height is None else camera_height,
+        "estimated": estimated,
+    }
+
+
+def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors,
+                      options: SolverOptions) -> tuple[list[VehicleResult], dict[str, Any]]:
+    """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
+    return the updated results and the plane. Failed vehicles stay as they were."""
+    ground = image.ground
+    assert ground is not None
+    fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok]
+    if not fitted:
+        return vehicles, _ground_json(ground, estimated=False)
+    joint_vehicles, models = [], []
+    for k, v in fitted:
+        parts = build_parts_model(v.parts, v.known_dimensions)
+        problem = Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d, options.lambda_px)
+        r = vehicles[k]
+        p = np.concatenate([r.dimensions, [r.details["parameters"][name] for name in parts.param_names[3:]]])
+        joint_vehicles.append(JointVehicle(problem, r.R_cam_vehicle, r.t_cam_vehicle, p))
+        models.append(parts)
+    try:
+        result = fit_jointly(joint_vehicles, ground)
+    except Exception as exc:  # the vehicles keep their own fits
+        plane = _ground_json(ground, estimated=False)
+        plane["joint_error"] = f"{type(exc).__name__}: {exc}"
+        return vehicles, plane
+    plane_fitted = replace(ground, normal=result.normal, camera_height=result.camera_height)
+    out = list(vehicles)
+    for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
+        own = Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
+                            plane_fitted, float(np.linalg.norm(t)))
+        fit = FitResult(
+            "ok", None, vehicles[k].details["constraints"], parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
+            t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
+            residuals_px=own.pixel_residuals(R, t, p), scale_shares=scale_shares(own, R, t, p),
+            warnings=tuple(vehicles[k].details.get("warnings", [])),
+        )
+        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted)
+        details = dict(updated.details)
+        details["cues"] = {**details["cues"], "joint_ground": True}
+        details["solver"] = {**vehicles[k].details.get("solver", {}), "joint_iterations": result.iterations}
+        out[k] = replace(updated, details=details)
+    return out, {**_ground_json(ground, True, result.camera_height, result.normal),
+                 "joint_iterations": result.iterations, "vehicles": len(fitted)}
 
 
 def prepare_output_dir(out_dir: Path) -> set[str]:
@@ -251,7 +328,8 @@ def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult]
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
              options: SolverOptions | None = None,
              progress: Callable[[int], None] | None = None,
-             on_start: Callable[[int], None] | None = None, jobs: int = 1) -> BatchSummary:
+             on_start: Callable[[int], None] | None = None, jobs: int = 1,
+             ground: dict[str, object] | None = None, joint_ground: bool = False) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -263,6 +341,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     progress : called with the number of vehicles just finished
     on_start : called once with the number of vehicles to fit
     jobs : worker processes (the output does not depend on it)
+    ground : ground-block fields (schema names) set for every image of the file
+    joint_ground : refine each image's vehicles together with its ground plane
 
     Raises
     ------
@@ -273,23 +353,30 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     """
     annotations, out_dir = Path(annotations), Path(out_dir)
     options = options or SolverOptions()
-    images = load_images(annotations)
+    images = with_ground(load_images(annotations), ground or {})
     priors = load_priors(priors_path)
     check_prototypes(images, priors, annotations)
     prepare_output_dir(out_dir)  # fail before the work, not after
     if on_start is not None:
         on_start(sum(len(im.vehicles) for im in images))
-    results = fit_images(images, priors, options, progress, jobs)
+    results = fit_images(images, priors, options, progress, jobs, joint_ground)
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
         "annotations_sha256": hashlib.sha256(annotations.read_bytes()).hexdigest(),
         "priors": priors.source if priors_path is not None else "bundled",
-        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px},
+        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px,
+                     **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
     write_outputs(out_dir, images, results, header)
     failed = [(im.id, v.id, v.error or "") for im in results for v in im.vehicles if not v.ok]
     n = sum(len(im.vehicles) for im in results)
-    return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir)
+    scale_from: dict[str, int] = {}
+    for im in results:
+        for v in im.vehicles:
+            if v.ok and v.details.get("scale_from"):
+                scale_from[v.details["scale_from"]] = scale_from.get(v.details["scale_from"], 0) + 1
+    return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir,
+                        scale_from=scale_from)

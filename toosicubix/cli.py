@@ -70,17 +70,41 @@ def schema_command() -> None:
                    "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Settings file (as `toosicubix tune` writes it); options given on the command line win.")
+@click.option("--kitti-ground", is_flag=True,
+              help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 deg, "
+                   "vehicles upright within 2 deg. The options below then change single fields.")
+@click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Camera height above the road, metres, for every image (enables the ground contact).")
+@click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Its uncertainty, metres [default 0.05, KITTI 0.1].")
+@click.option("--road-normal", default=None, help="Road normal in camera coordinates, x,y,z [default 0,-1,0].")
+@click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up.")
+@click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll.")
+@click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Uncertainty of the normal, degrees [default 1].")
+@click.option("--upright-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="How far vehicles lean from the road normal, degrees [default 2].")
+@click.option("--joint-ground", is_flag=True,
+              help="Refine each image's vehicles together with its ground plane (images with a ground block or the "
+                   "options above); the camera height may then be unknown: the vehicles' sizes fix it.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes; the output is the same for any number.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
 @click.pass_context
 def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_path: Path | None, lambda_3d: float,
-                lambda_px: float, config_path: Path | None, jobs: int, quiet: bool) -> None:
+                lambda_px: float, config_path: Path | None, kitti_ground: bool, camera_height: float | None,
+                camera_height_sigma: float | None, road_normal: str | None, camera_pitch_deg: float | None,
+                camera_roll_deg: float | None, normal_sigma_deg: float | None, upright_sigma_deg: float | None,
+                joint_ground: bool, jobs: int, quiet: bool) -> None:
     """Fit a 3D cuboid to every annotated vehicle.
 
     Reads ANNOTATIONS (annotation file v1, see `toosicubix schema`) and writes OUT/label_2/<image id>.txt
     in KITTI format plus OUT/results.json with the full pose of every vehicle. KITTI files store yaw only:
     pitch and roll are dropped there and kept in results.json.
+
+    Scale comes from the size priors unless the file or the options give a ground plane (vehicles stand
+    upright on the road; with the camera height, on it) or known sizes (plate widths, wheelbases, tyres,
+    known dimensions); the summary says which cue set each vehicle's scale.
 
     Exit code 0 when every vehicle was fitted, 1 when some failed (their reasons are in results.json
     and on stderr; the others are written), 2 for a bad input file or option.
@@ -88,16 +112,19 @@ def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_pat
     \b
     Example:
       toosicubix fit samples/annotations.json -o toosicubix-out
-      toosicubix fit big.json --jobs 2
+      toosicubix fit big.json --jobs 2 --kitti-ground
+      toosicubix fit big.json --road-normal 0,-1,0 --joint-ground   # camera height unknown
     """
     from .batch import OutputFolderError, fit_file
     from .schemas import InputFileError
 
     options = _solver_options(ctx, config_path, lambda_3d=lambda_3d, lambda_px=lambda_px)
+    ground = _ground_options(kitti_ground, camera_height, camera_height_sigma, road_normal, camera_pitch_deg,
+                             camera_roll_deg, normal_sigma_deg, upright_sigma_deg)
     bar = _ProgressBar(quiet)
     try:
         summary = fit_file(annotations, out_dir, priors_path, options, progress=bar.update, on_start=bar.start,
-                           jobs=jobs)
+                           jobs=jobs, ground=ground, joint_ground=joint_ground)
     except (InputFileError, OutputFolderError) as exc:
         raise BadInput(str(exc)) from None
     finally:
@@ -109,11 +136,40 @@ def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_pat
             f"{summary.out_dir / 'results.json'} (full rotations)",
             err=True,
         )
+        if summary.scale_from:
+            counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
+            click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)
         for image_id, vehicle_id, reason in summary.failed[:20]:
             click.echo(f"  failed: image {image_id} vehicle {vehicle_id}: {reason}", err=True)
         if len(summary.failed) > 20:
             click.echo(f"  ... and {len(summary.failed) - 20} more failed vehicles (see results.json)", err=True)
     sys.exit(EXIT_SOME_FAILED if summary.failed else EXIT_OK)
+
+
+def _ground_options(kitti_ground: bool, camera_height: float | None, camera_height_sigma: float | None,
+                   road_normal: str | None, camera_pitch_deg: float | None, camera_roll_deg: float | None,
+                   normal_sigma_deg: float | None, upright_sigma_deg: float | None) -> dict[str, object]:
+    """The ground-block fields the options set for every image (schema field names)."""
+    from .model import KITTI_GROUND
+
+    fields: dict[str, object] = dict(KITTI_GROUND) if kitti_ground else {}
+    if road_normal is not None:
+        try:
+            normal = tuple(float(v) for v in road_normal.split(","))
+        except ValueError:
+            normal = ()
+        if len(normal) != 3:
+            raise click.BadParameter(f"expected three numbers x,y,z, got {road_normal!r}", param_hint="--road-normal")
+        fields["normal"] = normal
+    given = {"camera_height": camera_height, "camera_height_sigma": camera_height_sigma,
+             "camera_pitch_deg": camera_pitch_deg, "camera_roll_deg": camera_roll_deg,
+             "normal_sigma_deg": normal_sigma_deg, "upright_sigma_deg": upright_sigma_deg}
+    fields.update({k: v for k, v in given.items() if v is not None})
+    if ("camera_pitch_deg" in fields or "camera_roll_deg" in fields) and road_normal is not None:
+        raise click.UsageError("give --road-normal or --camera-pitch-deg/--camera-roll-deg, not both")
+    if "camera_pitch_deg" in fields or "camera_roll_deg" in fields:
+        fields.pop("normal", None)
+    return fields
 
 
 def _parse_sequences(value: str | None) -> tuple[str, ...] | None:

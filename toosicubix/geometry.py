@@ -120,6 +120,22 @@ def nearest_rotation(M: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
+def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector ``a`` (3,) to unit vector ``b`` (3,): (3, 3)."""
+    a = np.asarray(a, dtype=float) / np.linalg.norm(a)
+    b = np.asarray(b, dtype=float) / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        # Opposite: half a turn about any axis orthogonal to a.
+        other = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis = np.cross(a, other)
+        return so3_exp(axis / np.linalg.norm(axis) * np.pi)
+    return so3_exp(axis / s * np.arctan2(s, c))
+
+
 def rot_x(angle: float) -> np.ndarray:
     """Rotation by ``angle`` about the x axis, (3, 3)."""
     c, s = np.cos(angle), np.sin(angle)

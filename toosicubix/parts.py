@@ -16,6 +16,13 @@ frame: origin at the bottom-face centre, X forward, Y left, Z up.
 | direction forward / backward       | (X, Y, Z) -> (X +- dx, Y, Z)             | X, Y, Z        |
 | direction leftward / rightward     | (X, Y, Z) -> (X, Y +- dy, Z)             | X, Y, Z        |
 | direction upward / downward        | (X, Y, Z) -> (X, Y, Z +- dz)             | X, Y, Z        |
+| length plate-{front,rear}          | (+-dx/2, +Y, Z), (+-dx/2, -Y, Z)         | Y, Z           |
+| length wheelbase-{left,right}      | (Xwf, +-dy/2, 0), (Xwr, +-dy/2, 0)       | Xwf, Xwr       |
+| length tyre-{front,rear}-{lr}      | (Xw, +-dy/2, 0), (Xw, +-dy/2, Zt)        | Xw, Zt         |
+
+A ``length`` annotation also gives a *measurement*, a linear equation on ``p`` with a known value in metres:
+the plate's width ``2 Y``, the wheelbase ``Xwf - Xwr``, the tyre's diameter ``Zt``. Known dimensions of the
+vehicle are measurements too. Unlike the clicks, measurements fix the scale.
 """
 
 from __future__ import annotations
@@ -53,6 +60,22 @@ class Line:
 
 
 @dataclass(frozen=True)
+class Measurement:
+    """A known size: ``coefficients @ p == metres`` within ``sigma``.
+
+    Attributes
+    ----------
+    coefficients : (P,)
+    label : e.g. 'length plate-rear' or 'known dx'
+    """
+
+    coefficients: np.ndarray
+    metres: float
+    sigma: float
+    label: str
+
+
+@dataclass(frozen=True)
 class PartsModel:
     """The clicked points of one vehicle as linear functions of ``p``.
 
@@ -64,6 +87,7 @@ class PartsModel:
     click_part : (N,) index of the annotation each click belongs to
     param_names : (P,) 'dx', 'dy', 'dz', 'Xwf', 'Xwr', then 'parts[k].X' etc.
     lines : pairs of clicks along a known vehicle axis
+    measurements : known sizes (length annotations, known dimensions)
     """
 
     A: np.ndarray
@@ -72,6 +96,7 @@ class PartsModel:
     click_part: np.ndarray
     param_names: tuple[str, ...]
     lines: tuple[Line, ...]
+    measurements: tuple[Measurement, ...] = ()
 
     @property
     def n_clicks(self) -> int:
@@ -100,15 +125,17 @@ class _Builder:
     def __init__(self, parts: tuple[Part, ...]):
         self.names = ["dx", "dy", "dz"]
         names = {p.name for p in parts if p.kind == "point"}
+        axles = {axle for p in parts if p.kind == "length" for axle in _LENGTH_AXLES.get(p.name, ())}
         self.wheel = {}
         for axle, label in (("front", "Xwf"), ("rear", "Xwr")):
-            if names & {f"wheel-{axle}-left", f"wheel-{axle}-right"}:
+            if names & {f"wheel-{axle}-left", f"wheel-{axle}-right"} or axle in axles:
                 self.wheel[axle] = len(self.names)
                 self.names.append(label)
         self.coeffs: list[list[dict[int, float]]] = []  # per click: the linear forms of X, Y, Z
         self.labels: list[str] = []
         self.owner: list[int] = []
         self.lines: list[Line] = []
+        self.measurements: list[tuple[dict[int, float], float, float, str]] = []
 
     def aux(self, k: int, what: str) -> int:
         self.names.append(f"parts[{k}].{what}")
@@ -128,16 +155,24 @@ class _Builder:
             for row, form in enumerate(forms):
                 for param, c in form.items():
                     A[i, row, param] += c
+        measurements = []
+        for form, metres, sigma, label in self.measurements:
+            c = np.zeros(P)
+            for param, coefficient in form.items():
+                c[param] += coefficient
+            measurements.append(Measurement(c, metres, sigma, label))
         return PartsModel(A=A, uv=uv, click_labels=tuple(self.labels), click_part=np.array(self.owner, dtype=int),
-                          param_names=tuple(self.names), lines=tuple(self.lines))
+                          param_names=tuple(self.names), lines=tuple(self.lines), measurements=tuple(measurements))
 
 
-def build_parts_model(parts: tuple[Part, ...] | list[Part]) -> PartsModel:
+def build_parts_model(parts: tuple[Part, ...] | list[Part],
+                      known_dimensions: dict[str, tuple[float, float]] | None = None) -> PartsModel:
     """The linear model of a vehicle's annotations (see the module's table).
 
     Parameters
     ----------
     parts : the vehicle's annotations, in file order
+    known_dimensions : ``{"dx": (metres, sigma), ...}``, dimensions known from elsewhere
 
     Returns
     -------
@@ -159,8 +194,13 @@ def build_parts_model(parts: tuple[Part, ...] | list[Part]) -> PartsModel:
                 corner_clicks.setdefault((tb, fr, lr), []).append(i)
         elif part.kind == "symmetry":
             _add_symmetry(b, k, part.name)
+        elif part.kind == "length":
+            for name, i in _add_length(b, k, part).items():
+                wheel_clicks.setdefault(name, []).append(i)
         else:
             _add_direction(b, k, part.name)
+    for axis, (metres, sigma) in (known_dimensions or {}).items():
+        b.measurements.append(({DIM_INDEX[axis]: 1.0}, metres, sigma, f"known {axis}"))
     _wheel_lines(b, wheel_clicks)
     _corner_lines(b, corner_clicks)
     uv = np.concatenate(uv_rows, axis=0) if uv_rows else np.zeros((0, 2))
@@ -196,6 +236,42 @@ def _add_symmetry(b: _Builder, k: int, face: str) -> None:
         i = b.point(k, "symmetry-roof/left", {x: 1.0}, {y: 1.0}, {DZ: 1.0})
         j = b.point(k, "symmetry-roof/right", {x: 1.0}, {y: -1.0}, {DZ: 1.0})
     b.lines.append(Line(i, j, axis=1))
+
+
+DIM_INDEX = {"dx": DX, "dy": DY, "dz": DZ}
+# The axles a length feature's clicks sit on.
+_LENGTH_AXLES = {"wheelbase-left": ("front", "rear"), "wheelbase-right": ("front", "rear"),
+                 **{f"tyre-{fr}-{lr}": (fr,) for fr in ("front", "rear") for lr in ("left", "right")}}
+
+
+def _add_length(b: _Builder, k: int, part: Part) -> dict[str, int]:
+    """Add a length annotation's two points and its measurement; return its wheel clicks by wheel name."""
+    metres, sigma = part.known  # type: ignore[misc]
+    feature = part.name
+    label = f"length {feature}"
+    if feature.startswith("plate-"):
+        face = feature.removeprefix("plate-")
+        y, z = b.aux(k, "Y"), b.aux(k, "Z")
+        x_form = {DX: 0.5 * _SIDE[face]}
+        i = b.point(k, f"length-{feature}/a", x_form, {y: 1.0}, {z: 1.0})
+        j = b.point(k, f"length-{feature}/b", x_form, {y: -1.0}, {z: 1.0})
+        b.lines.append(Line(i, j, axis=1))
+        b.measurements.append(({y: 2.0}, metres, sigma, label))
+        return {}
+    if feature.startswith("wheelbase-"):
+        side = feature.removeprefix("wheelbase-")
+        y_form = {DY: 0.5 * _SIDE[side]}
+        i = b.point(k, f"length-{feature}/a", {b.wheel["front"]: 1.0}, y_form, {})
+        j = b.point(k, f"length-{feature}/b", {b.wheel["rear"]: 1.0}, y_form, {})
+        b.measurements.append(({b.wheel["front"]: 1.0, b.wheel["rear"]: -1.0}, metres, sigma, label))
+        return {f"wheel-front-{side}": i, f"wheel-rear-{side}": j}
+    _, axle, side = feature.split("-")  # tyre-{front,rear}-{left,right}
+    top = b.aux(k, "Zt")
+    x_form, y_form = {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}
+    i = b.point(k, f"length-{feature}/a", x_form, y_form, {})
+    b.point(k, f"length-{feature}/b", x_form, y_form, {top: 1.0})
+    b.measurements.append(({top: 1.0}, metres, sigma, label))
+    return {f"wheel-{axle}-{side}": i}
 
 
 def _add_direction(b: _Builder, k: int, axis_name: str) -> None:

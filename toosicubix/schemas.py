@@ -25,6 +25,17 @@ CORNER_PARTS = tuple(
 POINT_PARTS: tuple[str, ...] = WHEEL_PARTS + CENTER_PARTS + EDGE_PARTS + CORNER_PARTS
 SYMMETRY_FACES = ("front", "rear", "roof")
 DIRECTION_AXES = ("forward", "backward", "leftward", "rightward", "upward", "downward")
+#: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
+LENGTH_FEATURES = {
+    "plate-front": "a: left end, b: right end of the front licence plate (its width)",
+    "plate-rear": "a: left end, b: right end of the rear licence plate (its width)",
+    "wheelbase-left": "a: front, b: rear tyre's contact with the ground, left side (the wheelbase)",
+    "wheelbase-right": "a: front, b: rear tyre's contact with the ground, right side (the wheelbase)",
+    **{f"tyre-{fr}-{lr}": f"a: contact with the ground, b: top of the {fr}-{lr} tyre (its diameter)"
+       for fr in ("front", "rear") for lr in ("left", "right")},
+}
+LengthFeature = Literal[tuple(LENGTH_FEATURES)]  # type: ignore[valid-type]
+DIMENSION_AXES = ("dx", "dy", "dz")
 
 PointPart = Literal[POINT_PARTS]  # type: ignore[valid-type]
 SymmetryFace = Literal[SYMMETRY_FACES]  # type: ignore[valid-type]
@@ -90,9 +101,59 @@ class DirectionAnnotation(_Model):
     head: Pixel
 
 
+class LengthAnnotation(_Model):
+    """Two clicks on a feature whose size is known: a licence plate's width, the wheelbase, a tyre's diameter."""
+
+    kind: Literal["length"]
+    feature: LengthFeature = Field(description="Which feature; see the README for what a and b mark.")
+    a: Pixel
+    b: Pixel
+    metres: float = Field(gt=0, description="The feature's known size, metres.")
+    sigma: float = Field(gt=0, description="Its uncertainty (one standard deviation), metres.")
+
+
 PartAnnotation = Annotated[
-    PointAnnotation | SymmetryAnnotation | DirectionAnnotation, Field(discriminator="kind")
+    PointAnnotation | SymmetryAnnotation | DirectionAnnotation | LengthAnnotation, Field(discriminator="kind")
 ]
+
+
+class KnownSize(_Model):
+    """A known dimension, e.g. from the vehicle's make and model."""
+
+    metres: float = Field(gt=0)
+    sigma: float = Field(gt=0, description="One standard deviation, metres.")
+
+
+class GroundModel(_Model):
+    """The road under the vehicles, in camera coordinates: its normal (pointing up, toward the camera side)
+    and the camera's height above it. KITTI's cameras sit about 1.65 m above a road whose normal is -y."""
+
+    camera_height: float | None = Field(
+        default=None, gt=0, description="Camera height above the road, metres; leave out when unknown.")
+    camera_height_sigma: float = Field(default=0.05, gt=0, description="Its uncertainty, metres.")
+    normal: Row3 | None = Field(
+        default=None, description="Road normal in camera coordinates (x right, y down, z forward), pointing up; "
+                                  "default [0, -1, 0] (a level camera).")
+    camera_pitch_deg: float | None = Field(
+        default=None, description="Instead of the normal: the camera's pitch above the road, degrees (nose up > 0).")
+    camera_roll_deg: float | None = Field(
+        default=None, description="Instead of the normal: the camera's roll, degrees (clockwise as seen > 0).")
+    normal_sigma_deg: float = Field(default=1.0, gt=0, description="Uncertainty of the normal, degrees.")
+    upright_sigma_deg: float = Field(
+        default=2.0, gt=0, description="How far vehicles lean from the road normal (pitch and roll), degrees.")
+
+    @field_validator("normal")
+    @classmethod
+    def _ensure_nonzero_normal(cls, normal: Row3 | None) -> Row3 | None:
+        if normal is not None and float(np.linalg.norm(normal)) < 1e-9:
+            raise ValueError(f"expected a non-zero road normal, got {list(normal)}")
+        return normal
+
+    @model_validator(mode="after")
+    def _ensure_one_orientation(self) -> GroundModel:
+        if self.normal is not None and (self.camera_pitch_deg is not None or self.camera_roll_deg is not None):
+            raise ValueError("expected either 'normal' or 'camera_pitch_deg'/'camera_roll_deg', not both")
+        return self
 
 
 class CameraModel(_Model):
@@ -154,6 +215,8 @@ class VehicleAnnotation(_Model):
         default=None, description="Annotated 2D box (x1, y1, x2, y2) in pixels, written to the KITTI file."
     )
     parts: list[PartAnnotation] = Field(default_factory=list)
+    known_dimensions: dict[Literal[DIMENSION_AXES], KnownSize] | None = Field(  # type: ignore[valid-type]
+        default=None, description="Dimensions known from elsewhere (e.g. the make and model): dx, dy, dz.")
 
     @field_validator("box2d")
     @classmethod
@@ -175,6 +238,7 @@ class ImageAnnotation(_Model):
         default=None, description="(width, height) in pixels; projected boxes are clipped to it."
     )
     camera: CameraModel
+    ground: GroundModel | None = Field(default=None, description="The road plane; enables the ground cues.")
     vehicles: list[VehicleAnnotation] = Field(default_factory=list)
 
     @field_validator("vehicles")
@@ -213,12 +277,14 @@ def json_schema() -> dict[str, Any]:
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
 
 
-_UNION_TAGS = {"point", "symmetry", "direction"}
+_UNION_TAGS = {"point", "symmetry", "direction", "length"}
 
 
 def _json_path(loc: tuple[int | str, ...]) -> str:
     path = "$"
     for index, item in enumerate(loc):
+        if item == "[key]":  # a bad key of a mapping: the path already ends with it
+            continue
         # A discriminated union puts the tag into the location: parts[1].point.xy -> parts[1].xy.
         if isinstance(item, str) and item in _UNION_TAGS and index > 0 and isinstance(loc[index - 1], int):
             continue
@@ -228,6 +294,8 @@ def _json_path(loc: tuple[int | str, ...]) -> str:
 
 def _describe(error: dict[str, Any]) -> str:
     message = error["msg"].removeprefix("Value error, ")
+    if error["loc"] and error["loc"][-1] == "[key]":
+        message = f"bad key: {message}"
     if error["type"] == "missing":
         return "missing required field"
     if error["type"] == "extra_forbidden":
@@ -339,3 +407,35 @@ def load_priors_file(path: str | Path) -> PriorsFile:
     InputFileError
     """
     return _validate(PriorsFile, read_json(path), path)
+
+
+class SettingsFile(_Model):
+    """Solver settings for ``toosicubix fit --config`` (written by ``toosicubix tune``)."""
+
+    model_config = ConfigDict(title="ToosiCubix settings v1")
+
+    toosicubix_settings: Literal[1]
+    lambda_3d: float | None = Field(default=None, gt=0, description="Prior weight in the descent's 3D cost.")
+    lambda_px: float | None = Field(default=None, gt=0, description="Prior weight in the pixel cost (px^2).")
+    tuned: dict[str, Any] | None = Field(default=None, description="How the values were chosen (free form).")
+
+
+def load_settings_file(path: str | Path) -> SettingsFile:
+    """Read and validate a settings file.
+
+    Raises
+    ------
+    InputFileError
+    """
+    return _validate(SettingsFile, read_json(path), path)
+
+
+def parse_ground_block(data: Any, source: str | Path = "command line") -> GroundModel:
+    """Validate a ground block given outside a file (e.g. by command-line options).
+
+    Raises
+    ------
+    InputFileError
+        Naming ``source`` and the field of every problem.
+    """
+    return _validate(GroundModel, data, source)

@@ -22,16 +22,18 @@ class PartSpec:
 
     Attributes
     ----------
-    kind : 'point', 'symmetry' or 'direction'
-    name : part name, symmetry face or direction axis (as in the annotation file)
+    kind : 'point', 'symmetry', 'direction' or 'length'
+    name : part name, symmetry face, direction axis or length feature (as in the annotation file)
     aux : its auxiliary unknowns by name, metres in the vehicle frame: 'Z' for a centre badge or an edge
-        point, 'X' for top-center, 'Y' and 'Z' for a front or rear pair, 'X' and 'Y' for a roof pair,
-        'X', 'Y', 'Z' for a direction's tail
+        point, 'X' for top-center, 'Y' and 'Z' for a front or rear pair or a plate, 'X' and 'Y' for a roof
+        pair, 'X', 'Y', 'Z' for a direction's tail, 'Zt' for a tyre's top
+    known : ``(metres, sigma)`` a length annotation states
     """
 
     kind: str
     name: str
     aux: dict[str, float] = field(default_factory=dict)
+    known: tuple[float, float] | None = None
 
 
 def true_parameters(specs: list[PartSpec], dimensions: np.ndarray,
@@ -48,7 +50,7 @@ def true_parameters(specs: list[PartSpec], dimensions: np.ndarray,
     parts : the annotations with zero pixels
     p : (P,) ordered as ``build_parts_model(parts).param_names``
     """
-    parts = [Part(s.kind, s.name, np.zeros((1 if s.kind == "point" else 2, 2)), f"spec[{k}]")
+    parts = [Part(s.kind, s.name, np.zeros((1 if s.kind == "point" else 2, 2)), f"spec[{k}]", s.known)
              for k, s in enumerate(specs)]
     model = build_parts_model(parts)
     values = {"dx": dimensions[0], "dy": dimensions[1], "dz": dimensions[2], "Xwf": wheel_x[0], "Xwr": wheel_x[1]}
@@ -85,6 +87,6 @@ def render_parts(specs: list[PartSpec], R_cam_vehicle: np.ndarray, t_cam_vehicle
     out, start = [], 0
     for part in parts:
         k = len(part.uv)
-        out.append(Part(part.kind, part.name, uv[start:start + k].copy(), part.json_path))
+        out.append(Part(part.kind, part.name, uv[start:start + k].copy(), part.json_path, part.known))
         start += k
     return out

@@ -39,7 +39,7 @@ from .metrics import (
     scaled_iou,
     translation_error,
 )
-from .predictions import Predictions, PredImage, PredObject, load_predictions
+from .predictions import Predictions, PredImage, PredObject, load_predictions, predictions_from_results
 from .records import EvaluationResult, MatchedObject, UnscoredObject
 from .report import format_report, result_to_csv, result_to_json, summarize, write_csv, write_json
 
@@ -49,6 +49,7 @@ __all__ = [
     "ObjectMetrics", "PredImage", "PredObject", "Predictions", "UnscoredObject", "box_iou_matrix", "combined_error",
     "dimension_error", "evaluate", "evaluate_folder", "format_report", "intersection_volume_3d", "iou_3d",
     "iou_bev_height_yaw", "load_predictions", "match_boxes", "object_metrics", "open_ground_truth",
+    "predictions_from_results",
     "result_to_csv", "result_to_json", "rotation_error_deg", "scale_factor", "scaled_iou", "summarize",
     "translation_error", "write_csv", "write_json",
 ]

@@ -106,15 +106,27 @@ def load_predictions(out_dir: str | Path) -> Predictions:
         raise EvaluationInputError(f"{out_dir}: prediction folder not found (the output folder of toosicubix fit)")
     results_path = out_dir / RESULTS_FILENAME
     if results_path.is_file():
-        images = tuple(_image_from_result(im, i, results_path) for i, im in enumerate(read_results(results_path)))
-        _check_unique(images, results_path)
-        return Predictions(images=images, kind=RESULTS_FILENAME, source=results_path)
+        return predictions_from_results(read_results(results_path), results_path)
     label_dir = out_dir / LABEL_DIR if (out_dir / LABEL_DIR).is_dir() else out_dir
     paths = sorted(label_dir.glob("*.txt"))
     if not paths:
         raise EvaluationInputError(
             f"{out_dir}: found neither {RESULTS_FILENAME} nor KITTI label files ({LABEL_DIR}/*.txt or *.txt)")
     return Predictions(images=tuple(_image_from_labels(p) for p in paths), kind=LABEL_DIR, source=label_dir)
+
+
+def predictions_from_results(results: list[ImageResult], source: str | Path = "<results>") -> Predictions:
+    """Predictions from fit results held in memory (as ``results.json`` would give them).
+
+    Raises
+    ------
+    EvaluationInputError
+        An image id appears more than once.
+    """
+    source = Path(source)
+    images = tuple(_image_from_result(im, i, source) for i, im in enumerate(results))
+    _check_unique(images, source)
+    return Predictions(images=images, kind=RESULTS_FILENAME, source=source)
 
 
 def _image_from_result(im: ImageResult, i: int, path: Path) -> PredImage:

@@ -66,6 +66,7 @@ class ImageResult:
     K : (3, 3)
     t_cam_rect : (3,) zero unless the camera came from a KITTI ``P``
     image_size : (width, height) or None
+    ground : the road plane used or estimated (``{"normal": [...], "camera_height": h, ...}``), or None
     """
 
     id: str
@@ -73,6 +74,7 @@ class ImageResult:
     t_cam_rect: np.ndarray
     image_size: tuple[int, int] | None
     vehicles: list[VehicleResult]
+    ground: dict[str, Any] | None = None
 
 
 def _array(value: np.ndarray | None) -> Any:
@@ -100,6 +102,7 @@ def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = N
             "id": im.id,
             "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
                        "image_size": list(im.image_size) if im.image_size else None},
+            **({"ground": im.ground} if im.ground is not None else {}),
             "vehicles": [vehicle_to_json(v) for v in im.vehicles],
         }
         for im in images
@@ -155,6 +158,7 @@ def read_results(path: str | Path) -> list[ImageResult]:
         images.append(ImageResult(
             id=str(_get(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
+            ground=im.get("ground"),
         ))
     return images
 

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..camera import Camera
+from ..geometry import rotation_between
+from ..model import GroundPlane
 from ..parts import PartsModel
 from ..priors import SizePrior
 from .descent import DescentResult, descend_all, solve_shapes
@@ -87,6 +89,8 @@ class FitResult:
     residuals_px : (N, 2) projected minus clicked, undistorted pixels
     constraints : 2 per click minus the auxiliary unknowns
     timings : seconds per stage
+    scale_shares : the cues' shares of the information on the scale ('size prior', 'ground contact',
+        'length plate-rear', 'known dx', ...), summing to 1
     """
 
     status: str
@@ -107,6 +111,12 @@ class FitResult:
     initial_cost: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    scale_shares: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def scale_from(self) -> str | None:
+        """The cue that carries most of the information on the vehicle's scale."""
+        return max(self.scale_shares, key=self.scale_shares.get) if self.scale_shares else None
 
     @property
     def ok(self) -> bool:
@@ -133,15 +143,16 @@ class _Candidate:
 
 
 def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
-                options: SolverOptions | None = None) -> FitResult:
+                options: SolverOptions | None = None, ground: GroundPlane | None = None) -> FitResult:
     """Fit a cuboid to one vehicle's clicks.
 
     Parameters
     ----------
-    parts : the vehicle's linear parts model
+    parts : the vehicle's linear parts model (with its known sizes)
     camera : intrinsics (and distortion) of its image
     prior : size prior of its prototype
     options : solver settings; defaults when None
+    ground : the image's road plane: vehicles stand upright on it, and, with the camera height, on it
 
     Returns
     -------
@@ -158,13 +169,15 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     if short:
         return FitResult("failed", f"degenerate clicks: {short}", **counts)
 
-    problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px)
+    problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px, ground)
     max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
-    yaws, from_lines = yaw_candidates(parts, problem.u, options.sweep_starts)
+    # Starts stand upright on the road: rotate the rays so that the road normal is the camera's -y.
+    R_align = rotation_between(np.array([0.0, -1.0, 0.0]), problem.up)
+    yaws, from_lines = yaw_candidates(parts, problem.u @ R_align, options.sweep_starts)
     t_init = time.perf_counter()
 
     candidates: list[_Candidate] = []
-    R_starts = rotations_from_yaws(yaws)
+    R_starts = R_align @ rotations_from_yaws(yaws)
     descents = _descend(problem, R_starts, options)
     descent_iterations = sum(d.iterations for d in descents)
     R_d = np.array([d.R_cam_vehicle for d in descents])
@@ -187,7 +200,9 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     # Refine the best distinct starts in lockstep, plausible ones first; a start still far above the
     # best after a few iterations is abandoned. A second batch runs when the first found nothing plausible.
     ordered = _plausible_first(candidates, parts.click_labels, max_tilt, np.deg2rad(options.distinct_deg),
-                               options.refine_starts)
+                               options.refine_starts, problem.up)
+    # The ground contact's sigma grows with the distance (the normal's uncertainty): set it from the best start.
+    problem = problem.with_contact_distance(float(np.linalg.norm(ordered[0].t)))
     best, best_any = None, None
     refine_iterations = 0
     k = options.refine_starts
@@ -202,7 +217,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
             refine_iterations += r.iterations
             if r.stopped == "abandoned":
                 continue
-            why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt)
+            why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt,
+                                 problem.up)
             if best_any is None or r.cost < best_any[0].cost:
                 best_any = (r, why)
             if why is None and (best is None or r.cost < best.cost):
@@ -224,7 +240,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         return FitResult("failed", degenerate, **common)
     return FitResult(
         "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
-        cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, **common,
+        cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals,
+        scale_shares=scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p), **common,
     )
 
 
@@ -249,17 +266,30 @@ def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions) -> 
 
 
 def _at_signed_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Move each descent result (B, 3), (B, P) to the scale its prior prefers, which may be negative: that
+    """Move each descent result (B, 3), (B, P) to the scale the cues prefer, which may be negative: that
     turns a mirrored, behind-the-camera answer around (the pixel data term is the same for both)."""
-    W = problem.prior.sqrt_information
-    Wd = p[:, :3] @ W.T
+    a, b = problem.scale_terms(t, p)
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (Wd @ (W @ problem.prior.mean)) / np.einsum("ki,ki->k", Wd, Wd)
+        s = (a @ b) / np.einsum("ki,ki->k", a, a)
     return s[:, None] * t, s[:, None] * p
 
 
+def scale_shares(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> dict[str, float]:
+    """How the information on the vehicle's scale splits among the cues: for each cue, the squared change of
+    its rows under a change of scale (the direction ``(0, t, p)``), as a share of all of them. The pixel rows
+    do not change with scale, so they take no share."""
+    a, _ = problem.scale_terms(t, p)
+    sensitivity = a**2  # d/ds of the row s a - b is a
+    shares: dict[str, float] = {}
+    for cue, value in zip(problem.row_cues, sensitivity, strict=True):
+        name = "size prior" if cue == "size prior" else cue
+        shares[name] = shares.get(name, 0.0) + float(value)
+    total = sum(shares.values())
+    return {k: v / total for k, v in shares.items()} if total > 0 else {}
+
+
 def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...], max_tilt: float | None,
-                     min_angle: float, wanted: int) -> list[_Candidate]:
+                     min_angle: float, wanted: int, up: np.ndarray) -> list[_Candidate]:
     """Candidates by cost, leaving out any within ``min_angle`` of a cheaper one, the plausible ones first;
     stops looking once ``wanted`` plausible ones are found."""
     plausible: list[_Candidate] = []
@@ -270,7 +300,7 @@ def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...]
         if np.any(np.einsum("kij,ij->k", kept, c.R) > min_trace):
             continue
         kept = np.concatenate([kept, c.R[None]])
-        why = implausibility(click_labels, c.R, c.t, c.p[:3], max_tilt)
+        why = implausibility(click_labels, c.R, c.t, c.p[:3], max_tilt, up)
         if why is None:
             plausible.append(c)
             if len(plausible) == wanted:

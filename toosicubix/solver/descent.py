@@ -2,7 +2,8 @@
 
 Alternates two exact minimizations of ``sum |M_i (R A_i p + t)|^2 + lambda_3d |W (d - mu)|^2``:
 
-1. ``(p, t)`` with ``R`` fixed: linear least squares (the prior makes it inhomogeneous);
+1. ``(p, t)`` with ``R`` fixed: linear least squares (the prior and the other scale cues make it
+   inhomogeneous);
 2. ``(R, t)`` with ``p`` fixed: OpenCV's SQPnP, which minimizes exactly this data term in normalized
    coordinates (points kept in metres: its thresholds are absolute).
 
@@ -61,10 +62,10 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     design[..., :P] = B
     design[..., P:] = _translation_block(u)[None]
     design = design.reshape(S, 2 * N, P + 3)
+    # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
     w = np.sqrt(problem.lambda_3d)
-    prior_rows = np.zeros((3, P + 3))
-    prior_rows[:, :3] = w * problem.prior.sqrt_information
-    prior_rhs = w * problem.prior.sqrt_information @ problem.prior.mean
+    prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
+    prior_rhs = w * problem.b
     # Normal equations: (P + 3) unknowns, a few dozen rows. A ridge of 1e-12 of the mean diagonal keeps an
     # auxiliary unknown that no click constrains at zero instead of making the system singular.
     normal = np.matmul(design.transpose(0, 2, 1), design) + prior_rows.T @ prior_rows
@@ -95,8 +96,8 @@ def costs_3d(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndar
     X = problem.points_vehicle_batch(p)  # (S, N, 3) vehicle frame
     Y = np.einsum("sij,snj->sni", R_cam_vehicle, X) + t_cam_vehicle[:, None, :]
     e = Y[..., :2] - problem.u[None, :, :2] * Y[..., 2:3]
-    r = (p[:, :3] - problem.prior.mean) @ problem.prior.sqrt_information.T
-    return np.sum(e * e, axis=(1, 2)) + problem.lambda_3d * np.sum(r * r, axis=1)
+    a, b = problem.scale_terms(t_cam_vehicle, p)
+    return np.sum(e * e, axis=(1, 2)) + problem.lambda_3d * np.sum((a - b) ** 2, axis=1)
 
 
 def solve_pose(problem: Problem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -4,7 +4,8 @@ With few clicks, a mirrored solution (the vehicle upside down, or turned end for
 the clicks as well as the true one. Two facts rule most of them out:
 
 - **Upright**: a camera on a vehicle or a pole sees other vehicles roughly upright. The angle between the
-  vehicle's up axis (Z) and the camera's up direction (-y) stays far below ``max_tilt``.
+  vehicle's up axis (Z) and the road normal (when known, else the camera's up direction -y) stays far below
+  ``max_tilt``.
 - **Seen faces**: every clicked part lies on a face of the cuboid that is turned to the camera (a tyre
   also from its end of the vehicle, under the bumper; an edge or a corner from any adjacent face). A
   face seen within ``GRAZING_DEG`` of edge-on still counts, for noise.
@@ -24,15 +25,25 @@ _FACE_NORMALS = {
 }
 
 
-def tilt(R_cam_vehicle: np.ndarray) -> float:
-    """Angle (radians) between the vehicle's up axis and the camera's up direction (-y)."""
-    return float(np.arccos(np.clip(-R_cam_vehicle[1, 2], -1.0, 1.0)))
+def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
+    """Angle (radians) between the vehicle's up axis and ``up`` (3,), by default the camera's up (-y)."""
+    up = np.array([0.0, -1.0, 0.0]) if up is None else up
+    return float(np.arccos(np.clip(R_cam_vehicle[:, 2] @ up, -1.0, 1.0)))
 
 
 def faces_of_click(label: str) -> tuple[str, ...] | None:
     """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
     if label.startswith("direction-"):
         return None
+    if label.startswith("length-"):
+        feature = label.split("/")[0].removeprefix("length-")
+        if feature.startswith("plate-"):
+            return (feature.removeprefix("plate-"),)
+        if feature.startswith("wheelbase-"):
+            side = feature.removeprefix("wheelbase-")
+            return (side, "front", "rear")
+        _, axle, side = feature.split("-")  # a tyre
+        return (side, axle)
     if label.startswith("symmetry-"):
         face = label.split("/")[0].removeprefix("symmetry-")
         return ("top",) if face == "roof" else (face,)
@@ -77,10 +88,10 @@ def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_ca
 
 
 def implausibility(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
-                   dimensions: np.ndarray, max_tilt: float | None) -> str | None:
-    """Why a pose is implausible, or None when it passes both checks."""
-    if max_tilt is not None and tilt(R_cam_vehicle) > max_tilt:
-        return f"tilted {np.rad2deg(tilt(R_cam_vehicle)):.0f} degrees from upright"
+                   dimensions: np.ndarray, max_tilt: float | None, up: np.ndarray | None = None) -> str | None:
+    """Why a pose is implausible, or None when it passes both checks. ``up``: the road normal when known."""
+    if max_tilt is not None and tilt(R_cam_vehicle, up) > max_tilt:
+        return f"tilted {np.rad2deg(tilt(R_cam_vehicle, up)):.0f} degrees from upright"
     unseen = unseen_clicks(click_labels, R_cam_vehicle, t_cam_vehicle, dimensions)
     if unseen:
         return f"clicked parts on faces turned away from the camera: {', '.join(sorted(set(unseen)))}"

@@ -1,26 +1,39 @@
-"""One vehicle's fitting problem and its two costs (paper, "Solving the equations" and "Pixel-domain
-fine-tuning").
+"""One vehicle's fitting problem and its costs (paper, "Solving the equations" and "Pixel-domain
+fine-tuning"), with the scale and ground cues.
 
 With ``X_i = A_i p`` and ``Y_i = R_cam_vehicle X_i + t_cam_vehicle``:
 
-- 3D cost (coordinate descent): ``sum |M_i Y_i|^2 + lambda_3d |W (d - mu)|^2`` with
+- 3D cost (coordinate descent): ``sum |M_i Y_i|^2 + lambda_3d |G [t; p] - b|^2`` with
   ``M_i = [[1, 0, -x_i], [0, 1, -y_i]]`` in normalized coordinates: the SQPnP cost, a depth-weighted
   error that shrinks with the vehicle's scale.
 - Pixel cost (refinement, and the comparison of starts): ``sum |K_:2 pi(Y_i) - x_i|^2 +
-  lambda_px |W (d - mu)|^2``. Its data term does not change with scale, so the prior sets the scale.
+  lambda_px (|G [t; p] - b|^2 + |R e_z - n|^2 / sigma_up^2)``.
 
-``W`` is the upper Cholesky factor of the prior's inverse covariance.
+``G [t; p] - b`` stacks every term that fixes the scale, each a linear function of ``(t, p)`` divided by
+its standard deviation: the size prior ``W (d - mu)`` (``W`` the upper Cholesky factor of the inverse
+covariance), known sizes ``(c . p - metres) / sigma`` (plates, wheelbases, tyres, known dimensions) and,
+with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`` (the bottom face on the
+road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
+does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..camera import Camera
+from ..model import GroundPlane
 from ..parts import PartsModel
 from ..priors import SizePrior
+
+
+@dataclass(frozen=True)
+class ScaleRow:
+    """Where one row of ``G [t; p] - b`` comes from: 'size prior', 'ground contact', or a measurement label."""
+
+    cue: str
 
 
 @dataclass(frozen=True)
@@ -34,7 +47,13 @@ class Problem:
     uv : (N, 2) the clicks as an ideal pinhole ``K`` sees them (undistorted pixels)
     K : (3, 3)
     prior : size prior of the vehicle's prototype
-    lambda_3d, lambda_px : prior weights of the 3D and the pixel cost
+    lambda_3d, lambda_px : weights of the cues in the 3D and the pixel cost
+    G : (m, 3 + P) the scale rows' linear map on ``(t, p)``, already divided by their sigmas
+    b : (m,) their targets
+    row_cues : (m,) what each row is
+    ground : the road plane, or None
+    upright_sigma : radians, the spread of the vehicle's up axis about the normal (None without ground)
+    A_rows : (3N, P) ``A`` stacked; A_mean : (3, P) the clicked points' centroid is ``A_mean @ p``
     """
 
     parts: PartsModel
@@ -44,20 +63,78 @@ class Problem:
     prior: SizePrior
     lambda_3d: float
     lambda_px: float
-    A_rows: np.ndarray  # (3N, P): A stacked, so that the points of a batch of p are one matrix product
-    A_mean: np.ndarray  # (3, P): the centroid of the clicked points is A_mean @ p
+    G: np.ndarray
+    b: np.ndarray
+    row_cues: tuple[str, ...]
+    ground: GroundPlane | None
+    upright_sigma: float | None
+    A_rows: np.ndarray
+    A_mean: np.ndarray
 
     @classmethod
     def build(cls, parts: PartsModel, camera: Camera, prior: SizePrior, lambda_3d: float,
-              lambda_px: float) -> Problem:
+              lambda_px: float, ground: GroundPlane | None = None, contact_distance: float = 0.0) -> Problem:
+        """Assemble a vehicle's problem.
+
+        Parameters
+        ----------
+        ground : the image's road plane; adds the upright term, and the ground contact when the camera
+            height is known
+        contact_distance : metres from the camera to the vehicle along the road; a normal off by
+            ``normal_sigma`` moves the road under the vehicle by about ``normal_sigma * contact_distance``,
+            which adds to the contact's uncertainty (see :meth:`with_contact_distance`)
+        """
         u = camera.normalize(parts.uv)
         uv = u[:, :2] @ camera.K[:2, :2].T + camera.K[:2, 2]
+        P = parts.n_params
+        rows, targets, cues = [], [], []
+        W = prior.sqrt_information
+        for k in range(3):
+            row = np.zeros(3 + P)
+            row[3:6] = W[k]
+            rows.append(row)
+            targets.append(W[k] @ prior.mean)
+            cues.append("size prior")
+        for m in parts.measurements:
+            row = np.zeros(3 + P)
+            row[3:] = m.coefficients / m.sigma
+            rows.append(row)
+            targets.append(m.metres / m.sigma)
+            cues.append(m.label)
+        upright_sigma = None
+        if ground is not None:
+            upright_sigma = float(np.hypot(ground.upright_sigma, ground.normal_sigma))
+            if ground.camera_height is not None:
+                sigma = float(np.hypot(ground.camera_height_sigma, ground.normal_sigma * contact_distance))
+                row = np.zeros(3 + P)
+                row[:3] = ground.normal / sigma
+                rows.append(row)
+                targets.append(-ground.camera_height / sigma)
+                cues.append("ground contact")
         A = parts.A
-        return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, A.reshape(-1, A.shape[2]), A.mean(axis=0))
+        return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, np.array(rows), np.array(targets),
+                   tuple(cues), ground, upright_sigma, A.reshape(-1, P), A.mean(axis=0))
+
+    def with_contact_distance(self, distance: float) -> Problem:
+        """The same problem with the ground contact's sigma widened for a vehicle ``distance`` metres away."""
+        if self.ground is None or self.ground.camera_height is None:
+            return self
+        sigma = float(np.hypot(self.ground.camera_height_sigma, self.ground.normal_sigma * distance))
+        k = self.row_cues.index("ground contact")
+        G, b = self.G.copy(), self.b.copy()
+        G[k] = 0.0
+        G[k, :3] = self.ground.normal / sigma
+        b[k] = -self.ground.camera_height / sigma
+        return replace(self, G=G, b=b)
 
     @property
     def A(self) -> np.ndarray:
         return self.parts.A
+
+    @property
+    def up(self) -> np.ndarray:
+        """The direction vehicles stand along, camera frame: the road normal, else the camera's up (-y)."""
+        return self.ground.normal if self.ground is not None else np.array([0.0, -1.0, 0.0])
 
     def points_vehicle_batch(self, p: np.ndarray) -> np.ndarray:
         """The clicked points for each ``p`` of a batch (B, P): (B, N, 3), vehicle frame."""
@@ -67,16 +144,25 @@ class Problem:
         """``Y_i = R X_i + t`` for every click: (N, 3)."""
         return (self.A @ p) @ R_cam_vehicle.T + t_cam_vehicle
 
+    def scale_terms(self, t_cam_vehicle: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``a = G [t; p]`` and ``b``: the scale rows are ``s a - b`` when ``(t, p)`` is scaled by ``s``.
+
+        Parameters
+        ----------
+        t_cam_vehicle : (B, 3) or (3,); p : (B, P) or (P,)
+        """
+        return t_cam_vehicle @ self.G[:, :3].T + p @ self.G[:, 3:].T, self.b
+
     def prior_residual(self, p: np.ndarray) -> np.ndarray:
         """``W (d - mu)``: (3,), unweighted by lambda."""
         return self.prior.sqrt_information @ (p[:3] - self.prior.mean)
 
     def cost_3d(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
-        """The coordinate-descent (SQPnP) cost with the prior, metres^2 plus lambda_3d times Mahalanobis^2."""
+        """The coordinate-descent (SQPnP) cost with the scale rows: metres^2 plus lambda_3d times theirs."""
         Y = self.points_cam(R_cam_vehicle, t_cam_vehicle, p)
         e = Y[:, :2] - self.u[:, :2] * Y[:, 2:3]
-        r = self.prior_residual(p)
-        return float(np.sum(e * e) + self.lambda_3d * (r @ r))
+        a, b = self.scale_terms(t_cam_vehicle, p)
+        return float(np.sum(e * e) + self.lambda_3d * np.sum((a - b) ** 2))
 
     def pixel_residuals(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Projected minus clicked (undistorted) pixels: (N, 2)."""
@@ -84,24 +170,26 @@ class Problem:
         return Y[:, :2] / Y[:, 2:3] @ self.K[:2, :2].T + self.K[:2, 2] - self.uv
 
     def cost_px(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
-        """The pixel-domain cost: px^2 plus lambda_px times Mahalanobis^2."""
+        """The pixel-domain cost: px^2 plus lambda_px times the cues' squared standardized residuals."""
         e = self.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)
-        r = self.prior_residual(p)
-        return float(np.sum(e * e) + self.lambda_px * (r @ r))
+        a, b = self.scale_terms(t_cam_vehicle, p)
+        cues = float(np.sum((a - b) ** 2))
+        if self.upright_sigma is not None:
+            cues += float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2)) / self.upright_sigma**2
+        return float(np.sum(e * e) + self.lambda_px * cues)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
         """Smallest depth (camera z) of the clicked points and the cuboid's bottom centre, metres."""
         Y = self.points_cam(R_cam_vehicle, t_cam_vehicle, p)
         return float(min(Y[:, 2].min(), t_cam_vehicle[2]))
 
-    def prior_scale(self, p: np.ndarray) -> float:
-        """The scale ``s`` that minimizes ``|W (s d - mu)|^2``: where the prior puts a cuboid of shape ``d``.
+    def prior_scale(self, p: np.ndarray, t_cam_vehicle: np.ndarray | None = None) -> float:
+        """The scale ``s`` minimizing the scale rows ``|s a - b|^2``: where the cues put a cuboid of this shape.
 
         May be negative: ``(s p, s t)`` then turns a mirrored, behind-the-camera answer around (the
-        pixel data term is the same for both). 0 when ``d`` is zero.
+        pixel data term is the same for both). 0 when ``a`` is zero.
         """
-        Wd = self.prior.sqrt_information @ p[:3]
-        denom = float(Wd @ Wd)
-        if denom <= 0.0:
-            return 0.0
-        return float(Wd @ (self.prior.sqrt_information @ self.prior.mean)) / denom
+        t = np.zeros(3) if t_cam_vehicle is None else t_cam_vehicle
+        a, b = self.scale_terms(t, p)
+        denom = float(a @ a)
+        return float(a @ b) / denom if denom > 0.0 else 0.0

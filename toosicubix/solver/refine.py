@@ -59,30 +59,34 @@ class RefineResult:
 
 
 def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, with_jacobian: bool,
-                     pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """Residuals (K, 2N + 3) and Jacobians (K, 2N + 3, 6 + P) of K poses: ``R`` (K, 3, 3), ``t`` (K, 3),
-    ``p`` (K, P), ``pivot`` (K, 3) or None."""
-    A, K_ = problem.A, problem.K
-    N, _, P = A.shape
+                    pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """Residuals (B, M) and Jacobians (B, M, 6 + P) of B poses: ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P),
+    ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
+    problem has a ground plane; the cue rows are multiplied by ``sqrt(lambda_px)``."""
+    K_ = problem.K
+    N, _, P = problem.A.shape
     B = len(R)
+    m = len(problem.b)
+    n_up = 0 if problem.upright_sigma is None else 3
     X = problem.points_vehicle_batch(p)  # (B, N, 3) vehicle frame
     Y = X @ R.transpose(0, 2, 1) + t[:, None, :]  # (B, N, 3) camera frame
     inv_z = 1.0 / Y[..., 2]
     xn, yn = Y[..., 0] * inv_z, Y[..., 1] * inv_z
     fx, skew, cx, fy, cy = K_[0, 0], K_[0, 1], K_[0, 2], K_[1, 1], K_[1, 2]
     w = np.sqrt(problem.lambda_px)
-    r = np.empty((B, 2 * N + 3))
+    r = np.empty((B, 2 * N + m + n_up))
     r[:, 0:2 * N:2] = fx * xn + skew * yn + cx - problem.uv[:, 0]
     r[:, 1:2 * N:2] = fy * yn + cy - problem.uv[:, 1]
-    W = problem.prior.sqrt_information
-    Wd = p[:, :3] @ W.T  # (B, 3)
-    Wmu = W @ problem.prior.mean
+    a, b = problem.scale_terms(t, p)  # (B, m), (m,)
     if profile_scale:
-        dd = np.einsum("ki,ki->k", Wd, Wd)
-        s_best = (Wd @ Wmu) / dd
-        r[:, 2 * N:] = w * (s_best[:, None] * Wd - Wmu)
+        aa = np.einsum("ki,ki->k", a, a)
+        s_best = (a @ b) / aa
+        r[:, 2 * N:2 * N + m] = w * (s_best[:, None] * a - b)
     else:
-        r[:, 2 * N:] = w * (Wd - Wmu)
+        r[:, 2 * N:2 * N + m] = w * (a - b)
+    if n_up:
+        w_up = w / problem.upright_sigma
+        r[:, 2 * N + m:] = w_up * (R[:, :, 2] - problem.up)
     if not with_jacobian:
         return r, None
     # D = d(pixel)/dY = [[fx/z, skew/z, -(fx x + skew y)/z], [0, fy/z, -fy y/z]], x, y normalized: (B, N, 2, 3)
@@ -95,18 +99,33 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     DR = D @ R[:, None, :, :]  # (B, N, 2, 3)
     # Rotation columns: each row b of D R against dY = -R [X - c]x delta gives the row (X - c) x b.
     Xc = (X if pivot is None else X - pivot[:, None, :])[:, :, None, :]
-    J = np.zeros((B, 2 * N + 3, 6 + P))
+    J = np.zeros((B, 2 * N + m + n_up, 6 + P))
     J_rot = J[:, : 2 * N, 0:3].reshape(B, N, 2, 3)
     J_rot[..., 0] = Xc[..., 1] * DR[..., 2] - Xc[..., 2] * DR[..., 1]
     J_rot[..., 1] = Xc[..., 2] * DR[..., 0] - Xc[..., 0] * DR[..., 2]
     J_rot[..., 2] = Xc[..., 0] * DR[..., 1] - Xc[..., 1] * DR[..., 0]
     J[:, : 2 * N, 3:6] = D.reshape(B, 2 * N, 3)
-    J[:, : 2 * N, 6:] = (DR @ A).reshape(B, 2 * N, P)
+    J[:, : 2 * N, 6:] = (DR @ problem.A).reshape(B, 2 * N, P)
+    # Scale rows: a = G_t t + G_p p; turning about the pivot moves t by R [c]x delta.
+    Ga = np.zeros((B, m, 6 + P))
+    Gt = problem.G[:, :3]
+    if pivot is not None and np.any(Gt):
+        c_hat = np.zeros((B, 3, 3))
+        c_hat[:, 0, 1], c_hat[:, 0, 2] = -pivot[:, 2], pivot[:, 1]
+        c_hat[:, 1, 0], c_hat[:, 1, 2] = pivot[:, 2], -pivot[:, 0]
+        c_hat[:, 2, 0], c_hat[:, 2, 1] = -pivot[:, 1], pivot[:, 0]
+        Ga[:, :, 0:3] = Gt @ (R @ c_hat)
+    Ga[:, :, 3:6] = Gt
+    Ga[:, :, 6:] = problem.G[:, 3:]
     if profile_scale:
-        ds_dd = ((W.T @ Wmu)[None, :] - 2.0 * s_best[:, None] * (Wd @ W)) / dd[:, None]  # (B, 3)
-        J[:, 2 * N:, 6:9] = w * (s_best[:, None, None] * W + Wd[:, :, None] * ds_dd[:, None, :])
+        ds = np.einsum("kmi,km->ki", Ga, b - 2.0 * s_best[:, None] * a) / aa[:, None]  # (B, 6 + P)
+        J[:, 2 * N:2 * N + m] = w * (s_best[:, None, None] * Ga + a[:, :, None] * ds[:, None, :])
     else:
-        J[:, 2 * N:, 6:9] = w * W
+        J[:, 2 * N:2 * N + m] = w * Ga
+    if n_up:
+        # R exp([delta]x) e_z ~ R (e_z + delta x e_z) = R e_z + delta_y R e_x - delta_x R e_y.
+        J[:, 2 * N + m:, 0] = -w_up * R[:, :, 1]
+        J[:, 2 * N + m:, 1] = w_up * R[:, :, 0]
     return r, J
 
 
@@ -133,10 +152,9 @@ def _so3_exp_batch(omega: np.ndarray) -> np.ndarray:
 
 
 def _at_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Move each (t, p) of a batch, (B, 3) and (B, P), to the scale its prior prefers (when positive)."""
-    W = problem.prior.sqrt_information
-    Wd = p[:, :3] @ W.T
-    s = (Wd @ (W @ problem.prior.mean)) / np.einsum("ki,ki->k", Wd, Wd)
+    """Move each (t, p) of a batch, (B, 3) and (B, P), to the scale the cues prefer (when positive)."""
+    a, b = problem.scale_terms(t, p)
+    s = (a @ b) / np.einsum("ki,ki->k", a, a)
     s = np.where(s > 0, s, 1.0)
     return s[:, None] * t, s[:, None] * p
 
@@ -165,8 +183,8 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     abandon_factor, abandon_after, abandon_above : a start is stopped ('abandoned') when after
         ``abandon_after`` iterations its cost is still above ``abandon_factor`` times the lowest cost in the
         batch, or above ``abandon_above`` (an answer already in hand)
-    max_tilt : radians; a start whose up axis leans less than this from the camera's up direction (-y)
-        never takes a step that leans it further (see :mod:`.plausibility`)
+    max_tilt : radians; a start whose up axis leans less than this from the road normal (else the camera's
+        up direction -y) never takes a step that leans it further (see :mod:`.plausibility`)
 
     Returns
     -------
@@ -192,9 +210,10 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     iterations = np.zeros(B, dtype=int)
     status = np.full(B, _RUNNING)
     size = np.linalg.norm(t, axis=1) + np.linalg.norm(p, axis=1) + 1.0
-    # -R[1, 2] is the cosine of the tilt; starts within the bound are kept within it.
+    # R e_z . up is the cosine of the tilt; starts within the bound are kept within it.
+    up = problem.up
     min_up = -np.inf if max_tilt is None else np.cos(max_tilt)
-    keep_upright = -R[:, 1, 2] >= min_up
+    keep_upright = R[:, :, 2] @ up >= min_up
 
     for _ in range(max_iterations):
         if abandon_factor is not None or abandon_above is not None:
@@ -228,7 +247,7 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
         depths = problem.points_vehicle_batch(p_new) @ R_new[:, 2, :, None]
         feasible = (solved & np.all(p_new[:, :3] > 0.0, axis=1) & (t_new[:, 2] > MIN_DEPTH)
                     & (depths[..., 0].min(axis=1) + t_new[:, 2] > MIN_DEPTH)
-                    & (~keep_upright[idx] | (-R_new[:, 1, 2] >= min_up)))
+                    & (~keep_upright[idx] | (R_new[:, :, 2] @ up >= min_up)))
         rho = np.full(len(idx), -1.0)
         new_cost = np.full(len(idx), np.inf)
         if feasible.any():
