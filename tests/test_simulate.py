@@ -224,3 +224,15 @@ def test_real_tracking_selection(shared_data):
         assert 3.0 <= g.label.location_rect[2] + g.camera.t_cam_rect[2] <= 60.0
     assert max(tracks.values()) <= 3
     assert tracking_image_id("0010", 7) == "0010_000007"
+
+
+def test_cli_can_give_every_image_kittis_ground(tmp_path):
+    vehicles = [gt_vehicle(ry, loc, vehicle_id=str(i)) for i, (ry, loc) in enumerate(VIEWS)]
+    write_kitti_folder(tmp_path / "kitti", vehicles)
+    ann = tmp_path / "sim.json"
+    result = CliRunner().invoke(main, ["simulate", "--kitti", str(tmp_path / "kitti"), "-o", str(ann),
+                                       "--ground", "kitti"])
+    assert result.exit_code == 0, result.output
+    image = json.loads(ann.read_text())["images"][0]
+    assert image["ground"]["camera_height"] == 1.65 and image["ground"]["normal"] == [0.0, -1.0, 0.0]
+    assert parse_annotations(json.loads(ann.read_text())).images[0].ground is not None

@@ -216,10 +216,12 @@ def _parse_sequences(value: str | None) -> tuple[str, ...] | None:
 @click.option("--frames-per-track", type=click.IntRange(min=1), default=3, show_default=True,
               help="Tracking labels: at most this many frames per track, evenly spread.")
 @click.option("--sequences", default=None, help="Tracking labels: e.g. 0010-0020 or 0001,0005 (default: all).")
+@click.option("--ground", "ground_kind", type=click.Choice(["none", "kitti"]), default="none", show_default=True,
+              help="Give every image a ground block: kitti = KITTI's nominal road (camera 1.65 m above it).")
 def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotations: Path, gt_out: Path | None,
                      noise_px: float, seed: int, exact_placement: bool, max_clicks: int, classes: str,
                      max_truncation: float, max_occlusion: int, min_depth: float, max_depth: float,
-                     min_box_height: float, frames_per_track: int, sequences: str | None) -> None:
+                     min_box_height: float, frames_per_track: int, sequences: str | None, ground_kind: str) -> None:
     """Simulate a person clicking parts on real ground-truth cuboids (no public human clicks exist).
 
     Selects vehicles from KITTI object or tracking labels, places the parts a person would click (tyre
@@ -260,7 +262,9 @@ def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotati
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement,
                                                     max_clicks=max_clicks, seed=seed))
     gt_dir = gt_out or annotations.with_name(annotations.stem + "_gt")
-    write_simulation(simulated, annotations, gt_dir)
+    from .model import KITTI_GROUND
+
+    write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
     clicks = [sv.n_clicks for sv in simulated]
     images = len({sv.source.image_id for sv in simulated})
     few = sum(1 for c in clicks if c < 3)

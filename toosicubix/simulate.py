@@ -404,8 +404,14 @@ def _part_json(part: Part) -> dict[str, Any]:
     return {"kind": "direction", "axis": part.name, "tail": xy[0], "head": xy[1]}
 
 
-def annotation_document(simulated: list[SimulatedVehicle]) -> dict[str, Any]:
-    """The annotation file (v1) of simulated vehicles, one image entry per image id (input order)."""
+def annotation_document(simulated: list[SimulatedVehicle],
+                        ground: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The annotation file (v1) of simulated vehicles, one image entry per image id (input order).
+
+    Parameters
+    ----------
+    ground : a ground block given to every image (e.g. ``toosicubix.model.KITTI_GROUND``), or None
+    """
     images: dict[str, dict[str, Any]] = {}
     for sv in simulated:
         gt = sv.source
@@ -414,7 +420,7 @@ def annotation_document(simulated: list[SimulatedVehicle]) -> dict[str, Any]:
             P2 = np.hstack([gt.camera.K, (gt.camera.K @ gt.camera.t_cam_rect)[:, None]])
             image = images[gt.image_id] = {
                 "id": gt.image_id, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
-                "camera": {"P": P2.tolist()}, "vehicles": [],
+                "camera": {"P": P2.tolist()}, **({"ground": dict(ground)} if ground else {}), "vehicles": [],
             }
         image["vehicles"].append({
             "id": gt.vehicle_id, "prototype": gt.label.type,
@@ -440,7 +446,8 @@ def _calib_text(camera: Camera) -> str:
     return "\n".join(rows) + "\n"
 
 
-def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path, gt_dir: str | Path) -> None:
+def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path, gt_dir: str | Path,
+                     ground: dict[str, Any] | None = None) -> None:
     """Write the annotation file and, in ``gt_dir``, the simulated vehicles' ground truth as a KITTI object
     folder (``label_2/<image id>.txt``, ``calib/<image id>.txt`` with ``P2`` in every ``P`` line) that
     ``toosicubix eval --kitti`` reads. Files are written atomically."""
@@ -458,7 +465,7 @@ def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path,
         lines = [format_label_line(_without_tracking(sv.source.label)) for sv in vehicles]
         atomic_write_text(gt_dir / "label_2" / f"{image_id}.txt", "".join(f"{ln}\n" for ln in lines))
         atomic_write_text(gt_dir / "calib" / f"{image_id}.txt", _calib_text(vehicles[0].source.camera))
-    atomic_write_text(Path(annotations), dumps(annotation_document(simulated)))
+    atomic_write_text(Path(annotations), dumps(annotation_document(simulated, ground)))
 
 
 def _without_tracking(obj: KittiObject) -> KittiObject:
