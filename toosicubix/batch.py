@@ -48,6 +48,7 @@ from .schemas import InputFileError
 from .solver import FitResult, SolverOptions, fit_vehicle, scale_shares
 from .solver.joint import JointVehicle, fit_jointly
 from .solver.problem import Problem
+from .solver.uncertainty import analyse, confidence
 
 LABEL_DIR = "label_2"
 
@@ -140,6 +141,11 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
         "parameters": {name: float(v) for name, v in zip(param_names[3:], fit.p[3:], strict=True)},
         "scale_from": fit.scale_from,
         "scale_shares": fit.scale_shares,
+        "sigma": fit.uncertainty.to_json() if fit.uncertainty is not None else None,
+        "confidence": confidence(fit.uncertainty) if fit.uncertainty is not None else None,
+        "observability": fit.observability.to_json() if fit.observability is not None else None,
+        "ambiguous": fit.ambiguous,
+        "alternatives": [a.to_json() for a in fit.alternatives],
         "warnings": list(fit.warnings),
         "solver": _solver_details(fit),
     })
@@ -176,9 +182,11 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     for v in image_result.vehicles:
         if not v.ok:
             continue
+        score = v.details.get("confidence")
         obj = kitti.object_from_pose(
             v.details["kitti_type"], v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
-            truncated=v.details.get("truncated", 0.0), occluded=kitti.OCCLUSION_UNKNOWN, score=1.0,
+            truncated=v.details.get("truncated", 0.0), occluded=kitti.OCCLUSION_UNKNOWN,
+            score=1.0 if score is None else score,
         )
         lines.append(kitti.format_label_line(obj))
     return lines
@@ -268,10 +276,12 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
         own = Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
                             plane_fitted, float(np.linalg.norm(t)))
+        shares = scale_shares(own, R, t, p)
+        u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None)
         fit = FitResult(
             "ok", None, vehicles[k].details["constraints"], parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
             t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
-            residuals_px=own.pixel_residuals(R, t, p), scale_shares=scale_shares(own, R, t, p),
+            residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
             warnings=tuple(vehicles[k].details.get("warnings", [])),
         )
         updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted)

@@ -70,6 +70,8 @@ def schema_command() -> None:
                    "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Settings file (as `toosicubix tune` writes it); options given on the command line win.")
+@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=SolverOptions.click_sigma,
+              show_default=True, help="Click noise in pixels the reported uncertainty (sigma, confidence) is for.")
 @click.option("--kitti-ground", is_flag=True,
               help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 deg, "
                    "vehicles upright within 2 deg. The options below then change single fields.")
@@ -92,7 +94,8 @@ def schema_command() -> None:
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
 @click.pass_context
 def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_path: Path | None, lambda_3d: float,
-                lambda_px: float, config_path: Path | None, kitti_ground: bool, camera_height: float | None,
+                lambda_px: float, config_path: Path | None, click_sigma: float, kitti_ground: bool,
+                camera_height: float | None,
                 camera_height_sigma: float | None, road_normal: str | None, camera_pitch_deg: float | None,
                 camera_roll_deg: float | None, normal_sigma_deg: float | None, upright_sigma_deg: float | None,
                 joint_ground: bool, jobs: int, quiet: bool) -> None:
@@ -118,7 +121,8 @@ def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_pat
     from .batch import OutputFolderError, fit_file
     from .schemas import InputFileError
 
-    options = _solver_options(ctx, config_path, lambda_3d=lambda_3d, lambda_px=lambda_px)
+    options = replace(_solver_options(ctx, config_path, lambda_3d=lambda_3d, lambda_px=lambda_px),
+                      click_sigma=click_sigma)
     ground = _ground_options(kitti_ground, camera_height, camera_height_sigma, road_normal, camera_pitch_deg,
                              camera_roll_deg, normal_sigma_deg, upright_sigma_deg)
     bar = _ProgressBar(quiet)

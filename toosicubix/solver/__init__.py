@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..camera import Camera
-from ..geometry import rotation_between
+from ..geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
 from ..model import GroundPlane
 from ..parts import PartsModel
 from ..priors import SizePrior
@@ -29,7 +29,8 @@ from .descent import DescentResult, descend_all, solve_shapes
 from .init import rotations_from_yaws, yaw_candidates
 from .plausibility import implausibility
 from .problem import Problem
-from .refine import MIN_DEPTH, levenberg_marquardt_batch, residuals_and_jacobian, residuals_batch
+from .refine import MIN_DEPTH, RefineResult, levenberg_marquardt_batch, residuals_and_jacobian, residuals_batch
+from .uncertainty import Observability, Uncertainty, analyse
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,9 @@ class SolverOptions:
         singular value below this fraction of its largest
     max_tilt_deg : answers whose up axis leans more than this from the camera's up direction are
         implausible (a camera on a vehicle sees vehicles upright); None turns the check off
+    click_sigma : the click noise (pixels per coordinate) the reported uncertainty is computed for
+    ambiguity_sigmas : another minimum whose cost is within this many ``click_sigma^2`` of the best one
+        makes the fit ambiguous
     """
 
     lambda_3d: float = 0.1
@@ -75,6 +79,8 @@ class SolverOptions:
     abandon_after: int = 10
     rank_tolerance: float = 1e-8
     max_tilt_deg: float | None = 45.0
+    click_sigma: float = 1.5
+    ambiguity_sigmas: float = 4.0
 
 
 @dataclass(frozen=True)
@@ -112,6 +118,13 @@ class FitResult:
     timings: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     scale_shares: dict[str, float] = field(default_factory=dict)
+    uncertainty: Uncertainty | None = None
+    observability: Observability | None = None
+    alternatives: tuple[Alternative, ...] = ()
+
+    @property
+    def ambiguous(self) -> bool:
+        return any(a.close for a in self.alternatives)
 
     @property
     def scale_from(self) -> str | None:
@@ -131,6 +144,36 @@ class FitResult:
         if self.residuals_px is None or len(self.residuals_px) == 0:
             return None
         return float(np.sqrt(np.mean(np.sum(self.residuals_px ** 2, axis=1))))
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """Another local minimum the refinement found, distinct from the answer.
+
+    Attributes
+    ----------
+    cost : its cost (the answer's is ``FitResult.cost``)
+    rotation_deg : how far its rotation is from the answer's
+    turned_around : its yaw differs by more than 135 degrees (the vehicle facing the other way)
+    implausible : why it is implausible, or None
+    close : its cost is within ``ambiguity_sigmas * click_sigma^2`` of the answer's
+    R_cam_vehicle, t_cam_vehicle, dimensions : the pose
+    """
+
+    cost: float
+    rotation_deg: float
+    turned_around: bool
+    implausible: str | None
+    close: bool
+    R_cam_vehicle: np.ndarray
+    t_cam_vehicle: np.ndarray
+    dimensions: np.ndarray
+
+    def to_json(self) -> dict:
+        return {"cost": self.cost, "rotation_deg": self.rotation_deg, "turned_around": self.turned_around,
+                "implausible": self.implausible, "close": self.close,
+                "R_cam_vehicle": self.R_cam_vehicle.tolist(), "t_cam_vehicle": self.t_cam_vehicle.tolist(),
+                "dimensions": self.dimensions.tolist()}
 
 
 @dataclass(frozen=True)
@@ -205,6 +248,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     problem = problem.with_contact_distance(float(np.linalg.norm(ordered[0].t)))
     best, best_any = None, None
     refine_iterations = 0
+    converged: list[tuple[RefineResult, str | None]] = []
     k = options.refine_starts
     for batch in (ordered[:k], ordered[k:2 * k]):
         if not batch or best is not None:
@@ -219,6 +263,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
                 continue
             why = implausibility(parts.click_labels, r.R_cam_vehicle, r.t_cam_vehicle, r.p[:3], max_tilt,
                                  problem.up)
+            converged.append((r, why))
             if best_any is None or r.cost < best_any[0].cost:
                 best_any = (r, why)
             if why is None and (best is None or r.cost < best.cost):
@@ -238,11 +283,34 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
                   timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings)
     if degenerate:
         return FitResult("failed", degenerate, **common)
+    shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
+    scale_source = max(shares, key=shares.get) if shares else None
+    u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source)
     return FitResult(
         "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
-        cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals,
-        scale_shares=scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p), **common,
+        cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, scale_shares=shares,
+        uncertainty=u, observability=obs, alternatives=_alternatives(best, converged, options), **common,
     )
+
+
+def _alternatives(best: RefineResult, converged: list[tuple[RefineResult, str | None]],
+                  options: SolverOptions, min_angle_deg: float = 15.0) -> tuple[Alternative, ...]:
+    """The other minima the refinement reached, cheapest first, each at least ``min_angle_deg`` from the
+    answer and from one another."""
+    margin = options.ambiguity_sigmas * options.click_sigma**2
+    kept: list[Alternative] = []
+    for r, why in sorted(converged, key=lambda rw: rw[0].cost):
+        angle = np.rad2deg(geodesic_angle(r.R_cam_vehicle, best.R_cam_vehicle))
+        if angle < min_angle_deg or any(np.rad2deg(geodesic_angle(r.R_cam_vehicle, a.R_cam_vehicle)) < min_angle_deg
+                                        for a in kept):
+            continue
+        yaw_diff = abs(np.rad2deg(wrap_angle(ypr_from_R_cam_vehicle(r.R_cam_vehicle)[0]
+                                             - ypr_from_R_cam_vehicle(best.R_cam_vehicle)[0])))
+        kept.append(Alternative(cost=r.cost, rotation_deg=float(angle), turned_around=bool(yaw_diff > 135.0),
+                                implausible=why, close=bool(r.cost - best.cost <= margin),
+                                R_cam_vehicle=r.R_cam_vehicle, t_cam_vehicle=r.t_cam_vehicle,
+                                dimensions=r.p[:3].copy()))
+    return tuple(kept)
 
 
 def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions) -> list[DescentResult]:

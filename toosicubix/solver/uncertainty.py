@@ -1,0 +1,249 @@
+"""How well a fitted cuboid is determined: covariance, standard deviations, what the clicks fix, confidence.
+
+The fit minimizes ``F = |r_px|^2 + lambda_px |r_cue|^2`` (pixel residuals; size prior, known sizes, ground
+cues as standardized residuals). Linearized at the optimum, with clicks off by independent Gaussian noise of
+``click_sigma`` pixels per coordinate and the vehicle off its prior (and the road off its stated plane) by
+one standard deviation per standardized residual, the estimate's error has covariance
+
+    Cov = H^-1 (click_sigma^2 J_px^T J_px + lambda_px^2 J_cue^T J_cue) H^-1,  H = J_px^T J_px + lambda_px J_cue^T J_cue
+
+over ``theta = (delta, t, p)`` with ``R = R_hat exp([delta]x)``: the estimator's own spread, right whatever
+``lambda_px`` is (when ``lambda_px = click_sigma^2`` it is the Laplace posterior ``click_sigma^2 H^-1``).
+Reported quantities are functions of ``theta`` whose standard deviations follow by the chain rule.
+
+What the clicks determine: for each quantity, its posterior variance from the clicks' information alone
+(``A / click_sigma^2`` with ``A = J_px^T J_px``, the cues' information ``C = J_cue^T J_cue`` scaled by 1e-6 to
+keep it invertible) against its variance from both (``(A / click_sigma^2 + C)^-1``). Along a direction no click
+fixes, the first is a million times the second. Both have the scale pinned (a huge weight along the
+direction ``(0, t, p)``), since no click ever fixes it: the scale is always the cues' (or the prior's).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import so3_exp, wrap_angle, ypr_from_R_cam_vehicle
+from .problem import Problem
+from .refine import residuals_and_jacobian
+
+#: A quantity is "set by the cues" when switching them off multiplies its variance by more than this.
+PRIOR_SET_RATIO = 4.0
+#: ... and "not fixed by the clicks at all" above this.
+UNDETERMINED_RATIO = 100.0
+QUANTITIES = ("yaw", "pitch", "roll", "length", "width", "height")
+
+_HINTS = {
+    "yaw": "click two wheels of one side, both ends of an axle, a light pair, or draw a forward arrow",
+    "pitch": "click parts at both ends (front and rear) and on the ground (wheels)",
+    "roll": "click parts on both sides (both wheels of an axle, a light pair)",
+    "length": "click a front and a rear part (both ends of the vehicle)",
+    "width": "click parts on both sides (both wheels of an axle, a light pair, both edges of an end)",
+    "height": "click a roof or top part and one on the ground (a wheel)",
+}
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """Standard deviations of a fitted cuboid for a stated click noise.
+
+    Attributes
+    ----------
+    yaw_deg, pitch_deg, roll_deg : KITTI yaw (about camera y) and the vehicle's pitch and roll, degrees
+    depth_m : of the bottom centre's camera z; depth_rel : relative to it
+    dimensions : (3,) of (dx, dy, dz), metres
+    position_m : (2,) of the bottom centre's lateral and forward position (camera x and z), metres
+    scale_rel : of the vehicle's scale (its distance), relative
+    covariance : (6 + P, 6 + P) of ``(delta, t, p)``
+    """
+
+    yaw_deg: float
+    pitch_deg: float
+    roll_deg: float
+    depth_m: float
+    depth_rel: float
+    dimensions: np.ndarray
+    position_m: np.ndarray
+    scale_rel: float
+    covariance: np.ndarray
+
+    def to_json(self) -> dict:
+        return {
+            "yaw_deg": self.yaw_deg, "pitch_deg": self.pitch_deg, "roll_deg": self.roll_deg,
+            "depth_m": self.depth_m, "depth_rel": self.depth_rel, "dimensions": self.dimensions.tolist(),
+            "position_m": self.position_m.tolist(), "scale_rel": self.scale_rel,
+        }
+
+
+def _jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot)."""
+    _, J = residuals_and_jacobian(problem, R, t, p)
+    n_px = 2 * problem.parts.n_clicks
+    return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
+
+
+def _sandwich(A: np.ndarray, C: np.ndarray, lam: float, click_sigma: float) -> np.ndarray:
+    """``H^-1 (s^2 A + lam^2 C) H^-1`` with ``H = A + lam C``; ``A = J_px^T J_px``, ``C = J_cue^T J_cue``."""
+    H = A + lam * C
+    try:
+        H_inv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        H_inv = np.linalg.pinv(H, rcond=1e-13, hermitian=True)
+    cov = H_inv @ (click_sigma**2 * A + lam**2 * C) @ H_inv
+    return (cov + cov.T) / 2.0
+
+
+def covariance(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
+               cue_weight: float = 1.0) -> np.ndarray:
+    """The estimate's covariance over ``(delta, t, p)`` (see the module docstring), (6 + P, 6 + P).
+
+    ``cue_weight`` scales the cues' weight in the estimator (1: as fitted; 1e-6: the clicks alone).
+    """
+    J_px, J_c = _jacobians(problem, R, t, p)
+    return _sandwich(J_px.T @ J_px, J_c.T @ J_c, problem.lambda_px * cue_weight, click_sigma)
+
+
+def _ypr_gradient(R: np.ndarray) -> np.ndarray:
+    """d(ry, pitch, roll) / d delta at ``R`` (central differences, 1e-6 rad): (3, 3)."""
+    h = 1e-6
+    G = np.zeros((3, 3))
+    for k in range(3):
+        step = np.zeros(3)
+        step[k] = h
+        plus = np.array(ypr_from_R_cam_vehicle(R @ so3_exp(step)))
+        minus = np.array(ypr_from_R_cam_vehicle(R @ so3_exp(-step)))
+        G[:, k] = wrap_angle(plus - minus) / (2 * h)
+    return G
+
+
+def compute_uncertainty(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+                        click_sigma: float) -> Uncertainty:
+    """Standard deviations of a fit at ``(R, t, p)`` for clicks off by ``click_sigma`` pixels."""
+    return _uncertainty(covariance(problem, R, t, p, click_sigma), _ypr_gradient(R), t)
+
+
+def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
+    cov_ypr = G @ cov[:3, :3] @ G.T
+    std_ypr = np.rad2deg(np.sqrt(np.clip(np.diag(cov_ypr), 0.0, None)))
+    cov_t = cov[3:6, 3:6]
+    depth = float(np.sqrt(max(cov_t[2, 2], 0.0)))
+    distance = float(np.linalg.norm(t))
+    g_scale = t / distance**2  # d log|t| / dt
+    return Uncertainty(
+        yaw_deg=float(std_ypr[0]), pitch_deg=float(std_ypr[1]), roll_deg=float(std_ypr[2]),
+        depth_m=depth, depth_rel=depth / abs(float(t[2])),
+        dimensions=np.sqrt(np.clip(np.diag(cov[6:9, 6:9]), 0.0, None)),
+        position_m=np.sqrt(np.clip(np.array([cov_t[0, 0], cov_t[2, 2]]), 0.0, None)),
+        scale_rel=float(np.sqrt(max(g_scale @ cov_t @ g_scale, 0.0))), covariance=cov,
+    )
+
+
+def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
+            scale_from: str | None = None) -> tuple[Uncertainty, Observability]:
+    """Uncertainty and observability of a fit together (one Jacobian, one yaw-pitch-roll gradient)."""
+    J_px, J_c = _jacobians(problem, R, t, p)
+    A, C = J_px.T @ J_px, J_c.T @ J_c
+    G = _ypr_gradient(R)
+    u = _uncertainty(_sandwich(A, C, problem.lambda_px, click_sigma), G, t)
+    full, clicks_only = _information_covariances(A, C, click_sigma)
+    return u, _observability(full, clicks_only, _gradients(problem, R, t, p, G), scale_from)
+
+
+def _information_covariances(A: np.ndarray, C: np.ndarray, click_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior covariances from clicks and cues, and from the clicks alone (cues times 1e-6)."""
+    data = A / click_sigma**2
+    return np.linalg.pinv(data + C, hermitian=True), np.linalg.pinv(data + 1e-6 * C, hermitian=True)
+
+
+def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+               G: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Gradients over ``(delta, t, p)`` of yaw, pitch, roll, and of each dimension against the scale:
+    ``log d_k - log z_c`` with ``z_c`` the depth of the centroid of the clicked parts (arrows left out). Their
+    points are fixed by their rays up to the common scale, so ``z_c`` changes with the scale and with nothing
+    else. An arrow's ends are not: they may slide along their rays when the dimension along the arrow is free."""
+    n = 6 + len(p)
+    G = _ypr_gradient(R) if G is None else G
+    out = {}
+    for k, name in enumerate(("yaw", "pitch", "roll")):
+        g = np.zeros(n)
+        g[:3] = G[k]
+        out[name] = g
+    rigid = [i for i, label in enumerate(problem.parts.click_labels) if not label.startswith("direction-")]
+    A_mean = problem.A[rigid].mean(axis=0) if rigid else problem.A_mean
+    c = A_mean @ p  # centroid, vehicle frame
+    z_c = float(R[2] @ c + t[2])
+    d_log_zc = np.zeros(n)
+    d_log_zc[0:3] = -(R @ np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]]))[2] / z_c
+    d_log_zc[5] = 1.0 / z_c
+    d_log_zc[6:] = (R @ A_mean)[2] / z_c
+    for k, name in enumerate(("length", "width", "height")):
+        g = -d_log_zc.copy()
+        g[6 + k] += 1.0 / p[k]
+        out[name] = g
+    return out
+
+
+@dataclass(frozen=True)
+class Observability:
+    """For each of yaw, pitch, roll, length, width, height: how much the cues tighten it.
+
+    Attributes
+    ----------
+    ratios : quantity -> variance from the clicks alone / variance from clicks and cues (>= 1); large means
+        the clicks leave it to the cues
+    status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
+    scale_from : the cue that sets the scale
+    """
+
+    ratios: dict[str, float]
+    status: dict[str, str]
+    scale_from: str | None
+
+    def sentences(self) -> list[str]:
+        """Plain sentences, one per quantity the clicks do not fix, and one on the scale."""
+        out = []
+        for name in QUANTITIES:
+            status = self.status[name]
+            if status == "cues only":
+                out.append(f"{name} set by the prior, not by the clicks: {_HINTS[name]}")
+            elif status == "mostly cues":
+                out.append(f"{name} mostly set by the prior: {_HINTS[name]}")
+        if self.scale_from:
+            source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(
+                self.scale_from, self.scale_from)
+            out.append(f"scale set by {source} (no click fixes it)")
+        return out
+
+    def to_json(self) -> dict:
+        return {"determined_by": self.status, "variance_ratios": self.ratios, "sentences": self.sentences()}
+
+
+def assess_observability(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float = 1.5,
+                         scale_from: str | None = None) -> Observability:
+    """Which of the cuboid's quantities the clicks determine, and which the cues (the prior) set."""
+    J_px, J_c = _jacobians(problem, R, t, p)
+    full, clicks_only = _information_covariances(J_px.T @ J_px, J_c.T @ J_c, click_sigma)
+    return _observability(full, clicks_only, _gradients(problem, R, t, p), scale_from)
+
+
+def _observability(full: np.ndarray, clicks_only: np.ndarray, gradients: dict[str, np.ndarray],
+                   scale_from: str | None) -> Observability:
+    ratios, status = {}, {}
+    for name, g in gradients.items():
+        v_full = float(g @ full @ g)
+        v_clicks = float(g @ clicks_only @ g)
+        ratio = v_clicks / v_full if v_full > 0 else math.inf
+        ratios[name] = ratio
+        status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
+                        "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
+    return Observability(ratios, status, scale_from)
+
+
+def confidence(u: Uncertainty, yaw_within_deg: float = 10.0, depth_within_rel: float = 0.1) -> float:
+    """The probability, under the Gaussian uncertainty, that the yaw is within ``yaw_within_deg`` and the depth
+    within ``depth_within_rel`` of the truth (taken as independent): the KITTI score of a fit."""
+    p_yaw = math.erf(yaw_within_deg / (math.sqrt(2.0) * max(u.yaw_deg, 1e-12)))
+    p_depth = math.erf(depth_within_rel / (math.sqrt(2.0) * max(u.depth_rel, 1e-12)))
+    return p_yaw * p_depth
