@@ -80,6 +80,24 @@ def test_wheel_axles_and_tyres_sit_as_on_real_cars():
     assert -0.32 * length <= rear <= -0.24 * length
 
 
+@pytest.mark.parametrize(("ry", "loc"), VIEWS)
+def test_parts_left_out_by_the_click_budget_are_kept_as_spares(ry, loc):
+    """With a budget of 4 clicks the person clicks the first parts and keeps the rest as spares: together
+    they are what the person clicks with a budget of 30; spares are visible and inside the image, and the
+    clicks do not depend on them."""
+    gt = gt_vehicle(ry, loc)
+    small = simulate_vehicle(gt, AnnotatorOptions(noise_px=1.0, exact_placement=True, max_clicks=4))
+    large = simulate_vehicle(gt, AnnotatorOptions(noise_px=1.0, exact_placement=True, max_clicks=30))
+    assert small.n_clicks <= 4 and not large.spare
+    names = [(p.kind, p.name) for p in small.parts + small.spare]
+    assert sorted(names) == sorted((p.kind, p.name) for p in large.parts)
+    labels = tuple(label for part in small.spare for label in part.click_labels)
+    assert unseen_clicks(labels, small.R_cam_vehicle, small.t_cam_vehicle, small.dimensions) == []
+    for part in small.spare:
+        assert np.all((part.uv > 0) & (part.uv < np.array([1242, 375])))
+    np.testing.assert_array_equal(small.parts[0].uv, large.parts[0].uv)
+
+
 def test_noise_has_the_requested_spread():
     gt = gt_vehicle(-45.0, (3.0, 1.65, 18.0))
     clean = simulate_vehicle(gt, AnnotatorOptions(noise_px=0.0, exact_placement=True))

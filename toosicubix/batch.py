@@ -30,7 +30,6 @@ from .formats.results import (
     RESULTS_FILENAME,
     ImageResult,
     VehicleResult,
-    dumps,
     read_results,
     results_to_json,
 )
@@ -40,7 +39,8 @@ from .geometry import (
     cuboid_corners_cam,
     ypr_from_R_cam_vehicle,
 )
-from .io_utils import atomic_write_text
+from .guidance import BOX_SHAPED, suggest_clicks
+from .io_utils import atomic_write_json, atomic_write_text
 from .model import GroundPlane, Image, Vehicle, load_images, with_ground
 from .parts import PartsModel, build_parts_model
 from .priors import Priors, SizePrior, load_priors
@@ -87,8 +87,11 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
 
 
 def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
-            ground: GroundPlane | None = None) -> VehicleResult:
-    """Fit one vehicle and describe it as results.json does; never raises."""
+            ground: GroundPlane | None = None, next_clicks: int = 0) -> VehicleResult:
+    """Fit one vehicle and describe it as results.json does; never raises.
+
+    ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.guidance`), 0: none.
+    """
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
@@ -99,7 +102,7 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
             error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
             details={"kitti_type": prior.kitti_type},
         )
-    return _vehicle_result(vehicle, camera, prior, parts, fit, ground)
+    return _vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks)
 
 
 def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]:
@@ -113,7 +116,7 @@ def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]
 
 
 def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
-                    ground: GroundPlane | None) -> VehicleResult:
+                    ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0) -> VehicleResult:
     click_labels, param_names = parts.click_labels, parts.param_names
     details: dict[str, Any] = {
         "kitti_type": prior.kitti_type,
@@ -149,8 +152,21 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
         "warnings": list(fit.warnings),
         "solver": _solver_details(fit),
     })
+    if next_clicks > 0:
+        details.update(_next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks))
     return VehicleResult(id=vehicle.id, status="ok", error=None, prototype=vehicle.prototype, R_cam_vehicle=R,
                          t_cam_vehicle=t, dimensions=d, box2d=box2d, details=details)
+
+
+def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
+                 ground: GroundPlane | None, n: int) -> dict[str, Any]:
+    """The ``n`` best parts to click next, for results.json; an error here never fails the vehicle."""
+    try:
+        suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
+                                     box_shaped=vehicle.prototype in BOX_SHAPED or prior.kitti_type in BOX_SHAPED)
+    except Exception as exc:  # guidance is advice: the fit stands without it
+        return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
+    return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
 
 
 def _solver_details(fit: FitResult) -> dict[str, Any]:
@@ -192,7 +208,7 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     return lines
 
 
-def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None]) -> VehicleResult:
+def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]) -> VehicleResult:
     return fit_one(*task)
 
 
@@ -202,7 +218,7 @@ def _worker_init() -> None:
 
 def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
                progress: Callable[[int], None] | None = None, jobs: int = 1,
-               joint_ground: bool = False) -> list[ImageResult]:
+               joint_ground: bool = False, next_clicks: int = 0) -> list[ImageResult]:
     """Fit every vehicle of every image.
 
     Parameters
@@ -212,8 +228,10 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
         deterministically, and the results come back in input order)
     joint_ground : then refine each image's vehicles together with its ground plane (images with a
         ground block); the camera height may be unknown
+    next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
     """
-    tasks = [(v, im.camera, priors[v.prototype], options, im.ground) for im in images for v in im.vehicles]
+    tasks = [(v, im.camera, priors[v.prototype], options, im.ground, next_clicks)
+             for im in images for v in im.vehicles]
     fitted: list[VehicleResult] = []
     if jobs > 1 and len(tasks) > 1:
         chunk = max(1, min(64, len(tasks) // (4 * jobs)))
@@ -233,7 +251,7 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
         start += len(im.vehicles)
         ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
         if joint_ground and im.ground is not None:
-            vehicles, ground = fit_image_jointly(im, vehicles, priors, options)
+            vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
         results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
                                    image_size=im.camera.image_size, vehicles=vehicles, ground=ground))
     return results
@@ -248,8 +266,8 @@ def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | No
     }
 
 
-def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors,
-                      options: SolverOptions) -> tuple[list[VehicleResult], dict[str, Any]]:
+def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
+                      next_clicks: int = 0) -> tuple[list[VehicleResult], dict[str, Any]]:
     """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
     return the updated results and the plane. Failed vehicles stay as they were."""
     ground = image.ground
@@ -277,14 +295,15 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         own = Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
                             plane_fitted, float(np.linalg.norm(t)))
         shares = scale_shares(own, R, t, p)
-        u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None)
+        u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
+                         options.part_sigma)
         fit = FitResult(
             "ok", None, vehicles[k].details["constraints"], parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
             t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
             warnings=tuple(vehicles[k].details.get("warnings", [])),
         )
-        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted)
+        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks)
         details = dict(updated.details)
         details["cues"] = {**details["cues"], "joint_ground": True}
         details["solver"] = {**vehicles[k].details.get("solver", {}), "joint_iterations": result.iterations}
@@ -330,7 +349,7 @@ def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult]
         lines = kitti_lines(res, im.camera)
         atomic_write_text(label_dir / f"{im.id}.txt", "".join(f"{ln}\n" for ln in lines))
         written.add(f"{im.id}.txt")
-    atomic_write_text(out_dir / RESULTS_FILENAME, dumps(results_to_json(results, header)))
+    atomic_write_json(out_dir / RESULTS_FILENAME, results_to_json(results, header))
     for stale in sorted(previous - written):
         (label_dir / stale).unlink(missing_ok=True)
 
@@ -339,7 +358,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
              options: SolverOptions | None = None,
              progress: Callable[[int], None] | None = None,
              on_start: Callable[[int], None] | None = None, jobs: int = 1,
-             ground: dict[str, object] | None = None, joint_ground: bool = False) -> BatchSummary:
+             ground: dict[str, object] | None = None, joint_ground: bool = False,
+             next_clicks: int = 0) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -353,6 +373,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     jobs : worker processes (the output does not depend on it)
     ground : ground-block fields (schema names) set for every image of the file
     joint_ground : refine each image's vehicles together with its ground plane
+    next_clicks : per vehicle, how many suggestions of what to click next results.json gets (0: none)
 
     Raises
     ------
@@ -369,13 +390,14 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     prepare_output_dir(out_dir)  # fail before the work, not after
     if on_start is not None:
         on_start(sum(len(im.vehicles) for im in images))
-    results = fit_images(images, priors, options, progress, jobs, joint_ground)
+    results = fit_images(images, priors, options, progress, jobs, joint_ground, next_clicks)
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
         "annotations_sha256": hashlib.sha256(annotations.read_bytes()).hexdigest(),
         "priors": priors.source if priors_path is not None else "bundled",
-        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px,
+        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
+                     "part_sigma": options.part_sigma,
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",

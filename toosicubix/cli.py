@@ -1,13 +1,14 @@
 """The ``toosicubix`` command. Thin: parses options, calls the library, reports, sets the exit code.
 
-Exit codes: 0 success; 1 a batch finished but some vehicles failed; 2 bad input or usage.
+Exit codes: 0 success; 1 a batch finished but some vehicles failed (validate: are not well determined);
+2 bad input or usage.
 """
 
 from __future__ import annotations
 
 import json
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import click
@@ -16,6 +17,7 @@ import numpy as np
 from . import __version__
 from .formats.results import DEFAULT_OUTPUT_DIR
 from .solver import SolverOptions
+from .validation import Thresholds
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -54,56 +56,96 @@ def schema_command() -> None:
     click.echo(json.dumps(json_schema(), indent=2))
 
 
+_FITTING_OPTIONS = [
+    click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help="Size priors file (JSON, see README); default: the bundled KITTI and Cityscapes 3D table."),
+    click.option("--lambda", "lambda_3d", type=click.FloatRange(min=0.0, min_open=True),
+                 default=SolverOptions.lambda_3d, show_default=True,
+                 help="Weight of the size prior in the coordinate descent's 3D cost."),
+    click.option("--lambda-p", "lambda_px", type=click.FloatRange(min=0.0, min_open=True),
+                 default=SolverOptions.lambda_px, show_default=True,
+                 help="Weight of the size prior in the pixel cost, in px^2 per squared Mahalanobis unit: the click "
+                      "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more."),
+    click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
+    click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=SolverOptions.click_sigma,
+                 show_default=True,
+                 help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) is for."),
+    click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
+                 help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
+                      "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
+    click.option("--kitti-ground", is_flag=True,
+                 help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
+                      "deg, vehicles upright within 2 deg. The options below then change single fields."),
+    click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Camera height above the road, metres, for every image (enables the ground contact)."),
+    click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
+    click.option("--road-normal", default=None, help="Road normal in camera coordinates, x,y,z [default 0,-1,0]."),
+    click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
+    click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
+    click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Uncertainty of the normal, degrees [default 1]."),
+    click.option("--upright-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="How far vehicles lean from the road normal, degrees [default 2]."),
+    click.option("--joint-ground", is_flag=True,
+                 help="Refine each image's vehicles together with its ground plane (images with a ground block or "
+                      "the options above); the camera height may then be unknown: the vehicles' sizes fix it."),
+    click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+                 help="Worker processes; the output is the same for any number."),
+]
+
+
+def _fitting_options(command):
+    """The options ``fit`` and ``validate`` share: priors, weights, click noise, ground cues, jobs."""
+    for option in reversed(_FITTING_OPTIONS):
+        command = option(command)
+    return command
+
+
+@dataclass(frozen=True)
+class _Fitting:
+    """What the shared options amount to."""
+
+    priors_path: Path | None
+    options: SolverOptions
+    ground: dict[str, object]
+    joint_ground: bool
+    jobs: int
+
+
+def _fitting(ctx: click.Context, priors_path: Path | None, lambda_3d: float, lambda_px: float,
+             config_path: Path | None, click_sigma: float, part_sigma: float, kitti_ground: bool,
+             camera_height: float | None,
+             camera_height_sigma: float | None, road_normal: str | None, camera_pitch_deg: float | None,
+             camera_roll_deg: float | None, normal_sigma_deg: float | None, upright_sigma_deg: float | None,
+             joint_ground: bool, jobs: int) -> _Fitting:
+    options = replace(_solver_options(ctx, config_path, lambda_3d=lambda_3d, lambda_px=lambda_px),
+                      click_sigma=click_sigma, part_sigma=part_sigma)
+    ground = _ground_options(kitti_ground, camera_height, camera_height_sigma, road_normal, camera_pitch_deg,
+                             camera_roll_deg, normal_sigma_deg, upright_sigma_deg)
+    return _Fitting(priors_path, options, ground, joint_ground, jobs)
+
+
 @main.command("fit")
 @click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=DEFAULT_OUTPUT_DIR, show_default=True,
               help="Output folder: label_2/<image id>.txt (KITTI) and results.json.")
-@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Size priors file (JSON, see README); default: the bundled KITTI and Cityscapes 3D table.")
-@click.option("--lambda", "lambda_3d", type=click.FloatRange(min=0.0, min_open=True),
-              default=SolverOptions.lambda_3d, show_default=True,
-              help="Weight of the size prior in the coordinate descent's 3D cost.")
-@click.option("--lambda-p", "lambda_px", type=click.FloatRange(min=0.0, min_open=True),
-              default=SolverOptions.lambda_px, show_default=True,
-              help="Weight of the size prior in the pixel cost, in px^2 per squared Mahalanobis unit: the click "
-                   "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more.")
-@click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Settings file (as `toosicubix tune` writes it); options given on the command line win.")
-@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=SolverOptions.click_sigma,
-              show_default=True, help="Click noise in pixels the reported uncertainty (sigma, confidence) is for.")
-@click.option("--kitti-ground", is_flag=True,
-              help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 deg, "
-                   "vehicles upright within 2 deg. The options below then change single fields.")
-@click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Camera height above the road, metres, for every image (enables the ground contact).")
-@click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Its uncertainty, metres [default 0.05, KITTI 0.1].")
-@click.option("--road-normal", default=None, help="Road normal in camera coordinates, x,y,z [default 0,-1,0].")
-@click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up.")
-@click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll.")
-@click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Uncertainty of the normal, degrees [default 1].")
-@click.option("--upright-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="How far vehicles lean from the road normal, degrees [default 2].")
-@click.option("--joint-ground", is_flag=True,
-              help="Refine each image's vehicles together with its ground plane (images with a ground block or the "
-                   "options above); the camera height may then be unknown: the vehicles' sizes fix it.")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes; the output is the same for any number.")
+@_fitting_options
+@click.option("--next-clicks", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Per vehicle, add to results.json this many parts to click next, best first (about 2 ms a "
+                   "vehicle; `toosicubix validate` shows them).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
 @click.pass_context
-def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_path: Path | None, lambda_3d: float,
-                lambda_px: float, config_path: Path | None, click_sigma: float, kitti_ground: bool,
-                camera_height: float | None,
-                camera_height_sigma: float | None, road_normal: str | None, camera_pitch_deg: float | None,
-                camera_roll_deg: float | None, normal_sigma_deg: float | None, upright_sigma_deg: float | None,
-                joint_ground: bool, jobs: int, quiet: bool) -> None:
+def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, next_clicks: int, quiet: bool,
+                **fitting_options) -> None:
     """Fit a 3D cuboid to every annotated vehicle.
 
     Reads ANNOTATIONS (annotation file v1, see `toosicubix schema`) and writes OUT/label_2/<image id>.txt
-    in KITTI format plus OUT/results.json with the full pose of every vehicle. KITTI files store yaw only:
-    pitch and roll are dropped there and kept in results.json.
+    in KITTI format plus OUT/results.json with the full pose of every vehicle, its uncertainty (sigma),
+    what its clicks leave to the prior, and any second answer nearly as good. KITTI files store yaw only:
+    pitch and roll are dropped there and kept in results.json; their score is the fit's confidence.
 
     Scale comes from the size priors unless the file or the options give a ground plane (vehicles stand
     upright on the road; with the camera height, on it) or known sizes (plate widths, wheelbases, tyres,
@@ -121,14 +163,11 @@ def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_pat
     from .batch import OutputFolderError, fit_file
     from .schemas import InputFileError
 
-    options = replace(_solver_options(ctx, config_path, lambda_3d=lambda_3d, lambda_px=lambda_px),
-                      click_sigma=click_sigma)
-    ground = _ground_options(kitti_ground, camera_height, camera_height_sigma, road_normal, camera_pitch_deg,
-                             camera_roll_deg, normal_sigma_deg, upright_sigma_deg)
+    f = _fitting(ctx, **fitting_options)
     bar = _ProgressBar(quiet)
     try:
-        summary = fit_file(annotations, out_dir, priors_path, options, progress=bar.update, on_start=bar.start,
-                           jobs=jobs, ground=ground, joint_ground=joint_ground)
+        summary = fit_file(annotations, out_dir, f.priors_path, f.options, progress=bar.update, on_start=bar.start,
+                           jobs=f.jobs, ground=f.ground, joint_ground=f.joint_ground, next_clicks=next_clicks)
     except (InputFileError, OutputFolderError) as exc:
         raise BadInput(str(exc)) from None
     finally:
@@ -148,6 +187,66 @@ def fit_command(ctx: click.Context, annotations: Path, out_dir: Path, priors_pat
         if len(summary.failed) > 20:
             click.echo(f"  ... and {len(summary.failed) - 20} more failed vehicles (see results.json)", err=True)
     sys.exit(EXIT_SOME_FAILED if summary.failed else EXIT_OK)
+
+
+@main.command("validate")
+@click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--max-yaw-sigma", "max_yaw_sigma_deg", type=click.FloatRange(min=0.0, min_open=True),
+              default=Thresholds.max_yaw_sigma_deg, show_default=True,
+              help="A vehicle is well determined when its yaw standard deviation is at most this, degrees ...")
+@click.option("--max-depth-sigma", "max_depth_sigma_rel", type=click.FloatRange(min=0.0, min_open=True),
+              default=Thresholds.max_depth_sigma_rel, show_default=True,
+              help="... its depth standard deviation at most this share of its depth ...")
+@click.option("--allow-ambiguous", is_flag=True,
+              help="... and (unless this flag is given) no second answer fits the clicks about as well.")
+@click.option("--next-clicks", type=click.IntRange(min=0), default=3, show_default=True,
+              help="How many parts to suggest clicking next, per vehicle.")
+@_fitting_options
+@click.option("--all", "show_all", is_flag=True, help="Describe every vehicle, not only those that need work.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout instead of text.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar on stderr.")
+@click.pass_context
+def validate_command(ctx: click.Context, annotations: Path, max_yaw_sigma_deg: float, max_depth_sigma_rel: float,
+                     allow_ambiguous: bool, next_clicks: int, show_all: bool, as_json: bool, quiet: bool,
+                     **fitting_options) -> None:
+    """Check an annotation file and say which vehicles need more clicks; writes nothing.
+
+    Schema errors are listed with their JSON paths (exit code 2). Otherwise every vehicle is fitted as
+    `toosicubix fit` would fit it with the same options, and for each vehicle that is not well determined
+    the report gives its constraint count, the standard deviations of its pose and size for clicks off by
+    --click-sigma pixels, what its clicks leave to the prior, any second answer (e.g. turned around) that
+    fits nearly as well, and the parts to click next, with where they should appear in the image and how
+    much each would shrink the yaw and depth uncertainty.
+
+    Exit code 0 when every vehicle is well determined, 1 when some are not (or cannot be fitted), 2 for a
+    bad input file or option.
+
+    \b
+    Example:
+      toosicubix validate annotations.json
+      toosicubix validate annotations.json --kitti-ground --max-yaw-sigma 3 --all
+      toosicubix validate annotations.json --json > report.json
+    """
+    from .schemas import InputFileError
+    from .validation import validate_file
+
+    f = _fitting(ctx, **fitting_options)
+    thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous)
+    bar = _ProgressBar(quiet)
+    try:
+        report = validate_file(annotations, f.priors_path, f.options, thresholds, f.ground, f.joint_ground,
+                               next_clicks, f.jobs, progress=bar.update, on_start=bar.start)
+    except InputFileError as exc:
+        raise BadInput(str(exc)) from None
+    finally:
+        bar.finish()
+    if as_json:
+        from .formats.results import dumps
+
+        click.echo(dumps(report.to_json()), nl=False)
+    else:
+        click.echo(report.text(show_all), nl=False)
+    sys.exit(EXIT_OK if report.ok else EXIT_SOME_FAILED)
 
 
 def _ground_options(kitti_ground: bool, camera_height: float | None, camera_height_sigma: float | None,

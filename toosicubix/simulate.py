@@ -133,6 +133,9 @@ class SimulatedVehicle:
         annotations' auxiliary values (it reproduces the noise-free clicks only with exact placement)
     R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) in the camera frame of K; dimensions : (3,)
     wheel_x : X of the front and rear axles, metres
+    spare : the parts the person could see and click but left out because of the click budget, clicked as
+        the others (placement and noise; the noise from a stream of their own, so that ``parts`` do not
+        depend on them): what the person would add when asked for one more
     """
 
     source: GroundTruthVehicle
@@ -144,6 +147,7 @@ class SimulatedVehicle:
     wheel_x: tuple[float, float]
     p_true: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    spare: list[Part] = field(default_factory=list)
 
     @property
     def n_clicks(self) -> int:
@@ -364,6 +368,8 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
     parts: list[Part] = []
     specs: list[PartSpec] = []
     notes: list[str] = []
+    spare: list[Part] = []
+    spare_rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/spare")
     clicks = 0
     for spec, rule in _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement):
         if not _needs(rule, visible):
@@ -383,6 +389,9 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
             notes.append(f"{spec.kind} {spec.name}: lost to occlusion")
             continue
         if clicks + len(uv) > options.max_clicks:
+            extra = uv + spare_rng.normal(0.0, options.noise_px, uv.shape) if options.noise_px > 0 else uv
+            if len(extra) == 1 or np.linalg.norm(extra[1] - extra[0]) >= MIN_PAIR_SEPARATION_PX:
+                spare.append(Part(spec.kind, spec.name, extra, f"spare[{len(spare)}]"))
             continue
         noisy = uv + rng.normal(0.0, options.noise_px, uv.shape) if options.noise_px > 0 else uv
         if len(noisy) == 2 and np.linalg.norm(noisy[1] - noisy[0]) < MIN_PAIR_SEPARATION_PX:
@@ -392,7 +401,7 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
         specs.append(_model_spec(spec, d))
         clicks += len(uv)
     p_true = true_parameters(specs, d, wheel_x)[1] if specs else np.zeros(3)
-    return SimulatedVehicle(gt, parts, specs, R, t, d, wheel_x, p_true, notes)
+    return SimulatedVehicle(gt, parts, specs, R, t, d, wheel_x, p_true, notes, spare)
 
 
 def _part_json(part: Part) -> dict[str, Any]:

@@ -60,14 +60,15 @@ def faces_of_click(label: str) -> tuple[str, ...] | None:
     return tuple(w for w in words[1:] if w != "bottom")
 
 
-def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
-                           dimensions: np.ndarray) -> dict[str, bool]:
-    """For each face but the bottom: is it turned to the camera (within the grazing tolerance)?"""
+def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray,
+                           grazing_deg: float = GRAZING_DEG) -> dict[str, bool]:
+    """For each face but the bottom: is it turned to the camera? A face seen edge-on counts, and one
+    turned away by up to ``grazing_deg`` (negative: it must be turned toward the camera by that much)."""
     camera_vehicle = R_cam_vehicle.T @ (-np.asarray(t_cam_vehicle, dtype=float))
     dx, dy, dz = dimensions
     centres = {"front": (dx / 2, 0, dz / 2), "rear": (-dx / 2, 0, dz / 2), "left": (0, dy / 2, dz / 2),
                "right": (0, -dy / 2, dz / 2), "top": (0, 0, dz)}
-    sin_grazing = np.sin(np.deg2rad(GRAZING_DEG))
+    sin_grazing = np.sin(np.deg2rad(grazing_deg))
     out = {}
     for face, normal in _FACE_NORMALS.items():
         to_camera = camera_vehicle - np.array(centres[face])

@@ -25,14 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import so3_exp, wrap_angle, ypr_from_R_cam_vehicle
+from ..geometry import rot_x, ypr_from_R_cam_vehicle
 from .problem import Problem
 from .refine import residuals_and_jacobian
 
-#: A quantity is "set by the cues" when switching them off multiplies its variance by more than this.
+#: A quantity is "mostly set by the cues" when switching them off multiplies its variance by more than this
+#: (its standard deviation by 2).
 PRIOR_SET_RATIO = 4.0
-#: ... and "not fixed by the clicks at all" above this.
-UNDETERMINED_RATIO = 100.0
+#: ... and "not fixed by the clicks at all" above this (standard deviation by 100): in practice a direction
+#: the clicks leave free, whose ratio is about 1e6, the inverse of the cues' scaling.
+UNDETERMINED_RATIO = 1e4
 QUANTITIES = ("yaw", "pitch", "roll", "length", "width", "height")
 
 _HINTS = {
@@ -70,61 +72,106 @@ class Uncertainty:
     covariance: np.ndarray
 
     def to_json(self) -> dict:
+        """As results.json has it; ``null`` for a quantity the fit does not determine at all (infinite)."""
+        scalars = ("yaw_deg", "pitch_deg", "roll_deg", "depth_m", "depth_rel")
         return {
-            "yaw_deg": self.yaw_deg, "pitch_deg": self.pitch_deg, "roll_deg": self.roll_deg,
-            "depth_m": self.depth_m, "depth_rel": self.depth_rel, "dimensions": self.dimensions.tolist(),
-            "position_m": self.position_m.tolist(), "scale_rel": self.scale_rel,
+            **{key: finite_or_none(getattr(self, key)) for key in scalars},
+            "dimensions": [finite_or_none(v) for v in self.dimensions],
+            "position_m": [finite_or_none(v) for v in self.position_m],
+            "scale_rel": finite_or_none(self.scale_rel),
         }
 
 
-def _jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def finite_or_none(value: float) -> float | None:
+    """JSON has no infinity: None stands for it."""
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot)."""
     _, J = residuals_and_jacobian(problem, R, t, p)
     n_px = 2 * problem.parts.n_clicks
     return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
 
 
-def _sandwich(A: np.ndarray, C: np.ndarray, lam: float, click_sigma: float) -> np.ndarray:
-    """``H^-1 (s^2 A + lam^2 C) H^-1`` with ``H = A + lam C``; ``A = J_px^T J_px``, ``C = J_cue^T J_cue``."""
-    H = A + lam * C
+def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
+               part_sigma: float = 0.0) -> np.ndarray:
+    """The noise of each pixel row, (2N,): the click noise and, for a part ``part_sigma`` metres off where
+    the cuboid model puts it, that offset seen from the camera, ``f part_sigma / z`` pixels at depth ``z``
+    (at least 0.5 m). Arrows get the click noise only: where on the ground one is drawn is an unknown of the
+    fit, not an error."""
+    if part_sigma <= 0.0:
+        return np.full(2 * problem.parts.n_clicks, float(click_sigma))
+    z = np.maximum(problem.points_cam(R, t, p)[:, 2], 0.5)
+    f = 0.5 * (problem.K[0, 0] + problem.K[1, 1])
+    on_body = np.array([not label.startswith("direction-") for label in problem.parts.click_labels])
+    return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
+
+
+def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float, sigmas: np.ndarray) -> np.ndarray:
+    """``H^-1 (J_px^T S^2 J_px + lam^2 J_cue^T J_cue) H^-1`` with ``H = J_px^T J_px + lam J_cue^T J_cue`` and
+    ``S`` the rows' noise (:func:`row_sigmas`).
+
+    Computed as ``X X^T`` with ``X = H^-1 [J_px^T S, lam J_cue^T]``, ``H`` scaled to a unit diagonal first, so
+    that no variance comes out negative however badly the fit is conditioned; a direction ``H`` does not
+    determine at all gets infinite variance (never zero)."""
+    H = J_px.T @ J_px + lam * (J_cue.T @ J_cue)
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
+    H_scaled = H * scale[:, None] * scale[None, :]
+    L = np.hstack([(J_px * sigmas[:, None]).T, lam * J_cue.T]) * scale[:, None]
     try:
-        H_inv = np.linalg.inv(H)
+        X = np.linalg.solve(H_scaled, L) * scale[:, None]
     except np.linalg.LinAlgError:
-        H_inv = np.linalg.pinv(H, rcond=1e-13, hermitian=True)
-    cov = H_inv @ (click_sigma**2 * A + lam**2 * C) @ H_inv
-    return (cov + cov.T) / 2.0
+        return np.full_like(H, np.inf)
+    if not np.all(np.isfinite(X)):
+        return np.full_like(H, np.inf)
+    return X @ X.T
 
 
 def covariance(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-               cue_weight: float = 1.0) -> np.ndarray:
+               cue_weight: float = 1.0, part_sigma: float = 0.0) -> np.ndarray:
     """The estimate's covariance over ``(delta, t, p)`` (see the module docstring), (6 + P, 6 + P).
 
     ``cue_weight`` scales the cues' weight in the estimator (1: as fitted; 1e-6: the clicks alone).
     """
-    J_px, J_c = _jacobians(problem, R, t, p)
-    return _sandwich(J_px.T @ J_px, J_c.T @ J_c, problem.lambda_px * cue_weight, click_sigma)
+    J_px, J_c = jacobians(problem, R, t, p)
+    return _sandwich(J_px, J_c, problem.lambda_px * cue_weight,
+                     row_sigmas(problem, R, t, p, click_sigma, part_sigma))
 
 
-def _ypr_gradient(R: np.ndarray) -> np.ndarray:
-    """d(ry, pitch, roll) / d delta at ``R`` (central differences, 1e-6 rad): (3, 3)."""
-    h = 1e-6
-    G = np.zeros((3, 3))
-    for k in range(3):
-        step = np.zeros(3)
-        step[k] = h
-        plus = np.array(ypr_from_R_cam_vehicle(R @ so3_exp(step)))
-        minus = np.array(ypr_from_R_cam_vehicle(R @ so3_exp(-step)))
-        G[:, k] = wrap_angle(plus - minus) / (2 * h)
-    return G
+def ypr_gradient(R: np.ndarray) -> np.ndarray:
+    """d(ry, pitch, roll) / d delta at ``R = R_hat exp([delta]x)``: (3, 3).
+
+    With ``R = R_y(ry) R_level R_Y(pitch) R_X(roll)`` (:func:`toosicubix.geometry.R_cam_vehicle_from_ypr`),
+    the rates of the three angles turn the vehicle about, in its own frame, ``R^T e_y`` (camera y),
+    ``R_X(roll)^T e_y`` and ``e_x``: ``delta = M (d ry, d pitch, d roll)`` with those columns, so the
+    gradient is ``M^-1`` (singular only with the nose straight up or down).
+    """
+    roll = ypr_from_R_cam_vehicle(R)[2]
+    e_x, e_y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    return np.linalg.inv(np.column_stack([R.T @ e_y, rot_x(roll).T @ e_y, e_x]))
 
 
 def compute_uncertainty(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
-                        click_sigma: float) -> Uncertainty:
-    """Standard deviations of a fit at ``(R, t, p)`` for clicks off by ``click_sigma`` pixels."""
-    return _uncertainty(covariance(problem, R, t, p, click_sigma), _ypr_gradient(R), t)
+                        click_sigma: float, part_sigma: float = 0.0) -> Uncertainty:
+    """Standard deviations of a fit at ``(R, t, p)`` for clicks off by ``click_sigma`` pixels on parts off
+    their model positions by ``part_sigma`` metres."""
+    return _uncertainty(covariance(problem, R, t, p, click_sigma, part_sigma=part_sigma), ypr_gradient(R), t)
+
+
+def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float, sigmas: np.ndarray,
+                               G: np.ndarray, t: np.ndarray) -> Uncertainty:
+    """As :func:`compute_uncertainty`, from the rows :func:`jacobians` gives (any subset of clicks and of
+    parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
+    and ``G = ypr_gradient(R)``."""
+    return _uncertainty(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
 
 
 def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
+    if not np.all(np.isfinite(cov)):  # nothing determined: every standard deviation infinite
+        inf = math.inf
+        return Uncertainty(inf, inf, inf, inf, inf, np.full(3, inf), np.full(2, inf), inf, cov)
     cov_ypr = G @ cov[:3, :3] @ G.T
     std_ypr = np.rad2deg(np.sqrt(np.clip(np.diag(cov_ypr), 0.0, None)))
     cov_t = cov[3:6, 3:6]
@@ -141,20 +188,35 @@ def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
 
 
 def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-            scale_from: str | None = None) -> tuple[Uncertainty, Observability]:
+            scale_from: str | None = None, part_sigma: float = 0.0) -> tuple[Uncertainty, Observability]:
     """Uncertainty and observability of a fit together (one Jacobian, one yaw-pitch-roll gradient)."""
-    J_px, J_c = _jacobians(problem, R, t, p)
-    A, C = J_px.T @ J_px, J_c.T @ J_c
-    G = _ypr_gradient(R)
-    u = _uncertainty(_sandwich(A, C, problem.lambda_px, click_sigma), G, t)
-    full, clicks_only = _information_covariances(A, C, click_sigma)
-    return u, _observability(full, clicks_only, _gradients(problem, R, t, p, G), scale_from)
+    J_px, J_c = jacobians(problem, R, t, p)
+    C = J_c.T @ J_c
+    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
+    G = ypr_gradient(R)
+    u = _uncertainty(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
+    full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
+    return u, _observability(full, clicks_only, scale_from)
 
 
-def _information_covariances(A: np.ndarray, C: np.ndarray, click_sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Posterior covariances from clicks and cues, and from the clicks alone (cues times 1e-6)."""
-    data = A / click_sigma**2
-    return np.linalg.pinv(data + C, hermitian=True), np.linalg.pinv(data + 1e-6 * C, hermitian=True)
+def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
+                           gradients: dict[str, np.ndarray]) -> tuple[dict[str, float], dict[str, float]]:
+    """Posterior variances of the quantities with the ``gradients``, from clicks and cues, and from the clicks
+    alone (cues times 1e-6): ``g^T (J^T W J + c C)^-1 g``, solved with the matrix scaled to a unit diagonal."""
+    whitened = J_px / sigmas[:, None]
+    data = whitened.T @ whitened
+    names = list(gradients)
+    Gm = np.column_stack([gradients[k] for k in names])
+    out = []
+    for weight in (1.0, 1e-6):
+        M = data + weight * C
+        scale = 1.0 / np.sqrt(np.maximum(np.diag(M), 1e-300))
+        try:
+            X = np.linalg.solve(M * scale[:, None] * scale[None, :], Gm * scale[:, None]) * scale[:, None]
+        except np.linalg.LinAlgError:
+            X = np.linalg.pinv(M, hermitian=True) @ Gm
+        out.append({k: float(Gm[:, i] @ X[:, i]) for i, k in enumerate(names)})
+    return out[0], out[1]
 
 
 def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
@@ -164,7 +226,7 @@ def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
     points are fixed by their rays up to the common scale, so ``z_c`` changes with the scale and with nothing
     else. An arrow's ends are not: they may slide along their rays when the dimension along the arrow is free."""
     n = 6 + len(p)
-    G = _ypr_gradient(R) if G is None else G
+    G = ypr_gradient(R) if G is None else G
     out = {}
     for k, name in enumerate(("yaw", "pitch", "roll")):
         g = np.zeros(n)
@@ -213,27 +275,20 @@ class Observability:
         if self.scale_from:
             source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(
                 self.scale_from, self.scale_from)
-            out.append(f"scale set by {source} (no click fixes it)")
+            hint = (": a ground block (the camera height) or a known size (licence plate, wheelbase, tyre, known "
+                    "dimensions) pins it better" if self.scale_from == "size prior" else "")
+            out.append(f"scale set by {source} (no click fixes it){hint}")
         return out
 
     def to_json(self) -> dict:
-        return {"determined_by": self.status, "variance_ratios": self.ratios, "sentences": self.sentences()}
+        return {"determined_by": self.status, "variance_ratios": {k: finite_or_none(v) for k, v in self.ratios.items()},
+                "sentences": self.sentences()}
 
 
-def assess_observability(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float = 1.5,
-                         scale_from: str | None = None) -> Observability:
-    """Which of the cuboid's quantities the clicks determine, and which the cues (the prior) set."""
-    J_px, J_c = _jacobians(problem, R, t, p)
-    full, clicks_only = _information_covariances(J_px.T @ J_px, J_c.T @ J_c, click_sigma)
-    return _observability(full, clicks_only, _gradients(problem, R, t, p), scale_from)
-
-
-def _observability(full: np.ndarray, clicks_only: np.ndarray, gradients: dict[str, np.ndarray],
-                   scale_from: str | None) -> Observability:
+def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None) -> Observability:
     ratios, status = {}, {}
-    for name, g in gradients.items():
-        v_full = float(g @ full @ g)
-        v_clicks = float(g @ clicks_only @ g)
+    for name, v_full in full.items():
+        v_clicks = clicks_only[name]
         ratio = v_clicks / v_full if v_full > 0 else math.inf
         ratios[name] = ratio
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
