@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 
 class FormatError(ValueError):
@@ -14,3 +18,38 @@ class FormatError(ValueError):
         self.message = message
         where = f"{self.file}:{line}" if line is not None else self.file
         super().__init__(f"{where}: {message}")
+
+
+def json_field(obj: Any, key: str, kind: type | tuple[type, ...], path: Path, where: str) -> Any:
+    """``obj[key]`` of a JSON document, checked to be a ``kind`` (booleans never count as numbers).
+
+    Raises
+    ------
+    FormatError
+        Naming the file and the JSON path ``where.key``: missing, or of another type.
+    """
+    if not isinstance(obj, dict) or key not in obj:
+        raise FormatError(path, f"{where}.{key}: missing")
+    value = obj[key]
+    if not isinstance(value, kind) or isinstance(value, bool):
+        names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
+        raise FormatError(path, f"{where}.{key}: expected {names}, got {type(value).__name__}")
+    return value
+
+
+def json_numbers(value: Any, shape: tuple[int, ...], path: Path, where: str) -> np.ndarray:
+    """A JSON value as a float array of ``shape`` (``()`` for one number), every entry finite.
+
+    Raises
+    ------
+    FormatError
+        Naming the file and the JSON path ``where``, with what was expected and what was found.
+    """
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != shape or not all(math.isfinite(x) for x in arr.ravel()) or isinstance(value, bool):
+        what = "a finite number" if shape == () else f"finite numbers of shape {shape}"
+        raise FormatError(path, f"{where}: expected {what}, got {value!r:.60}")
+    return arr

@@ -22,7 +22,6 @@ with ``R_ego_vehicle`` from the scalar-first quaternion, rotations in full (pitc
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Camera
-from . import FormatError
+from . import FormatError, json_field, json_numbers
 
 #: Sensor axes (x forward, y left, z up) to camera axes (x right, y down, z forward); ``get_K_multiplier()``
 #: in cityscapesScripts.
@@ -200,24 +199,25 @@ def parse_gtbbox3d(doc: Any, path: str | Path = "<gtBbox3d>") -> CityscapesAnnot
     path = Path(path)
     if not isinstance(doc, dict):
         raise FormatError(path, "$: expected a JSON object (a Cityscapes 3D gtBbox3d file)")
-    sensor = _get(doc, "sensor", dict, path, "$")
-    T = _numbers(_get(sensor, "sensor_T_ISO_8855", list, path, "$.sensor"), (3, 4), path, "$.sensor.sensor_T_ISO_8855")
-    intr = {k: float(_numbers(_get(sensor, k, (int, float), path, "$.sensor"), (), path, f"$.sensor.{k}"))
+    sensor = json_field(doc, "sensor", dict, path, "$")
+    T = json_numbers(json_field(sensor, "sensor_T_ISO_8855", list, path, "$.sensor"), (3, 4), path,
+                     "$.sensor.sensor_T_ISO_8855")
+    intr = {k: float(json_numbers(json_field(sensor, k, (int, float), path, "$.sensor"), (), path, f"$.sensor.{k}"))
             for k in ("fx", "fy", "u0", "v0")}
     baseline = sensor.get("baseline")
     camera = CityscapesCamera(R_sensor_ego=T[:, :3], t_sensor_ego=T[:, 3], baseline=_optional_float(
         baseline, path, "$.sensor.baseline"), **intr)
     size = None
     if "imgWidth" in doc and "imgHeight" in doc:
-        size = (int(_numbers(doc["imgWidth"], (), path, "$.imgWidth")),
-                int(_numbers(doc["imgHeight"], (), path, "$.imgHeight")))
-    objects = [_box(obj, i, path) for i, obj in enumerate(_get(doc, "objects", list, path, "$"))]
+        size = (int(json_numbers(doc["imgWidth"], (), path, "$.imgWidth")),
+                int(json_numbers(doc["imgHeight"], (), path, "$.imgHeight")))
+    objects = [_box(obj, i, path) for i, obj in enumerate(json_field(doc, "objects", list, path, "$"))]
     ignore = []
     for i, entry in enumerate(doc.get("ignore") or []):
         where = f"$.ignore[{i}]"
         if not isinstance(entry, dict):
             raise FormatError(path, f"{where}: expected an object")
-        box = _numbers(_get(entry, "2d", list, path, where), (4,), path, f"{where}.2d")
+        box = json_numbers(json_field(entry, "2d", list, path, where), (4,), path, f"{where}.2d")
         ignore.append(CityscapesIgnore(index=i, label=str(entry.get("label", "")),
                                        instance_id=_optional_int(entry.get("instanceId"), path, f"{where}.instanceId"),
                                        box2d=xywh_to_xyxy(box)))
@@ -228,26 +228,28 @@ def _box(obj: Any, i: int, path: Path) -> CityscapesBox:
     where = f"$.objects[{i}]"
     if not isinstance(obj, dict):
         raise FormatError(path, f"{where}: expected an object")
-    box3d = _get(obj, "3d", dict, path, where)
-    centre = _numbers(_get(box3d, "center", list, path, f"{where}.3d"), (3,), path, f"{where}.3d.center")
-    dims = _numbers(_get(box3d, "dimensions", list, path, f"{where}.3d"), (3,), path, f"{where}.3d.dimensions")
+    box3d = json_field(obj, "3d", dict, path, where)
+    centre = json_numbers(json_field(box3d, "center", list, path, f"{where}.3d"), (3,), path, f"{where}.3d.center")
+    dims = json_numbers(json_field(box3d, "dimensions", list, path, f"{where}.3d"), (3,), path,
+                        f"{where}.3d.dimensions")
     if np.any(dims <= 0.0):
         raise FormatError(path, f"{where}.3d.dimensions: expected positive [l, w, h], got {dims.tolist()}")
-    q = _numbers(_get(box3d, "rotation", list, path, f"{where}.3d"), (4,), path, f"{where}.3d.rotation")
+    q = json_numbers(json_field(box3d, "rotation", list, path, f"{where}.3d"), (4,), path, f"{where}.3d.rotation")
     if abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
         raise FormatError(path, f"{where}.3d.rotation: expected a unit quaternion [w, x, y, z], "
                                 f"got norm {np.linalg.norm(q):.6g}")
     fmt = box3d.get("format", "CRS_ISO8855")
     if fmt != "CRS_ISO8855":
         raise FormatError(path, f"{where}.3d.format: expected 'CRS_ISO8855' (boxes in the ego frame), got {fmt!r}")
-    box2d = _get(obj, "2d", dict, path, where)
+    box2d = json_field(obj, "2d", dict, path, where)
     # Current files hold "amodal" (and "modal"); older ones "bbox" (amodal) and "bboxVis" (modal).
     amodal_key = "amodal" if "amodal" in box2d else "bbox"
     modal_key = "modal" if "modal" in box2d else ("bboxVis" if "bboxVis" in box2d else amodal_key)
-    amodal = _numbers(_get(box2d, amodal_key, list, path, f"{where}.2d"), (4,), path, f"{where}.2d.{amodal_key}")
-    modal = _numbers(box2d.get(modal_key), (4,), path, f"{where}.2d.{modal_key}")
+    amodal = json_numbers(json_field(box2d, amodal_key, list, path, f"{where}.2d"), (4,), path,
+                          f"{where}.2d.{amodal_key}")
+    modal = json_numbers(box2d.get(modal_key), (4,), path, f"{where}.2d.{modal_key}")
     return CityscapesBox(
-        index=i, label=str(_get(obj, "label", str, path, where)), type=str(box3d.get("type", "")),
+        index=i, label=str(json_field(obj, "label", str, path, where)), type=str(box3d.get("type", "")),
         instance_id=_optional_int(obj.get("instanceId"), path, f"{where}.instanceId"),
         center_ego=centre, dimensions=dims, quaternion_ego=q / np.linalg.norm(q),
         box2d_amodal=xywh_to_xyxy(amodal), box2d_modal=xywh_to_xyxy(modal),
@@ -257,35 +259,14 @@ def _box(obj: Any, i: int, path: Path) -> CityscapesBox:
     )
 
 
-def _get(obj: dict[str, Any], key: str, kind: type | tuple[type, ...], path: Path, where: str) -> Any:
-    if key not in obj:
-        raise FormatError(path, f"{where}.{key}: missing")
-    value = obj[key]
-    if not isinstance(value, kind) or isinstance(value, bool):
-        names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-        raise FormatError(path, f"{where}.{key}: expected {names}, got {type(value).__name__}")
-    return value
-
-
-def _numbers(value: Any, shape: tuple[int, ...], path: Path, where: str) -> np.ndarray:
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != shape or not all(math.isfinite(x) for x in arr.ravel()) or isinstance(value, bool):
-        what = "a finite number" if shape == () else f"finite numbers of shape {shape}"
-        raise FormatError(path, f"{where}: expected {what}, got {value!r:.60}")
-    return arr
-
-
 def _optional_float(value: Any, path: Path, where: str) -> float | None:
-    return None if value is None else float(_numbers(value, (), path, where))
+    return None if value is None else float(json_numbers(value, (), path, where))
 
 
 def _optional_int(value: Any, path: Path, where: str) -> int | None:
     if value is None:
         return None
-    number = float(_numbers(value, (), path, where))
+    number = float(json_numbers(value, (), path, where))
     if number != int(number):
         raise FormatError(path, f"{where}: expected an integer, got {value!r}")
     return int(number)

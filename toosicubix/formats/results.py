@@ -14,14 +14,13 @@ Layout (keys may be added; these keep their names and meanings)::
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import FormatError
+from . import FormatError, json_field, json_numbers
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"
@@ -134,29 +133,31 @@ def read_results(path: str | Path) -> list[ImageResult]:
     if not isinstance(doc, dict) or doc.get("toosicubix_results") != RESULTS_VERSION:
         raise FormatError(path, f"$.toosicubix_results: expected {RESULTS_VERSION} (a toosicubix results file)")
     images = []
-    for i, im in enumerate(_get(doc, "images", list, path, "$")):
+    for i, im in enumerate(json_field(doc, "images", list, path, "$")):
         where = f"$.images[{i}]"
-        camera = _get(im, "camera", dict, path, where)
-        K = _matrix(camera.get("K"), (3, 3), path, f"{where}.camera.K")
-        t_cam_rect = _matrix(camera.get("t_cam_rect", [0.0, 0.0, 0.0]), (3,), path, f"{where}.camera.t_cam_rect")
+        camera = json_field(im, "camera", dict, path, where)
+        K = json_numbers(camera.get("K"), (3, 3), path, f"{where}.camera.K")
+        t_cam_rect = json_numbers(camera.get("t_cam_rect", [0.0, 0.0, 0.0]), (3,), path, f"{where}.camera.t_cam_rect")
         size = camera.get("image_size")
         vehicles = []
-        for j, v in enumerate(_get(im, "vehicles", list, path, where)):
+        for j, v in enumerate(json_field(im, "vehicles", list, path, where)):
             vw = f"{where}.vehicles[{j}]"
-            status = _get(v, "status", str, path, vw)
+            status = json_field(v, "status", str, path, vw)
             posed = status == "ok"
             details = {k: val for k, val in v.items() if k not in _FIXED_KEYS}
             vehicles.append(VehicleResult(
-                id=str(_get(v, "id", str, path, vw)), status=status, error=v.get("error"),
+                id=str(json_field(v, "id", str, path, vw)), status=status, error=v.get("error"),
                 prototype=str(v.get("prototype", "")),
-                R_cam_vehicle=_matrix(v.get("R_cam_vehicle"), (3, 3), path, f"{vw}.R_cam_vehicle") if posed else None,
-                t_cam_vehicle=_matrix(v.get("t_cam_vehicle"), (3,), path, f"{vw}.t_cam_vehicle") if posed else None,
-                dimensions=_matrix(v.get("dimensions"), (3,), path, f"{vw}.dimensions") if posed else None,
-                box2d=_matrix(v["box2d"], (4,), path, f"{vw}.box2d") if v.get("box2d") is not None else None,
+                R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{vw}.R_cam_vehicle")
+                if posed else None,
+                t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{vw}.t_cam_vehicle")
+                if posed else None,
+                dimensions=json_numbers(v.get("dimensions"), (3,), path, f"{vw}.dimensions") if posed else None,
+                box2d=json_numbers(v["box2d"], (4,), path, f"{vw}.box2d") if v.get("box2d") is not None else None,
                 details=details,
             ))
         images.append(ImageResult(
-            id=str(_get(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
+            id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=im.get("ground"),
         ))
@@ -166,20 +167,3 @@ def read_results(path: str | Path) -> list[ImageResult]:
 _FIXED_KEYS = {"id", "status", "error", "prototype", "R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"}
 
 
-def _get(obj: Any, key: str, kind: type, path: Path, where: str) -> Any:
-    if not isinstance(obj, dict) or key not in obj:
-        raise FormatError(path, f"{where}.{key}: missing")
-    value = obj[key]
-    if not isinstance(value, kind):
-        raise FormatError(path, f"{where}.{key}: expected {kind.__name__}, got {type(value).__name__}")
-    return value
-
-
-def _matrix(value: Any, shape: tuple[int, ...], path: Path, where: str) -> np.ndarray:
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != shape or not all(math.isfinite(x) for x in arr.ravel()):
-        raise FormatError(path, f"{where}: expected finite numbers of shape {shape}, got {value!r:.60}")
-    return arr
