@@ -3,9 +3,10 @@ cuboid's yaw and depth uncertainty.
 
 A candidate part is placed where it typically sits on the fitted cuboid (lights at 38 % of the width from the
 centre line and 55 % of the height, badges at 45 % of the height, vertical edges at mid height, roof features
-a tenth of the length behind the middle, wheels at the fitted axles or 30 % of the length from the middle, an
-arrow on the ground beside the vehicle), projected into the image, and checked: on a face turned to the camera
-(as :mod:`toosicubix.solver.plausibility` judges clicks), in front of the camera, inside the image. Its
+a tenth of the length behind the middle, wheels at the fitted axles or 30 % of the length from the middle, a
+forward arrow on the ground beside the vehicle, a sideways one ahead of it), projected into the image, and
+checked: on a face turned toward the camera by at least 5 degrees (stricter than
+:mod:`toosicubix.solver.plausibility` is with clicks already made), in front of the camera, inside the image. Its
 expected effect is the uncertainty (:mod:`toosicubix.solver.uncertainty`) of the same fit with that part
 added, exactly where predicted. Candidates are ranked by ``ln(sigma_yaw / sigma_yaw') + ln(sigma_depth /
 sigma_depth')``, the log of the factor by which they would shrink the two (primes: with the part clicked), so
