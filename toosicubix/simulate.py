@@ -175,11 +175,7 @@ def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -
         A missing folder or calibration file, a malformed label line.
     """
     sel = sel or SelectionOptions()
-    root = Path(root)
-    label_dir, calib_dir = root / "label_2", root / "calib"
-    for folder in (label_dir, calib_dir):
-        if not folder.is_dir():
-            raise FormatError(folder, "expected a KITTI object folder with label_2/ and calib/")
+    label_dir, calib_dir = _label_and_calib_dirs(root, "label_2", "object")
     out = []
     for path in sorted(label_dir.glob("*.txt")):
         calib_path = calib_dir / path.name
@@ -193,6 +189,15 @@ def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -
     return out
 
 
+def _label_and_calib_dirs(root: str | Path, labels: str, kind: str) -> tuple[Path, Path]:
+    """``root/labels`` and ``root/calib``, both required to exist."""
+    label_dir, calib_dir = Path(root) / labels, Path(root) / "calib"
+    for folder in (label_dir, calib_dir):
+        if not folder.is_dir():
+            raise FormatError(folder, f"expected a KITTI {kind} folder with {labels}/ and calib/")
+    return label_dir, calib_dir
+
+
 def tracking_image_id(sequence: str, frame: int) -> str:
     """Image id of a tracking frame: ``<sequence>_<frame as 6 digits>``, e.g. ``0010_000123``."""
     return f"{sequence}_{frame:06d}"
@@ -202,11 +207,7 @@ def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None)
     """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``): at most ``frames_per_track``
     eligible frames per track, evenly spread over its eligible frames."""
     sel = sel or SelectionOptions()
-    root = Path(root)
-    label_dir, calib_dir = root / "label_02", root / "calib"
-    for folder in (label_dir, calib_dir):
-        if not folder.is_dir():
-            raise FormatError(folder, "expected a KITTI tracking folder with label_02/ and calib/")
+    label_dir, calib_dir = _label_and_calib_dirs(root, "label_02", "tracking")
     out = []
     for path in sorted(label_dir.glob("*.txt")):
         sequence = path.stem

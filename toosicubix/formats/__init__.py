@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,24 @@ class FormatError(ValueError):
         self.message = message
         where = f"{self.file}:{line}" if line is not None else self.file
         super().__init__(f"{where}: {message}")
+
+
+def read_json(path: Path) -> Any:
+    """The parsed contents of a JSON file.
+
+    Raises
+    ------
+    FormatError
+        The file cannot be read, is not UTF-8, or is not valid JSON (with the line).
+    """
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
 
 
 def json_field(obj: Any, key: str, kind: type | tuple[type, ...], path: Path, where: str) -> Any:

@@ -21,7 +21,6 @@ with ``R_ego_vehicle`` from the scalar-first quaternion, rotations in full (pitc
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Camera
-from . import FormatError, json_field, json_numbers
+from . import FormatError, json_field, json_numbers, read_json
 
 #: Sensor axes (x forward, y left, z up) to camera axes (x right, y down, z forward); ``get_K_multiplier()``
 #: in cityscapesScripts.
@@ -183,14 +182,7 @@ def read_gtbbox3d(path: str | Path) -> CityscapesAnnotation:
         (``$.objects[3].3d.dimensions``).
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+    doc = read_json(path)
     return parse_gtbbox3d(doc, path)
 
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import FormatError, json_field, json_numbers
+from . import FormatError, json_field, json_numbers, read_json
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"
@@ -124,12 +124,7 @@ def read_results(path: str | Path) -> list[ImageResult]:
         Not JSON, or a required key missing or malformed (the message gives its JSON path).
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
+    doc = read_json(path)
     if not isinstance(doc, dict) or doc.get("toosicubix_results") != RESULTS_VERSION:
         raise FormatError(path, f"$.toosicubix_results: expected {RESULTS_VERSION} (a toosicubix results file)")
     images = []

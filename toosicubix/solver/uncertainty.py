@@ -129,17 +129,6 @@ def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float, sigmas: np.ndarra
     return X @ X.T
 
 
-def covariance(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-               cue_weight: float = 1.0, part_sigma: float = 0.0) -> np.ndarray:
-    """The estimate's covariance over ``(delta, t, p)`` (see the module docstring), (6 + P, 6 + P).
-
-    ``cue_weight`` scales the cues' weight in the estimator (1: as fitted; 1e-6: the clicks alone).
-    """
-    J_px, J_c = jacobians(problem, R, t, p)
-    return _sandwich(J_px, J_c, problem.lambda_px * cue_weight,
-                     row_sigmas(problem, R, t, p, click_sigma, part_sigma))
-
-
 def ypr_gradient(R: np.ndarray) -> np.ndarray:
     """d(ry, pitch, roll) / d delta at ``R = R_hat exp([delta]x)``: (3, 3).
 
@@ -153,18 +142,11 @@ def ypr_gradient(R: np.ndarray) -> np.ndarray:
     return np.linalg.inv(np.column_stack([R.T @ e_y, rot_x(roll).T @ e_y, e_x]))
 
 
-def compute_uncertainty(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
-                        click_sigma: float, part_sigma: float = 0.0) -> Uncertainty:
-    """Standard deviations of a fit at ``(R, t, p)`` for clicks off by ``click_sigma`` pixels on parts off
-    their model positions by ``part_sigma`` metres."""
-    return _uncertainty(covariance(problem, R, t, p, click_sigma, part_sigma=part_sigma), ypr_gradient(R), t)
-
-
 def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float, sigmas: np.ndarray,
                                G: np.ndarray, t: np.ndarray) -> Uncertainty:
-    """As :func:`compute_uncertainty`, from the rows :func:`jacobians` gives (any subset of clicks and of
+    """Standard deviations of a fit from the rows :func:`jacobians` gives (any subset of clicks and of
     parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
-    and ``G = ypr_gradient(R)``."""
+    and ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
     return _uncertainty(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
 
 
