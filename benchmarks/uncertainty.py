@@ -13,7 +13,7 @@ reported uncertainty computed for ``--click-sigma 1`` (the simulated noise).
    ``toosicubix.guidance`` among the parts the person can click, or one of them drawn at random (seeded);
    the vehicle is fitted again. Compared: the median (and mean) yaw error before and after.
 
-The default ``part_sigma`` (0.08 m, how far real parts sit from the cuboid model) was chosen on the tuning
+The default ``part_sigma`` (0.09 m, how far real parts sit from the cuboid model) was chosen on the tuning
 sequences 0000-0009, never on the test sequences, by ``--tune-part-sigma``: the grid value whose yaw shares
 within 1 and 2 sigmas come nearest to a Gaussian's.
 

@@ -22,7 +22,7 @@ from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.descent import DescentResult, descend, solve_pose, solve_shape
 from toosicubix.solver.init import YAW_SWEEP, line_rows, yaw_candidates, yaw_from_lines
 from toosicubix.solver.observability import determines_8dof, undetermined_directions
-from toosicubix.solver.problem import Problem
+from toosicubix.solver.problem import ARROW_ZONE_SIGMA, Problem
 from toosicubix.solver.refine import levenberg_marquardt, residuals_and_jacobian
 
 from .scenes import CAMERA, VIEW_YAW, random_scene
@@ -47,20 +47,65 @@ def scaled_errors(fit, scene) -> tuple[float, float, float]:
     return e_r, e_t, np.abs(s * fit.dimensions - scene.dimensions).max()
 
 
+def central_differences(problem, R, t, p, n: int, h: float = 1e-6) -> np.ndarray:
+    """The Jacobian of the residuals over ``(delta, t, p)`` (n columns) by central differences."""
+    columns = []
+    for k in range(n):
+        step = np.zeros(n)
+        step[k] = h
+        plus = residuals_and_jacobian(problem, R @ so3_exp(step[:3]), t + step[3:6], p + step[6:], False)[0]
+        minus = residuals_and_jacobian(problem, R @ so3_exp(-step[:3]), t - step[3:6], p - step[6:], False)[0]
+        columns.append((plus - minus) / (2 * h))
+    return np.column_stack(columns)
+
+
 def test_jacobian_matches_central_differences(rng):
     scene = random_scene(rng, "oblique-front-left")
     problem = Problem.build(scene.model, CAMERA, CAR, 1.0, 0.7)
     R, t, p = scene.R_cam_vehicle, scene.t_cam_vehicle + 0.1, scene.p_true * 1.05
     _, J = residuals_and_jacobian(problem, R, t, p)
-    h = 1e-6
-    numeric = np.zeros_like(J)
-    for k in range(J.shape[1]):
-        step = np.zeros(J.shape[1])
-        step[k] = h
-        plus = residuals_and_jacobian(problem, R @ so3_exp(step[:3]), t + step[3:6], p + step[6:], False)[0]
-        minus = residuals_and_jacobian(problem, R @ so3_exp(-step[:3]), t - step[3:6], p - step[6:], False)[0]
-        numeric[:, k] = (plus - minus) / (2 * h)
+    numeric = central_differences(problem, R, t, p, J.shape[1])
     # Central differences err by O(h^2 f''') ~ 1e-9 relative to entries of size up to ~1e3 px per unit.
+    np.testing.assert_allclose(J, numeric, rtol=1e-6, atol=1e-5)
+
+
+def _moved_arrow(scene, metres_ahead: float) -> tuple[np.ndarray, int]:
+    """``p`` with the scene's first arrow moved ``metres_ahead`` along X, and the index of that arrow's tail."""
+    model = scene.model
+    i = next(k for k, label in enumerate(model.click_labels)
+             if label.startswith("direction-") and label.endswith("/tail"))
+    x_column = int(np.flatnonzero(model.A[i, 0, 3:])[0]) + 3  # the tail's own X unknown (after the dimensions)
+    p = scene.p_true.copy()
+    p[x_column] += metres_ahead
+    return p, i
+
+
+@pytest.mark.parametrize("view", ["front", "rear"])
+def test_arrow_zone_rows_are_zero_near_the_vehicle_and_grow_outside(rng, view):
+    scene = random_scene(rng, view)
+    lam = 4.0
+    problem = Problem.build(scene.model, CAMERA, CAR, 1.0, lam)
+    assert problem.n_arrow_rows == 3
+    R, t = scene.R_cam_vehicle, scene.t_cam_vehicle
+    r, _ = residuals_and_jacobian(problem, R, t, scene.p_true)
+    np.testing.assert_array_equal(r[-3:], 0.0)  # drawn beside the vehicle: inside the zone, no pull at all
+    p, i = _moved_arrow(scene, 30.0)
+    r, _ = residuals_and_jacobian(problem, R, t, p)
+    mid_x = 0.5 * (scene.model.A[i, 0] + scene.model.A[i + 1, 0]) @ p
+    expected = np.sqrt(lam) * (mid_x - 1.5 * p[0]) / ARROW_ZONE_SIGMA
+    np.testing.assert_allclose(r[-3:], [expected, 0.0, 0.0], rtol=1e-12)
+    assert expected > 0.0
+
+
+def test_jacobian_matches_central_differences_with_an_arrow_outside_its_zone(rng):
+    scene = random_scene(rng, "rear")
+    problem = Problem.build(scene.model, CAMERA, CAR, 1.0, 0.7)
+    p, _ = _moved_arrow(scene, -25.0)
+    R, t = scene.R_cam_vehicle, scene.t_cam_vehicle + 0.1
+    _, J = residuals_and_jacobian(problem, R, t, p)
+    assert np.any(J[-3:] != 0.0)
+    numeric = central_differences(problem, R, t, p, J.shape[1])
+    # As above; the zone rows are linear away from the zone's boundary, so their differences are exact.
     np.testing.assert_allclose(J, numeric, rtol=1e-6, atol=1e-5)
 
 

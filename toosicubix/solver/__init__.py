@@ -63,7 +63,7 @@ class SolverOptions:
     click_sigma : the click noise (pixels per coordinate) the reported uncertainty is computed for
     part_sigma : how far, in metres, real parts sit from where the cuboid model puts them (tyres inside the
         body's width, lights behind its end faces, rounded corners), as a random offset per part; the
-        reported uncertainty includes it. The default 0.08 m makes the yaw sigmas calibrated on simulated
+        reported uncertainty includes it. The default 0.09 m makes the yaw sigmas calibrated on simulated
         clicks with realistic part placement (KITTI tracking tuning sequences 0000-0009, 1 px noise);
         0 for parts that sit exactly on a box
     ambiguity_sigmas : another minimum whose cost is within this many ``click_sigma^2`` of the best one
@@ -85,7 +85,7 @@ class SolverOptions:
     rank_tolerance: float = 1e-8
     max_tilt_deg: float | None = 45.0
     click_sigma: float = 1.5
-    part_sigma: float = 0.08
+    part_sigma: float = 0.09
     ambiguity_sigmas: float = 4.0
 
 
@@ -283,7 +283,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_refine = time.perf_counter()
     timings = {"init": t_init - t_start, "descent": t_descent - t_init, "refine": t_refine - t_descent}
 
-    degenerate = _degeneracy(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.rank_tolerance)
+    _, J_best = residuals_and_jacobian(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
+    degenerate = _degeneracy(problem, J_best, options.rank_tolerance)
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
@@ -293,7 +294,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     scale_source = max(shares, key=shares.get) if shares else None
     u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source,
-                     options.part_sigma)
+                     options.part_sigma, J_best)
     return FitResult(
         "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
         cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, scale_shares=shares,
@@ -358,8 +359,7 @@ def scale_shares(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) 
     sensitivity = a**2  # d/ds of the row s a - b is a
     shares: dict[str, float] = {}
     for cue, value in zip(problem.row_cues, sensitivity, strict=True):
-        name = "size prior" if cue == "size prior" else cue
-        shares[name] = shares.get(name, 0.0) + float(value)
+        shares[cue] = shares.get(cue, 0.0) + float(value)
     total = sum(shares.values())
     return {k: v / total for k, v in shares.items()} if total > 0 else {}
 
@@ -389,9 +389,9 @@ def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...]
 _BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")
 
 
-def _degeneracy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, tolerance: float) -> str | None:
-    """A reason when the clicks and the prior leave a direction of the unknowns undetermined, else None."""
-    _, J = residuals_and_jacobian(problem, R, t, p)
+def _degeneracy(problem: Problem, J: np.ndarray, tolerance: float) -> str | None:
+    """A reason when the clicks and the prior leave a direction of the unknowns undetermined, else None.
+    ``J`` : (M, 6 + P) the Jacobian at the answer (:func:`.refine.residuals_and_jacobian`)."""
     norms = np.linalg.norm(J, axis=0)
     if np.any(norms == 0.0):
         names = _unknown_names(problem)

@@ -13,16 +13,18 @@ the clicks as well as the true one. Two facts rule most of them out:
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
 GRAZING_DEG = 15.0
 
-_FACE_NORMALS = {
-    "front": np.array([1.0, 0.0, 0.0]), "rear": np.array([-1.0, 0.0, 0.0]),
-    "left": np.array([0.0, 1.0, 0.0]), "right": np.array([0.0, -1.0, 0.0]),
-    "top": np.array([0.0, 0.0, 1.0]),
-}
+_FACES = ("front", "rear", "left", "right", "top")
+#: Outward normals of the faces, vehicle frame: (5, 3).
+_FACE_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+#: Face centres as fractions of (dx, dy, dz), vehicle frame (origin at the bottom centre): (5, 3).
+_FACE_CENTRES = np.array([[0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [0.0, 0.5, 0.5], [0.0, -0.5, 0.5], [0.0, 0.0, 1.0]])
 
 
 def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
@@ -31,6 +33,7 @@ def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
     return float(np.arccos(np.clip(R_cam_vehicle[:, 2] @ up, -1.0, 1.0)))
 
 
+@lru_cache(maxsize=4096)
 def faces_of_click(label: str) -> tuple[str, ...] | None:
     """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
     if label.startswith("direction-"):
@@ -64,16 +67,12 @@ def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
                            grazing_deg: float = GRAZING_DEG) -> dict[str, bool]:
     """For each face but the bottom: is it turned to the camera? A face seen edge-on counts, and one
     turned away by up to ``grazing_deg`` (negative: it must be turned toward the camera by that much)."""
-    camera_vehicle = R_cam_vehicle.T @ (-np.asarray(t_cam_vehicle, dtype=float))
-    dx, dy, dz = dimensions
-    centres = {"front": (dx / 2, 0, dz / 2), "rear": (-dx / 2, 0, dz / 2), "left": (0, dy / 2, dz / 2),
-               "right": (0, -dy / 2, dz / 2), "top": (0, 0, dz)}
-    sin_grazing = np.sin(np.deg2rad(grazing_deg))
-    out = {}
-    for face, normal in _FACE_NORMALS.items():
-        to_camera = camera_vehicle - np.array(centres[face])
-        out[face] = bool(normal @ to_camera > -sin_grazing * np.linalg.norm(to_camera))
-    return out
+    camera_vehicle = -np.asarray(t_cam_vehicle, dtype=float) @ R_cam_vehicle  # R^T (-t): (3,)
+    to_camera = camera_vehicle - _FACE_CENTRES * np.asarray(dimensions, dtype=float)  # (5, 3)
+    along = np.einsum("fi,fi->f", _FACE_NORMALS, to_camera)
+    distance = np.sqrt(np.einsum("fi,fi->f", to_camera, to_camera))
+    seen = along > -np.sin(np.deg2rad(grazing_deg)) * distance
+    return dict(zip(_FACES, seen.tolist(), strict=True))
 
 
 def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,

@@ -15,6 +15,14 @@ covariance), known sizes ``(c . p - metres) / sigma`` (plates, wheelbases, tyres
 with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`` (the bottom face on the
 road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
 does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
+
+Arrow zone: a direction arrow is drawn on the vehicle or on the ground beside it, so the midpoint ``c`` of each
+arrow (vehicle frame) is kept inside a zone around the cuboid, ``|c_x| <= 1.5 dx``, ``|c_y| <= 1.5 dy``,
+``-0.5 dz <= c_z <= 1.5 dz``: a row ``(distance outside the zone) / ARROW_ZONE_SIGMA`` per coordinate, zero
+inside (no pull on an arrow drawn anywhere near the vehicle). Without it an arrow seen nearly end-on (front
+and rear views) can slide along its rays tens of metres, under the road, at almost no cost: a flat valley
+with spurious minima that the starts cannot all reach. The rows are piecewise linear in ``p`` and, like the
+scale rows, change with the scale only through ``p``.
 """
 
 from __future__ import annotations
@@ -28,12 +36,10 @@ from ..model import GroundPlane
 from ..parts import PartsModel
 from ..priors import SizePrior
 
-
-@dataclass(frozen=True)
-class ScaleRow:
-    """Where one row of ``G [t; p] - b`` comes from: 'size prior', 'ground contact', or a measurement label."""
-
-    cue: str
+#: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
+ARROW_ZONE_SIGMA = 0.5
+#: The arrow zone, as multiples of (dx, dy, dz) per coordinate: (low, high).
+_ARROW_ZONE = ((-1.5, 1.5), (-1.5, 1.5), (-0.5, 1.5))
 
 
 @dataclass(frozen=True)
@@ -54,6 +60,8 @@ class Problem:
     ground : the road plane, or None
     upright_sigma : radians, the spread of the vehicle's up axis about the normal (None without ground)
     A_rows : (3N, P) ``A`` stacked; A_mean : (3, P) the clicked points' centroid is ``A_mean @ p``
+    arrow_mid, arrow_low, arrow_high : (3 n_arrows, P) each arrow's midpoint coordinates and the zone's
+        bounds on them, linear in ``p`` (empty without arrows)
     """
 
     parts: PartsModel
@@ -70,6 +78,9 @@ class Problem:
     upright_sigma: float | None
     A_rows: np.ndarray
     A_mean: np.ndarray
+    arrow_mid: np.ndarray
+    arrow_low: np.ndarray
+    arrow_high: np.ndarray
 
     @classmethod
     def build(cls, parts: PartsModel, camera: Camera, prior: SizePrior, lambda_3d: float,
@@ -113,7 +124,23 @@ class Problem:
                 cues.append("ground contact")
         A = parts.A
         return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, np.array(rows), np.array(targets),
-                   tuple(cues), ground, upright_sigma, A.reshape(-1, P), A.mean(axis=0))
+                   tuple(cues), ground, upright_sigma, A.reshape(-1, P), A.mean(axis=0), *_arrow_zone(parts))
+
+    @property
+    def n_arrow_rows(self) -> int:
+        return len(self.arrow_mid)
+
+    def arrow_zone_residuals(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far each arrow midpoint coordinate lies outside its zone, metres (0 inside), and its gradient
+        over ``p``: (B, k) and (B, k, P) for ``p`` (B, P), with ``k = n_arrow_rows``."""
+        c = p @ self.arrow_mid.T
+        above = c - p @ self.arrow_high.T
+        below = c - p @ self.arrow_low.T
+        is_above, is_below = above > 0.0, below < 0.0
+        outside = np.where(is_above, above, np.where(is_below, below, 0.0))
+        gradient = (is_above[..., None] * (self.arrow_mid - self.arrow_high)
+                    + is_below[..., None] * (self.arrow_mid - self.arrow_low))
+        return outside, gradient
 
     def with_contact_distance(self, distance: float) -> Problem:
         """The same problem with the ground contact's sigma widened for a vehicle ``distance`` metres away."""
@@ -176,6 +203,8 @@ class Problem:
         cues = float(np.sum((a - b) ** 2))
         if self.upright_sigma is not None:
             cues += float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2)) / self.upright_sigma**2
+        if self.n_arrow_rows:
+            cues += float(np.sum(self.arrow_zone_residuals(p[None])[0] ** 2)) / ARROW_ZONE_SIGMA**2
         return float(np.sum(e * e) + self.lambda_px * cues)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
@@ -193,3 +222,18 @@ class Problem:
         a, b = self.scale_terms(t, p)
         denom = float(a @ a)
         return float(a @ b) / denom if denom > 0.0 else 0.0
+
+
+def _arrow_zone(parts: PartsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each arrow's midpoint coordinates and the zone's low and high bounds on them: 3 rows (P,) per arrow."""
+    P = parts.n_params
+    mid, low, high = [], [], []
+    for i, label in enumerate(parts.click_labels):
+        if label.startswith("direction-") and label.endswith("/tail"):
+            m = 0.5 * (parts.A[i] + parts.A[i + 1])  # (3, P): tail and head, vehicle frame
+            for k, (lo, hi) in enumerate(_ARROW_ZONE):
+                mid.append(m[k])
+                low.append(lo * np.eye(P)[k])
+                high.append(hi * np.eye(P)[k])
+    shape = (len(mid), P)
+    return np.reshape(mid, shape), np.reshape(low, shape), np.reshape(high, shape)

@@ -27,10 +27,11 @@ import cv2
 import numpy as np
 from scipy.linalg import lapack
 
-from .problem import Problem
+from .problem import ARROW_ZONE_SIGMA, Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
 MIN_DEPTH = 1e-3
+ABANDON_MARGIN = 1e-6
 
 _RUNNING, _GRADIENT, _STEP, _COST, _MAX_ITERATIONS, _DAMPING, _ABANDONED = range(7)
 _STATUS_NAMES = ("running", "gradient", "step", "cost", "max-iterations", "damping", "abandoned")
@@ -62,19 +63,21 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
                     pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """Residuals (B, M) and Jacobians (B, M, 6 + P) of B poses: ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P),
     ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
-    problem has a ground plane; the cue rows are multiplied by ``sqrt(lambda_px)``."""
+    problem has a ground plane, then 3 arrow-zone rows per arrow; the cue rows are multiplied by
+    ``sqrt(lambda_px)``."""
     K_ = problem.K
     N, _, P = problem.A.shape
     B = len(R)
     m = len(problem.b)
     n_up = 0 if problem.upright_sigma is None else 3
+    n_arrow = problem.n_arrow_rows
     X = problem.points_vehicle_batch(p)  # (B, N, 3) vehicle frame
     Y = X @ R.transpose(0, 2, 1) + t[:, None, :]  # (B, N, 3) camera frame
     inv_z = 1.0 / Y[..., 2]
     xn, yn = Y[..., 0] * inv_z, Y[..., 1] * inv_z
     fx, skew, cx, fy, cy = K_[0, 0], K_[0, 1], K_[0, 2], K_[1, 1], K_[1, 2]
     w = np.sqrt(problem.lambda_px)
-    r = np.empty((B, 2 * N + m + n_up))
+    r = np.empty((B, 2 * N + m + n_up + n_arrow))
     r[:, 0:2 * N:2] = fx * xn + skew * yn + cx - problem.uv[:, 0]
     r[:, 1:2 * N:2] = fy * yn + cy - problem.uv[:, 1]
     a, b = problem.scale_terms(t, p)  # (B, m), (m,)
@@ -86,11 +89,17 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         r[:, 2 * N:2 * N + m] = w * (a - b)
     if n_up:
         w_up = w / problem.upright_sigma
-        r[:, 2 * N + m:] = w_up * (R[:, :, 2] - problem.up)
+        r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
+    if n_arrow:
+        w_arrow = w / ARROW_ZONE_SIGMA
+        outside, arrow_gradient = problem.arrow_zone_residuals(p)
+        r[:, 2 * N + m + n_up:] = w_arrow * outside
     if not with_jacobian:
         return r, None
-    # D = d(pixel)/dY = [[fx/z, skew/z, -(fx x + skew y)/z], [0, fy/z, -fy y/z]], x, y normalized: (B, N, 2, 3)
-    D = np.zeros((B, N, 2, 3))
+    # D = d(pixel)/dY = [[fx/z, skew/z, -(fx x + skew y)/z], [0, fy/z, -fy y/z]], x, y normalized: (B, N, 2, 3),
+    # written straight into the translation columns of J (its Jacobian for t).
+    J = np.zeros((B, 2 * N + m + n_up + n_arrow, 6 + P))
+    D = J[:, : 2 * N, 3:6].reshape(B, N, 2, 3)
     D[..., 0, 0] = fx * inv_z
     D[..., 0, 1] = skew * inv_z
     D[..., 0, 2] = -(fx * xn + skew * yn) * inv_z
@@ -99,17 +108,15 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     DR = D @ R[:, None, :, :]  # (B, N, 2, 3)
     # Rotation columns: each row b of D R against dY = -R [X - c]x delta gives the row (X - c) x b.
     Xc = (X if pivot is None else X - pivot[:, None, :])[:, :, None, :]
-    J = np.zeros((B, 2 * N + m + n_up, 6 + P))
     J_rot = J[:, : 2 * N, 0:3].reshape(B, N, 2, 3)
     J_rot[..., 0] = Xc[..., 1] * DR[..., 2] - Xc[..., 2] * DR[..., 1]
     J_rot[..., 1] = Xc[..., 2] * DR[..., 0] - Xc[..., 0] * DR[..., 2]
     J_rot[..., 2] = Xc[..., 0] * DR[..., 1] - Xc[..., 1] * DR[..., 0]
-    J[:, : 2 * N, 3:6] = D.reshape(B, 2 * N, 3)
     J[:, : 2 * N, 6:] = (DR @ problem.A).reshape(B, 2 * N, P)
     # Scale rows: a = G_t t + G_p p; turning about the pivot moves t by R [c]x delta.
     Ga = np.zeros((B, m, 6 + P))
     Gt = problem.G[:, :3]
-    if pivot is not None and np.any(Gt):
+    if pivot is not None and Gt.any():
         c_hat = np.zeros((B, 3, 3))
         c_hat[:, 0, 1], c_hat[:, 0, 2] = -pivot[:, 2], pivot[:, 1]
         c_hat[:, 1, 0], c_hat[:, 1, 2] = pivot[:, 2], -pivot[:, 0]
@@ -124,8 +131,10 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         J[:, 2 * N:2 * N + m] = w * Ga
     if n_up:
         # R exp([delta]x) e_z ~ R (e_z + delta x e_z) = R e_z + delta_y R e_x - delta_x R e_y.
-        J[:, 2 * N + m:, 0] = -w_up * R[:, :, 1]
-        J[:, 2 * N + m:, 1] = w_up * R[:, :, 0]
+        J[:, 2 * N + m:2 * N + m + n_up, 0] = -w_up * R[:, :, 1]
+        J[:, 2 * N + m:2 * N + m + n_up, 1] = w_up * R[:, :, 0]
+    if n_arrow:
+        J[:, 2 * N + m + n_up:, 6:] = w_arrow * arrow_gradient
     return r, J
 
 
@@ -155,8 +164,9 @@ def _at_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.
     """Move each (t, p) of a batch, (B, 3) and (B, P), to the scale the cues prefer (when positive)."""
     a, b = problem.scale_terms(t, p)
     s = (a @ b) / np.einsum("ki,ki->k", a, a)
-    s = np.where(s > 0, s, 1.0)
-    return s[:, None] * t, s[:, None] * p
+    s[~(s > 0)] = 1.0
+    s = s[:, None]
+    return s * t, s * p
 
 
 def _pivots(problem: Problem, p: np.ndarray) -> np.ndarray:
@@ -209,75 +219,81 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     nu = np.full(B, 2.0)
     iterations = np.zeros(B, dtype=int)
     status = np.full(B, _RUNNING)
-    size = np.linalg.norm(t, axis=1) + np.linalg.norm(p, axis=1) + 1.0
+    size = np.sqrt(np.einsum("ki,ki->k", t, t)) + np.sqrt(np.einsum("ki,ki->k", p, p)) + 1.0
     # R e_z . up is the cosine of the tilt; starts within the bound are kept within it.
     up = problem.up
     min_up = -np.inf if max_tilt is None else np.cos(max_tilt)
     keep_upright = R[:, :, 2] @ up >= min_up
 
+    # Every array keeps all B starts; the ones that stopped ride along (a few more rows cost less than the
+    # gathers to leave them out) but are never updated.
     for _ in range(max_iterations):
+        running = status == _RUNNING
         if abandon_factor is not None or abandon_above is not None:
             bar = np.inf if abandon_above is None else abandon_above
             if abandon_factor is not None:
-                bar = min(bar, abandon_factor * float(cost.min()) + 1e-6)
-            status[(status == _RUNNING) & (iterations >= abandon_after) & (cost > bar)] = _ABANDONED
-        idx = np.flatnonzero(status == _RUNNING)
-        if len(idx) == 0:
+                bar = min(bar, abandon_factor * float(cost.min()) + ABANDON_MARGIN)
+            gone = running & (iterations >= abandon_after) & (cost > bar)
+            status[gone] = _ABANDONED
+            running &= ~gone
+        if not running.any():
             break
-        Ji, ri = J[idx], r[idx]
-        g = np.einsum("kmi,km->ki", Ji, ri)
-        column_norms = np.sqrt(np.einsum("kmi,kmi->ki", Ji, Ji))
-        cosines = np.max(np.abs(g) / np.maximum(column_norms, 1e-300), axis=1)
-        done = (cost[idx] == 0.0) | (cosines <= gradient_tolerance * np.sqrt(cost[idx]))
-        status[idx[done]] = _GRADIENT
-        if done.all():
+        g = np.einsum("kmi,km->ki", J, r)
+        column_sq = np.einsum("kmi,kmi->ki", J, J)  # squared column norms
+        # max_j |g_j| / |J_j| <= gtol |r|, squared
+        cosines_sq = (g * g / np.maximum(column_sq, 1e-300)).max(axis=1)
+        done = running & ((cost == 0.0) | (cosines_sq <= gradient_tolerance**2 * cost))
+        status[done] = _GRADIENT
+        running &= ~done
+        if not running.any():
             break
-        keep = ~done
-        idx, Ji, g, column_norms = idx[keep], Ji[keep], g[keep], column_norms[keep]
-        iterations[idx] += 1
-        H = Ji.transpose(0, 2, 1) @ Ji
-        Dg = np.maximum(column_norms**2, 1e-12 * np.max(column_norms, axis=1, keepdims=True) ** 2 + 1e-300)
-        H[:, diagonal, diagonal] += mu[idx, None] * Dg
-        step = _solve_batch(H, -g)
-        solved = np.all(np.isfinite(step), axis=1)
+        iterations += running
+        H = J.transpose(0, 2, 1) @ J
+        Dg = np.maximum(column_sq, 1e-12 * column_sq.max(axis=1, keepdims=True) + 1e-300)
+        H[:, diagonal, diagonal] += mu[:, None] * Dg
+        step = _solve_batch(H, -g, running)
+        solved = np.isfinite(step).all(axis=1)  # only running starts are solved
         step[~solved] = 0.0
-        R_new = R[idx] @ _so3_exp_batch(step[:, :3])
-        t_new = t[idx] + step[:, 3:6] + np.einsum("kij,kj->ki", R[idx] - R_new, pivot[idx])
-        p_new = p[idx] + step[:, 6:]
+        R_new = R @ _so3_exp_batch(step[:, :3])
+        t_new = t + step[:, 3:6] + np.einsum("kij,kj->ki", R - R_new, pivot)
+        p_new = p + step[:, 6:]
         depths = problem.points_vehicle_batch(p_new) @ R_new[:, 2, :, None]
-        feasible = (solved & np.all(p_new[:, :3] > 0.0, axis=1) & (t_new[:, 2] > MIN_DEPTH)
+        feasible = (solved & (p_new[:, :3] > 0.0).all(axis=1) & (t_new[:, 2] > MIN_DEPTH)
                     & (depths[..., 0].min(axis=1) + t_new[:, 2] > MIN_DEPTH)
-                    & (~keep_upright[idx] | (R_new[:, :, 2] @ up >= min_up)))
-        rho = np.full(len(idx), -1.0)
-        new_cost = np.full(len(idx), np.inf)
+                    & (~keep_upright | (R_new[:, :, 2] @ up >= min_up)))
+        rho = np.full(B, -1.0)
         if feasible.any():
-            r_try, _ = residuals_batch(problem, R_new[feasible], t_new[feasible], p_new[feasible], False, None, True)
-            new_cost[feasible] = np.einsum("km,km->k", r_try, r_try)
+            # The trial point goes to its best scale before it is evaluated (the profiled cost does not change
+            # with the scale), with its Jacobian: most steps are accepted, and then it is the next iterate's.
+            R_try = R_new[feasible]
+            t_try, p_try = _at_prior_scale(problem, t_new[feasible], p_new[feasible])
+            pivot_try = _pivots(problem, p_try)
+            r_try, J_try = residuals_batch(problem, R_try, t_try, p_try, True, pivot_try, True)
+            new_cost = np.einsum("km,km->k", r_try, r_try)
             sf = step[feasible]
-            predicted = np.einsum("ki,ki->k", sf, mu[idx[feasible], None] * Dg[feasible] * sf - g[feasible])
+            predicted = np.einsum("ki,ki->k", sf, mu[feasible, None] * Dg[feasible] * sf - g[feasible])
             with np.errstate(divide="ignore", invalid="ignore"):
-                rho[feasible] = np.where(predicted > 0, (cost[idx[feasible]] - new_cost[feasible]) / predicted, -1.0)
-        accept = rho > 0
-        rejected = idx[~accept]
+                rho[feasible] = np.where(predicted > 0, (cost[feasible] - new_cost) / predicted, -1.0)
+        accept = rho > 0  # implies feasible, hence running
+        rejected = running & ~accept
         mu[rejected] *= nu[rejected]
         nu[rejected] *= 2.0
-        status[rejected[mu[rejected] > 1e16]] = _DAMPING
+        status[rejected & (mu > 1e16)] = _DAMPING
         if not accept.any():
             continue
-        ka = idx[accept]
         sa = step[accept]
-        small = (np.max(np.abs(sa[:, :3]), axis=1) <= step_tolerance) & (
-            np.linalg.norm(sa[:, 3:], axis=1) <= step_tolerance * size[ka])
-        R[ka] = R_new[accept]
-        t[ka], p[ka] = _at_prior_scale(problem, t_new[accept], p_new[accept])
-        pivot[ka] = _pivots(problem, p[ka])
-        r[ka], J[ka] = residuals_batch(problem, R[ka], t[ka], p[ka], True, pivot[ka], True)
-        drop = cost[ka] - new_cost[accept]
-        cost[ka] = new_cost[accept]
-        ra = rho[accept]
-        mu[ka] = np.maximum(mu[ka] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * ra - 1.0) ** 3), 1e-15)
-        nu[ka] = 2.0
-        status[ka[(drop <= cost_tolerance * cost[ka]) & ~small]] = _COST
+        taken = accept[feasible]  # the accepted among the evaluated trials
+        small = (np.abs(sa[:, :3]).max(axis=1) <= step_tolerance) & (
+            np.sqrt(np.einsum("ki,ki->k", sa[:, 3:], sa[:, 3:])) <= step_tolerance * size[accept])
+        R[accept], t[accept], p[accept], pivot[accept] = R_try[taken], t_try[taken], p_try[taken], pivot_try[taken]
+        r[accept], J[accept] = r_try[taken], J_try[taken]
+        new_cost = new_cost[taken]
+        drop = cost[accept] - new_cost
+        cost[accept] = new_cost
+        mu[accept] = np.maximum(mu[accept] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho[accept] - 1.0) ** 3), 1e-15)
+        nu[accept] = 2.0
+        ka = accept.nonzero()[0]
+        status[ka[(drop <= cost_tolerance * new_cost) & ~small]] = _COST
         status[ka[small]] = _STEP
     status[status == _RUNNING] = _MAX_ITERATIONS
     # Re-orthonormalize against drift from many small exp() products.
@@ -287,11 +303,12 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
                          _STATUS_NAMES[status[k]]) for k in range(B)]
 
 
-def _solve_batch(H: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve ``H x = b`` for a batch (B, n, n), (B, n) of symmetric positive definite systems (LAPACK dposv,
-    one call each: cheaper than a batched solve for a few starts); rows that are not come back NaN."""
+def _solve_batch(H: np.ndarray, b: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """Solve ``H x = b`` for the rows ``which`` (B,) bool of a batch (B, n, n), (B, n) of symmetric positive
+    definite systems (LAPACK dposv, one call each: cheaper than a batched solve for a few starts); rows not
+    asked for or not positive definite come back NaN."""
     out = np.full(b.shape, np.nan)
-    for k in range(len(H)):
+    for k in which.nonzero()[0]:
         _, x, info = lapack.dposv(H[k], b[k])
         if info == 0:
             out[k] = x

@@ -88,9 +88,12 @@ def finite_or_none(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot)."""
-    _, J = residuals_and_jacobian(problem, R, t, p)
+def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+              J: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot); ``J``
+    is that Jacobian when the caller has it already (:func:`.refine.residuals_and_jacobian` at the pose)."""
+    if J is None:
+        _, J = residuals_and_jacobian(problem, R, t, p)
     n_px = 2 * problem.parts.n_clicks
     return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
 
@@ -170,9 +173,11 @@ def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
 
 
 def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-            scale_from: str | None = None, part_sigma: float = 0.0) -> tuple[Uncertainty, Observability]:
-    """Uncertainty and observability of a fit together (one Jacobian, one yaw-pitch-roll gradient)."""
-    J_px, J_c = jacobians(problem, R, t, p)
+            scale_from: str | None = None, part_sigma: float = 0.0,
+            J: np.ndarray | None = None) -> tuple[Uncertainty, Observability]:
+    """Uncertainty and observability of a fit together (one Jacobian, one yaw-pitch-roll gradient); ``J`` as in
+    :func:`jacobians`."""
+    J_px, J_c = jacobians(problem, R, t, p, J)
     C = J_c.T @ J_c
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
