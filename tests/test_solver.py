@@ -72,8 +72,7 @@ def test_jacobian_matches_central_differences(rng):
 def _moved_arrow(scene, metres_ahead: float) -> tuple[np.ndarray, int]:
     """``p`` with the scene's first arrow moved ``metres_ahead`` along X, and the index of that arrow's tail."""
     model = scene.model
-    i = next(k for k, label in enumerate(model.click_labels)
-             if label.startswith("direction-") and label.endswith("/tail"))
+    i = model.arrow_tails[0]
     x_column = int(np.flatnonzero(model.A[i, 0, 3:])[0]) + 3  # the tail's own X unknown (after the dimensions)
     p = scene.p_true.copy()
     p[x_column] += metres_ahead

@@ -116,6 +116,12 @@ class PartsModel:
         """Equations left for the cuboid: two per click minus one per auxiliary unknown."""
         return 2 * self.n_clicks - self.n_aux
 
+    @property
+    def arrow_tails(self) -> tuple[int, ...]:
+        """The click index of each direction arrow's tail; its head is the next click."""
+        return tuple(i for i, label in enumerate(self.click_labels)
+                     if label.startswith("direction-") and label.endswith("/tail"))
+
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
         return self.A @ p

@@ -417,12 +417,11 @@ MIN_ARROW_PX = 1.0
 def _short_arrows(parts: PartsModel) -> str | None:
     """A description of the direction arrows whose tail and head are less than MIN_ARROW_PX apart."""
     found = []
-    for i, label in enumerate(parts.click_labels):
-        if label.startswith("direction-") and label.endswith("/tail"):
-            length = float(np.linalg.norm(parts.uv[i + 1] - parts.uv[i]))
-            if length < MIN_ARROW_PX:
-                found.append(f"the {label.split('/')[0].removeprefix('direction-')} arrow of annotation "
-                             f"parts[{parts.click_part[i]}] is {length:.2f} px long")
+    for i in parts.arrow_tails:
+        length = float(np.linalg.norm(parts.uv[i + 1] - parts.uv[i]))
+        if length < MIN_ARROW_PX:
+            axis = parts.click_labels[i].split("/")[0].removeprefix("direction-")
+            found.append(f"the {axis} arrow of annotation parts[{parts.click_part[i]}] is {length:.2f} px long")
     return "; ".join(found) + f" (an arrow needs at least {MIN_ARROW_PX:g} px)" if found else None
 
 

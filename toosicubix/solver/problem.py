@@ -226,14 +226,10 @@ class Problem:
 
 def _arrow_zone(parts: PartsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each arrow's midpoint coordinates and the zone's low and high bounds on them: 3 rows (P,) per arrow."""
-    P = parts.n_params
-    mid, low, high = [], [], []
-    for i, label in enumerate(parts.click_labels):
-        if label.startswith("direction-") and label.endswith("/tail"):
-            m = 0.5 * (parts.A[i] + parts.A[i + 1])  # (3, P): tail and head, vehicle frame
-            for k, (lo, hi) in enumerate(_ARROW_ZONE):
-                mid.append(m[k])
-                low.append(lo * np.eye(P)[k])
-                high.append(hi * np.eye(P)[k])
-    shape = (len(mid), P)
-    return np.reshape(mid, shape), np.reshape(low, shape), np.reshape(high, shape)
+    unit = np.eye(parts.n_params)[:3]  # rows picking dx, dy, dz out of p
+    low = np.array([lo for lo, _ in _ARROW_ZONE])[:, None] * unit  # (3, P)
+    high = np.array([hi for _, hi in _ARROW_ZONE])[:, None] * unit
+    tails = parts.arrow_tails
+    mid = [0.5 * (parts.A[i] + parts.A[i + 1]) for i in tails]  # (3, P) each: tail and head, vehicle frame
+    shape = (3 * len(tails), parts.n_params)
+    return np.reshape(mid, shape), np.tile(low, (len(tails), 1)), np.tile(high, (len(tails), 1))

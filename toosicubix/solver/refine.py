@@ -31,7 +31,6 @@ from .problem import ARROW_ZONE_SIGMA, Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
 MIN_DEPTH = 1e-3
-ABANDON_MARGIN = 1e-6
 
 _RUNNING, _GRADIENT, _STEP, _COST, _MAX_ITERATIONS, _DAMPING, _ABANDONED = range(7)
 _STATUS_NAMES = ("running", "gradient", "step", "cost", "max-iterations", "damping", "abandoned")
@@ -232,7 +231,7 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
         if abandon_factor is not None or abandon_above is not None:
             bar = np.inf if abandon_above is None else abandon_above
             if abandon_factor is not None:
-                bar = min(bar, abandon_factor * float(cost.min()) + ABANDON_MARGIN)
+                bar = min(bar, abandon_factor * float(cost.min()) + 1e-6)
             gone = running & (iterations >= abandon_after) & (cost > bar)
             status[gone] = _ABANDONED
             running &= ~gone
