@@ -67,7 +67,7 @@ def test_realistic_placement_moves_parts_off_the_model():
     model = build_parts_model(real.parts)
     projected = CAMERA.project(model.points_vehicle(real.p_true) @ real.R_cam_vehicle.T + real.t_cam_vehicle)
     offsets = np.linalg.norm(projected - model.uv, axis=1)
-    # Tyres 3-10 cm inside, lights 3-20 cm behind the faces: a few pixels at 18 m (40 px per metre).
+    # Tyres 0-5 cm inside, lights 3-20 cm behind the faces: a few pixels at 18 m (40 px per metre).
     assert offsets.max() > 0.5
     assert [p.name for p in exact.parts] == [p.name for p in real.parts]
 
@@ -78,6 +78,30 @@ def test_wheel_axles_and_tyres_sit_as_on_real_cars():
     length = sv.dimensions[0]
     assert 0.26 * length <= front <= 0.33 * length  # front overhang 17-24 % of the length
     assert -0.32 * length <= rear <= -0.24 * length
+
+
+def test_tyres_sit_inside_the_body_as_measured_on_real_cars():
+    """Each wheel click, noise-free, back-projected onto the road (vehicle Z = 0): its outer tyre face is
+    uniformly 0 to TYRE_INSET_MAX inside the cuboid's side, one inset per vehicle."""
+    from toosicubix.simulate import TYRE_INSET_MAX
+
+    insets = []
+    for k in range(200):
+        sv = simulate_vehicle(gt_vehicle(-45.0, (3.0, 1.65, 12.0), vehicle_id=str(k)), AnnotatorOptions(noise_px=0.0))
+        R, t = sv.R_cam_vehicle, sv.t_cam_vehicle
+        origin = R.T @ -t  # the camera centre, vehicle frame
+        per_vehicle = set()
+        for part in sv.parts:
+            if part.name.startswith("wheel-"):
+                ray = R.T @ np.linalg.solve(CAMERA.K, np.append(part.uv[0], 1.0))
+                point = origin - origin[2] / ray[2] * ray
+                per_vehicle.add(round(sv.dimensions[1] / 2 - abs(point[1]), 9))
+        assert len(per_vehicle) == 1
+        insets.append(per_vehicle.pop())
+    insets = np.array(insets)
+    assert insets.min() >= 0.0 and insets.max() <= TYRE_INSET_MAX
+    # Uniform: of 200 draws, some in the first and last tenth of the range (each missed with p = 0.9^200).
+    assert insets.min() < 0.005 and insets.max() > 0.045
 
 
 @pytest.mark.parametrize(("ry", "loc"), VIEWS)
