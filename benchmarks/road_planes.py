@@ -25,6 +25,7 @@ from common import SPLITS, default_data_dir, machine
 
 from toosicubix.formats.kitti import read_tracking_file
 from toosicubix.model import KITTI_GROUND
+from toosicubix.simulate import VEHICLE_CLASSES
 
 DEPTH_BANDS = ((3.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 60.0))
 
@@ -35,7 +36,7 @@ def bottom_centres(root: Path, sequences: tuple[str, ...]) -> dict[str, np.ndarr
     for sequence in sequences:
         points = [obj.location_rect for objs in read_tracking_file(root / "label_02" / f"{sequence}.txt").values()
                   for obj in objs
-                  if obj.type in ("Car", "Van", "Truck") and obj.truncated == 0 and obj.occluded <= 1
+                  if obj.type in VEHICLE_CLASSES and obj.truncated == 0 and obj.occluded <= 1
                   and 3.0 < obj.location_rect[2] < 60.0]
         out[sequence] = np.array(points).reshape(-1, 3)
     return out
