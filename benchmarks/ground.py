@@ -42,11 +42,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
-from toosicubix.batch import fit_file
 from toosicubix.evaluation import evaluate_folder, summarize
 from toosicubix.formats.results import dumps, read_results
 from toosicubix.model import KITTI_GROUND
-from toosicubix.simulate import (
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
     annotation_document,

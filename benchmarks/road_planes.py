@@ -25,7 +25,7 @@ from common import SPLITS, default_data_dir, machine
 
 from toosicubix.formats.kitti import read_tracking_file
 from toosicubix.model import KITTI_GROUND
-from toosicubix.simulate import VEHICLE_CLASSES
+from toosicubix.simulate.annotator import VEHICLE_CLASSES
 
 DEPTH_BANDS = ((3.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 60.0))
 

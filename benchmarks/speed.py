@@ -30,10 +30,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
-from toosicubix.batch import fit_one
 from toosicubix.model import Vehicle
-from toosicubix.priors import load_priors
-from toosicubix.simulate import (
+from toosicubix.pipeline.batch import fit_one
+from toosicubix.priors.table import load_priors
+from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
     select_kitti_tracking,

@@ -42,15 +42,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
-from toosicubix.batch import fit_images
+from toosicubix.annotations.schema import parse_ground_block
 from toosicubix.formats.results import dumps
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
-from toosicubix.guidance import BOX_SHAPED, suggest_clicks
 from toosicubix.model import KITTI_GROUND, ground_from_schema, load_images
-from toosicubix.parts import build_parts_model
-from toosicubix.priors import load_priors
-from toosicubix.schemas import parse_ground_block
-from toosicubix.simulate import (
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline.batch import fit_images
+from toosicubix.priors.table import load_priors
+from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
     annotation_document,
@@ -59,6 +58,7 @@ from toosicubix.simulate import (
     vehicle_rng,
 )
 from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.guidance import BOX_SHAPED, suggest_clicks
 
 OPTIONS = replace(SolverOptions(), click_sigma=1.0)
 

@@ -17,14 +17,9 @@ import numpy as np
 
 from toosicubix.camera import Camera
 from toosicubix.formats.kitti import format_label_line, object_from_pose
-from toosicubix.geometry import (
-    R_cam_vehicle_from_ypr,
-    box2d_of_points,
-    clip_cuboid_to_near_plane,
-    cuboid_corners_cam,
-)
+from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam
+from toosicubix.parts.synthesis import PartSpec, render_parts
 from toosicubix.solver.plausibility import unseen_clicks
-from toosicubix.synthesis import PartSpec, render_parts
 
 HERE = Path(__file__).resolve().parent
 

@@ -17,13 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from toosicubix.formats.results import ImageResult, VehicleResult, dumps, results_to_json
-from toosicubix.geometry import (
-    R_cam_vehicle_from_ypr,
-    box2d_of_points,
-    cuboid_corners_cam,
-    project_pinhole,
-    so3_exp,
-)
+from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, cuboid_corners_cam, project_pinhole, so3_exp
 
 # A KITTI-like camera 2: P2 = K [I | T2], T2 = K^-1 P2[:, 3] about 6 cm, as in the real calib files.
 K_KITTI = np.array([[721.5377, 0.0, 609.5593], [0.0, 721.5377, 172.854], [0.0, 0.0, 1.0]])

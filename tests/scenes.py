@@ -16,8 +16,8 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.geometry import R_cam_vehicle_from_ypr
 from toosicubix.model import Part
-from toosicubix.parts import PartsModel, build_parts_model
-from toosicubix.synthesis import PartSpec, render_parts, true_parameters
+from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.parts.synthesis import PartSpec, render_parts, true_parameters
 
 K_TEST = np.array([[720.0, 0.0, 620.0], [0.0, 720.0, 180.0], [0.0, 0.0, 1.0]])
 CAMERA = Camera(K=K_TEST, image_size=(1240, 375))

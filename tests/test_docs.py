@@ -4,9 +4,8 @@ import subprocess
 
 from click.testing import CliRunner
 
+from tests.conftest import REPO
 from toosicubix.cli import main
-
-from .conftest import REPO
 
 
 def readme_commands() -> list[str]:

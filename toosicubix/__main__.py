@@ -1,3 +1,3 @@
-from .cli import main
+from toosicubix.cli import main
 
 main()

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import schemas
-from .camera import Camera
-from .geometry import rot_x, rot_z
+from toosicubix.annotations import schema as schemas
+from toosicubix.camera import Camera
+from toosicubix.geometry import rot_x, rot_z
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,10 @@ Example
 
 from __future__ import annotations
 
-from .cuboid import Cuboid
-from .errors import EvaluationInputError
-from .evaluate import EvalOptions, evaluate, evaluate_folder
-from .ground_truth import (
+from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.evaluation.evaluate import EvalOptions, evaluate, evaluate_folder
+from toosicubix.evaluation.ground_truth import (
     CityscapesGroundTruth,
     GroundTruthSource,
     GtImage,
@@ -27,9 +27,9 @@ from .ground_truth import (
     KittiTrackingGroundTruth,
     open_ground_truth,
 )
-from .iou import intersection_volume_3d, iou_3d, iou_bev_height_yaw
-from .matching import Matching, box_iou_matrix, match_boxes
-from .metrics import (
+from toosicubix.evaluation.iou import intersection_volume_3d, iou_3d, iou_bev_height_yaw
+from toosicubix.evaluation.matching import Matching, box_iou_matrix, match_boxes
+from toosicubix.evaluation.metrics import (
     ObjectMetrics,
     combined_error,
     dimension_error,
@@ -39,9 +39,15 @@ from .metrics import (
     scaled_iou,
     translation_error,
 )
-from .predictions import Predictions, PredImage, PredObject, load_predictions, predictions_from_results
-from .records import EvaluationResult, MatchedObject, UnscoredObject
-from .report import format_report, result_to_csv, result_to_json, summarize, write_csv, write_json
+from toosicubix.evaluation.predictions import (
+    Predictions,
+    PredImage,
+    PredObject,
+    load_predictions,
+    predictions_from_results,
+)
+from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
+from toosicubix.evaluation.report import format_report, result_to_csv, result_to_json, summarize, write_csv, write_json
 
 __all__ = [
     "CityscapesGroundTruth", "Cuboid", "EvalOptions", "EvaluationInputError", "EvaluationResult", "GroundTruthSource",

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import cuboid_corners_cam
+from toosicubix.geometry import cuboid_corners_cam
 
 
 @dataclass(frozen=True)

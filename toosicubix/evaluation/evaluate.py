@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import EvaluationInputError
-from .ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
-from .matching import box_iou_matrix, match_boxes
-from .metrics import object_metrics
-from .predictions import Predictions, PredImage, PredObject, load_predictions
-from .records import EvaluationResult, MatchedObject, UnscoredObject
+from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.evaluation.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
+from toosicubix.evaluation.matching import box_iou_matrix, match_boxes
+from toosicubix.evaluation.metrics import object_metrics
+from toosicubix.evaluation.predictions import Predictions, PredImage, PredObject, load_predictions
+from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
 
 #: results.json's and the calib's camera offsets may differ by this much (metres) without a warning.
 T_CAM_RECT_TOLERANCE = 1e-3

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..formats import kitti
-from ..formats.cityscapes import read_gtbbox3d
-from .cuboid import Cuboid
-from .errors import EvaluationInputError
+from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.formats import kitti
+from toosicubix.formats.cityscapes import read_gtbbox3d
 
 #: Classes scored by default, compared case-insensitively.
 KITTI_DEFAULT_CLASSES = ("Car", "Van", "Truck")

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import geodesic_angle
-from .cuboid import Cuboid
-from .iou import iou_3d, iou_bev_height_yaw
+from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.evaluation.iou import iou_3d, iou_bev_height_yaw
+from toosicubix.geometry import geodesic_angle
 
 
 def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..formats import kitti
-from ..formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
-from ..geometry import box2d_of_points, clip_cuboid_to_near_plane, project_pinhole
-from .cuboid import Cuboid
-from .errors import EvaluationInputError
+from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.formats import kitti
+from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
+from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, project_pinhole
 
 LABEL_DIR = "label_2"
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from .cuboid import Cuboid
-from .metrics import ObjectMetrics
+from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.evaluation.metrics import ObjectMetrics
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
-from ..io_utils import atomic_write_text
-from .records import EvaluationResult, MatchedObject
+from toosicubix import __version__
+from toosicubix.evaluation.records import EvaluationResult, MatchedObject
+from toosicubix.formats.atomic import atomic_write_text
 
 #: Depth bins over the ground truth's z, metres: [lo, hi).
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 50.0), (50.0, math.inf))

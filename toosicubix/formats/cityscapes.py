@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
-from . import FormatError, json_field, json_numbers, read_json
+from toosicubix.camera import Camera
+from toosicubix.formats import FormatError, json_field, json_numbers, read_json
 
 #: Sensor axes (x forward, y left, z up) to camera axes (x right, y down, z forward); ``get_K_multiplier()``
 #: in cityscapesScripts.

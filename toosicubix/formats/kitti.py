@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera
-from ..geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
-from . import FormatError
+from toosicubix.camera import Camera
+from toosicubix.formats import FormatError
+from toosicubix.geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
 
 #: KITTI's code for "occlusion unknown", written for fitted objects.
 OCCLUSION_UNKNOWN = 3

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import FormatError, json_field, json_numbers, read_json
+from toosicubix.formats import FormatError, json_field, json_numbers, read_json
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"

@@ -20,17 +20,23 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..camera import Camera
-from ..geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
-from ..model import GroundPlane
-from ..parts import PartsModel
-from ..priors import SizePrior
-from .descent import DescentResult, descend_all, solve_shapes
-from .init import rotations_from_yaws, yaw_candidates
-from .plausibility import implausibility
-from .problem import Problem
-from .refine import MIN_DEPTH, RefineResult, levenberg_marquardt_batch, residuals_and_jacobian, residuals_batch
-from .uncertainty import Observability, Uncertainty, analyse
+from toosicubix.camera import Camera
+from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
+from toosicubix.model import GroundPlane
+from toosicubix.parts.linear import PartsModel
+from toosicubix.priors.table import SizePrior
+from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
+from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
+from toosicubix.solver.plausibility import implausibility
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import (
+    MIN_DEPTH,
+    RefineResult,
+    levenberg_marquardt_batch,
+    residuals_and_jacobian,
+    residuals_batch,
+)
+from toosicubix.solver.uncertainty import Observability, Uncertainty, analyse
 
 
 @dataclass(frozen=True)

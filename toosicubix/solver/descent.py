@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .problem import Problem
+from toosicubix.solver.problem import Problem
 
 
 @dataclass(frozen=True)

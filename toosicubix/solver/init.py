@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import R_LEVEL_VEHICLE
-from ..parts import PartsModel
+from toosicubix.geometry import R_LEVEL_VEHICLE
+from toosicubix.parts.linear import PartsModel
 
 #: Offsets tried around each line-based yaw, radians.
 YAW_OFFSETS = np.deg2rad([0.0, -10.0, 10.0, -20.0, 20.0])

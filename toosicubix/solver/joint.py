@@ -21,9 +21,9 @@ import cv2
 import numpy as np
 from scipy.linalg import lapack
 
-from ..model import GroundPlane
-from .problem import Problem
-from .refine import MIN_DEPTH, residuals_batch
+from toosicubix.model import GroundPlane
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import MIN_DEPTH, residuals_batch
 
 #: How far a vehicle's ground may lie off the image's plane once that plane (its normal too) is estimated:
 #: the road is not flat. KITTI tracking ground truth (sequences 0000-0009, images with 3 or more vehicles):

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .problem import Problem
-from .refine import residuals_and_jacobian
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import residuals_and_jacobian
 
 
 def data_jacobian_spectrum(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,

@@ -31,10 +31,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..camera import Camera
-from ..model import GroundPlane
-from ..parts import PartsModel
-from ..priors import SizePrior
+from toosicubix.camera import Camera
+from toosicubix.model import GroundPlane
+from toosicubix.parts.linear import PartsModel
+from toosicubix.priors.table import SizePrior
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5

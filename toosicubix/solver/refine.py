@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from scipy.linalg import lapack
 
-from .problem import ARROW_ZONE_SIGMA, Problem
+from toosicubix.solver.problem import ARROW_ZONE_SIGMA, Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
 MIN_DEPTH = 1e-3

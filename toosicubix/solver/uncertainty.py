@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import rot_x, ypr_from_R_cam_vehicle
-from .problem import Problem
-from .refine import residuals_and_jacobian
+from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import residuals_and_jacobian
 
 #: A quantity is "mostly set by the cues" when switching them off multiplies its variance by more than this
 #: (its standard deviation by 2).

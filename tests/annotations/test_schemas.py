@@ -1,0 +1,163 @@
+import copy
+import json
+
+import pytest
+
+from tests.conftest import REPO
+from toosicubix.annotations.schema import (
+    DIRECTION_AXES,
+    POINT_PARTS,
+    AnnotationFile,
+    InputFileError,
+    json_schema,
+    load_annotations,
+    load_priors_file,
+    parse_annotations,
+)
+
+# The example of DESIGN section 3, verbatim.
+DESIGN_EXAMPLE = {
+    "toosicubix": 1,
+    "images": [{
+        "id": "000123",
+        "file": "image_2/000123.png",
+        "size": [1242, 375],
+        "camera": {"P": [[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]]},
+        "vehicles": [{
+            "id": "3",
+            "prototype": "Car",
+            "box2d": [387.6, 181.5, 423.8, 203.1],
+            "parts": [
+                {"kind": "point", "part": "wheel-front-left", "xy": [401.2, 202.0]},
+                {"kind": "symmetry", "face": "rear", "left": [390.1, 190.3], "right": [410.8, 190.6]},
+                {"kind": "direction", "axis": "forward", "tail": [380.0, 215.0], "head": [420.0, 212.0]},
+            ],
+        }],
+    }],
+}
+
+
+def problems_of(doc) -> list[tuple[str, str]]:
+    with pytest.raises(InputFileError) as info:
+        parse_annotations(doc, "bad.json")
+    return info.value.problems
+
+
+def test_design_example_parses():
+    doc = parse_annotations(DESIGN_EXAMPLE)
+    vehicle = doc.images[0].vehicles[0]
+    assert [p.kind for p in vehicle.parts] == ["point", "symmetry", "direction"]
+    assert doc.images[0].camera.P is not None and doc.images[0].camera.K is None
+
+
+def test_every_part_name_and_axis_is_accepted():
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    parts = [{"kind": "point", "part": name, "xy": [10.0, 20.0]} for name in POINT_PARTS]
+    parts += [{"kind": "symmetry", "face": f, "left": [1.0, 2.0], "right": [3.0, 4.0]}
+              for f in ("front", "rear", "roof")]
+    parts += [{"kind": "direction", "axis": a, "tail": [1.0, 2.0], "head": [9.0, 9.0]} for a in DIRECTION_AXES]
+    doc["images"][0]["vehicles"][0]["parts"] = parts
+    assert len(parse_annotations(doc).images[0].vehicles[0].parts) == 19 + 3 + 6
+
+
+def test_camera_K_with_distortion():
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    doc["images"][0]["camera"] = {"K": [[700, 0, 600], [0, 700, 180], [0, 0, 1]], "distortion": [-0.1, 0.01, 0, 0, 0]}
+    assert parse_annotations(doc).images[0].camera.distortion == [-0.1, 0.01, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("mutate", "path", "fragment"),
+    [
+        (lambda d: d["images"][0]["vehicles"][0].update(colour="red"),
+         "$.images[0].vehicles[0].colour", "unknown field"),
+        (lambda d: d["images"][0]["vehicles"][0].pop("prototype"),
+         "$.images[0].vehicles[0].prototype", "missing required field"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][1]["left"].__setitem__(0, float("nan")),
+         "$.images[0].vehicles[0].parts[1].left[0]", "finite number"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][2]["head"].__setitem__(1, float("inf")),
+         "$.images[0].vehicles[0].parts[2].head[1]", "finite number"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][0].update(part="wheel-front"),
+         "$.images[0].vehicles[0].parts[0].part", "'wheel-front-left'"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][1].update(face="side"),
+         "$.images[0].vehicles[0].parts[1].face", "'roof'"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][2].update(axis="sideways"),
+         "$.images[0].vehicles[0].parts[2].axis", "'leftward'"),
+        (lambda d: d["images"][0]["vehicles"][0]["parts"][0].update(kind="circle"),
+         "$.images[0].vehicles[0].parts[0]", "'point', 'symmetry', 'direction'"),
+        (lambda d: d["images"][0]["vehicles"].append(copy.deepcopy(d["images"][0]["vehicles"][0])),
+         "$.images[0].vehicles", "unique vehicle ids, got '3' at [0] and [1]"),
+        (lambda d: d["images"].append(copy.deepcopy(d["images"][0])),
+         "$.images", "unique image ids"),
+        (lambda d: d["images"][0].update(camera={"K": [[700, 0, 600], [1400, 0, 1200], [0, 0, 1]]}),
+         "$.images[0].camera.K", "invertible K"),
+        (lambda d: d["images"][0].update(camera={"P": [[0, 0, 609.6, 44.9], [0, 0, 172.9, 0.2], [0, 0, 1, 0]]}),
+         "$.images[0].camera.P", "invertible K"),
+        (lambda d: d["images"][0].update(camera={"K": [[700, 0, 600], [0, 700, 180], [0, 0, 2]]}),
+         "$.images[0].camera.K", "last row of K"),
+        (lambda d: d["images"][0]["camera"].update(K=[[700, 0, 600], [0, 700, 180], [0, 0, 1]]),
+         "$.images[0].camera", "exactly one of 'K'"),
+        (lambda d: d["images"][0].update(camera={"K": [[700, 0, 600], [0, 700, 180], [0, 0, 1]], "distortion": [0.1]}),
+         "$.images[0].camera.distortion", "4, 5, 8, 12 or 14"),
+        (lambda d: d["images"][0]["vehicles"][0].update(box2d=[10, 10, 5, 20]),
+         "$.images[0].vehicles[0].box2d", "x1 < x2"),
+        (lambda d: d["images"][0].update(id="../etc"),
+         "$.images[0].id", "pattern"),
+        (lambda d: d.update(toosicubix=2),
+         "$.toosicubix", "1"),
+    ],
+)
+def test_bad_input_names_the_json_path(mutate, path, fragment):
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    mutate(doc)
+    problems = problems_of(doc)
+    assert any(p == path and fragment in m for p, m in problems), problems
+
+
+def test_error_message_names_the_file(tmp_path):
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    doc["images"][0]["vehicles"][0]["parts"][0]["part"] = "mirror"
+    path = tmp_path / "ann.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputFileError) as info:
+        load_annotations(path)
+    assert str(info.value).startswith(f"{path}: $.images[0].vehicles[0].parts[0].part: Input should be")
+    assert 'got "mirror"' in str(info.value)
+
+
+def test_json_syntax_error_has_line_and_column(tmp_path):
+    path = tmp_path / "ann.json"
+    path.write_text('{"toosicubix": 1,\n "images": [,]}')
+    with pytest.raises(InputFileError, match=r"not valid JSON: .* at line 2 column 13"):
+        load_annotations(path)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputFileError, match="cannot read the file"):
+        load_annotations(tmp_path / "nope.json")
+
+
+def test_committed_schema_matches_the_models():
+    committed = json.loads((REPO / "schemas" / "annotations.schema.json").read_text())
+    assert committed == json_schema(), "run: toosicubix schema > schemas/annotations.schema.json"
+
+
+def test_schema_lists_every_part_name():
+    schema = json.dumps(json_schema())
+    for name in (*POINT_PARTS, *DIRECTION_AXES):
+        assert f'"{name}"' in schema
+
+
+def test_models_are_frozen():
+    doc = parse_annotations(DESIGN_EXAMPLE)
+    with pytest.raises(ValueError, match="frozen"):
+        doc.images[0].id = "x"  # type: ignore[misc]
+    assert isinstance(doc, AnnotationFile)
+
+
+def test_priors_file_rejects_non_spd_covariance(tmp_path):
+    path = tmp_path / "priors.json"
+    entry = {"mean": [4, 1.7, 1.5], "cov": [[1, 2, 0], [2, 1, 0], [0, 0, 1]], "kitti_type": "Car", "source": "test"}
+    path.write_text(json.dumps({"toosicubix_priors": 1, "prototypes": {"Car": entry}}))
+    with pytest.raises(InputFileError, match=r"\$\.prototypes\.Car\.cov: expected a positive definite"):
+        load_priors_file(path)

@@ -1,0 +1,126 @@
+"""`toosicubix priors`: exit codes, warnings, --base, and files that load as priors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from tests.eval_scenes import write_cityscapes
+from tests.priors.test_prior_estimation import small_tracking, tracking_line, write_tracking
+from toosicubix.annotations.schema import load_priors_file
+from toosicubix.cli import main
+from toosicubix.priors.table import bundled_priors_path, load_priors
+
+
+def run(*args):
+    return CliRunner().invoke(main, ["priors", *[str(a) for a in args]])
+
+
+@pytest.fixture
+def tracking(tmp_path):
+    return small_tracking(tmp_path / "kitti_tracking")
+
+
+def test_tracking_priors_are_written_validated_and_summarised(tmp_path, tracking):
+    out = tmp_path / "priors.json"
+    result = run("--kitti-tracking", tracking, "--min-samples", "2", "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "Car: n=5 tracks, mean (dx, dy, dz) = (" in result.stderr
+    assert f"wrote 1 priors to {out}" in result.stderr and result.stdout == ""
+    # Van and Truck have one track each: no covariance, skipped with a warning.
+    assert "warning: Van: only 1 sample; at least 2 are needed for a covariance, skipped" in result.stderr
+    doc = load_priors_file(out)
+    assert list(doc.prototypes) == ["Car"] and doc.prototypes["Car"].kitti_type == "Car"
+    assert doc.prototypes["Car"].source.startswith(f"toosicubix priors --kitti-tracking {tracking}: ")
+    assert load_priors(out)["Car"].n == 5
+
+
+def test_small_classes_are_written_and_named_in_a_warning(tmp_path, tracking):
+    out = tmp_path / "priors.json"
+    result = run("--kitti-tracking", tracking, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "warning: Car: only 5 samples (fewer than 20); written, but its spread is poorly determined" in \
+        result.stderr
+    assert "only 5 samples (fewer than 20)" in load_priors_file(out).prototypes["Car"].source
+
+
+def test_base_keeps_every_other_entry(tmp_path, tracking):
+    base = tmp_path / "base.json"
+    base.write_text(bundled_priors_path().read_text())
+    result = run("--kitti-tracking", tracking, "--min-samples", "2", "--base", base, "-o", base)
+    assert result.exit_code == 0, result.output
+    before, after = load_priors_file(bundled_priors_path()), load_priors_file(base)
+    assert f"kept {len(before.prototypes) - 1} other entries of {base}" in result.stderr
+    assert list(after.prototypes) == list(before.prototypes)
+    assert after.prototypes["Car"] != before.prototypes["Car"] and after.prototypes["Car"].n == 5
+    assert all(after.prototypes[k] == v for k, v in before.prototypes.items() if k != "Car")
+
+
+def test_sequences_classes_and_whitened_covariance(tmp_path, tracking):
+    out = tmp_path / "priors.json"
+    result = run("--kitti-tracking", tracking, "--sequences", "0000", "--classes", "car", "--min-samples", "2",
+                 "--covariance", "whitened", "-o", out)
+    assert result.exit_code == 0, result.output
+    entry = load_priors_file(out).prototypes["Car"]
+    assert entry.n == 4  # tracks 1-4 of sequence 0000
+    assert "--sequences 0000 --classes car --covariance whitened:" in entry.source
+    assert "sequences 0000, one sample per track" in entry.source and "whitened fixed point" in entry.source
+
+
+def test_cityscapes_prototypes_map_to_kitti_types(tmp_path):
+    out = tmp_path / "priors.json"
+    result = run("--cityscapes", write_cityscapes(tmp_path / "cs"), "--min-samples", "3", "-o", out)
+    assert result.exit_code == 0, result.output
+    entry = load_priors_file(out).prototypes["Mid Size Car"]
+    assert entry.kitti_type == "Car" and entry.n == 4
+    assert "warning: Mini Truck: only 1 sample" in result.stderr
+
+
+def test_quiet_prints_nothing(tmp_path, tracking):
+    result = run("--kitti-tracking", tracking, "-q", "-o", tmp_path / "p.json")
+    assert result.exit_code == 0 and result.stderr == ""
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    ([], "give exactly one ground truth"),
+    (["--kitti", "a", "--kitti-tracking", "b"], "give exactly one ground truth"),
+    (["--kitti", "{gt}", "--sequences", "0000"], "--sequences applies to --kitti-tracking only"),
+    (["--kitti-tracking", "{gt}", "--sequences", "00x0"], "expected sequence numbers like 0010-0020"),
+    (["--kitti-tracking", "{gt}", "--sequences", "0007"], "no label file for the requested sequences"),
+    (["--kitti-tracking", "{gt}", "--classes", " , "], "expected at least one class name"),
+    (["--kitti-tracking", "{gt}", "--classes", "Tram"], "no class gave a prior"),
+    (["--kitti-tracking", "{tmp}/absent"], "ground-truth folder not found"),
+])
+def test_bad_input_exits_2(tmp_path, tracking, args, message):
+    args = [a.format(gt=tracking, tmp=tmp_path) for a in args]
+    result = run(*args, "-o", tmp_path / "p.json")
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_malformed_label_exits_2_naming_file_and_line(tmp_path):
+    gt = write_tracking(tmp_path / "gt", {"0000": [tracking_line(0, 1, "Car", (4.0, 1.6, 1.5)), "0 2 Car x"]})
+    result = run("--kitti-tracking", gt, "-o", tmp_path / "p.json")
+    assert result.exit_code == 2
+    assert f"Error: {gt / 'label_02' / '0000.txt'}:2: expected 17 or 18 fields" in result.stderr
+
+
+def test_bad_base_file_exits_2(tmp_path, tracking):
+    base = tmp_path / "base.json"
+    base.write_text(json.dumps({"toosicubix_priors": 1, "prototypes": {}}))
+    result = run("--kitti-tracking", tracking, "--base", base, "-o", tmp_path / "p.json")
+    assert result.exit_code == 2
+    assert f"{base}: $.prototypes" in result.stderr
+
+
+def test_unwritable_output_exits_2(tmp_path, tracking):
+    result = run("--kitti-tracking", tracking, "--min-samples", "2", "-o", tmp_path / "no" / "p.json")
+    assert result.exit_code == 2 and "cannot write" in result.stderr
+
+
+def test_help_has_an_example():
+    result = CliRunner().invoke(main, ["priors", "--help"])
+    assert result.exit_code == 0 and "Example:" in result.output and "--kitti-tracking" in result.output

@@ -1,0 +1,85 @@
+"""What to click next (toosicubix.guidance)."""
+
+import numpy as np
+import pytest
+
+from tests.scenes import CAMERA, random_scene
+from toosicubix.model import Part
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.priors.table import load_priors
+from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.guidance import suggest_clicks
+
+CAR = load_priors()["Car"]
+OPTIONS = SolverOptions()
+
+
+def _fit(parts):
+    return fit_vehicle(build_parts_model(parts), CAMERA, CAR, OPTIONS)
+
+
+@pytest.mark.parametrize(("view", "seed", "k"), [("rear", 1, 4), ("front", 2, 4), ("oblique-front-left", 3, 4),
+                                                 ("oblique-rear-right", 4, 5)])
+def test_clicking_a_suggestion_where_predicted_gives_the_predicted_uncertainty(view, seed, k):
+    """A part clicked exactly where the suggestion says lies on the fitted cuboid, so the fit does not move
+    and its uncertainty becomes the one predicted (up to the solver's convergence: 1e-3 relative)."""
+    scene = random_scene(np.random.default_rng(seed), view)
+    parts = tuple(scene.parts[:k])
+    fit = _fit(parts)
+    suggestions = suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS)
+    assert suggestions
+    for s in suggestions[:3]:
+        refit = _fit((*parts, Part(s.kind, s.name, s.uv, "$")))
+        assert refit.ok
+        assert refit.uncertainty.yaw_deg == pytest.approx(s.yaw_sigma_deg, rel=1e-3)
+        assert refit.uncertainty.depth_rel == pytest.approx(s.depth_sigma_rel, rel=1e-3)
+        assert s.yaw_gain_deg == pytest.approx(fit.uncertainty.yaw_deg - s.yaw_sigma_deg, rel=1e-9)
+
+
+def test_suggestions_are_ranked_visible_first_then_by_score_and_never_repeat_a_click():
+    scene = random_scene(np.random.default_rng(1), "rear")
+    parts = tuple(scene.parts[:4])
+    suggestions = suggest_clicks(parts, CAMERA, CAR, _fit(parts), OPTIONS)
+    clicked = {(p.kind, p.name) for p in parts}
+    assert not clicked & {(s.kind, s.name) for s in suggestions}
+    usable = [s.visible and s.inside for s in suggestions]
+    assert usable == sorted(usable, reverse=True)
+    scores = [s.score for s in suggestions if s.visible and s.inside]
+    assert scores == sorted(scores, reverse=True)
+    for s in suggestions:  # the score is the log of the shrink factor of yaw sigma times depth sigma
+        base = _fit(parts).uncertainty
+        assert s.score == pytest.approx(np.log(base.yaw_deg / s.yaw_sigma_deg * base.depth_rel / s.depth_sigma_rel))
+
+
+def test_a_rear_view_is_told_what_pins_its_yaw():
+    """Rear face and rear wheels only (the rear axle's position is unknown): the yaw is barely determined and
+    the length not at all. The best suggestion is visible, inside the image, and cuts the yaw sigma by more
+    than half; adding a front wheel would fix the length."""
+    scene = random_scene(np.random.default_rng(2), "rear")
+    parts = tuple(scene.parts[:4])
+    fit = _fit(parts)
+    assert fit.observability.status["length"] == "cues only"
+    suggestions = suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS)
+    assert suggestions[0].visible and suggestions[0].inside
+    assert suggestions[0].yaw_sigma_deg < 0.5 * fit.uncertainty.yaw_deg
+    front_wheel = next(s for s in suggestions if s.name.startswith("wheel-front"))
+    refit = _fit((*parts, Part(front_wheel.kind, front_wheel.name, front_wheel.uv, "$")))
+    assert refit.observability.status["length"] != "cues only"
+
+
+def test_corners_are_suggested_only_on_box_shaped_vehicles_or_once_one_was_clicked():
+    scene = random_scene(np.random.default_rng(3), "oblique-front-left")
+    parts = tuple(p for p in scene.parts[:5] if not p.name.startswith("corner-"))
+    fit = _fit(parts)
+    names = [s.name for s in suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS)]
+    assert not any(n.startswith("corner-") for n in names)
+    boxy = [s.name for s in suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS, box_shaped=True)]
+    assert any(n.startswith("corner-") for n in boxy)
+
+
+def test_no_suggestions_for_a_failed_fit():
+    scene = random_scene(np.random.default_rng(0), "side")
+    parts = tuple(scene.parts[:2])
+    fit = _fit(parts)
+    assert not fit.ok
+    assert suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS) == []

@@ -1,0 +1,315 @@
+"""From annotations to the linear model ``X_i = A_i p`` of every clicked point (paper, "Method").
+
+``p = (dx, dy, dz, [Xwf], [Xwr], aux...)``: the dimensions, the shared front and rear wheel
+positions (only when a front or rear wheel is clicked), then each annotation's own unknowns. Vehicle
+frame: origin at the bottom-face centre, X forward, Y left, Z up.
+
+| kind / name                        | 3D point(s)                              | new unknowns   |
+|------------------------------------|------------------------------------------|----------------|
+| wheel-{front,rear}-{left,right}    | (Xwf or Xwr, +-dy/2, 0)                  | Xwf / Xwr      |
+| front-center / rear-center         | (+-dx/2, 0, Z)                           | Z              |
+| top-center                         | (X, 0, dz)                               | X              |
+| edge-{front,rear}-{left,right}     | (+-dx/2, +-dy/2, Z)                      | Z              |
+| corner-{top,bottom}-{fr}-{lr}      | (+-dx/2, +-dy/2, dz or 0)                | none           |
+| symmetry front / rear              | (+-dx/2, +Y, Z), (+-dx/2, -Y, Z)         | Y, Z           |
+| symmetry roof                      | (X, +Y, dz), (X, -Y, dz)                 | X, Y           |
+| direction forward / backward       | (X, Y, Z) -> (X +- dx, Y, Z)             | X, Y, Z        |
+| direction leftward / rightward     | (X, Y, Z) -> (X, Y +- dy, Z)             | X, Y, Z        |
+| direction upward / downward        | (X, Y, Z) -> (X, Y, Z +- dz)             | X, Y, Z        |
+| length plate-{front,rear}          | (+-dx/2, +Y, Z), (+-dx/2, -Y, Z)         | Y, Z           |
+| length wheelbase-{left,right}      | (Xwf, +-dy/2, 0), (Xwr, +-dy/2, 0)       | Xwf, Xwr       |
+| length tyre-{front,rear}-{lr}      | (Xw, +-dy/2, 0), (Xw, +-dy/2, Zt)        | Xw, Zt         |
+
+A ``length`` annotation also gives a *measurement*, a linear equation on ``p`` with a known value in metres:
+the plate's width ``2 Y``, the wheelbase ``Xwf - Xwr``, the tyre's diameter ``Zt``. Known dimensions of the
+vehicle are measurements too. Unlike the clicks, measurements fix the scale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from toosicubix.model import Part
+
+DX, DY, DZ = 0, 1, 2
+#: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.
+CUBOID_DOF = 9
+#: What one image can determine: the cuboid up to scale.
+IMAGE_DOF = 8
+
+_SIDE = {"front": 1.0, "rear": -1.0, "left": 1.0, "right": -1.0}
+_DIRECTION = {
+    "forward": (0, 1.0), "backward": (0, -1.0),
+    "leftward": (1, 1.0), "rightward": (1, -1.0),
+    "upward": (2, 1.0), "downward": (2, -1.0),
+}
+
+
+@dataclass(frozen=True)
+class Line:
+    """Two clicks whose 3D points differ along a vehicle axis: ``X_j - X_i`` is parallel to ``e_axis``.
+
+    Used by the yaw initialisation (``l^T K R D = 0``).
+    """
+
+    i: int
+    j: int
+    axis: int  # 0: X (forward), 1: Y (left)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A known size: ``coefficients @ p == metres`` within ``sigma``.
+
+    Attributes
+    ----------
+    coefficients : (P,)
+    label : e.g. 'length plate-rear' or 'known dx'
+    """
+
+    coefficients: np.ndarray
+    metres: float
+    sigma: float
+    label: str
+
+
+@dataclass(frozen=True)
+class PartsModel:
+    """The clicked points of one vehicle as linear functions of ``p``.
+
+    Attributes
+    ----------
+    A : (N, 3, P) ``X_vehicle_i = A[i] @ p``
+    uv : (N, 2) clicked pixels, in click order
+    click_labels : (N,) what each click is, e.g. 'wheel-front-left', 'symmetry-rear/left'
+    click_part : (N,) index of the annotation each click belongs to
+    param_names : (P,) 'dx', 'dy', 'dz', 'Xwf', 'Xwr', then 'parts[k].X' etc.
+    lines : pairs of clicks along a known vehicle axis
+    measurements : known sizes (length annotations, known dimensions)
+    """
+
+    A: np.ndarray
+    uv: np.ndarray
+    click_labels: tuple[str, ...]
+    click_part: np.ndarray
+    param_names: tuple[str, ...]
+    lines: tuple[Line, ...]
+    measurements: tuple[Measurement, ...] = ()
+
+    @property
+    def n_clicks(self) -> int:
+        return len(self.uv)
+
+    @property
+    def n_params(self) -> int:
+        return self.A.shape[2]
+
+    @property
+    def n_aux(self) -> int:
+        """Unknowns besides the dimensions: wheel positions and per-annotation auxiliaries."""
+        return self.n_params - 3
+
+    @property
+    def constraints(self) -> int:
+        """Equations left for the cuboid: two per click minus one per auxiliary unknown."""
+        return 2 * self.n_clicks - self.n_aux
+
+    @property
+    def arrow_tails(self) -> tuple[int, ...]:
+        """The click index of each direction arrow's tail; its head is the next click."""
+        return tuple(i for i, label in enumerate(self.click_labels)
+                     if label.startswith("direction-") and label.endswith("/tail"))
+
+    def points_vehicle(self, p: np.ndarray) -> np.ndarray:
+        """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
+        return self.A @ p
+
+
+class _Builder:
+    def __init__(self, parts: tuple[Part, ...]):
+        self.names = ["dx", "dy", "dz"]
+        names = {p.name for p in parts if p.kind == "point"}
+        axles = {axle for p in parts if p.kind == "length" for axle in _LENGTH_AXLES.get(p.name, ())}
+        self.wheel = {}
+        for axle, label in (("front", "Xwf"), ("rear", "Xwr")):
+            if names & {f"wheel-{axle}-left", f"wheel-{axle}-right"} or axle in axles:
+                self.wheel[axle] = len(self.names)
+                self.names.append(label)
+        self.coeffs: list[list[dict[int, float]]] = []  # per click: the linear forms of X, Y, Z
+        self.labels: list[str] = []
+        self.owner: list[int] = []
+        self.lines: list[Line] = []
+        self.measurements: list[tuple[dict[int, float], float, float, str]] = []
+
+    def aux(self, k: int, what: str) -> int:
+        self.names.append(f"parts[{k}].{what}")
+        return len(self.names) - 1
+
+    def point(self, k: int, label: str, x: dict[int, float], y: dict[int, float], z: dict[int, float]) -> int:
+        """Add a click whose X, Y, Z are the linear forms ``x``, ``y``, ``z`` ({param: coefficient})."""
+        self.coeffs.append([x, y, z])
+        self.labels.append(label)
+        self.owner.append(k)
+        return len(self.labels) - 1
+
+    def build(self, uv: np.ndarray) -> PartsModel:
+        P = len(self.names)
+        A = np.zeros((len(self.coeffs), 3, P))
+        for i, forms in enumerate(self.coeffs):
+            for row, form in enumerate(forms):
+                for param, c in form.items():
+                    A[i, row, param] += c
+        measurements = []
+        for form, metres, sigma, label in self.measurements:
+            c = np.zeros(P)
+            for param, coefficient in form.items():
+                c[param] += coefficient
+            measurements.append(Measurement(c, metres, sigma, label))
+        return PartsModel(A=A, uv=uv, click_labels=tuple(self.labels), click_part=np.array(self.owner, dtype=int),
+                          param_names=tuple(self.names), lines=tuple(self.lines), measurements=tuple(measurements))
+
+
+def build_parts_model(parts: tuple[Part, ...] | list[Part],
+                      known_dimensions: dict[str, tuple[float, float]] | None = None) -> PartsModel:
+    """The linear model of a vehicle's annotations (see the module's table).
+
+    Parameters
+    ----------
+    parts : the vehicle's annotations, in file order
+    known_dimensions : ``{"dx": (metres, sigma), ...}``, dimensions known from elsewhere
+
+    Returns
+    -------
+    PartsModel
+    """
+    parts = tuple(parts)
+    b = _Builder(parts)
+    wheel_clicks: dict[str, list[int]] = {}
+    corner_clicks: dict[tuple[str, str, str], list[int]] = {}
+    uv_rows = []
+    for k, part in enumerate(parts):
+        uv_rows.append(part.uv)
+        if part.kind == "point":
+            i = _add_point(b, k, part.name)
+            if part.name.startswith("wheel-"):
+                wheel_clicks.setdefault(part.name, []).append(i)
+            elif part.name.startswith("corner-"):
+                _, tb, fr, lr = part.name.split("-")
+                corner_clicks.setdefault((tb, fr, lr), []).append(i)
+        elif part.kind == "symmetry":
+            _add_symmetry(b, k, part.name)
+        elif part.kind == "length":
+            for name, i in _add_length(b, k, part).items():
+                wheel_clicks.setdefault(name, []).append(i)
+        else:
+            _add_direction(b, k, part.name)
+    for axis, (metres, sigma) in (known_dimensions or {}).items():
+        b.measurements.append(({DIM_INDEX[axis]: 1.0}, metres, sigma, f"known {axis}"))
+    _wheel_lines(b, wheel_clicks)
+    _corner_lines(b, corner_clicks)
+    uv = np.concatenate(uv_rows, axis=0) if uv_rows else np.zeros((0, 2))
+    return b.build(uv)
+
+
+def _add_point(b: _Builder, k: int, name: str) -> int:
+    if name.startswith("wheel-"):
+        _, fr, lr = name.split("-")
+        return b.point(k, name, {b.wheel[fr]: 1.0}, {DY: 0.5 * _SIDE[lr]}, {})
+    if name in ("front-center", "rear-center"):
+        s = _SIDE[name.split("-")[0]]
+        return b.point(k, name, {DX: 0.5 * s}, {}, {b.aux(k, "Z"): 1.0})
+    if name == "top-center":
+        return b.point(k, name, {b.aux(k, "X"): 1.0}, {}, {DZ: 1.0})
+    if name.startswith("edge-"):
+        _, fr, lr = name.split("-")
+        return b.point(k, name, {DX: 0.5 * _SIDE[fr]}, {DY: 0.5 * _SIDE[lr]}, {b.aux(k, "Z"): 1.0})
+    if name.startswith("corner-"):
+        _, tb, fr, lr = name.split("-")
+        return b.point(k, name, {DX: 0.5 * _SIDE[fr]}, {DY: 0.5 * _SIDE[lr]}, {DZ: 1.0} if tb == "top" else {})
+    raise ValueError(f"unknown point part {name!r}")  # the schema admits no other name
+
+
+def _add_symmetry(b: _Builder, k: int, face: str) -> None:
+    if face in ("front", "rear"):
+        y, z = b.aux(k, "Y"), b.aux(k, "Z")
+        x_form = {DX: 0.5 * _SIDE[face]}
+        i = b.point(k, f"symmetry-{face}/left", x_form, {y: 1.0}, {z: 1.0})
+        j = b.point(k, f"symmetry-{face}/right", x_form, {y: -1.0}, {z: 1.0})
+    else:
+        x, y = b.aux(k, "X"), b.aux(k, "Y")
+        i = b.point(k, "symmetry-roof/left", {x: 1.0}, {y: 1.0}, {DZ: 1.0})
+        j = b.point(k, "symmetry-roof/right", {x: 1.0}, {y: -1.0}, {DZ: 1.0})
+    b.lines.append(Line(i, j, axis=1))
+
+
+DIM_INDEX = {"dx": DX, "dy": DY, "dz": DZ}
+# The axles a length feature's clicks sit on.
+_LENGTH_AXLES = {"wheelbase-left": ("front", "rear"), "wheelbase-right": ("front", "rear"),
+                 **{f"tyre-{fr}-{lr}": (fr,) for fr in ("front", "rear") for lr in ("left", "right")}}
+
+
+def _add_length(b: _Builder, k: int, part: Part) -> dict[str, int]:
+    """Add a length annotation's two points and its measurement; return its wheel clicks by wheel name."""
+    metres, sigma = part.known  # type: ignore[misc]
+    feature = part.name
+    label = f"length {feature}"
+    if feature.startswith("plate-"):
+        face = feature.removeprefix("plate-")
+        y, z = b.aux(k, "Y"), b.aux(k, "Z")
+        x_form = {DX: 0.5 * _SIDE[face]}
+        i = b.point(k, f"length-{feature}/a", x_form, {y: 1.0}, {z: 1.0})
+        j = b.point(k, f"length-{feature}/b", x_form, {y: -1.0}, {z: 1.0})
+        b.lines.append(Line(i, j, axis=1))
+        b.measurements.append(({y: 2.0}, metres, sigma, label))
+        return {}
+    if feature.startswith("wheelbase-"):
+        side = feature.removeprefix("wheelbase-")
+        y_form = {DY: 0.5 * _SIDE[side]}
+        i = b.point(k, f"length-{feature}/a", {b.wheel["front"]: 1.0}, y_form, {})
+        j = b.point(k, f"length-{feature}/b", {b.wheel["rear"]: 1.0}, y_form, {})
+        b.measurements.append(({b.wheel["front"]: 1.0, b.wheel["rear"]: -1.0}, metres, sigma, label))
+        return {f"wheel-front-{side}": i, f"wheel-rear-{side}": j}
+    _, axle, side = feature.split("-")  # tyre-{front,rear}-{left,right}
+    top = b.aux(k, "Zt")
+    x_form, y_form = {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}
+    i = b.point(k, f"length-{feature}/a", x_form, y_form, {})
+    b.point(k, f"length-{feature}/b", x_form, y_form, {top: 1.0})
+    b.measurements.append(({top: 1.0}, metres, sigma, label))
+    return {f"wheel-{axle}-{side}": i}
+
+
+def _add_direction(b: _Builder, k: int, axis_name: str) -> None:
+    axis, sign = _DIRECTION[axis_name]
+    x, y, z = b.aux(k, "X"), b.aux(k, "Y"), b.aux(k, "Z")
+    tail = [{x: 1.0}, {y: 1.0}, {z: 1.0}]
+    head = [dict(f) for f in tail]
+    head[axis][axis] = sign  # + or - the dimension along that axis (dx, dy, dz have indices 0, 1, 2)
+    i = b.point(k, f"direction-{axis_name}/tail", *tail)
+    j = b.point(k, f"direction-{axis_name}/head", *head)
+    if axis < 2:
+        b.lines.append(Line(i, j, axis=axis))
+
+
+def _wheel_lines(b: _Builder, wheels: dict[str, list[int]]) -> None:
+    for side in ("left", "right"):  # same side: front to rear wheel runs along X
+        for i in wheels.get(f"wheel-front-{side}", []):
+            for j in wheels.get(f"wheel-rear-{side}", []):
+                b.lines.append(Line(i, j, axis=0))
+    for axle in ("front", "rear"):  # same axle: left to right wheel runs along Y
+        for i in wheels.get(f"wheel-{axle}-left", []):
+            for j in wheels.get(f"wheel-{axle}-right", []):
+                b.lines.append(Line(i, j, axis=1))
+
+
+def _corner_lines(b: _Builder, corners: dict[tuple[str, str, str], list[int]]) -> None:
+    for (tb, fr, lr), clicks in corners.items():
+        if fr == "front":  # front-to-rear edge along X
+            for i in clicks:
+                for j in corners.get((tb, "rear", lr), []):
+                    b.lines.append(Line(i, j, axis=0))
+        if lr == "left":  # left-to-right edge along Y
+            for i in clicks:
+                for j in corners.get((tb, fr, "right"), []):
+                    b.lines.append(Line(i, j, axis=1))

@@ -1,0 +1,403 @@
+"""Fit every vehicle of an annotation file and write the outputs: the job behind ``toosicubix fit``.
+
+Outputs in the output folder:
+
+- ``label_2/<image id>.txt``: KITTI labels (camera-0 frame when the camera is a KITTI ``P``), one file per
+  image, vehicles that failed left out. KITTI stores yaw only: pitch and roll are dropped there.
+- ``results.json``: every vehicle, with its full rotation, or its status "failed" and the reason.
+
+Every file is written atomically; ``results.json`` last. One vehicle that fails, even by an unexpected
+error, never stops the batch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import traceback
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from toosicubix import __version__
+from toosicubix.annotations.schema import InputFileError
+from toosicubix.camera import Camera
+from toosicubix.formats import kitti
+from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
+from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results, results_to_json
+from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
+from toosicubix.model import GroundPlane, Image, Vehicle, load_images, with_ground
+from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.priors.table import Priors, SizePrior, load_priors
+from toosicubix.solver import FitResult, SolverOptions, fit_vehicle, scale_shares
+from toosicubix.solver.guidance import BOX_SHAPED, suggest_clicks
+from toosicubix.solver.joint import JointVehicle, fit_jointly
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.uncertainty import analyse, confidence
+
+LABEL_DIR = "label_2"
+
+
+class OutputFolderError(ValueError):
+    """The output folder cannot be used (for instance, it holds label files toosicubix did not write)."""
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """What a batch did."""
+
+    images: int
+    vehicles: int
+    ok: int
+    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason)
+    out_dir: Path
+    scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
+
+
+def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
+    """Every vehicle's prototype must be in the priors table.
+
+    Raises
+    ------
+    InputFileError
+        Naming each vehicle's JSON path and listing the known prototypes.
+    """
+    known = sorted(priors)
+    problems = [
+        (f"{v.json_path}.prototype", f"unknown prototype {v.prototype!r}; known: {', '.join(known)}")
+        for im in images for v in im.vehicles if v.prototype not in priors
+    ]
+    if problems:
+        raise InputFileError(source, problems)
+
+
+def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
+            ground: GroundPlane | None = None, next_clicks: int = 0) -> VehicleResult:
+    """Fit one vehicle and describe it as results.json does; never raises.
+
+    ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.guidance`), 0: none.
+    """
+    try:
+        parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
+        fit = fit_vehicle(parts, camera, prior, options, ground)
+    except Exception as exc:  # one vehicle must never stop the batch
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return VehicleResult(
+            id=vehicle.id, status="failed", prototype=vehicle.prototype,
+            error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
+            details={"kitti_type": prior.kitti_type},
+        )
+    return _vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks)
+
+
+def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]:
+    """What besides the clicks shapes a vehicle's fit."""
+    return {
+        "size_prior": True,
+        "upright": ground is not None,
+        "ground_contact": ground is not None and ground.camera_height is not None,
+        "known_sizes": [m.label for m in parts.measurements],
+    }
+
+
+def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
+                    ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0) -> VehicleResult:
+    click_labels, param_names = parts.click_labels, parts.param_names
+    details: dict[str, Any] = {
+        "kitti_type": prior.kitti_type,
+        "constraints": fit.constraints,
+        "clicks": fit.n_clicks,
+        "aux_unknowns": fit.n_aux,
+        "cues": active_cues(parts, ground),
+    }
+    if not fit.ok:
+        details["solver"] = _solver_details(fit)
+        return VehicleResult(id=vehicle.id, status="failed", error=fit.reason, prototype=vehicle.prototype,
+                             box2d=vehicle.box2d, details=details)
+    R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
+    box2d, truncated = _box2d(vehicle, camera, R, t, d)
+    ry, pitch, roll = ypr_from_R_cam_vehicle(R)
+    details.update({
+        "box2d_source": "annotated" if vehicle.box2d is not None else "projected",
+        "truncated": truncated,
+        "yaw_pitch_roll_deg": np.rad2deg([ry, pitch, roll]).tolist(),
+        "rms_px": fit.rms_px,
+        "residuals_px": fit.residuals_px.tolist(),
+        "click_labels": list(click_labels),
+        "cost": fit.cost,
+        "prior_mahalanobis2": fit.cost_prior,
+        "parameters": {name: float(v) for name, v in zip(param_names[3:], fit.p[3:], strict=True)},
+        "scale_from": fit.scale_from,
+        "scale_shares": fit.scale_shares,
+        "sigma": fit.uncertainty.to_json() if fit.uncertainty is not None else None,
+        "confidence": confidence(fit.uncertainty) if fit.uncertainty is not None else None,
+        "observability": fit.observability.to_json() if fit.observability is not None else None,
+        "ambiguous": fit.ambiguous,
+        "alternatives": [a.to_json() for a in fit.alternatives],
+        "warnings": list(fit.warnings),
+        "solver": _solver_details(fit),
+    })
+    if next_clicks > 0:
+        details.update(_next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks))
+    return VehicleResult(id=vehicle.id, status="ok", error=None, prototype=vehicle.prototype, R_cam_vehicle=R,
+                         t_cam_vehicle=t, dimensions=d, box2d=box2d, details=details)
+
+
+def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
+                 ground: GroundPlane | None, n: int) -> dict[str, Any]:
+    """The ``n`` best parts to click next, for results.json; an error here never fails the vehicle."""
+    try:
+        suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
+                                     box_shaped=vehicle.prototype in BOX_SHAPED or prior.kitti_type in BOX_SHAPED)
+    except Exception as exc:  # guidance is advice: the fit stands without it
+        return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
+    return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
+
+
+def _solver_details(fit: FitResult) -> dict[str, Any]:
+    return {"starts": fit.starts, "starts_from_lines": fit.starts_from_lines,
+            "descent_iterations": fit.descent_iterations, "refine_iterations": fit.refine_iterations,
+            "initial_cost": fit.initial_cost}
+
+
+def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
+    """The label's 2D box (annotated, else the projected cuboid clipped to the image) and the
+    truncation: the share of the projected cuboid's box outside the image."""
+    points_cam = clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, d))
+    uv = camera.project(points_cam)
+    full = box2d_of_points(uv)
+    truncated = 0.0
+    clipped = full
+    if camera.image_size is not None:
+        clipped = box2d_of_points(uv, camera.image_size)
+        area = (full[2] - full[0]) * (full[3] - full[1])
+        inside = max(clipped[2] - clipped[0], 0.0) * max(clipped[3] - clipped[1], 0.0)
+        truncated = float(np.clip(1.0 - inside / area, 0.0, 1.0)) if area > 0 else 0.0
+    box = vehicle.box2d if vehicle.box2d is not None else clipped
+    return np.asarray(box, dtype=float), truncated
+
+
+def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
+    """The KITTI label lines of an image's successful fits (pitch and roll dropped)."""
+    lines = []
+    for v in image_result.vehicles:
+        if not v.ok:
+            continue
+        score = v.details.get("confidence")
+        obj = kitti.object_from_pose(
+            v.details["kitti_type"], v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
+            truncated=v.details.get("truncated", 0.0), occluded=kitti.OCCLUSION_UNKNOWN,
+            score=1.0 if score is None else score,
+        )
+        lines.append(kitti.format_label_line(obj))
+    return lines
+
+
+def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]) -> VehicleResult:
+    return fit_one(*task)
+
+
+def _worker_init() -> None:
+    cv2.setNumThreads(1)  # one process per core; no threads on top
+
+
+def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
+               progress: Callable[[int], None] | None = None, jobs: int = 1,
+               joint_ground: bool = False, next_clicks: int = 0) -> list[ImageResult]:
+    """Fit every vehicle of every image.
+
+    Parameters
+    ----------
+    progress : called with the number of vehicles just finished
+    jobs : worker processes; the results are the same for any number (each vehicle is fitted on its own,
+        deterministically, and the results come back in input order)
+    joint_ground : then refine each image's vehicles together with its ground plane (images with a
+        ground block); the camera height may be unknown
+    next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
+    """
+    tasks = [(v, im.camera, priors[v.prototype], options, im.ground, next_clicks)
+             for im in images for v in im.vehicles]
+    fitted: list[VehicleResult] = []
+    if jobs > 1 and len(tasks) > 1:
+        chunk = max(1, min(64, len(tasks) // (4 * jobs)))
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+            for result in pool.map(_fit_task, tasks, chunksize=chunk):
+                fitted.append(result)
+                if progress is not None:
+                    progress(1)
+    else:
+        for task in tasks:
+            fitted.append(_fit_task(task))
+            if progress is not None:
+                progress(1)
+    results, start = [], 0
+    for im in images:
+        vehicles = fitted[start:start + len(im.vehicles)]
+        start += len(im.vehicles)
+        ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
+        if joint_ground and im.ground is not None:
+            vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
+        results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
+                                   image_size=im.camera.image_size, vehicles=vehicles, ground=ground))
+    return results
+
+
+def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | None = None,
+                 normal: np.ndarray | None = None) -> dict[str, Any]:
+    return {
+        "normal": (ground.normal if normal is None else normal).tolist(),
+        "camera_height": ground.camera_height if camera_height is None else camera_height,
+        "estimated": estimated,
+    }
+
+
+def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
+                      next_clicks: int = 0) -> tuple[list[VehicleResult], dict[str, Any]]:
+    """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
+    return the updated results and the plane. Failed vehicles stay as they were."""
+    ground = image.ground
+    assert ground is not None
+    fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok]
+    if not fitted:
+        return vehicles, _ground_json(ground, estimated=False)
+    joint_vehicles, models = [], []
+    for k, v in fitted:
+        parts = build_parts_model(v.parts, v.known_dimensions)
+        problem = Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d, options.lambda_px)
+        r = vehicles[k]
+        p = np.concatenate([r.dimensions, [r.details["parameters"][name] for name in parts.param_names[3:]]])
+        joint_vehicles.append(JointVehicle(problem, r.R_cam_vehicle, r.t_cam_vehicle, p))
+        models.append(parts)
+    try:
+        result = fit_jointly(joint_vehicles, ground)
+    except Exception as exc:  # the vehicles keep their own fits
+        plane = _ground_json(ground, estimated=False)
+        plane["joint_error"] = f"{type(exc).__name__}: {exc}"
+        return vehicles, plane
+    plane_fitted = replace(ground, normal=result.normal, camera_height=result.camera_height)
+    out = list(vehicles)
+    for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
+        own = Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
+                            plane_fitted, float(np.linalg.norm(t)))
+        shares = scale_shares(own, R, t, p)
+        u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
+                         options.part_sigma)
+        fit = FitResult(
+            "ok", None, vehicles[k].details["constraints"], parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
+            t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
+            residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
+            warnings=tuple(vehicles[k].details.get("warnings", [])),
+        )
+        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks)
+        details = dict(updated.details)
+        details["cues"] = {**details["cues"], "joint_ground": True}
+        details["solver"] = {**vehicles[k].details.get("solver", {}), "joint_iterations": result.iterations}
+        out[k] = replace(updated, details=details)
+    return out, {**_ground_json(ground, True, result.camera_height, result.normal),
+                 "joint_iterations": result.iterations, "vehicles": len(fitted)}
+
+
+def prepare_output_dir(out_dir: Path) -> set[str]:
+    """Create the output folder; return the label files an earlier run of toosicubix wrote there.
+
+    Raises
+    ------
+    OutputFolderError
+        ``label_2`` holds label files but no ``results.json`` says toosicubix wrote them: they may be
+        someone's ground truth, and are never overwritten.
+    """
+    label_dir = out_dir / LABEL_DIR
+    existing = sorted(p.name for p in label_dir.glob("*.txt")) if label_dir.is_dir() else []
+    results_path = out_dir / RESULTS_FILENAME
+    if existing and not results_path.is_file():
+        raise OutputFolderError(
+            f"{label_dir} holds {len(existing)} label files that toosicubix did not write (no {RESULTS_FILENAME} "
+            f"beside it); they may be ground truth. Choose another output folder."
+        )
+    previous: set[str] = set()
+    if results_path.is_file():
+        try:
+            previous = {f"{im.id}.txt" for im in read_results(results_path)}
+        except ValueError:
+            previous = set()
+    label_dir.mkdir(parents=True, exist_ok=True)
+    return previous
+
+
+def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult], header: dict[str, Any]) -> None:
+    """Write the KITTI label files, then results.json, each atomically; remove label files of an earlier
+    run that this run did not write."""
+    previous = prepare_output_dir(out_dir)
+    label_dir = out_dir / LABEL_DIR
+    written = set()
+    for im, res in zip(images, results, strict=True):
+        lines = kitti_lines(res, im.camera)
+        atomic_write_text(label_dir / f"{im.id}.txt", "".join(f"{ln}\n" for ln in lines))
+        written.add(f"{im.id}.txt")
+    atomic_write_json(out_dir / RESULTS_FILENAME, results_to_json(results, header))
+    for stale in sorted(previous - written):
+        (label_dir / stale).unlink(missing_ok=True)
+
+
+def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
+             options: SolverOptions | None = None,
+             progress: Callable[[int], None] | None = None,
+             on_start: Callable[[int], None] | None = None, jobs: int = 1,
+             ground: dict[str, object] | None = None, joint_ground: bool = False,
+             next_clicks: int = 0) -> BatchSummary:
+    """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
+
+    Parameters
+    ----------
+    annotations : the annotation file (v1)
+    out_dir : output folder, created when missing
+    priors_path : a priors file; the bundled one when None
+    options : solver settings
+    progress : called with the number of vehicles just finished
+    on_start : called once with the number of vehicles to fit
+    jobs : worker processes (the output does not depend on it)
+    ground : ground-block fields (schema names) set for every image of the file
+    joint_ground : refine each image's vehicles together with its ground plane
+    next_clicks : per vehicle, how many suggestions of what to click next results.json gets (0: none)
+
+    Raises
+    ------
+    InputFileError
+        Bad annotation or priors file, unknown prototype: nothing is written.
+    OutputFolderError
+        The output folder holds label files toosicubix did not write.
+    """
+    annotations, out_dir = Path(annotations), Path(out_dir)
+    options = options or SolverOptions()
+    images = with_ground(load_images(annotations), ground or {})
+    priors = load_priors(priors_path)
+    check_prototypes(images, priors, annotations)
+    prepare_output_dir(out_dir)  # fail before the work, not after
+    if on_start is not None:
+        on_start(sum(len(im.vehicles) for im in images))
+    results = fit_images(images, priors, options, progress, jobs, joint_ground, next_clicks)
+    header = {
+        "generator": f"toosicubix {__version__}",
+        "annotations": str(annotations),
+        "annotations_sha256": hashlib.sha256(annotations.read_bytes()).hexdigest(),
+        "priors": priors.source if priors_path is not None else "bundled",
+        "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
+                     "part_sigma": options.part_sigma,
+                     **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
+        "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
+                 "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
+    }
+    write_outputs(out_dir, images, results, header)
+    failed = [(im.id, v.id, v.error or "") for im in results for v in im.vehicles if not v.ok]
+    n = sum(len(im.vehicles) for im in results)
+    scale_from: dict[str, int] = {}
+    for im in results:
+        for v in im.vehicles:
+            if v.ok and v.details.get("scale_from"):
+                scale_from[v.details["scale_from"]] = scale_from.get(v.details["scale_from"], 0) + 1
+    return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir,
+                        scale_from=scale_from)

@@ -1,0 +1,489 @@
+"""A simulated annotator: the clicks a person would make on a vehicle whose true cuboid is known.
+
+No human part clicks exist publicly for KITTI, so accuracy is measured by simulating them on real
+ground-truth cuboids. The annotator modelled here is a person, not an oracle:
+
+**What a person clicks, in this order of preference** (each only when visible, see below):
+
+1. the tyres' contact points with the ground (``wheel-*``), every visible one;
+2. on each end face turned to the camera: a symmetric pair of lights (``symmetry front/rear``), then the
+   badge or plate on the centre line (``front-center`` / ``rear-center``);
+3. the vertical cuboid edges (``edge-*``) of the visible faces (silhouette edges included);
+4. a direction arrow on the ground when the view is nearly straight (within 15 degrees) from the front or
+   rear (``forward`` / ``backward`` beside the vehicle) or from the side (``leftward`` / ``rightward``
+   ahead of the vehicle, pointing away from the camera side);
+5. when the roof can be seen (camera above it): a symmetric pair on the roof and a roof antenna or light
+   (``top-center``);
+6. on vans and trucks, whose bodies are boxes: the visible top corners of the body (``corner-top-*``).
+
+Clicking stops before ``max_clicks`` (12) would be exceeded; a symmetric pair or an arrow counts 2.
+
+**What a person can see.** A part is clickable when it lies on a face of the cuboid turned to the camera
+(tyres also from their end of the vehicle, below the bumper; vertical edges and box corners when an
+adjacent face is turned to the camera; the roof only when the camera is above it), when it projects inside
+the image with a 2 px margin, and when the two clicks of a pair are at least 3 px apart. Vehicles labelled partly
+occluded (KITTI 1) lose each remaining annotation with probability 0.3, largely occluded (2) with 0.6.
+Arrows drawn on the ground need only be inside the image.
+
+**Where the parts really are.** Real vehicles are not cuboids, so by default every part is placed as on a
+real car, varying per vehicle: the tyres' outer faces 0 to 5 cm inside the body's sides (as measured on
+real cars, see ``TYRE_INSET_MAX``), axles set in from the ends by the vehicle's overhangs; lights 3 to
+20 cm behind the end faces; vertical edges (rounded body corners) 5 to 20 cm inside the cuboid's corner;
+roof features up to 5 cm below the top; box corners up to 5 cm inside; an arrow on the ground drawn within
+a few degrees (sigma 2 degrees) of the vehicle's axis. With ``exact_placement`` every part lies exactly
+where the parts model puts it (the arrows too), which tests the solver rather than the model.
+
+**Noise.** Every click gets independent Gaussian noise of ``noise_px`` pixels per coordinate.
+
+Randomness is seeded per vehicle from ``seed`` and the vehicle's image and id, so a vehicle's clicks do
+not depend on which other vehicles are simulated.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from toosicubix.camera import Camera
+from toosicubix.formats import FormatError
+from toosicubix.formats.kitti import KittiObject, read_calib, read_label_file, read_tracking_file
+from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
+from toosicubix.model import Part
+from toosicubix.parts.synthesis import PartSpec, true_parameters
+
+#: KITTI image sizes by the focal length of P2 (one per recording date); other cameras: the option.
+KITTI_IMAGE_SIZES = {721.5: (1242, 375), 707.0: (1224, 370), 707.1: (1226, 370), 718.3: (1238, 374),
+                     718.9: (1241, 376)}
+DEFAULT_IMAGE_SIZE = (1242, 375)
+VEHICLE_CLASSES = ("Car", "Van", "Truck")
+STRAIGHT_VIEW_DEG = 15.0
+EDGE_MARGIN_PX = 2.0
+MIN_PAIR_SEPARATION_PX = 3.0
+OCCLUSION_DROP = {0: 0.0, 1: 0.3, 2: 0.6, 3: 0.6}
+#: How far, at most, the outer faces of the tyres sit inside the body's sides (metres; uniform from 0, one
+#: draw per vehicle). Measured on ApolloCar3D's car meshes (10 models: the sidewall at the ground a median
+#: 2.2 cm inside the widest body point, mirrors left out, 10-90 % 0.3-4.3 cm at KITTI's 1.63 m mean width);
+#: track, tyre and body widths of common cars agree. Sources: benchmarks/RESULTS.md, "Scale and ground cues".
+TYRE_INSET_MAX = 0.05
+
+
+@dataclass(frozen=True)
+class AnnotatorOptions:
+    """How the simulated person works.
+
+    Attributes
+    ----------
+    noise_px : Gaussian click noise, pixels per coordinate
+    exact_placement : every part exactly where the parts model puts it
+    max_clicks : stop before exceeding this many clicked points
+    seed : base of the per-vehicle random streams
+    """
+
+    noise_px: float = 1.0
+    exact_placement: bool = False
+    max_clicks: int = 12
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class SelectionOptions:
+    """Which ground-truth vehicles to simulate.
+
+    Attributes
+    ----------
+    classes : KITTI types
+    max_truncation : keep truncation <= this (object labels: fraction; tracking: 0, 1, 2)
+    max_occlusion : keep occlusion <= this (0 visible, 1 partly, 2 largely occluded)
+    min_depth, max_depth : bottom-centre depth range, metres
+    min_box_height : 2D box height, pixels
+    frames_per_track : tracking labels: at most this many frames per track, evenly spread
+    sequences : tracking labels: the sequence names to use, or None for all
+    """
+
+    classes: tuple[str, ...] = VEHICLE_CLASSES
+    max_truncation: float = 0.0
+    max_occlusion: int = 1
+    min_depth: float = 3.0
+    max_depth: float = 60.0
+    min_box_height: float = 25.0
+    frames_per_track: int | None = 3
+    sequences: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class GroundTruthVehicle:
+    """A vehicle to annotate: its label and its image's camera (``P2``)."""
+
+    image_id: str
+    vehicle_id: str
+    label: KittiObject
+    camera: Camera
+
+
+@dataclass(frozen=True)
+class SimulatedVehicle:
+    """The simulated annotation of one vehicle and the truth behind it.
+
+    Attributes
+    ----------
+    parts : the clicks, noise included, in annotation order
+    specs : the parts' auxiliary values (vehicle frame) before placement noise was dropped in;
+        with ``exact_placement`` they are exactly the model's parameters
+    p_true : (P,) the parts model's parameters at the true cuboid: the true dimensions and axles and the
+        annotations' auxiliary values (it reproduces the noise-free clicks only with exact placement)
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) in the camera frame of K; dimensions : (3,)
+    wheel_x : X of the front and rear axles, metres
+    spare : the parts the person could see and click but left out because of the click budget, clicked as
+        the others (placement and noise; the noise from a stream of their own, so that ``parts`` do not
+        depend on them): what the person would add when asked for one more
+    """
+
+    source: GroundTruthVehicle
+    parts: list[Part]
+    specs: list[PartSpec]
+    R_cam_vehicle: np.ndarray
+    t_cam_vehicle: np.ndarray
+    dimensions: np.ndarray
+    wheel_x: tuple[float, float]
+    p_true: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+    spare: list[Part] = field(default_factory=list)
+
+    @property
+    def n_clicks(self) -> int:
+        return sum(len(p.uv) for p in self.parts)
+
+
+def kitti_image_size(camera: Camera) -> tuple[int, int]:
+    """The KITTI image size for a P2 focal length, else the most common one."""
+    return KITTI_IMAGE_SIZES.get(round(float(camera.K[0, 0]), 1), DEFAULT_IMAGE_SIZE)
+
+
+def _keep(obj: KittiObject, camera: Camera, sel: SelectionOptions) -> bool:
+    if obj.type not in sel.classes or obj.truncated > sel.max_truncation or obj.occluded > sel.max_occlusion:
+        return False
+    depth = obj.location_rect[2] + camera.t_cam_rect[2]
+    return sel.min_depth <= depth <= sel.max_depth and obj.box2d[3] - obj.box2d[1] >= sel.min_box_height
+
+
+def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """Vehicles of a KITTI object folder (``label_2/`` and ``calib/``) that pass the selection.
+
+    Raises
+    ------
+    FormatError
+        A missing folder or calibration file, a malformed label line.
+    """
+    sel = sel or SelectionOptions()
+    label_dir, calib_dir = _label_and_calib_dirs(root, "label_2", "object")
+    out = []
+    for path in sorted(label_dir.glob("*.txt")):
+        calib_path = calib_dir / path.name
+        if not calib_path.is_file():
+            raise FormatError(path, f"no calibration file {calib_path}")
+        camera = read_calib(calib_path).camera(2)
+        camera = Camera(K=camera.K, t_cam_rect=camera.t_cam_rect, image_size=kitti_image_size(camera))
+        for index, obj in enumerate(read_label_file(path)):
+            if _keep(obj, camera, sel):
+                out.append(GroundTruthVehicle(path.stem, str(index), obj, camera))
+    return out
+
+
+def _label_and_calib_dirs(root: str | Path, labels: str, kind: str) -> tuple[Path, Path]:
+    """``root/labels`` and ``root/calib``, both required to exist."""
+    label_dir, calib_dir = Path(root) / labels, Path(root) / "calib"
+    for folder in (label_dir, calib_dir):
+        if not folder.is_dir():
+            raise FormatError(folder, f"expected a KITTI {kind} folder with {labels}/ and calib/")
+    return label_dir, calib_dir
+
+
+def tracking_image_id(sequence: str, frame: int) -> str:
+    """Image id of a tracking frame: ``<sequence>_<frame as 6 digits>``, e.g. ``0010_000123``."""
+    return f"{sequence}_{frame:06d}"
+
+
+def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``): at most ``frames_per_track``
+    eligible frames per track, evenly spread over its eligible frames."""
+    sel = sel or SelectionOptions()
+    label_dir, calib_dir = _label_and_calib_dirs(root, "label_02", "tracking")
+    out = []
+    for path in sorted(label_dir.glob("*.txt")):
+        sequence = path.stem
+        if sel.sequences is not None and sequence not in sel.sequences:
+            continue
+        calib_path = calib_dir / path.name
+        if not calib_path.is_file():
+            raise FormatError(path, f"no calibration file {calib_path}")
+        camera = read_calib(calib_path).camera(2)
+        camera = Camera(K=camera.K, t_cam_rect=camera.t_cam_rect, image_size=kitti_image_size(camera))
+        tracks: dict[int, list[KittiObject]] = {}
+        for frame in sorted(frames := read_tracking_file(path)):
+            for obj in frames[frame]:
+                if _keep(obj, camera, sel):
+                    tracks.setdefault(int(obj.track_id), []).append(obj)  # type: ignore[arg-type]
+        for track_id in sorted(tracks):
+            objs = tracks[track_id]
+            if sel.frames_per_track is not None and len(objs) > sel.frames_per_track:
+                picks = np.linspace(0, len(objs) - 1, sel.frames_per_track).round().astype(int)
+                objs = [objs[i] for i in picks]
+            for obj in objs:
+                out.append(GroundTruthVehicle(tracking_image_id(sequence, int(obj.frame)), str(track_id), obj,
+                                              camera))
+    out.sort(key=lambda g: (g.image_id, int(g.vehicle_id)))
+    return out
+
+
+def vehicle_rng(seed: int, image_id: str, vehicle_id: str) -> np.random.Generator:
+    """The random stream of one vehicle: independent of which other vehicles are simulated."""
+    digest = hashlib.sha256(f"{seed}/{image_id}/{vehicle_id}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+# Outward normals of the cuboid's faces in the vehicle frame, and a point on each (with d = dx, dy, dz).
+def _faces_visible(camera_vehicle: np.ndarray, d: np.ndarray) -> dict[str, bool]:
+    x, y, z = camera_vehicle
+    return {"front": x > d[0] / 2, "rear": x < -d[0] / 2, "left": y > d[1] / 2, "right": y < -d[1] / 2,
+            "top": z > d[2]}
+
+
+def _axis_view_angle(camera_vehicle: np.ndarray) -> tuple[float, float]:
+    """Angles (degrees, in the ground plane) between the line of sight and the vehicle's X and Y axes."""
+    x, y, _ = camera_vehicle
+    along_x = math.degrees(math.atan2(abs(y), abs(x)))
+    return along_x, 90.0 - along_x
+
+
+def _candidate_specs(gt: GroundTruthVehicle, d: np.ndarray, wheel_x: tuple[float, float],
+                     visible: dict[str, bool], camera_vehicle: np.ndarray, rng: np.random.Generator,
+                     exact: bool) -> list[tuple[PartSpec, str]]:
+    """Every annotation the person would consider, in order of preference, with what must be visible."""
+    dx, dy, dz = d
+    u = rng.uniform
+    boxy = gt.label.type in ("Van", "Truck")
+
+    def inset(lo: float, hi: float) -> float:
+        return 0.0 if exact else u(lo, hi)
+
+    out: list[tuple[PartSpec, str]] = []
+    for axle in ("front", "rear"):
+        for side in ("left", "right"):
+            out.append((PartSpec("point", f"wheel-{axle}-{side}"), f"{side}|{axle}"))
+    for end, sign in (("front", 1.0), ("rear", -1.0)):
+        light_z = u(0.2, 0.35) if boxy else (u(0.45, 0.6) if end == "front" else u(0.55, 0.72))
+        out.append((PartSpec("symmetry", end, {"Y": u(0.33, 0.44) * dy, "Z": light_z * dz,
+                                                "_X": sign * (dx / 2 - inset(0.03, 0.20))}), end))
+        badge_z = u(0.4, 0.55) if end == "front" else u(0.3, 0.5)
+        out.append((PartSpec("point", f"{end}-center", {"Z": badge_z * dz, "_X": sign * (dx / 2 - inset(0.02, 0.15))}),
+                    end))
+    for end in ("front", "rear"):
+        for side in ("left", "right"):
+            out.append((PartSpec("point", f"edge-{end}-{side}", {"Z": u(0.3, 0.7) * dz, "_in": inset(0.05, 0.20)}),
+                        f"{end}|{side}"))
+    along_x, along_y = _axis_view_angle(camera_vehicle)
+    if along_x < STRAIGHT_VIEW_DEG:  # straight from the front or rear: an arrow beside the vehicle
+        side = 1.0 if camera_vehicle[1] >= 0 else -1.0
+        axis = "forward" if rng.uniform() < 0.5 else "backward"
+        start = -dx / 2 if axis == "forward" else dx / 2
+        out.append((PartSpec("direction", axis, {"X": start + u(-0.3, 0.3), "Y": side * (dy / 2 + u(0.2, 0.6)),
+                                                 "Z": 0.0}), "ground"))
+    elif along_y < STRAIGHT_VIEW_DEG:  # straight from a side: an arrow ahead of the vehicle, away from us
+        side = 1.0 if camera_vehicle[1] >= 0 else -1.0
+        axis = "rightward" if side > 0 else "leftward"
+        out.append((PartSpec("direction", axis, {"X": dx / 2 + u(0.3, 0.8), "Y": side * dy / 2, "Z": 0.0}),
+                    "ground"))
+    out.append((PartSpec("symmetry", "roof", {"X": u(-0.25, 0.05) * dx, "Y": u(0.3, 0.4) * dy,
+                                              "_Z": dz - inset(0.0, 0.05)}), "top"))
+    out.append((PartSpec("point", "top-center", {"X": u(-0.3, 0.1) * dx, "_Z": dz - inset(0.0, 0.05)}), "top"))
+    if boxy:
+        for end in ("front", "rear"):
+            for side in ("left", "right"):
+                out.append((PartSpec("point", f"corner-top-{end}-{side}", {"_in": inset(0.0, 0.05)}),
+                            f"top|{end}|{side}"))
+    return out
+
+
+def _needs(rule: str, visible: dict[str, bool]) -> bool:
+    """``a|b``: any alternative; ``a&b``: all of them; 'ground': always."""
+    if rule == "ground":
+        return True
+    return any(all(visible[f] for f in alt.split("&")) for alt in rule.split("|"))
+
+
+def _real_points(spec: PartSpec, d: np.ndarray, wheel_x: tuple[float, float], tyre_inset: float,
+                 arrow_yaw: float) -> np.ndarray:
+    """Where the part really is on the vehicle (vehicle frame), (k, 3): the model's point moved by the
+    placement offsets recorded in the spec's private ``_`` keys."""
+    dx, dy, dz = d
+    a = spec.aux
+    sx = {"front": 1.0, "rear": -1.0}
+    sy = {"left": 1.0, "right": -1.0}
+    if spec.kind == "point":
+        name = spec.name
+        if name.startswith("wheel-"):
+            _, axle, side = name.split("-")
+            return np.array([[wheel_x[0] if axle == "front" else wheel_x[1], sy[side] * (dy / 2 - tyre_inset), 0.0]])
+        if name in ("front-center", "rear-center"):
+            return np.array([[a["_X"], 0.0, a["Z"]]])
+        if name == "top-center":
+            return np.array([[a["X"], 0.0, a["_Z"]]])
+        if name.startswith("edge-"):
+            _, end, side = name.split("-")
+            return np.array([[sx[end] * (dx / 2 - a["_in"]), sy[side] * (dy / 2 - a["_in"]), a["Z"]]])
+        _, _, end, side = name.split("-")  # corner-top-*
+        return np.array([[sx[end] * (dx / 2 - a["_in"]), sy[side] * (dy / 2 - a["_in"]), dz - a["_in"]]])
+    if spec.kind == "symmetry":
+        if spec.name == "roof":
+            return np.array([[a["X"], a["Y"], a["_Z"]], [a["X"], -a["Y"], a["_Z"]]])
+        return np.array([[a["_X"], a["Y"], a["Z"]], [a["_X"], -a["Y"], a["Z"]]])
+    tail = np.array([a["X"], a["Y"], a["Z"]])
+    axis = {"forward": (0, 1.0), "backward": (0, -1.0), "leftward": (1, 1.0), "rightward": (1, -1.0)}[spec.name]
+    step = np.zeros(3)
+    step[axis[0]] = axis[1] * d[axis[0]]
+    return np.array([tail, tail + rot_z(arrow_yaw) @ step])
+
+
+def _model_spec(spec: PartSpec, d: np.ndarray) -> PartSpec:
+    """The spec with only the parts model's auxiliary values (private placement keys dropped)."""
+    return PartSpec(spec.kind, spec.name, {k: v for k, v in spec.aux.items() if not k.startswith("_")})
+
+
+def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> SimulatedVehicle:
+    """The clicks of the simulated person on one ground-truth vehicle (see the module's description)."""
+    rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id)
+    obj, camera = gt.label, gt.camera
+    d = np.asarray(obj.dimensions, dtype=float)
+    R = R_cam_vehicle_from_ypr(obj.rotation_y)
+    t = obj.t_cam_vehicle(camera.t_cam_rect)
+    boxy = obj.type in ("Van", "Truck")
+    front_overhang = rng.uniform(0.10, 0.15) if obj.type == "Truck" else rng.uniform(0.17, 0.24)
+    rear_overhang = rng.uniform(0.20, 0.35) if boxy else rng.uniform(0.18, 0.26)
+    wheel_x = (d[0] * (0.5 - front_overhang), -d[0] * (0.5 - rear_overhang))
+    tyre_inset = 0.0 if options.exact_placement else rng.uniform(0.0, TYRE_INSET_MAX)
+    camera_vehicle = R.T @ (-t)
+    visible = _faces_visible(camera_vehicle, d)
+    size = camera.image_size or DEFAULT_IMAGE_SIZE
+    drop = OCCLUSION_DROP.get(obj.occluded, 0.6)
+
+    parts: list[Part] = []
+    specs: list[PartSpec] = []
+    notes: list[str] = []
+    spare: list[Part] = []
+    spare_rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/spare")
+    clicks = 0
+    for spec, rule in _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement):
+        if not _needs(rule, visible):
+            continue
+        arrow_yaw = 0.0 if options.exact_placement else math.radians(rng.normal(0.0, 2.0))
+        points_vehicle = _real_points(spec, d, wheel_x, tyre_inset, arrow_yaw)
+        points_cam = points_vehicle @ R.T + t
+        if np.any(points_cam[:, 2] <= 0.1):
+            continue
+        uv = camera.project(points_cam)
+        inside = np.all((uv >= EDGE_MARGIN_PX) & (uv <= np.array(size) - 1 - EDGE_MARGIN_PX))
+        if not inside:
+            continue
+        if len(uv) == 2 and np.linalg.norm(uv[1] - uv[0]) < MIN_PAIR_SEPARATION_PX:
+            continue
+        if rule != "ground" and drop > 0 and rng.uniform() < drop:
+            notes.append(f"{spec.kind} {spec.name}: lost to occlusion")
+            continue
+        if clicks + len(uv) > options.max_clicks:
+            extra = uv + spare_rng.normal(0.0, options.noise_px, uv.shape) if options.noise_px > 0 else uv
+            if len(extra) == 1 or np.linalg.norm(extra[1] - extra[0]) >= MIN_PAIR_SEPARATION_PX:
+                spare.append(Part(spec.kind, spec.name, extra, f"spare[{len(spare)}]"))
+            continue
+        noisy = uv + rng.normal(0.0, options.noise_px, uv.shape) if options.noise_px > 0 else uv
+        if len(noisy) == 2 and np.linalg.norm(noisy[1] - noisy[0]) < MIN_PAIR_SEPARATION_PX:
+            continue  # the person sees the two clicks land on one spot and leaves the pair out
+        k = len(specs)
+        parts.append(Part(spec.kind, spec.name, noisy, f"simulated[{k}]"))
+        specs.append(_model_spec(spec, d))
+        clicks += len(uv)
+    p_true = true_parameters(specs, d, wheel_x)[1] if specs else np.zeros(3)
+    return SimulatedVehicle(gt, parts, specs, R, t, d, wheel_x, p_true, notes, spare)
+
+
+def _part_json(part: Part) -> dict[str, Any]:
+    xy = [[float(v) for v in row] for row in part.uv]  # full precision: exact clicks stay exact
+    if part.kind == "point":
+        return {"kind": "point", "part": part.name, "xy": xy[0]}
+    if part.kind == "symmetry":
+        return {"kind": "symmetry", "face": part.name, "left": xy[0], "right": xy[1]}
+    return {"kind": "direction", "axis": part.name, "tail": xy[0], "head": xy[1]}
+
+
+def annotation_document(simulated: list[SimulatedVehicle],
+                        ground: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The annotation file (v1) of simulated vehicles, one image entry per image id (input order).
+
+    Parameters
+    ----------
+    ground : a ground block given to every image (e.g. ``toosicubix.model.KITTI_GROUND``), or None
+    """
+    images: dict[str, dict[str, Any]] = {}
+    for sv in simulated:
+        gt = sv.source
+        image = images.get(gt.image_id)
+        if image is None:
+            P2 = np.hstack([gt.camera.K, (gt.camera.K @ gt.camera.t_cam_rect)[:, None]])
+            image = images[gt.image_id] = {
+                "id": gt.image_id, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
+                "camera": {"P": P2.tolist()}, **({"ground": dict(ground)} if ground else {}), "vehicles": [],
+            }
+        image["vehicles"].append({
+            "id": gt.vehicle_id, "prototype": gt.label.type,
+            "box2d": [round(float(v), 2) for v in gt.label.box2d],
+            "parts": [_part_json(p) for p in sv.parts],
+        })
+    return {"toosicubix": 1, "images": list(images.values())}
+
+
+def simulate(vehicles: list[GroundTruthVehicle], options: AnnotatorOptions) -> list[SimulatedVehicle]:
+    """Simulate the annotator on every vehicle."""
+    return [simulate_vehicle(gt, options) for gt in vehicles]
+
+
+def _calib_text(camera: Camera) -> str:
+    P2 = np.hstack([camera.K, (camera.K @ camera.t_cam_rect)[:, None]])
+    P0 = np.hstack([camera.K, np.zeros((3, 1))])
+    rows = [f"P{i}: " + " ".join(f"{v:.12e}" for v in P.ravel()) for i, P in enumerate((P0, P0, P2, P2))]
+    identity = np.hstack([np.eye(3), np.zeros((3, 1))])
+    rows.append("R0_rect: " + " ".join(f"{v:.12e}" for v in np.eye(3).ravel()))
+    rows += [f"{key}: " + " ".join(f"{v:.12e}" for v in identity.ravel())
+             for key in ("Tr_velo_to_cam", "Tr_imu_to_velo")]
+    return "\n".join(rows) + "\n"
+
+
+def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path, gt_dir: str | Path,
+                     ground: dict[str, Any] | None = None) -> None:
+    """Write the annotation file and, in ``gt_dir``, the simulated vehicles' ground truth as a KITTI object
+    folder (``label_2/<image id>.txt``, ``calib/<image id>.txt`` with ``P2`` in every ``P`` line) that
+    ``toosicubix eval --kitti`` reads. Files are written atomically."""
+    from toosicubix.formats.atomic import atomic_write_text
+    from toosicubix.formats.kitti import format_label_line
+    from toosicubix.formats.results import dumps
+
+    gt_dir = Path(gt_dir)
+    (gt_dir / "label_2").mkdir(parents=True, exist_ok=True)
+    (gt_dir / "calib").mkdir(parents=True, exist_ok=True)
+    by_image: dict[str, list[SimulatedVehicle]] = {}
+    for sv in simulated:
+        by_image.setdefault(sv.source.image_id, []).append(sv)
+    for image_id, vehicles in by_image.items():
+        lines = [format_label_line(_without_tracking(sv.source.label)) for sv in vehicles]
+        atomic_write_text(gt_dir / "label_2" / f"{image_id}.txt", "".join(f"{ln}\n" for ln in lines))
+        atomic_write_text(gt_dir / "calib" / f"{image_id}.txt", _calib_text(vehicles[0].source.camera))
+    atomic_write_text(Path(annotations), dumps(annotation_document(simulated, ground)))
+
+
+def _without_tracking(obj: KittiObject) -> KittiObject:
+    from dataclasses import replace
+
+    return replace(obj, frame=None, track_id=None, score=None)

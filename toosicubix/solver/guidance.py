@@ -1,0 +1,229 @@
+"""What to click next: for each part a person has not clicked, how much clicking it would shrink the fitted
+cuboid's yaw and depth uncertainty.
+
+A candidate part is placed where it typically sits on the fitted cuboid (lights at 38 % of the width from the
+centre line and 55 % of the height, badges at 45 % of the height, vertical edges at mid height, roof features
+a tenth of the length behind the middle, wheels at the fitted axles or 30 % of the length from the middle, a
+forward arrow on the ground beside the vehicle, a sideways one ahead of it), projected into the image, and
+checked: on a face turned toward the camera by at least 5 degrees (stricter than
+:mod:`toosicubix.solver.plausibility` is with clicks already made), in front of the camera, inside the image. Its
+expected effect is the uncertainty (:mod:`toosicubix.solver.uncertainty`) of the same fit with that part
+added, exactly where predicted. Candidates are ranked by ``ln(sigma_yaw / sigma_yaw') + ln(sigma_depth /
+sigma_depth')``, the log of the factor by which they would shrink the two (primes: with the part clicked), so
+halving either counts the same whether it starts at 40 degrees or at 2.
+
+The cuboid's corners are suggested only on box-shaped vehicles (vans, trucks, buses, trailers, caravans) or
+when the person has clicked a corner already: on a car they are points in the air that nobody can click.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from toosicubix.annotations.schema import POINT_PARTS, SYMMETRY_FACES
+from toosicubix.camera import Camera
+from toosicubix.model import GroundPlane, Part
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.priors.table import SizePrior
+from toosicubix.solver import FitResult, SolverOptions
+from toosicubix.solver.plausibility import faces_of_click, faces_turned_to_camera
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import MIN_DEPTH
+from toosicubix.solver.uncertainty import (
+    finite_or_none,
+    jacobians,
+    row_sigmas,
+    uncertainty_from_jacobians,
+    ypr_gradient,
+)
+
+#: A suggested part must be on a face turned toward the camera by at least this much, degrees.
+VISIBLE_MIN_DEG = 5.0
+TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class Suggestion:
+    """One part to click next.
+
+    Attributes
+    ----------
+    kind, name : as in the annotation file ('point' 'wheel-rear-left', 'symmetry' 'rear', 'direction' 'forward')
+    uv : (k, 2) where it should appear in the image, pixels (lens distortion applied, as clicks are)
+    visible : on a face turned to the camera and in front of it; inside : within the image (True if unknown)
+    yaw_sigma_deg, depth_sigma_rel : the uncertainty with it clicked
+    yaw_gain_deg, depth_gain_rel : the reductions; score : ln of the shrink factor of yaw times depth sigma
+    """
+
+    kind: str
+    name: str
+    uv: np.ndarray
+    visible: bool
+    inside: bool
+    yaw_sigma_deg: float
+    depth_sigma_rel: float
+    yaw_gain_deg: float
+    depth_gain_rel: float
+    score: float
+
+    @property
+    def label(self) -> str:
+        return {"point": self.name, "symmetry": f"symmetry {self.name} (a left-right pair)",
+                "direction": f"{self.name} arrow on the ground"}.get(self.kind, self.name)
+
+    def to_json(self) -> dict:
+        """As results.json has it (``null`` for an infinite standard deviation or an undefined gain)."""
+        return {"kind": self.kind, "name": self.name, "label": self.label, "uv": np.round(self.uv, 1).tolist(),
+                "visible": self.visible, "inside_image": self.inside,
+                **{key: finite_or_none(getattr(self, key)) for key in (
+                    "yaw_sigma_deg", "depth_sigma_rel", "yaw_gain_deg", "depth_gain_rel", "score")}}
+
+
+def _typical_points(kind: str, name: str, d: np.ndarray, wheels: dict[str, float],
+                    camera_side: float) -> np.ndarray:
+    """Where a part usually is on a cuboid of dimensions ``d``, vehicle frame: (k, 3)."""
+    dx, dy, dz = d
+    sx = {"front": 1.0, "rear": -1.0}
+    sy = {"left": 1.0, "right": -1.0}
+    if kind == "symmetry":
+        if name == "roof":
+            return np.array([[-0.1 * dx, 0.35 * dy, dz], [-0.1 * dx, -0.35 * dy, dz]])
+        return np.array([[sx[name] * dx / 2, 0.38 * dy, 0.55 * dz], [sx[name] * dx / 2, -0.38 * dy, 0.55 * dz]])
+    if kind == "direction":
+        if name == "forward":  # beside the vehicle, on the camera's side
+            y = camera_side * (dy / 2 + 0.4)
+            return np.array([[-dx / 2, y, 0.0], [dx / 2, y, 0.0]])
+        # leftward or rightward: ahead of the vehicle, from the camera's side away from it
+        return np.array([[dx / 2 + 0.5, camera_side * dy / 2, 0.0], [dx / 2 + 0.5, -camera_side * dy / 2, 0.0]])
+    words = name.split("-")
+    if words[0] == "wheel":
+        return np.array([[wheels[words[1]], sy[words[2]] * dy / 2, 0.0]])
+    if name in ("front-center", "rear-center"):
+        return np.array([[sx[words[0]] * dx / 2, 0.0, 0.45 * dz]])
+    if name == "top-center":
+        return np.array([[-0.1 * dx, 0.0, dz]])
+    if words[0] == "edge":
+        return np.array([[sx[words[1]] * dx / 2, sy[words[2]] * dy / 2, 0.5 * dz]])
+    return np.array([[sx[words[2]] * dx / 2, sy[words[3]] * dy / 2, dz if words[1] == "top" else 0.0]])
+
+
+#: Prototypes whose bodies are boxes, so that the cuboid's corners are parts one can click.
+BOX_SHAPED = frozenset({"Van", "Truck", "Small Van", "Box Wagon", "Large Van", "Mini Truck", "Small Size Truck",
+                        "Mid Size Truck", "Urban Bus (Solo)", "Urban Bus (Front)", "Urban Bus (Back)", "Coach",
+                        "Trailer", "Caravan"})
+
+
+def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> list[tuple[str, str]]:
+    """The annotations not made yet, as (kind, name); a wheelbase counts as its two wheels clicked. Arrows:
+    forward, and across the vehicle away from the camera (``camera_side`` +1: the camera is on its left)."""
+    clicked = {(p.kind, p.name) for p in parts}
+    corners = corners or any(p.kind == "point" and p.name.startswith("corner-") for p in parts)
+    clicked |= {("point", f"wheel-{a}-{s}") for p in parts if p.kind == "length" and p.name.startswith("wheelbase")
+                for a in ("front", "rear") for s in (p.name.split("-")[1],)}
+    out = [("point", n) for n in POINT_PARTS
+           if ("point", n) not in clicked and (corners or not n.startswith("corner-"))]
+    out += [("symmetry", f) for f in SYMMETRY_FACES if ("symmetry", f) not in clicked]
+    across = "rightward" if camera_side > 0 else "leftward"
+    out += [("direction", a) for a in ("forward", across) if not any(p.kind == "direction" for p in parts)]
+    return out
+
+
+def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: FitResult,
+                   options: SolverOptions | None = None, ground: GroundPlane | None = None,
+                   known_dimensions: dict[str, tuple[float, float]] | None = None,
+                   box_shaped: bool = False) -> list[Suggestion]:
+    """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty.
+
+    Parameters
+    ----------
+    parts : the vehicle's annotations; fit : its fit (no suggestions when it failed)
+    options, ground, known_dimensions : as the fit had them
+    box_shaped : suggest the cuboid's corners too (see :data:`BOX_SHAPED`)
+
+    Returns
+    -------
+    list of Suggestion, best first; visible parts inside the image before the others
+    """
+    options = options or SolverOptions()
+    if not fit.ok or fit.uncertainty is None:
+        return []
+    R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
+    base = build_parts_model(parts, known_dimensions)
+    values = dict(zip(base.param_names, fit.p, strict=True))
+    wheels = {"front": values.get("Xwf", 0.3 * d[0]), "rear": values.get("Xwr", -0.3 * d[0])}
+    camera_side = 1.0 if (R.T @ (-t))[1] >= 0 else -1.0
+    facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
+
+    # Every candidate at its typical place, all in one model: one Jacobian serves them all.
+    placed = []
+    for kind, name in _candidates(parts, box_shaped, camera_side):
+        points_cam = _typical_points(kind, name, d, wheels, camera_side) @ R.T + t
+        if np.all(points_cam[:, 2] > MIN_DEPTH):
+            placed.append(Part(kind, name, camera.project(points_cam), "$"))
+    if not placed:
+        return []
+    combined = build_parts_model((*parts, *placed), known_dimensions)
+    index = {name: i for i, name in enumerate(combined.param_names)}
+    p = np.full(combined.n_params, np.nan)
+    for name, value in values.items():
+        p[index[name]] = value
+    for axle, name in (("front", "Xwf"), ("rear", "Xwr")):
+        if name in index and np.isnan(p[index[name]]):
+            p[index[name]] = wheels[axle]
+    rows = _click_rows(parts, placed)
+    for part, (first, last) in zip(placed, rows, strict=True):
+        points_vehicle = _typical_points(part.kind, part.name, d, wheels, camera_side)
+        _set_own_values(combined.A[first:last], points_vehicle, p)
+    problem = Problem.build(combined, camera, prior, options.lambda_3d, options.lambda_px, ground,
+                            float(np.linalg.norm(t)))
+    J_px, J_cue = jacobians(problem, R, t, p)
+    sigmas = row_sigmas(problem, R, t, p, options.click_sigma, options.part_sigma)
+    G = ypr_gradient(R)
+    base_rows = np.arange(2 * base.n_clicks)
+    base_cols = np.array([6 + index[name] for name in base.param_names])
+    cols0 = np.concatenate([np.arange(6), base_cols])
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
+                                     sigmas[base_rows], G, t)
+    size = camera.image_size
+    out = []
+    for part, (first, last) in zip(placed, rows, strict=True):
+        own = np.flatnonzero(np.any(combined.A[first:last] != 0, axis=(0, 1)))
+        cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
+        r = np.concatenate([base_rows, np.arange(2 * first, 2 * last)])
+        u = uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t)
+        visible = all(f is None or any(facing[x] for x in f) for f in map(faces_of_click, part.click_labels))
+        inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
+        score = (math.log(_bounded(now.yaw_deg) / _bounded(u.yaw_deg))
+                 + math.log(_bounded(now.depth_rel) / _bounded(u.depth_rel)))
+        out.append(Suggestion(part.kind, part.name, part.uv, visible, inside, u.yaw_deg, u.depth_rel,
+                              now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score))
+    out.sort(key=lambda s: (not (s.visible and s.inside), -s.score))
+    return out
+
+
+def _bounded(sigma: float) -> float:
+    """A standard deviation kept within [1e-12, 1e12], infinities included, for the score's ratios."""
+    return min(max(sigma, TINY), 1.0 / TINY)
+
+
+def _click_rows(parts: tuple[Part, ...], placed: list[Part]) -> list[tuple[int, int]]:
+    """The click indices ``[first, last)`` of each placed candidate in the combined model."""
+    first = sum(len(p.uv) for p in parts)
+    out = []
+    for part in placed:
+        out.append((first, first + len(part.uv)))
+        first += len(part.uv)
+    return out
+
+
+def _set_own_values(A_rows: np.ndarray, points_vehicle: np.ndarray, p: np.ndarray) -> None:
+    """Fill in ``p`` the unknowns of a candidate still unset (NaN), from its placed points: ``A_rows``
+    (k, 3, P) of its clicks, ``points_vehicle`` (k, 3). Each own unknown is a coordinate of some click
+    with coefficient +-1 (the table of :mod:`toosicubix.parts`)."""
+    for j in np.flatnonzero(np.isnan(p) & np.any(A_rows != 0, axis=(0, 1))):
+        i, axis = np.argwhere(A_rows[:, :, j] != 0)[0]
+        rest = A_rows[i, axis] @ np.where(np.isnan(p), 0.0, p)
+        p[j] = (points_vehicle[i, axis] - rest) / A_rows[i, axis, j]
