@@ -1,18 +1,17 @@
 """Plain numpy dataclasses for annotated images and vehicles; built once from the parsed file.
 
-The solver and the formats work on these and never see pydantic.
+The solver and the formats work on these and never see pydantic: :mod:`toosicubix.annotations.convert` turns the
+annotation file into them and back.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from toosicubix.annotations import schema as schemas
 from toosicubix.camera import Camera
-from toosicubix.geometry import rot_x, rot_z
+from toosicubix.parts.vocabulary import click_labels
 
 
 @dataclass(frozen=True)
@@ -38,14 +37,8 @@ class Part:
 
     @property
     def click_labels(self) -> tuple[str, ...]:
-        """A label per clicked pixel, e.g. ('symmetry-rear/left', 'symmetry-rear/right')."""
-        if self.kind == "point":
-            return (self.name,)
-        if self.kind == "symmetry":
-            return (f"symmetry-{self.name}/left", f"symmetry-{self.name}/right")
-        if self.kind == "length":
-            return (f"length-{self.name}/a", f"length-{self.name}/b")
-        return (f"direction-{self.name}/tail", f"direction-{self.name}/head")
+        """A label per clicked pixel, e.g. ('symmetry-rear/left', 'symmetry-rear/right') (the vocabulary's)."""
+        return click_labels(self.kind, self.name)
 
 
 @dataclass(frozen=True)
@@ -100,17 +93,6 @@ class Image:
     ground_block: dict | None = None  # the ground block as the file gave it (schema field names)
 
 
-def _part(p: schemas.PointAnnotation | schemas.SymmetryAnnotation | schemas.DirectionAnnotation
-          | schemas.LengthAnnotation, json_path: str) -> Part:
-    if isinstance(p, schemas.PointAnnotation):
-        return Part("point", p.part, np.array([p.xy], dtype=float), json_path)
-    if isinstance(p, schemas.SymmetryAnnotation):
-        return Part("symmetry", p.face, np.array([p.left, p.right], dtype=float), json_path)
-    if isinstance(p, schemas.LengthAnnotation):
-        return Part("length", p.feature, np.array([p.a, p.b], dtype=float), json_path, (p.metres, p.sigma))
-    return Part("direction", p.axis, np.array([p.tail, p.head], dtype=float), json_path)
-
-
 #: The road normal of a level camera (camera y points down).
 LEVEL_NORMAL = np.array([0.0, -1.0, 0.0])
 
@@ -121,81 +103,3 @@ LEVEL_NORMAL = np.array([0.0, -1.0, 0.0])
 #: times the distance, which the normal's uncertainty covers.
 KITTI_GROUND = {"camera_height": 1.65, "camera_height_sigma": 0.1, "normal": (0.0, -1.0, 0.0),
                 "normal_sigma_deg": 1.0, "upright_sigma_deg": 2.0}
-
-
-def with_ground(images: list[Image], overrides: dict[str, object]) -> list[Image]:
-    """The images with their ground block's fields replaced by ``overrides`` (schema field names), for a
-    whole file; an image without a block gets one from the overrides and the defaults.
-
-    Raises
-    ------
-    schemas.InputFileError
-        When the resulting block is invalid (e.g. a negative height), naming the field.
-    """
-    if not overrides:
-        return images
-    out = []
-    for im in images:
-        fields = dict(overrides)
-        if "normal" in fields:
-            fields.setdefault("camera_pitch_deg", None)
-            fields.setdefault("camera_roll_deg", None)
-        if "camera_pitch_deg" in fields or "camera_roll_deg" in fields:
-            fields.setdefault("normal", None)
-        block = schemas.parse_ground_block({**(im.ground_block or {}), **fields}, "ground options")
-        out.append(replace(im, ground=ground_from_schema(block), ground_block=block.model_dump()))
-    return out
-
-
-def ground_from_schema(g: schemas.GroundModel) -> GroundPlane:
-    """The :class:`GroundPlane` of an image's ground block."""
-    if g.normal is not None:
-        normal = np.array(g.normal, dtype=float)
-        normal /= np.linalg.norm(normal)
-    else:
-        pitch = np.deg2rad(g.camera_pitch_deg or 0.0)
-        roll = np.deg2rad(g.camera_roll_deg or 0.0)
-        normal = rot_z(-roll) @ rot_x(-pitch) @ LEVEL_NORMAL
-    return GroundPlane(normal=normal, normal_sigma=float(np.deg2rad(g.normal_sigma_deg)),
-                       camera_height=g.camera_height, camera_height_sigma=g.camera_height_sigma,
-                       upright_sigma=float(np.deg2rad(g.upright_sigma_deg)))
-
-
-def camera_from_schema(cam: schemas.CameraModel, size: tuple[int, int] | None) -> Camera:
-    """The :class:`Camera` of an annotation's camera block."""
-    distortion = None if cam.distortion is None else np.array(cam.distortion, dtype=float)
-    if cam.P is not None:
-        return Camera.from_P(np.array(cam.P, dtype=float), image_size=size, distortion=distortion)
-    return Camera(K=np.array(cam.K, dtype=float), distortion=distortion, image_size=size)
-
-
-def images_from_schema(doc: schemas.AnnotationFile) -> list[Image]:
-    """Convert a validated annotation file into :class:`Image` objects."""
-    images = []
-    for i, im in enumerate(doc.images):
-        ip = f"$.images[{i}]"
-        vehicles = tuple(
-            Vehicle(
-                id=v.id, prototype=v.prototype,
-                box2d=None if v.box2d is None else np.array(v.box2d, dtype=float),
-                parts=tuple(_part(p, f"{ip}.vehicles[{j}].parts[{k}]") for k, p in enumerate(v.parts)),
-                json_path=f"{ip}.vehicles[{j}]",
-                known_dimensions={axis: (k.metres, k.sigma) for axis, k in (v.known_dimensions or {}).items()},
-            )
-            for j, v in enumerate(im.vehicles)
-        )
-        images.append(Image(id=im.id, file=im.file, camera=camera_from_schema(im.camera, im.size),
-                            vehicles=vehicles, json_path=ip,
-                            ground=None if im.ground is None else ground_from_schema(im.ground),
-                            ground_block=None if im.ground is None else im.ground.model_dump()))
-    return images
-
-
-def load_images(path: str | Path) -> list[Image]:
-    """Read, validate and convert an annotation file.
-
-    Raises
-    ------
-    schemas.AnnotationError
-    """
-    return images_from_schema(schemas.load_annotations(path))

@@ -1,7 +1,7 @@
 """The annotation file, version 1: Pydantic models, loading, and errors that name the JSON path.
 
-This module only parses and validates. :mod:`toosicubix.model` turns the parsed file into plain
-numpy dataclasses; nothing past that boundary imports pydantic.
+This module only parses and validates. :mod:`toosicubix.annotations.convert` turns the parsed file into the plain
+numpy dataclasses of :mod:`toosicubix.model`; nothing past that boundary imports pydantic.
 """
 
 from __future__ import annotations
@@ -13,27 +13,16 @@ from typing import Annotated, Any, Literal, TypeVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from toosicubix.parts import vocabulary
+
 SCHEMA_VERSION = 1
 
-WHEEL_PARTS = tuple(f"wheel-{fr}-{lr}" for fr in ("front", "rear") for lr in ("left", "right"))
-CENTER_PARTS = ("front-center", "rear-center", "top-center")
-EDGE_PARTS = tuple(f"edge-{fr}-{lr}" for fr in ("front", "rear") for lr in ("left", "right"))
-CORNER_PARTS = tuple(
-    f"corner-{tb}-{fr}-{lr}" for tb in ("top", "bottom") for fr in ("front", "rear") for lr in ("left", "right")
-)
-#: Every name a ``point`` annotation may carry.
-POINT_PARTS: tuple[str, ...] = WHEEL_PARTS + CENTER_PARTS + EDGE_PARTS + CORNER_PARTS
-SYMMETRY_FACES = ("front", "rear", "roof")
-DIRECTION_AXES = ("forward", "backward", "leftward", "rightward", "upward", "downward")
+#: Every name a ``point`` annotation may carry (the part vocabulary's, :mod:`toosicubix.parts.vocabulary`).
+POINT_PARTS: tuple[str, ...] = vocabulary.names("point")
+SYMMETRY_FACES = vocabulary.names("symmetry")
+DIRECTION_AXES = vocabulary.names("direction")
 #: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
-LENGTH_FEATURES = {
-    "plate-front": "a: left end, b: right end of the front licence plate (its width)",
-    "plate-rear": "a: left end, b: right end of the rear licence plate (its width)",
-    "wheelbase-left": "a: front, b: rear tyre's contact with the ground, left side (the wheelbase)",
-    "wheelbase-right": "a: front, b: rear tyre's contact with the ground, right side (the wheelbase)",
-    **{f"tyre-{fr}-{lr}": f"a: contact with the ground, b: top of the {fr}-{lr} tyre (its diameter)"
-       for fr in ("front", "rear") for lr in ("left", "right")},
-}
+LENGTH_FEATURES = {name: vocabulary.entry("length", name).get("description") for name in vocabulary.names("length")}
 LengthFeature = Literal[tuple(LENGTH_FEATURES)]  # type: ignore[valid-type]
 DIMENSION_AXES = ("dx", "dy", "dz")
 

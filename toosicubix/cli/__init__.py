@@ -441,11 +441,11 @@ def tune_command(annotations: Path, kitti_dir: Path | None, tracking_dir: Path |
       toosicubix tune tuning.json --kitti tuning_gt -o settings.json --jobs 2
       toosicubix fit annotations.json --config settings.json
     """
+    from toosicubix.annotations.convert import load_images
     from toosicubix.annotations.schema import InputFileError
     from toosicubix.evaluation import EvalOptions, EvaluationInputError, open_ground_truth
     from toosicubix.formats import FormatError
     from toosicubix.formats.atomic import atomic_write_text
-    from toosicubix.model import load_images
     from toosicubix.pipeline.tuning import tune
     from toosicubix.priors.table import load_priors
 

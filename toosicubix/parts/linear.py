@@ -23,15 +23,20 @@ frame: origin at the bottom-face centre, X forward, Y left, Z up.
 A ``length`` annotation also gives a *measurement*, a linear equation on ``p`` with a known value in metres:
 the plate's width ``2 Y``, the wheelbase ``Xwf - Xwr``, the tyre's diameter ``Zt``. Known dimensions of the
 vehicle are measurements too. Unlike the clicks, measurements fix the scale.
+
+The names and their attributes come from the part vocabulary (:mod:`toosicubix.parts.vocabulary`); each kind's
+linear form is a function here registered with ``@linear_form(kind)``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from toosicubix.model import Part
+from toosicubix.parts.vocabulary import KINDS, click, click_labels, entry
 
 DX, DY, DZ = 0, 1, 2
 #: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.
@@ -40,11 +45,7 @@ CUBOID_DOF = 9
 IMAGE_DOF = 8
 
 _SIDE = {"front": 1.0, "rear": -1.0, "left": 1.0, "right": -1.0}
-_DIRECTION = {
-    "forward": (0, 1.0), "backward": (0, -1.0),
-    "leftward": (1, 1.0), "rightward": (1, -1.0),
-    "upward": (2, 1.0), "downward": (2, -1.0),
-}
+DIM_INDEX = {"dx": DX, "dy": DY, "dz": DZ}
 
 
 @dataclass(frozen=True)
@@ -119,22 +120,26 @@ class PartsModel:
     @property
     def arrow_tails(self) -> tuple[int, ...]:
         """The click index of each direction arrow's tail; its head is the next click."""
-        return tuple(i for i, label in enumerate(self.click_labels)
-                     if label.startswith("direction-") and label.endswith("/tail"))
+        return tuple(i for i, label in enumerate(self.click_labels) if _is_arrow_tail(label))
 
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
         return self.A @ p
 
 
+def _is_arrow_tail(label: str) -> bool:
+    """The first click of an annotation not on the body (a direction arrow's tail)."""
+    c = click(label)
+    return c.index == 0 and not KINDS[c.kind].on_body
+
+
 class _Builder:
     def __init__(self, parts: tuple[Part, ...]):
         self.names = ["dx", "dy", "dz"]
-        names = {p.name for p in parts if p.kind == "point"}
-        axles = {axle for p in parts if p.kind == "length" for axle in _LENGTH_AXLES.get(p.name, ())}
+        axles = {axle for p in parts for axle in _axles(p)}
         self.wheel = {}
         for axle, label in (("front", "Xwf"), ("rear", "Xwr")):
-            if names & {f"wheel-{axle}-left", f"wheel-{axle}-right"} or axle in axles:
+            if axle in axles:
                 self.wheel[axle] = len(self.names)
                 self.names.append(label)
         self.coeffs: list[list[dict[int, float]]] = []  # per click: the linear forms of X, Y, Z
@@ -142,6 +147,8 @@ class _Builder:
         self.owner: list[int] = []
         self.lines: list[Line] = []
         self.measurements: list[tuple[dict[int, float], float, float, str]] = []
+        self.wheel_clicks: dict[tuple[str, str], list[int]] = {}  # (axle, side) -> clicks on that tyre's contact
+        self.corner_clicks: dict[tuple[str, str, str], list[int]] = {}  # (height, end, side) -> clicks
 
     def aux(self, k: int, what: str) -> int:
         self.names.append(f"parts[{k}].{what}")
@@ -171,6 +178,30 @@ class _Builder:
                           param_names=tuple(self.names), lines=tuple(self.lines), measurements=tuple(measurements))
 
 
+def _axles(part: Part) -> tuple[str, ...]:
+    """The axles whose positions (``Xwf``, ``Xwr``) an annotation's points use."""
+    e = entry(part.kind, part.name)
+    shape = e.get("shape")
+    if shape == "wheelbase":
+        return ("front", "rear")
+    if shape in ("wheel", "tyre"):
+        return (e.get("axle"),)
+    return ()
+
+
+#: The linear form of each kind: ``f(builder, k, part)`` adds the clicks of annotation ``k``.
+LinearForm = Callable[[_Builder, int, Part], None]
+LINEAR_FORMS: dict[str, LinearForm] = {}
+
+
+def linear_form(kind: str) -> Callable[[LinearForm], LinearForm]:
+    """Register the function that adds a ``kind`` annotation's points to the model (see the vocabulary)."""
+    def register(f: LinearForm) -> LinearForm:
+        LINEAR_FORMS[kind] = f
+        return f
+    return register
+
+
 def build_parts_model(parts: tuple[Part, ...] | list[Part],
                       known_dimensions: dict[str, tuple[float, float]] | None = None) -> PartsModel:
     """The linear model of a vehicle's annotations (see the module's table).
@@ -186,130 +217,128 @@ def build_parts_model(parts: tuple[Part, ...] | list[Part],
     """
     parts = tuple(parts)
     b = _Builder(parts)
-    wheel_clicks: dict[str, list[int]] = {}
-    corner_clicks: dict[tuple[str, str, str], list[int]] = {}
     uv_rows = []
     for k, part in enumerate(parts):
         uv_rows.append(part.uv)
-        if part.kind == "point":
-            i = _add_point(b, k, part.name)
-            if part.name.startswith("wheel-"):
-                wheel_clicks.setdefault(part.name, []).append(i)
-            elif part.name.startswith("corner-"):
-                _, tb, fr, lr = part.name.split("-")
-                corner_clicks.setdefault((tb, fr, lr), []).append(i)
-        elif part.kind == "symmetry":
-            _add_symmetry(b, k, part.name)
-        elif part.kind == "length":
-            for name, i in _add_length(b, k, part).items():
-                wheel_clicks.setdefault(name, []).append(i)
-        else:
-            _add_direction(b, k, part.name)
+        LINEAR_FORMS[part.kind](b, k, part)
     for axis, (metres, sigma) in (known_dimensions or {}).items():
         b.measurements.append(({DIM_INDEX[axis]: 1.0}, metres, sigma, f"known {axis}"))
-    _wheel_lines(b, wheel_clicks)
-    _corner_lines(b, corner_clicks)
+    _wheel_lines(b)
+    _corner_lines(b)
     uv = np.concatenate(uv_rows, axis=0) if uv_rows else np.zeros((0, 2))
     return b.build(uv)
 
 
-def _add_point(b: _Builder, k: int, name: str) -> int:
-    if name.startswith("wheel-"):
-        _, fr, lr = name.split("-")
-        return b.point(k, name, {b.wheel[fr]: 1.0}, {DY: 0.5 * _SIDE[lr]}, {})
-    if name in ("front-center", "rear-center"):
-        s = _SIDE[name.split("-")[0]]
-        return b.point(k, name, {DX: 0.5 * s}, {}, {b.aux(k, "Z"): 1.0})
-    if name == "top-center":
-        return b.point(k, name, {b.aux(k, "X"): 1.0}, {}, {DZ: 1.0})
-    if name.startswith("edge-"):
-        _, fr, lr = name.split("-")
-        return b.point(k, name, {DX: 0.5 * _SIDE[fr]}, {DY: 0.5 * _SIDE[lr]}, {b.aux(k, "Z"): 1.0})
-    if name.startswith("corner-"):
-        _, tb, fr, lr = name.split("-")
-        return b.point(k, name, {DX: 0.5 * _SIDE[fr]}, {DY: 0.5 * _SIDE[lr]}, {DZ: 1.0} if tb == "top" else {})
-    raise ValueError(f"unknown point part {name!r}")  # the schema admits no other name
-
-
-def _add_symmetry(b: _Builder, k: int, face: str) -> None:
-    if face in ("front", "rear"):
-        y, z = b.aux(k, "Y"), b.aux(k, "Z")
-        x_form = {DX: 0.5 * _SIDE[face]}
-        i = b.point(k, f"symmetry-{face}/left", x_form, {y: 1.0}, {z: 1.0})
-        j = b.point(k, f"symmetry-{face}/right", x_form, {y: -1.0}, {z: 1.0})
+@linear_form("point")
+def _add_point(b: _Builder, k: int, part: Part) -> None:
+    name = part.name
+    e = entry("point", name)
+    shape = e.get("shape")
+    if shape == "wheel":
+        axle, side = e.get("axle"), e.get("side")
+        i = b.point(k, name, {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}, {})
+        b.wheel_clicks.setdefault((axle, side), []).append(i)
+    elif shape == "end-center":
+        b.point(k, name, {DX: 0.5 * _SIDE[e.get("end")]}, {}, {b.aux(k, "Z"): 1.0})
+    elif shape == "top-center":
+        b.point(k, name, {b.aux(k, "X"): 1.0}, {}, {DZ: 1.0})
+    elif shape == "edge":
+        b.point(k, name, {DX: 0.5 * _SIDE[e.get("end")]}, {DY: 0.5 * _SIDE[e.get("side")]}, {b.aux(k, "Z"): 1.0})
+    elif shape == "corner":
+        height, end, side = e.get("height"), e.get("end"), e.get("side")
+        i = b.point(k, name, {DX: 0.5 * _SIDE[end]}, {DY: 0.5 * _SIDE[side]}, {DZ: 1.0} if height == "top" else {})
+        b.corner_clicks.setdefault((height, end, side), []).append(i)
     else:
+        raise ValueError(f"point part {name!r} has no linear form (shape {shape!r})")
+
+
+@linear_form("symmetry")
+def _add_symmetry(b: _Builder, k: int, part: Part) -> None:
+    face = part.name
+    end = entry("symmetry", face).get("end")
+    left, right = click_labels("symmetry", face)
+    if end is not None:  # a front or rear pair
+        y, z = b.aux(k, "Y"), b.aux(k, "Z")
+        x_form = {DX: 0.5 * _SIDE[end]}
+        i = b.point(k, left, x_form, {y: 1.0}, {z: 1.0})
+        j = b.point(k, right, x_form, {y: -1.0}, {z: 1.0})
+    else:  # on the roof
         x, y = b.aux(k, "X"), b.aux(k, "Y")
-        i = b.point(k, "symmetry-roof/left", {x: 1.0}, {y: 1.0}, {DZ: 1.0})
-        j = b.point(k, "symmetry-roof/right", {x: 1.0}, {y: -1.0}, {DZ: 1.0})
+        i = b.point(k, left, {x: 1.0}, {y: 1.0}, {DZ: 1.0})
+        j = b.point(k, right, {x: 1.0}, {y: -1.0}, {DZ: 1.0})
     b.lines.append(Line(i, j, axis=1))
 
 
-DIM_INDEX = {"dx": DX, "dy": DY, "dz": DZ}
-# The axles a length feature's clicks sit on.
-_LENGTH_AXLES = {"wheelbase-left": ("front", "rear"), "wheelbase-right": ("front", "rear"),
-                 **{f"tyre-{fr}-{lr}": (fr,) for fr in ("front", "rear") for lr in ("left", "right")}}
-
-
-def _add_length(b: _Builder, k: int, part: Part) -> dict[str, int]:
-    """Add a length annotation's two points and its measurement; return its wheel clicks by wheel name."""
+@linear_form("length")
+def _add_length(b: _Builder, k: int, part: Part) -> None:
+    """Add a length annotation's two points and its measurement."""
     metres, sigma = part.known  # type: ignore[misc]
     feature = part.name
+    e = entry("length", feature)
+    shape, side = e.get("shape"), e.get("side")
     label = f"length {feature}"
-    if feature.startswith("plate-"):
-        face = feature.removeprefix("plate-")
+    a, b_label = click_labels("length", feature)
+    if shape == "plate":
         y, z = b.aux(k, "Y"), b.aux(k, "Z")
-        x_form = {DX: 0.5 * _SIDE[face]}
-        i = b.point(k, f"length-{feature}/a", x_form, {y: 1.0}, {z: 1.0})
-        j = b.point(k, f"length-{feature}/b", x_form, {y: -1.0}, {z: 1.0})
+        x_form = {DX: 0.5 * _SIDE[e.get("end")]}
+        i = b.point(k, a, x_form, {y: 1.0}, {z: 1.0})
+        j = b.point(k, b_label, x_form, {y: -1.0}, {z: 1.0})
         b.lines.append(Line(i, j, axis=1))
         b.measurements.append(({y: 2.0}, metres, sigma, label))
-        return {}
-    if feature.startswith("wheelbase-"):
-        side = feature.removeprefix("wheelbase-")
+    elif shape == "wheelbase":
         y_form = {DY: 0.5 * _SIDE[side]}
-        i = b.point(k, f"length-{feature}/a", {b.wheel["front"]: 1.0}, y_form, {})
-        j = b.point(k, f"length-{feature}/b", {b.wheel["rear"]: 1.0}, y_form, {})
+        i = b.point(k, a, {b.wheel["front"]: 1.0}, y_form, {})
+        j = b.point(k, b_label, {b.wheel["rear"]: 1.0}, y_form, {})
         b.measurements.append(({b.wheel["front"]: 1.0, b.wheel["rear"]: -1.0}, metres, sigma, label))
-        return {f"wheel-front-{side}": i, f"wheel-rear-{side}": j}
-    _, axle, side = feature.split("-")  # tyre-{front,rear}-{left,right}
-    top = b.aux(k, "Zt")
-    x_form, y_form = {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}
-    i = b.point(k, f"length-{feature}/a", x_form, y_form, {})
-    b.point(k, f"length-{feature}/b", x_form, y_form, {top: 1.0})
-    b.measurements.append(({top: 1.0}, metres, sigma, label))
-    return {f"wheel-{axle}-{side}": i}
+        b.wheel_clicks.setdefault(("front", side), []).append(i)
+        b.wheel_clicks.setdefault(("rear", side), []).append(j)
+    elif shape == "tyre":
+        axle = e.get("axle")
+        top = b.aux(k, "Zt")
+        x_form, y_form = {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}
+        i = b.point(k, a, x_form, y_form, {})
+        b.point(k, b_label, x_form, y_form, {top: 1.0})
+        b.measurements.append(({top: 1.0}, metres, sigma, label))
+        b.wheel_clicks.setdefault((axle, side), []).append(i)
+    else:
+        raise ValueError(f"length feature {feature!r} has no linear form (shape {shape!r})")
 
 
-def _add_direction(b: _Builder, k: int, axis_name: str) -> None:
-    axis, sign = _DIRECTION[axis_name]
+@linear_form("direction")
+def _add_direction(b: _Builder, k: int, part: Part) -> None:
+    e = entry("direction", part.name)
+    axis, sign = DIM_INDEX[e.get("axis")], float(e.get("sign"))
     x, y, z = b.aux(k, "X"), b.aux(k, "Y"), b.aux(k, "Z")
     tail = [{x: 1.0}, {y: 1.0}, {z: 1.0}]
     head = [dict(f) for f in tail]
     head[axis][axis] = sign  # + or - the dimension along that axis (dx, dy, dz have indices 0, 1, 2)
-    i = b.point(k, f"direction-{axis_name}/tail", *tail)
-    j = b.point(k, f"direction-{axis_name}/head", *head)
+    tail_label, head_label = click_labels("direction", part.name)
+    i = b.point(k, tail_label, *tail)
+    j = b.point(k, head_label, *head)
     if axis < 2:
         b.lines.append(Line(i, j, axis=axis))
 
 
-def _wheel_lines(b: _Builder, wheels: dict[str, list[int]]) -> None:
+def _wheel_lines(b: _Builder) -> None:
+    wheels = b.wheel_clicks
     for side in ("left", "right"):  # same side: front to rear wheel runs along X
-        for i in wheels.get(f"wheel-front-{side}", []):
-            for j in wheels.get(f"wheel-rear-{side}", []):
+        for i in wheels.get(("front", side), []):
+            for j in wheels.get(("rear", side), []):
                 b.lines.append(Line(i, j, axis=0))
     for axle in ("front", "rear"):  # same axle: left to right wheel runs along Y
-        for i in wheels.get(f"wheel-{axle}-left", []):
-            for j in wheels.get(f"wheel-{axle}-right", []):
+        for i in wheels.get((axle, "left"), []):
+            for j in wheels.get((axle, "right"), []):
                 b.lines.append(Line(i, j, axis=1))
 
 
-def _corner_lines(b: _Builder, corners: dict[tuple[str, str, str], list[int]]) -> None:
-    for (tb, fr, lr), clicks in corners.items():
-        if fr == "front":  # front-to-rear edge along X
+def _corner_lines(b: _Builder) -> None:
+    corners = b.corner_clicks
+    for (height, end, side), clicks in corners.items():
+        if end == "front":  # front-to-rear edge along X
             for i in clicks:
-                for j in corners.get((tb, "rear", lr), []):
+                for j in corners.get((height, "rear", side), []):
                     b.lines.append(Line(i, j, axis=0))
-        if lr == "left":  # left-to-right edge along Y
+        if side == "left":  # left-to-right edge along Y
             for i in clicks:
-                for j in corners.get((tb, fr, "right"), []):
+                for j in corners.get((height, end, "right"), []):
                     b.lines.append(Line(i, j, axis=1))

@@ -24,13 +24,14 @@ import cv2
 import numpy as np
 
 from toosicubix import __version__
+from toosicubix.annotations.convert import load_images, with_ground
 from toosicubix.annotations.schema import InputFileError
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results, results_to_json
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
-from toosicubix.model import GroundPlane, Image, Vehicle, load_images, with_ground
+from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
 from toosicubix.priors.table import Priors, SizePrior, load_priors
 from toosicubix.solver import FitResult, SolverOptions, fit_vehicle, scale_shares

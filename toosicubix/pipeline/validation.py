@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from toosicubix.annotations.convert import load_images, with_ground
 from toosicubix.formats.results import VehicleResult
-from toosicubix.model import load_images, with_ground
 from toosicubix.pipeline.batch import check_prototypes, fit_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions

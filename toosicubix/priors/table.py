@@ -14,8 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from toosicubix.annotations import schema as schemas
-
 
 @dataclass(frozen=True)
 class SizePrior:
@@ -101,6 +99,8 @@ def load_priors(path: str | Path | None = None) -> Priors:
     schemas.InputFileError
         The file is unreadable or not a valid priors file (the message names the JSON path).
     """
+    from toosicubix.annotations import schema as schemas  # here, so that the solver never loads pydantic
+
     path = Path(path) if path is not None else bundled_priors_path()
     doc = schemas.load_priors_file(path)
     entries = {

@@ -1,0 +1,211 @@
+"""The one part vocabulary: every kind of annotation, every name it may carry, and what each one means.
+
+The table is the data file ``vocabulary.json`` beside this module; this module loads it once and answers
+questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``length``):
+
+- ``name_field``: the annotation-file key that names it (``part``, ``face``, ``axis``, ``feature``);
+- ``clicks``: the keys of its clicked pixels, in click order (``xy``; ``left``, ``right``; ...);
+- ``known``: the keys of a known size it states (``metres``, ``sigma``), if any;
+- ``labels``: the label of each click, ``{name}`` standing for the name (``symmetry-{name}/left``);
+- ``on_body``: whether its clicks lie on the vehicle (a direction arrow may be drawn on the ground);
+- ``suggest_once``: suggest none of the kind once one of it is clicked (direction arrows);
+- ``names``: every name, in the order the schema lists them.
+
+Per **name**:
+
+- ``faces``: the cuboid faces its clicks can be seen on (``null``: anywhere, e.g. an arrow on the ground);
+  :mod:`toosicubix.solver.plausibility` checks clicked parts against them;
+- ``typical``: where it usually sits on a cuboid, one point per click, each coordinate a linear form
+  ``{term: coefficient}`` over ``dx``, ``dy``, ``dz`` (the dimensions), ``Xwf``, ``Xwr`` (the axles),
+  ``side`` (+1 when the camera is on the vehicle's left, else -1), ``side*dy`` and ``one`` (a constant), in
+  metres, vehicle frame; ``null``: never suggested (:mod:`toosicubix.solver.guidance`);
+- ``suits``: ``"all"`` (the default) or a prototype group of ``prototype_groups`` (the cuboid's corners are
+  only suggested on box-shaped vehicles: on a car they are points in the air);
+- ``suggest`` (directions): ``always``, ``never``, ``camera-left`` or ``camera-right``;
+- attributes the linear form reads: ``shape``, ``end``, ``side``, ``axle``, ``height``, ``axis``, ``sign``;
+- ``description`` (length features): what its two clicks mark.
+
+**Adding a kind** is one entry under ``kinds`` in ``vocabulary.json`` plus its linear form: a function in
+:mod:`toosicubix.parts.linear` decorated ``@linear_form("kind")`` that adds the kind's points ``X = A p`` (and
+any lines or measurements) to the model. (The pydantic schema in :mod:`toosicubix.annotations.schema` lists
+the kinds' file fields and needs the new kind's annotation class as well.) **Adding a name** to a kind is one
+entry under its ``names``. ``tests/parts/test_vocabulary.py`` checks that every kind has its linear form and
+that every name's faces and typical positions are well formed.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+from typing import Any
+
+#: Faces of the cuboid a click can be seen on (the bottom never is).
+FACES = ("front", "rear", "left", "right", "top")
+#: The terms a typical position's linear forms may use.
+TYPICAL_TERMS = ("dx", "dy", "dz", "Xwf", "Xwr", "side", "side*dy", "one")
+
+
+@dataclass(frozen=True)
+class Name:
+    """One name of a kind, e.g. point ``wheel-front-left``.
+
+    Attributes
+    ----------
+    kind, name : as in the annotation file
+    faces : faces its clicks can be seen on; None: anywhere (the ground included)
+    typical : per click, per coordinate (X, Y, Z), ``{term: coefficient}``; None: never suggested
+    suits : 'all' or a prototype group
+    attributes : every other field of its entry (``shape``, ``end``, ``side``, ``axle``, ...)
+    """
+
+    kind: str
+    name: str
+    faces: tuple[str, ...] | None
+    typical: tuple[tuple[dict[str, float], ...], ...] | None
+    suits: str
+    attributes: dict[str, Any]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        """One of its attributes (``shape``, ``end``, ``side``, ``axle``, ``height``, ``axis``, ``sign``, ...)."""
+        return self.attributes.get(key, default)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One kind of annotation (see the module's description)."""
+
+    kind: str
+    name_field: str
+    clicks: tuple[str, ...]
+    known: tuple[str, ...]
+    labels: tuple[str, ...]
+    on_body: bool
+    suggest_once: bool
+    names: dict[str, Name]
+
+    def click_labels(self, name: str) -> tuple[str, ...]:
+        """A label per click of the annotation ``name``, e.g. ('symmetry-rear/left', 'symmetry-rear/right')."""
+        return tuple(template.replace("{name}", name) for template in self.labels)
+
+
+@dataclass(frozen=True)
+class Click:
+    """What one click label stands for: its annotation's kind and name, and which of its clicks it is."""
+
+    kind: str
+    name: str
+    index: int
+    label: str
+
+
+def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
+    text = (resources.files("toosicubix.parts") / "vocabulary.json").read_text(encoding="utf-8")
+    doc = json.loads(text)
+    kinds = {}
+    for kind, k in doc["kinds"].items():
+        names = {}
+        for name, entry in k["names"].items():
+            faces = entry.get("faces")
+            typical = entry.get("typical")
+            attributes = {key: value for key, value in entry.items() if key not in ("faces", "typical", "suits")}
+            names[name] = Name(
+                kind=kind, name=name, faces=None if faces is None else tuple(faces),
+                typical=None if typical is None else tuple(tuple(dict(c) for c in point) for point in typical),
+                suits=entry.get("suits", "all"), attributes=attributes,
+            )
+        kinds[kind] = Kind(kind=kind, name_field=k["name_field"], clicks=tuple(k["clicks"]),
+                           known=tuple(k.get("known", ())), labels=tuple(k["labels"]), on_body=bool(k["on_body"]),
+                           suggest_once=bool(k.get("suggest_once", False)), names=names)
+    groups = {group: frozenset(members) for group, members in doc["prototype_groups"].items()}
+    return kinds, groups
+
+
+#: Every kind by its name, in the file's order.
+KINDS, PROTOTYPE_GROUPS = _load()
+
+
+def names(kind: str) -> tuple[str, ...]:
+    """Every name a ``kind`` annotation may carry, in the schema's order."""
+    return tuple(KINDS[kind].names)
+
+
+def entry(kind: str, name: str) -> Name:
+    """The vocabulary entry of one annotation.
+
+    Raises
+    ------
+    KeyError
+        An unknown kind or name (the schema admits none).
+    """
+    return KINDS[kind].names[name]
+
+
+def click_labels(kind: str, name: str) -> tuple[str, ...]:
+    """A label per clicked pixel of one annotation, e.g. ('symmetry-rear/left', 'symmetry-rear/right')."""
+    return KINDS[kind].click_labels(name)
+
+
+@lru_cache(maxsize=1)
+def _clicks_by_label() -> dict[str, Click]:
+    out = {}
+    for kind in KINDS.values():
+        for name in kind.names:
+            for index, label in enumerate(kind.click_labels(name)):
+                out[label] = Click(kind.kind, name, index, label)
+    return out
+
+
+def click(label: str) -> Click:
+    """What a click label stands for.
+
+    Raises
+    ------
+    KeyError
+        A label no annotation gives.
+    """
+    return _clicks_by_label()[label]
+
+
+def faces_of_click(label: str) -> tuple[str, ...] | None:
+    """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
+    c = click(label)
+    return entry(c.kind, c.name).faces
+
+
+def on_body(label: str) -> bool:
+    """Whether a click lies on the vehicle's body (a direction arrow may be drawn on the ground)."""
+    return KINDS[click(label).kind].on_body
+
+
+def suits(name: Name, prototypes: tuple[str, ...] | list[str]) -> bool:
+    """Whether a part can be clicked on a vehicle of any of ``prototypes`` (its prototype, its KITTI type)."""
+    if name.suits == "all":
+        return True
+    group = PROTOTYPE_GROUPS[name.suits]
+    return any(p in group for p in prototypes)
+
+
+def typical_points(name: Name, values: dict[str, float]) -> list[list[float]]:
+    """Where a part usually sits: per click (X, Y, Z), metres, vehicle frame.
+
+    Parameters
+    ----------
+    values : the terms' values (``dx``, ``dy``, ``dz``, ``Xwf``, ``Xwr``, ``side``, ``side*dy``, ``one``)
+
+    Raises
+    ------
+    ValueError
+        The part is never suggested (no typical position).
+    """
+    if name.typical is None:
+        raise ValueError(f"{name.kind} {name.name} has no typical position")
+    return [[_evaluate(form, values) for form in point] for point in name.typical]
+
+
+def _evaluate(form: dict[str, float], values: dict[str, float]) -> float:
+    out = 0.0
+    for term, coefficient in form.items():
+        out += coefficient * values[term]
+    return out
