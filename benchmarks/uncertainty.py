@@ -59,7 +59,7 @@ from toosicubix.simulate.annotator import (
     vehicle_rng,
 )
 from toosicubix.solver import SolverOptions, fit_vehicle
-from toosicubix.solver.guidance import BOX_SHAPED, suggest_clicks
+from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 
 OPTIONS = replace(SolverOptions(), click_sigma=1.0)
 
@@ -143,7 +143,7 @@ def _next_click_task(task) -> dict | None:
         return None
     clickable = {(p.kind, p.name): p for p in sv.spare}
     ranked = suggest_clicks(base, camera, prior, fit, OPTIONS, ground,
-                            box_shaped=sv.source.label.type in BOX_SHAPED)
+                            box_shaped=is_box_shaped(sv.source.label.type))
     guided = next((clickable[(s.kind, s.name)] for s in ranked if (s.kind, s.name) in clickable), None)
     if guided is None:
         return None

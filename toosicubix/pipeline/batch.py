@@ -34,11 +34,18 @@ from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cubo
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
 from toosicubix.priors.table import Priors, SizePrior, load_priors
-from toosicubix.solver import FitResult, SolverOptions, fit_vehicle, scale_shares
-from toosicubix.solver.guidance import BOX_SHAPED, suggest_clicks
-from toosicubix.solver.joint import JointVehicle, fit_jointly
-from toosicubix.solver.problem import Problem
-from toosicubix.solver.uncertainty import analyse, confidence
+from toosicubix.solver import (
+    FitResult,
+    JointVehicle,
+    Problem,
+    SolverOptions,
+    analyse,
+    confidence,
+    fit_jointly,
+    fit_vehicle,
+    scale_shares,
+)
+from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 
 LABEL_DIR = "label_2"
 
@@ -153,7 +160,7 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitRes
     """The ``n`` best parts to click next, for results.json; an error here never fails the vehicle."""
     try:
         suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
-                                     box_shaped=vehicle.prototype in BOX_SHAPED or prior.kitti_type in BOX_SHAPED)
+                                     box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type))
     except Exception as exc:  # guidance is advice: the fit stands without it
         return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
     return {"next_clicks": [s.to_json() for s in suggestions[:n]]}

@@ -24,10 +24,12 @@ from toosicubix.camera import Camera
 from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
+from toosicubix.parts.vocabulary import click
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
-from toosicubix.solver.plausibility import implausibility
+from toosicubix.solver.joint import JointVehicle, fit_jointly
+from toosicubix.solver.plausibility import faces_turned_to_camera, implausibility
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import (
     MIN_DEPTH,
@@ -36,7 +38,14 @@ from toosicubix.solver.refine import (
     residuals_and_jacobian,
     residuals_batch,
 )
-from toosicubix.solver.uncertainty import Observability, Uncertainty, analyse
+from toosicubix.solver.uncertainty import (
+    Observability,
+    Uncertainty,
+    analyse,
+    confidence,
+    finite_or_none,
+    uncertainties_with_added_clicks,
+)
 
 
 @dataclass(frozen=True)
@@ -426,7 +435,7 @@ def _short_arrows(parts: PartsModel) -> str | None:
     for i in parts.arrow_tails:
         length = float(np.linalg.norm(parts.uv[i + 1] - parts.uv[i]))
         if length < MIN_ARROW_PX:
-            axis = parts.click_labels[i].split("/")[0].removeprefix("direction-")
+            axis = click(parts.click_labels[i]).name
             found.append(f"the {axis} arrow of annotation parts[{parts.click_part[i]}] is {length:.2f} px long")
     return "; ".join(found) + f" (an arrow needs at least {MIN_ARROW_PX:g} px)" if found else None
 
@@ -437,4 +446,19 @@ def _too_few(parts: PartsModel, needed: int) -> str:
             f"the cuboid with its size prior, 8 to fix its shape from the clicks alone")
 
 
-__all__ = ["FitResult", "SolverOptions", "fit_vehicle"]
+#: What :mod:`toosicubix.pipeline` and :mod:`toosicubix.solver.guidance` use; nothing past it.
+__all__ = [
+    "MIN_DEPTH",
+    "FitResult",
+    "JointVehicle",
+    "Problem",
+    "SolverOptions",
+    "analyse",
+    "confidence",
+    "faces_turned_to_camera",
+    "finite_or_none",
+    "fit_jointly",
+    "fit_vehicle",
+    "scale_shares",
+    "uncertainties_with_added_clicks",
+]

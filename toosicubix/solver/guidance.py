@@ -14,6 +14,9 @@ halving either counts the same whether it starts at 40 degrees or at 2.
 
 The cuboid's corners are suggested only on box-shaped vehicles (vans, trucks, buses, trailers, caravans) or
 when the person has clicked a corner already: on a car they are points in the air that nobody can click.
+
+The candidates, their typical positions, the faces they are seen on and the prototypes they suit are the part
+vocabulary's (:mod:`toosicubix.parts.vocabulary`).
 """
 
 from __future__ import annotations
@@ -23,21 +26,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from toosicubix.annotations.schema import POINT_PARTS, SYMMETRY_FACES
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
+from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.priors.table import SizePrior
-from toosicubix.solver import FitResult, SolverOptions
-from toosicubix.solver.plausibility import faces_of_click, faces_turned_to_camera
-from toosicubix.solver.problem import Problem
-from toosicubix.solver.refine import MIN_DEPTH
-from toosicubix.solver.uncertainty import (
+from toosicubix.solver import (
+    MIN_DEPTH,
+    FitResult,
+    Problem,
+    SolverOptions,
+    faces_turned_to_camera,
     finite_or_none,
-    jacobians,
-    row_sigmas,
-    uncertainty_from_jacobians,
-    ypr_gradient,
+    uncertainties_with_added_clicks,
 )
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
@@ -84,50 +85,46 @@ class Suggestion:
 
 def _typical_points(kind: str, name: str, d: np.ndarray, wheels: dict[str, float],
                     camera_side: float) -> np.ndarray:
-    """Where a part usually is on a cuboid of dimensions ``d``, vehicle frame: (k, 3)."""
+    """Where a part usually is on a cuboid of dimensions ``d``, vehicle frame: (k, 3) (the vocabulary's
+    ``typical``; ``camera_side`` +1: the camera is on the vehicle's left)."""
     dx, dy, dz = d
-    sx = {"front": 1.0, "rear": -1.0}
-    sy = {"left": 1.0, "right": -1.0}
-    if kind == "symmetry":
-        if name == "roof":
-            return np.array([[-0.1 * dx, 0.35 * dy, dz], [-0.1 * dx, -0.35 * dy, dz]])
-        return np.array([[sx[name] * dx / 2, 0.38 * dy, 0.55 * dz], [sx[name] * dx / 2, -0.38 * dy, 0.55 * dz]])
-    if kind == "direction":
-        if name == "forward":  # beside the vehicle, on the camera's side
-            y = camera_side * (dy / 2 + 0.4)
-            return np.array([[-dx / 2, y, 0.0], [dx / 2, y, 0.0]])
-        # leftward or rightward: ahead of the vehicle, from the camera's side away from it
-        return np.array([[dx / 2 + 0.5, camera_side * dy / 2, 0.0], [dx / 2 + 0.5, -camera_side * dy / 2, 0.0]])
-    words = name.split("-")
-    if words[0] == "wheel":
-        return np.array([[wheels[words[1]], sy[words[2]] * dy / 2, 0.0]])
-    if name in ("front-center", "rear-center"):
-        return np.array([[sx[words[0]] * dx / 2, 0.0, 0.45 * dz]])
-    if name == "top-center":
-        return np.array([[-0.1 * dx, 0.0, dz]])
-    if words[0] == "edge":
-        return np.array([[sx[words[1]] * dx / 2, sy[words[2]] * dy / 2, 0.5 * dz]])
-    return np.array([[sx[words[2]] * dx / 2, sy[words[3]] * dy / 2, dz if words[1] == "top" else 0.0]])
+    values = {"dx": dx, "dy": dy, "dz": dz, "Xwf": wheels["front"], "Xwr": wheels["rear"], "side": camera_side,
+              "side*dy": camera_side * dy, "one": 1.0}
+    return np.array(vocabulary.typical_points(vocabulary.entry(kind, name), values))
 
 
-#: Prototypes whose bodies are boxes, so that the cuboid's corners are parts one can click.
-BOX_SHAPED = frozenset({"Van", "Truck", "Small Van", "Box Wagon", "Large Van", "Mini Truck", "Small Size Truck",
-                        "Mid Size Truck", "Urban Bus (Solo)", "Urban Bus (Front)", "Urban Bus (Back)", "Coach",
-                        "Trailer", "Caravan"})
+def is_box_shaped(*prototypes: str) -> bool:
+    """Whether a vehicle of any of these prototypes (its own, its KITTI type) is a box, so that the cuboid's
+    corners are parts one can click (the vocabulary's ``box-shaped`` prototype group)."""
+    return any(p in vocabulary.PROTOTYPE_GROUPS["box-shaped"] for p in prototypes)
+
+
+_SUGGEST = {"always": lambda side: True, "never": lambda side: False,
+            "camera-left": lambda side: side > 0, "camera-right": lambda side: side < 0}
 
 
 def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> list[tuple[str, str]]:
-    """The annotations not made yet, as (kind, name); a wheelbase counts as its two wheels clicked. Arrows:
-    forward, and across the vehicle away from the camera (``camera_side`` +1: the camera is on its left)."""
+    """The annotations not made yet, as (kind, name), in the vocabulary's order; a wheelbase counts as its two
+    wheels clicked. Parts that suit only some prototypes (corners) when ``corners`` or one is clicked already;
+    of a kind suggested once (arrows), none when one is clicked, else those its ``suggest`` admits for the
+    camera's side (``camera_side`` +1: the camera is on the vehicle's left)."""
     clicked = {(p.kind, p.name) for p in parts}
-    corners = corners or any(p.kind == "point" and p.name.startswith("corner-") for p in parts)
-    clicked |= {("point", f"wheel-{a}-{s}") for p in parts if p.kind == "length" and p.name.startswith("wheelbase")
-                for a in ("front", "rear") for s in (p.name.split("-")[1],)}
-    out = [("point", n) for n in POINT_PARTS
-           if ("point", n) not in clicked and (corners or not n.startswith("corner-"))]
-    out += [("symmetry", f) for f in SYMMETRY_FACES if ("symmetry", f) not in clicked]
-    across = "rightward" if camera_side > 0 else "leftward"
-    out += [("direction", a) for a in ("forward", across) if not any(p.kind == "direction" for p in parts)]
+    corners = corners or any(vocabulary.entry(p.kind, p.name).suits != "all" for p in parts)
+    for p in parts:
+        e = vocabulary.entry(p.kind, p.name)
+        if e.get("shape") == "wheelbase":
+            clicked |= {("point", f"wheel-{axle}-{e.get('side')}") for axle in ("front", "rear")}
+    kinds_clicked = {p.kind for p in parts}
+    out = []
+    for kind in vocabulary.KINDS.values():
+        if kind.suggest_once and kind.kind in kinds_clicked:
+            continue
+        for name, e in kind.names.items():
+            if e.typical is None or (kind.kind, name) in clicked or not (corners or e.suits == "all"):
+                continue
+            if "suggest" in e.attributes and not _SUGGEST[e.get("suggest")](camera_side):
+                continue
+            out.append((kind.kind, name))
     return out
 
 
@@ -141,7 +138,7 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     ----------
     parts : the vehicle's annotations; fit : its fit (no suggestions when it failed)
     options, ground, known_dimensions : as the fit had them
-    box_shaped : suggest the cuboid's corners too (see :data:`BOX_SHAPED`)
+    box_shaped : suggest the cuboid's corners too (see :func:`is_box_shaped`)
 
     Returns
     -------
@@ -179,22 +176,14 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         _set_own_values(combined.A[first:last], points_vehicle, p)
     problem = Problem.build(combined, camera, prior, options.lambda_3d, options.lambda_px, ground,
                             float(np.linalg.norm(t)))
-    J_px, J_cue = jacobians(problem, R, t, p)
-    sigmas = row_sigmas(problem, R, t, p, options.click_sigma, options.part_sigma)
-    G = ypr_gradient(R)
-    base_rows = np.arange(2 * base.n_clicks)
-    base_cols = np.array([6 + index[name] for name in base.param_names])
-    cols0 = np.concatenate([np.arange(6), base_cols])
-    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
-                                     sigmas[base_rows], G, t)
+    base_params = np.array([index[name] for name in base.param_names])
+    now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks, rows,
+                                                 options.click_sigma, options.part_sigma)
     size = camera.image_size
     out = []
-    for part, (first, last) in zip(placed, rows, strict=True):
-        own = np.flatnonzero(np.any(combined.A[first:last] != 0, axis=(0, 1)))
-        cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
-        r = np.concatenate([base_rows, np.arange(2 * first, 2 * last)])
-        u = uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t)
-        visible = all(f is None or any(facing[x] for x in f) for f in map(faces_of_click, part.click_labels))
+    for part, u in zip(placed, added, strict=True):
+        visible = all(f is None or any(facing[x] for x in f)
+                      for f in map(vocabulary.faces_of_click, part.click_labels))
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
         score = (math.log(_bounded(now.yaw_deg) / _bounded(u.yaw_deg))
                  + math.log(_bounded(now.depth_rel) / _bounded(u.depth_rel)))
@@ -227,3 +216,6 @@ def _set_own_values(A_rows: np.ndarray, points_vehicle: np.ndarray, p: np.ndarra
         i, axis = np.argwhere(A_rows[:, :, j] != 0)[0]
         rest = A_rows[i, axis] @ np.where(np.isnan(p), 0.0, p)
         p[j] = (points_vehicle[i, axis] - rest) / A_rows[i, axis, j]
+
+
+__all__ = ["Suggestion", "is_box_shaped", "suggest_clicks"]

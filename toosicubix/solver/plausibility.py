@@ -8,20 +8,20 @@ the clicks as well as the true one. Two facts rule most of them out:
   ``max_tilt``.
 - **Seen faces**: every clicked part lies on a face of the cuboid that is turned to the camera (a tyre
   also from its end of the vehicle, under the bumper; an edge or a corner from any adjacent face). A
-  face seen within ``GRAZING_DEG`` of edge-on still counts, for noise.
+  face seen within ``GRAZING_DEG`` of edge-on still counts, for noise. Which faces a part can be seen on is
+  the part vocabulary's (:func:`toosicubix.parts.vocabulary.faces_of_click`).
 """
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
+
+from toosicubix.parts.vocabulary import FACES, faces_of_click
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
 GRAZING_DEG = 15.0
 
-_FACES = ("front", "rear", "left", "right", "top")
-#: Outward normals of the faces, vehicle frame: (5, 3).
+#: Outward normals of the faces (in :data:`FACES` order), vehicle frame: (5, 3).
 _FACE_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 #: Face centres as fractions of (dx, dy, dz), vehicle frame (origin at the bottom centre): (5, 3).
 _FACE_CENTRES = np.array([[0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [0.0, 0.5, 0.5], [0.0, -0.5, 0.5], [0.0, 0.0, 1.0]])
@@ -33,36 +33,6 @@ def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
     return float(np.arccos(np.clip(R_cam_vehicle[:, 2] @ up, -1.0, 1.0)))
 
 
-@lru_cache(maxsize=4096)
-def faces_of_click(label: str) -> tuple[str, ...] | None:
-    """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
-    if label.startswith("direction-"):
-        return None
-    if label.startswith("length-"):
-        feature = label.split("/")[0].removeprefix("length-")
-        if feature.startswith("plate-"):
-            return (feature.removeprefix("plate-"),)
-        if feature.startswith("wheelbase-"):
-            side = feature.removeprefix("wheelbase-")
-            return (side, "front", "rear")
-        _, axle, side = feature.split("-")  # a tyre
-        return (side, axle)
-    if label.startswith("symmetry-"):
-        face = label.split("/")[0].removeprefix("symmetry-")
-        return ("top",) if face == "roof" else (face,)
-    words = label.split("-")
-    if words[0] == "wheel":
-        return (words[2], words[1])
-    if words[0] in ("front", "rear"):
-        return (words[0],)
-    if words[0] == "top":
-        return ("top",)
-    if words[0] == "edge":
-        return (words[1], words[2])
-    # corner-{top,bottom}-{front,rear}-{left,right}: the bottom face is never seen
-    return tuple(w for w in words[1:] if w != "bottom")
-
-
 def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray,
                            grazing_deg: float = GRAZING_DEG) -> dict[str, bool]:
     """For each face but the bottom: is it turned to the camera? A face seen edge-on counts, and one
@@ -72,7 +42,7 @@ def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
     along = np.einsum("fi,fi->f", _FACE_NORMALS, to_camera)
     distance = np.sqrt(np.einsum("fi,fi->f", to_camera, to_camera))
     seen = along > -np.sin(np.deg2rad(grazing_deg)) * distance
-    return dict(zip(_FACES, seen.tolist(), strict=True))
+    return dict(zip(FACES, seen.tolist(), strict=True))
 
 
 def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
+from toosicubix.parts import vocabulary
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 
@@ -108,7 +109,7 @@ def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, cl
         return np.full(2 * problem.parts.n_clicks, float(click_sigma))
     z = np.maximum(problem.points_cam(R, t, p)[:, 2], 0.5)
     f = 0.5 * (problem.K[0, 0] + problem.K[1, 1])
-    on_body = np.array([not label.startswith("direction-") for label in problem.parts.click_labels])
+    on_body = np.array([vocabulary.on_body(label) for label in problem.parts.click_labels])
     return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
 
 
@@ -151,6 +152,43 @@ def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: f
     parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
     and ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
     return _uncertainty(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
+
+
+def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+                                    base_params: np.ndarray, n_base_clicks: int,
+                                    added: list[tuple[int, int]], click_sigma: float,
+                                    part_sigma: float = 0.0) -> tuple[Uncertainty, list[Uncertainty]]:
+    """The uncertainty of a fit, and of the same fit with each of some candidate annotations added, from one
+    Jacobian of a model that holds them all (:mod:`toosicubix.solver.guidance`).
+
+    Parameters
+    ----------
+    problem : its parts model holds the fit's clicks first (``n_base_clicks``), then every candidate's
+    R, t, p : the pose (3, 3), (3,) and every parameter (P,) of that model
+    base_params : (P0,) indices in ``p`` of the fit's own parameters, in its own order
+    added : per candidate, its click indices ``[first, last)``
+    click_sigma, part_sigma : as :func:`row_sigmas`
+
+    Returns
+    -------
+    now : the fit's uncertainty; with : per candidate, with it clicked (its own new unknowns included)
+    """
+    J_px, J_cue = jacobians(problem, R, t, p)
+    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
+    G = ypr_gradient(R)
+    A = problem.parts.A
+    base_rows = np.arange(2 * n_base_clicks)
+    base_cols = 6 + np.asarray(base_params)
+    cols0 = np.concatenate([np.arange(6), base_cols])
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
+                                     sigmas[base_rows], G, t)
+    out = []
+    for first, last in added:
+        own = np.flatnonzero(np.any(A[first:last] != 0, axis=(0, 1)))
+        cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
+        r = np.concatenate([base_rows, np.arange(2 * first, 2 * last)])
+        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t))
+    return now, out
 
 
 def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
@@ -219,7 +257,7 @@ def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
         g = np.zeros(n)
         g[:3] = G[k]
         out[name] = g
-    rigid = [i for i, label in enumerate(problem.parts.click_labels) if not label.startswith("direction-")]
+    rigid = [i for i, label in enumerate(problem.parts.click_labels) if vocabulary.on_body(label)]
     A_mean = problem.A[rigid].mean(axis=0) if rigid else problem.A_mean
     c = A_mean @ p  # centroid, vehicle frame
     z_c = float(R[2] @ c + t[2])
