@@ -15,9 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from toosicubix.annotations.convert import vehicle_json
 from toosicubix.camera import Camera
 from toosicubix.formats.kitti import format_label_line, object_from_pose
 from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam
+from toosicubix.model import Vehicle
 from toosicubix.parts.synthesis import PartSpec, render_parts
 from toosicubix.solver.plausibility import unseen_clicks
 
@@ -109,15 +111,6 @@ def camera_for(kind: str) -> tuple[Camera, dict, tuple[int, int]]:
     return cam, {"K": K_WIDE.tolist(), "distortion": DIST_WIDE}, size
 
 
-def to_json(part, spec: PartSpec) -> dict:
-    xy = [[round(float(v), 1) for v in row] for row in part.uv]
-    if spec.kind == "point":
-        return {"kind": "point", "part": spec.name, "xy": xy[0]}
-    if spec.kind == "symmetry":
-        return {"kind": "symmetry", "face": spec.name, "left": xy[0], "right": xy[1]}
-    return {"kind": "direction", "axis": spec.name, "tail": xy[0], "head": xy[1]}
-
-
 def calib_text(camera: Camera) -> str:
     P2 = np.hstack([camera.K, (camera.K @ camera.t_cam_rect)[:, None]])
     P0 = np.hstack([camera.K, np.zeros((3, 1))])
@@ -146,10 +139,8 @@ def main() -> None:
             assert not unseen, f"image {image_id} vehicle {vid}: {unseen} are on faces the camera cannot see"
             corners_uv = camera.project(clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, dims)))
             box = box2d_of_points(corners_uv, size)
-            vehicles.append({
-                "id": vid, "prototype": prototype, "box2d": [round(float(v), 1) for v in box],
-                "parts": [to_json(p, s) for p, s in zip(parts, specs, strict=True)],
-            })
+            box_json = np.array([round(float(v), 1) for v in box])
+            vehicles.append(vehicle_json(Vehicle(vid, prototype, box_json, tuple(parts), ""), decimals=1))
             kitti_type = {"Mid Size Car": "Car"}.get(prototype, prototype)
             obj = object_from_pose(kitti_type, R, t, dims, camera, box, occluded=0, score=None)
             gt_lines.append(format_label_line(obj))

@@ -37,6 +37,10 @@ where the parts model puts it (the arrows too), which tests the solver rather th
 
 Randomness is seeded per vehicle from ``seed`` and the vehicle's image and id, so a vehicle's clicks do
 not depend on which other vehicles are simulated.
+
+The faces each part can be seen on and the prototypes it suits (the corners: box-shaped ones) are the part
+vocabulary's (:mod:`toosicubix.parts.vocabulary`); the annotation file is written by
+:func:`toosicubix.annotations.convert.vehicle_json`.
 """
 
 from __future__ import annotations
@@ -49,11 +53,13 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix.annotations.convert import vehicle_json
 from toosicubix.camera import Camera
 from toosicubix.formats import FormatError
 from toosicubix.formats.kitti import KittiObject, read_calib, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
-from toosicubix.model import Part
+from toosicubix.model import Part, Vehicle
+from toosicubix.parts import vocabulary
 from toosicubix.parts.synthesis import PartSpec, true_parameters
 
 #: KITTI image sizes by the focal length of P2 (one per recording date); other cameras: the option.
@@ -262,58 +268,67 @@ def _axis_view_angle(camera_vehicle: np.ndarray) -> tuple[float, float]:
 
 def _candidate_specs(gt: GroundTruthVehicle, d: np.ndarray, wheel_x: tuple[float, float],
                      visible: dict[str, bool], camera_vehicle: np.ndarray, rng: np.random.Generator,
-                     exact: bool) -> list[tuple[PartSpec, str]]:
-    """Every annotation the person would consider, in order of preference, with what must be visible."""
+                     exact: bool) -> list[PartSpec]:
+    """Every annotation the person would consider, in order of preference (:func:`_needs` says which of them
+    can be seen)."""
     dx, dy, dz = d
     u = rng.uniform
-    boxy = gt.label.type in ("Van", "Truck")
+    boxy = _box_shaped(gt.label.type)
 
     def inset(lo: float, hi: float) -> float:
         return 0.0 if exact else u(lo, hi)
 
-    out: list[tuple[PartSpec, str]] = []
+    out: list[PartSpec] = []
     for axle in ("front", "rear"):
         for side in ("left", "right"):
-            out.append((PartSpec("point", f"wheel-{axle}-{side}"), f"{side}|{axle}"))
+            out.append(PartSpec("point", f"wheel-{axle}-{side}"))
     for end, sign in (("front", 1.0), ("rear", -1.0)):
         light_z = u(0.2, 0.35) if boxy else (u(0.45, 0.6) if end == "front" else u(0.55, 0.72))
-        out.append((PartSpec("symmetry", end, {"Y": u(0.33, 0.44) * dy, "Z": light_z * dz,
-                                                "_X": sign * (dx / 2 - inset(0.03, 0.20))}), end))
+        out.append(PartSpec("symmetry", end, {"Y": u(0.33, 0.44) * dy, "Z": light_z * dz,
+                                              "_X": sign * (dx / 2 - inset(0.03, 0.20))}))
         badge_z = u(0.4, 0.55) if end == "front" else u(0.3, 0.5)
-        out.append((PartSpec("point", f"{end}-center", {"Z": badge_z * dz, "_X": sign * (dx / 2 - inset(0.02, 0.15))}),
-                    end))
+        out.append(PartSpec("point", f"{end}-center", {"Z": badge_z * dz, "_X": sign * (dx / 2 - inset(0.02, 0.15))}))
     for end in ("front", "rear"):
         for side in ("left", "right"):
-            out.append((PartSpec("point", f"edge-{end}-{side}", {"Z": u(0.3, 0.7) * dz, "_in": inset(0.05, 0.20)}),
-                        f"{end}|{side}"))
+            out.append(PartSpec("point", f"edge-{end}-{side}", {"Z": u(0.3, 0.7) * dz, "_in": inset(0.05, 0.20)}))
     along_x, along_y = _axis_view_angle(camera_vehicle)
     if along_x < STRAIGHT_VIEW_DEG:  # straight from the front or rear: an arrow beside the vehicle
         side = 1.0 if camera_vehicle[1] >= 0 else -1.0
         axis = "forward" if rng.uniform() < 0.5 else "backward"
         start = -dx / 2 if axis == "forward" else dx / 2
-        out.append((PartSpec("direction", axis, {"X": start + u(-0.3, 0.3), "Y": side * (dy / 2 + u(0.2, 0.6)),
-                                                 "Z": 0.0}), "ground"))
+        out.append(PartSpec("direction", axis, {"X": start + u(-0.3, 0.3), "Y": side * (dy / 2 + u(0.2, 0.6)),
+                                               "Z": 0.0}))
     elif along_y < STRAIGHT_VIEW_DEG:  # straight from a side: an arrow ahead of the vehicle, away from us
         side = 1.0 if camera_vehicle[1] >= 0 else -1.0
         axis = "rightward" if side > 0 else "leftward"
-        out.append((PartSpec("direction", axis, {"X": dx / 2 + u(0.3, 0.8), "Y": side * dy / 2, "Z": 0.0}),
-                    "ground"))
-    out.append((PartSpec("symmetry", "roof", {"X": u(-0.25, 0.05) * dx, "Y": u(0.3, 0.4) * dy,
-                                              "_Z": dz - inset(0.0, 0.05)}), "top"))
-    out.append((PartSpec("point", "top-center", {"X": u(-0.3, 0.1) * dx, "_Z": dz - inset(0.0, 0.05)}), "top"))
-    if boxy:
-        for end in ("front", "rear"):
-            for side in ("left", "right"):
-                out.append((PartSpec("point", f"corner-top-{end}-{side}", {"_in": inset(0.0, 0.05)}),
-                            f"top|{end}|{side}"))
+        out.append(PartSpec("direction", axis, {"X": dx / 2 + u(0.3, 0.8), "Y": side * dy / 2, "Z": 0.0}))
+    out.append(PartSpec("symmetry", "roof", {"X": u(-0.25, 0.05) * dx, "Y": u(0.3, 0.4) * dy,
+                                            "_Z": dz - inset(0.0, 0.05)}))
+    out.append(PartSpec("point", "top-center", {"X": u(-0.3, 0.1) * dx, "_Z": dz - inset(0.0, 0.05)}))
+    for end in ("front", "rear"):
+        for side in ("left", "right"):
+            corner = vocabulary.entry("point", f"corner-top-{end}-{side}")
+            if vocabulary.suits(corner, (gt.label.type,)):
+                out.append(PartSpec("point", corner.name, {"_in": inset(0.0, 0.05)}))
     return out
 
 
-def _needs(rule: str, visible: dict[str, bool]) -> bool:
-    """``a|b``: any alternative; ``a&b``: all of them; 'ground': always."""
-    if rule == "ground":
-        return True
-    return any(all(visible[f] for f in alt.split("&")) for alt in rule.split("|"))
+def _box_shaped(prototype: str) -> bool:
+    """A body that is a box (the vocabulary's ``box-shaped`` prototype group): lights set low, long rear
+    overhangs, and corners one can click."""
+    return prototype in vocabulary.PROTOTYPE_GROUPS["box-shaped"]
+
+
+def _on_ground(spec: PartSpec) -> bool:
+    """Drawn anywhere, the ground included (an arrow): the vocabulary gives it no faces."""
+    return vocabulary.entry(spec.kind, spec.name).faces is None
+
+
+def _needs(spec: PartSpec, visible: dict[str, bool]) -> bool:
+    """Whether the person can see the part: any of the faces the vocabulary puts it on is visible; always
+    for one drawn on the ground."""
+    faces = vocabulary.entry(spec.kind, spec.name).faces
+    return faces is None or any(visible[f] for f in faces)
 
 
 def _real_points(spec: PartSpec, d: np.ndarray, wheel_x: tuple[float, float], tyre_inset: float,
@@ -361,7 +376,7 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
     d = np.asarray(obj.dimensions, dtype=float)
     R = R_cam_vehicle_from_ypr(obj.rotation_y)
     t = obj.t_cam_vehicle(camera.t_cam_rect)
-    boxy = obj.type in ("Van", "Truck")
+    boxy = _box_shaped(obj.type)
     front_overhang = rng.uniform(0.10, 0.15) if obj.type == "Truck" else rng.uniform(0.17, 0.24)
     rear_overhang = rng.uniform(0.20, 0.35) if boxy else rng.uniform(0.18, 0.26)
     wheel_x = (d[0] * (0.5 - front_overhang), -d[0] * (0.5 - rear_overhang))
@@ -377,8 +392,8 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
     spare: list[Part] = []
     spare_rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/spare")
     clicks = 0
-    for spec, rule in _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement):
-        if not _needs(rule, visible):
+    for spec in _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement):
+        if not _needs(spec, visible):
             continue
         arrow_yaw = 0.0 if options.exact_placement else math.radians(rng.normal(0.0, 2.0))
         points_vehicle = _real_points(spec, d, wheel_x, tyre_inset, arrow_yaw)
@@ -391,7 +406,7 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
             continue
         if len(uv) == 2 and np.linalg.norm(uv[1] - uv[0]) < MIN_PAIR_SEPARATION_PX:
             continue
-        if rule != "ground" and drop > 0 and rng.uniform() < drop:
+        if not _on_ground(spec) and drop > 0 and rng.uniform() < drop:
             notes.append(f"{spec.kind} {spec.name}: lost to occlusion")
             continue
         if clicks + len(uv) > options.max_clicks:
@@ -408,15 +423,6 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
         clicks += len(uv)
     p_true = true_parameters(specs, d, wheel_x)[1] if specs else np.zeros(3)
     return SimulatedVehicle(gt, parts, specs, R, t, d, wheel_x, p_true, notes, spare)
-
-
-def _part_json(part: Part) -> dict[str, Any]:
-    xy = [[float(v) for v in row] for row in part.uv]  # full precision: exact clicks stay exact
-    if part.kind == "point":
-        return {"kind": "point", "part": part.name, "xy": xy[0]}
-    if part.kind == "symmetry":
-        return {"kind": "symmetry", "face": part.name, "left": xy[0], "right": xy[1]}
-    return {"kind": "direction", "axis": part.name, "tail": xy[0], "head": xy[1]}
 
 
 def annotation_document(simulated: list[SimulatedVehicle],
@@ -437,11 +443,8 @@ def annotation_document(simulated: list[SimulatedVehicle],
                 "id": gt.image_id, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
                 "camera": {"P": P2.tolist()}, **({"ground": dict(ground)} if ground else {}), "vehicles": [],
             }
-        image["vehicles"].append({
-            "id": gt.vehicle_id, "prototype": gt.label.type,
-            "box2d": [round(float(v), 2) for v in gt.label.box2d],
-            "parts": [_part_json(p) for p in sv.parts],
-        })
+        box2d = np.array([round(float(v), 2) for v in gt.label.box2d])
+        image["vehicles"].append(vehicle_json(Vehicle(gt.vehicle_id, gt.label.type, box2d, tuple(sv.parts), "")))
     return {"toosicubix": 1, "images": list(images.values())}
 
 

@@ -1,0 +1,81 @@
+"""The part vocabulary (:mod:`toosicubix.parts.vocabulary`) is complete and consistent."""
+
+import numpy as np
+import pytest
+
+from toosicubix.annotations import schema
+from toosicubix.model import Part
+from toosicubix.parts import vocabulary
+from toosicubix.parts.linear import LINEAR_FORMS, build_parts_model
+
+
+def test_every_kind_has_its_linear_form_and_no_form_lacks_a_kind():
+    assert set(LINEAR_FORMS) == set(vocabulary.KINDS)
+
+
+def test_the_schema_admits_exactly_the_vocabulary_s_names():
+    assert schema.POINT_PARTS == vocabulary.names("point")
+    assert schema.SYMMETRY_FACES == vocabulary.names("symmetry") == ("front", "rear", "roof")
+    assert schema.DIRECTION_AXES == vocabulary.names("direction")
+    assert tuple(schema.LENGTH_FEATURES) == vocabulary.names("length")
+    assert all(isinstance(d, str) and d for d in schema.LENGTH_FEATURES.values())
+    assert len(schema.POINT_PARTS) == 19
+
+
+@pytest.mark.parametrize("kind", list(vocabulary.KINDS))
+def test_every_name_builds_its_clicks_with_the_vocabulary_s_labels(kind):
+    k = vocabulary.KINDS[kind]
+    for name, entry in k.names.items():
+        uv = np.zeros((len(k.clicks), 2))
+        known = (1.0, 0.1) if k.known else None
+        model = build_parts_model([Part(kind, name, uv, "$", known)])
+        assert model.click_labels == vocabulary.click_labels(kind, name)
+        for index, label in enumerate(model.click_labels):
+            assert vocabulary.click(label) == vocabulary.Click(kind, name, index, label)
+        assert entry.faces is None or (entry.faces and set(entry.faces) <= set(vocabulary.FACES))
+        assert entry.suits == "all" or entry.suits in vocabulary.PROTOTYPE_GROUPS
+
+
+def test_typical_positions_have_a_point_per_click_and_known_terms():
+    for k in vocabulary.KINDS.values():
+        for entry in k.names.values():
+            if entry.typical is None:
+                continue
+            assert len(entry.typical) == len(k.clicks)
+            for point in entry.typical:
+                assert len(point) == 3
+                assert all(term in vocabulary.TYPICAL_TERMS for form in point for term in form)
+
+
+def test_typical_positions_lie_on_the_faces_they_name():
+    """A part's typical points, on a 4 x 2 x 1.5 m cuboid, lie on (one of) the faces the vocabulary names."""
+    d = np.array([4.0, 2.0, 1.5])
+    values = {"dx": 4.0, "dy": 2.0, "dz": 1.5, "Xwf": 1.3, "Xwr": -1.2, "side": 1.0, "side*dy": 2.0, "one": 1.0}
+    on_face = {"front": lambda X: np.isclose(X[0], d[0] / 2), "rear": lambda X: np.isclose(X[0], -d[0] / 2),
+               "left": lambda X: np.isclose(X[1], d[1] / 2), "right": lambda X: np.isclose(X[1], -d[1] / 2),
+               "top": lambda X: np.isclose(X[2], d[2])}
+    checked = 0
+    for k in vocabulary.KINDS.values():
+        for entry in k.names.values():
+            if entry.typical is None or entry.faces is None or entry.get("shape") == "wheel":
+                continue  # wheels touch the ground under their face, not on it
+            for X in vocabulary.typical_points(entry, values):
+                assert any(on_face[f](X) for f in entry.faces), (entry.kind, entry.name, X)
+                checked += 1
+    assert checked > 20
+
+
+def test_arrows_are_off_the_body_and_wheels_on_it():
+    assert not vocabulary.on_body("direction-forward/tail")
+    assert vocabulary.on_body("wheel-front-left")
+    assert vocabulary.faces_of_click("corner-bottom-rear-left") == ("rear", "left")
+    assert vocabulary.faces_of_click("length-wheelbase-right/b") == ("right", "front", "rear")
+    with pytest.raises(KeyError):
+        vocabulary.click("wheel-middle-left")
+
+
+def test_corners_suit_box_shaped_prototypes_only():
+    corner = vocabulary.entry("point", "corner-top-front-left")
+    assert vocabulary.suits(corner, ("Van",)) and vocabulary.suits(corner, ("Mid Size Car", "Truck"))
+    assert not vocabulary.suits(corner, ("Car",))
+    assert vocabulary.suits(vocabulary.entry("point", "wheel-rear-right"), ("Car",))
