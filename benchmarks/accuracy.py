@@ -126,7 +126,7 @@ def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path) 
     tasks = []
     for sv in simulated:
         v = fitted[(sv.source.image_id, sv.source.vehicle_id)]
-        tasks.append((sv, v.details.get("cost") if v.ok else None, options))
+        tasks.append((sv, v.cost if v.ok else None, options))
     with ProcessPoolExecutor(jobs) as pool:
         refs = list(pool.map(_reference, tasks, chunksize=16))
 

@@ -88,7 +88,7 @@ def run(doc: dict, gt_dir: Path, folder: Path, joint: bool = False) -> tuple[dic
     summary = summarize(evaluate_folder(folder / "out", "kitti", gt_dir))
     summary["fit_seconds"] = seconds
     results = read_results(folder / "out" / "results.json")
-    scale_from = collections.Counter(v.details.get("scale_from") for im in results for v in im.vehicles if v.ok)
+    scale_from = collections.Counter(v.scale_from for im in results for v in im.vehicles if v.ok)
     summary["scale_from"] = dict(scale_from)
     return summary, results
 

@@ -252,11 +252,11 @@ def write_results(out_dir: Path, images: dict[str, list[Pose]], K: np.ndarray, t
     results = []
     for image_id, poses in images.items():
         vehicles = [VehicleResult(id=str(k), status="ok", error=None, prototype=p.cls, R_cam_vehicle=p.R,
-                                  t_cam_vehicle=p.t, dimensions=p.d, box2d=p.box2d, details={"kitti_type": p.cls})
+                                  t_cam_vehicle=p.t, dimensions=p.d, box2d=p.box2d, kitti_type=p.cls)
                     for k, p in enumerate(poses)]
         for k, box in enumerate((failed or {}).get(image_id, [])):
             vehicles.append(VehicleResult(id=f"f{k}", status="failed", error="PnP found no solution",
-                                          prototype="Car", box2d=box, details={"kitti_type": "Car"}))
+                                          prototype="Car", box2d=box, kitti_type="Car"))
         results.append(ImageResult(id=image_id, K=K, t_cam_rect=t_cam_rect, image_size=image_size, vehicles=vehicles))
     (out_dir / "results.json").write_text(dumps(results_to_json(results, {"generator": "tests"})))
     return out_dir

@@ -79,7 +79,7 @@ def test_validate_and_fit_agree(tmp_path):
     assert run("fit", str(SAMPLE), "-o", str(out), "--next-clicks", "3").exit_code == 0
     fitted = json.loads((out / "results.json").read_text())
     report = validate_file(SAMPLE, thresholds=Thresholds())
-    by_id = {(c.image_id, c.result.id): c.result.details for c in report.vehicles}
+    by_id = {(c.image_id, c.result.id): c.result.to_json() for c in report.vehicles}
     for image in fitted["images"]:
         for v in image["vehicles"]:
             details = by_id[(image["id"], v["id"])]

@@ -136,7 +136,7 @@ def _image_from_result(im: ImageResult, i: int, path: Path) -> PredImage:
 
 
 def _object_from_vehicle(v: VehicleResult, im: ImageResult, source: str) -> PredObject:
-    cls = str(v.details.get("kitti_type") or v.prototype)
+    cls = str(v.kitti_type or v.prototype)
     if not v.ok:
         return PredObject(id=v.id, cls=cls, status=v.status, error=v.error, cuboid=None, box2d=v.box2d, source=source)
     cuboid = Cuboid(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)  # type: ignore[arg-type]

@@ -14,7 +14,7 @@ Layout (keys may be added; these keep their names and meanings)::
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -28,9 +28,161 @@ RESULTS_FILENAME = "results.json"
 DEFAULT_OUTPUT_DIR = "toosicubix-out"
 
 
+def _floats(value: Any) -> tuple[float | None, ...]:
+    return tuple(None if v is None else float(v) for v in value)
+
+
+@dataclass(frozen=True)
+class Sigma:
+    """Standard deviations of a fit (results.json's ``sigma``); None: not determined at all (infinite).
+
+    Attributes
+    ----------
+    yaw_deg, pitch_deg, roll_deg : KITTI yaw, the vehicle's pitch and roll, degrees
+    depth_m, depth_rel : the bottom centre's camera z, metres and relative to it
+    dimensions : (3,) of (dx, dy, dz), metres; position_m : (2,) of the bottom centre's camera x and z
+    scale_rel : of the vehicle's scale (its distance), relative
+    """
+
+    yaw_deg: float | None
+    pitch_deg: float | None
+    roll_deg: float | None
+    depth_m: float | None
+    depth_rel: float | None
+    dimensions: tuple[float | None, ...]
+    position_m: tuple[float | None, ...]
+    scale_rel: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"yaw_deg": self.yaw_deg, "pitch_deg": self.pitch_deg, "roll_deg": self.roll_deg,
+                "depth_m": self.depth_m, "depth_rel": self.depth_rel, "dimensions": list(self.dimensions),
+                "position_m": list(self.position_m), "scale_rel": self.scale_rel}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Sigma:
+        return cls(yaw_deg=d["yaw_deg"], pitch_deg=d["pitch_deg"], roll_deg=d["roll_deg"], depth_m=d["depth_m"],
+                   depth_rel=d["depth_rel"], dimensions=_floats(d["dimensions"]),
+                   position_m=_floats(d["position_m"]), scale_rel=d["scale_rel"])
+
+
+@dataclass(frozen=True)
+class Observability:
+    """What the clicks determine (results.json's ``observability``).
+
+    Attributes
+    ----------
+    determined_by : per quantity, 'clicks', 'mostly cues' or 'cues only'
+    variance_ratios : per quantity, variance with the clicks alone over that with clicks and cues (None: infinite)
+    sentences : plain sentences, one per quantity the clicks do not fix, and one on the scale
+    """
+
+    determined_by: dict[str, str]
+    variance_ratios: dict[str, float | None]
+    sentences: tuple[str, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"determined_by": dict(self.determined_by), "variance_ratios": dict(self.variance_ratios),
+                "sentences": list(self.sentences)}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Observability:
+        return cls(dict(d["determined_by"]), dict(d["variance_ratios"]), tuple(d["sentences"]))
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """Another minimum the refinement reached (results.json's ``alternatives``).
+
+    Attributes
+    ----------
+    cost : its pixel cost; rotation_deg : its rotation's angle from the answer's, degrees
+    turned_around : it faces the other way; implausible : why it was rejected, or None
+    close : its cost is within the ambiguity margin of the answer's
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,); dimensions : (3,)
+    """
+
+    cost: float
+    rotation_deg: float
+    turned_around: bool
+    implausible: str | None
+    close: bool
+    R_cam_vehicle: np.ndarray
+    t_cam_vehicle: np.ndarray
+    dimensions: np.ndarray
+
+    def to_json(self) -> dict[str, Any]:
+        return {"cost": self.cost, "rotation_deg": self.rotation_deg, "turned_around": self.turned_around,
+                "implausible": self.implausible, "close": self.close,
+                "R_cam_vehicle": self.R_cam_vehicle.tolist(), "t_cam_vehicle": self.t_cam_vehicle.tolist(),
+                "dimensions": self.dimensions.tolist()}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Alternative:
+        return cls(cost=d["cost"], rotation_deg=d["rotation_deg"], turned_around=d["turned_around"],
+                   implausible=d["implausible"], close=d["close"],
+                   R_cam_vehicle=np.array(d["R_cam_vehicle"], dtype=float),
+                   t_cam_vehicle=np.array(d["t_cam_vehicle"], dtype=float),
+                   dimensions=np.array(d["dimensions"], dtype=float))
+
+
+@dataclass(frozen=True)
+class Cues:
+    """What besides the clicks shaped a fit (results.json's ``cues``).
+
+    Attributes
+    ----------
+    size_prior : always; upright : the road's normal was known; ground_contact : the camera height was known
+    known_sizes : the measurements' labels ('length plate-rear', 'known dx', ...)
+    joint_ground : refined together with the image's other vehicles and its ground plane (None: not)
+    """
+
+    size_prior: bool
+    upright: bool
+    ground_contact: bool
+    known_sizes: tuple[str, ...]
+    joint_ground: bool | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"size_prior": self.size_prior, "upright": self.upright,
+                               "ground_contact": self.ground_contact, "known_sizes": list(self.known_sizes)}
+        if self.joint_ground is not None:
+            out["joint_ground"] = self.joint_ground
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Cues:
+        return cls(d["size_prior"], d["upright"], d["ground_contact"], tuple(d["known_sizes"]), d.get("joint_ground"))
+
+
+@dataclass(frozen=True)
+class SolverStats:
+    """How the solver got there (results.json's ``solver``)."""
+
+    starts: int
+    starts_from_lines: bool
+    descent_iterations: int
+    refine_iterations: int
+    initial_cost: float | None
+    joint_iterations: int | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"starts": self.starts, "starts_from_lines": self.starts_from_lines,
+                               "descent_iterations": self.descent_iterations,
+                               "refine_iterations": self.refine_iterations, "initial_cost": self.initial_cost}
+        if self.joint_iterations is not None:
+            out["joint_iterations"] = self.joint_iterations
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> SolverStats:
+        return cls(d["starts"], d["starts_from_lines"], d["descent_iterations"], d["refine_iterations"],
+                   d["initial_cost"], d.get("joint_iterations"))
+
+
 @dataclass(frozen=True)
 class VehicleResult:
-    """One vehicle's fit. Pose fields are None when ``status == "failed"``.
+    """One vehicle's fit, as results.json has it. Pose fields are None when ``status == "failed"``; the fields
+    from ``box2d_source`` to ``warnings`` are set only for a vehicle that was fitted.
 
     Attributes
     ----------
@@ -38,7 +190,20 @@ class VehicleResult:
     t_cam_vehicle : (3,) or None, bottom-face centre in the camera frame of ``K``
     dimensions : (3,) or None, ``(dx, dy, dz)`` metres
     box2d : (4,) or None, ``(x1, y1, x2, y2)`` pixels
-    details : every other key of the vehicle's JSON object, as read or to be written
+    kitti_type : the type its KITTI label gets
+    constraints, clicks, aux_unknowns : 2 per click minus the auxiliary unknowns; clicked points; those unknowns
+    cues : what besides the clicks shaped it
+    box2d_source : 'annotated' or 'projected'; truncated : share of the projected box outside the image
+    yaw_pitch_roll_deg : (3,) KITTI yaw, pitch, roll
+    rms_px, residuals_px : (N, 2) projected minus clicked, undistorted pixels; click_labels : (N,)
+    cost : final pixel cost; prior_mahalanobis2 : the size prior's squared Mahalanobis distance
+    parameters : the wheel positions and other auxiliary unknowns by name, metres
+    scale_from, scale_shares : the cue that sets the scale, and every cue's share of it
+    sigma, confidence, observability, ambiguous, alternatives : how sure the fit is (README, "How sure is a fit")
+    warnings : what the solver warned about; solver : its statistics
+    next_clicks : the best parts to click next (as :meth:`toosicubix.solver.guidance.Suggestion.to_json`
+        gives them), or None when not asked for; next_clicks_error : why there are none
+    extra : keys of the JSON object this type does not know (kept, written last)
     """
 
     id: str
@@ -49,11 +214,119 @@ class VehicleResult:
     t_cam_vehicle: np.ndarray | None = None
     dimensions: np.ndarray | None = None
     box2d: np.ndarray | None = None
-    details: dict[str, Any] = field(default_factory=dict)
+    kitti_type: str | None = None
+    constraints: int | None = None
+    clicks: int | None = None
+    aux_unknowns: int | None = None
+    cues: Cues | None = None
+    box2d_source: str | None = None
+    truncated: float | None = None
+    yaw_pitch_roll_deg: tuple[float, float, float] | None = None
+    rms_px: float | None = None
+    residuals_px: np.ndarray | None = None
+    click_labels: tuple[str, ...] = ()
+    cost: float | None = None
+    prior_mahalanobis2: float | None = None
+    parameters: dict[str, float] = field(default_factory=dict)
+    scale_from: str | None = None
+    scale_shares: dict[str, float] = field(default_factory=dict)
+    sigma: Sigma | None = None
+    confidence: float | None = None
+    observability: Observability | None = None
+    ambiguous: bool = False
+    alternatives: tuple[Alternative, ...] = ()
+    warnings: tuple[str, ...] = ()
+    solver: SolverStats | None = None
+    next_clicks: list[dict[str, Any]] | None = None
+    next_clicks_error: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON object of one vehicle, keys in results.json's order."""
+        out: dict[str, Any] = {
+            "id": self.id, "status": self.status, "error": self.error, "prototype": self.prototype,
+            "R_cam_vehicle": _array(self.R_cam_vehicle), "t_cam_vehicle": _array(self.t_cam_vehicle),
+            "dimensions": _array(self.dimensions), "box2d": _array(self.box2d),
+        }
+        for key in ("kitti_type", "constraints", "clicks", "aux_unknowns"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        if self.cues is not None:
+            out["cues"] = self.cues.to_json()
+        if self.ok:
+            out.update({
+                "box2d_source": self.box2d_source, "truncated": self.truncated,
+                "yaw_pitch_roll_deg": None if self.yaw_pitch_roll_deg is None else list(self.yaw_pitch_roll_deg),
+                "rms_px": self.rms_px, "residuals_px": _array(self.residuals_px),
+                "click_labels": list(self.click_labels), "cost": self.cost,
+                "prior_mahalanobis2": self.prior_mahalanobis2, "parameters": dict(self.parameters),
+                "scale_from": self.scale_from, "scale_shares": dict(self.scale_shares),
+                "sigma": None if self.sigma is None else self.sigma.to_json(), "confidence": self.confidence,
+                "observability": None if self.observability is None else self.observability.to_json(),
+                "ambiguous": self.ambiguous, "alternatives": [a.to_json() for a in self.alternatives],
+                "warnings": list(self.warnings),
+            })
+        if self.solver is not None:
+            out["solver"] = self.solver.to_json()
+        if self.next_clicks is not None:
+            out["next_clicks"] = list(self.next_clicks)
+        if self.next_clicks_error is not None:
+            out["next_clicks_error"] = self.next_clicks_error
+        out.update(self.extra)
+        return out
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any], path: str | Path = "<results>", where: str = "$") -> VehicleResult:
+        """Read one vehicle's JSON object (``where`` its JSON path, for the messages).
+
+        Raises
+        ------
+        FormatError
+            A required key missing or malformed (the message gives its JSON path).
+        """
+        status = json_field(v, "status", str, path, where)
+        posed = status == "ok"
+
+        def get(key: str, convert: Any = None) -> Any:
+            value = v.get(key)
+            return value if value is None or convert is None else convert(value)
+
+        try:
+            return cls(
+                id=str(json_field(v, "id", str, path, where)), status=status, error=v.get("error"),
+                prototype=str(v.get("prototype", "")),
+                R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{where}.R_cam_vehicle")
+                if posed else None,
+                t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{where}.t_cam_vehicle")
+                if posed else None,
+                dimensions=json_numbers(v.get("dimensions"), (3,), path, f"{where}.dimensions") if posed else None,
+                box2d=json_numbers(v["box2d"], (4,), path, f"{where}.box2d") if v.get("box2d") is not None else None,
+                kitti_type=v.get("kitti_type"), constraints=v.get("constraints"), clicks=v.get("clicks"),
+                aux_unknowns=v.get("aux_unknowns"), cues=get("cues", Cues.from_json),
+                box2d_source=v.get("box2d_source"), truncated=v.get("truncated"),
+                yaw_pitch_roll_deg=get("yaw_pitch_roll_deg", tuple), rms_px=v.get("rms_px"),
+                residuals_px=get("residuals_px", lambda r: np.array(r, dtype=float).reshape(-1, 2)),
+                click_labels=tuple(v.get("click_labels") or ()), cost=v.get("cost"),
+                prior_mahalanobis2=v.get("prior_mahalanobis2"), parameters=dict(v.get("parameters") or {}),
+                scale_from=v.get("scale_from"), scale_shares=dict(v.get("scale_shares") or {}),
+                sigma=get("sigma", Sigma.from_json), confidence=v.get("confidence"),
+                observability=get("observability", Observability.from_json), ambiguous=bool(v.get("ambiguous")),
+                alternatives=tuple(Alternative.from_json(a) for a in v.get("alternatives") or ()),
+                warnings=tuple(v.get("warnings") or ()), solver=get("solver", SolverStats.from_json),
+                next_clicks=get("next_clicks", list), next_clicks_error=v.get("next_clicks_error"),
+                extra={k: val for k, val in v.items() if k not in _KNOWN_KEYS},
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, FormatError):
+                raise
+            raise FormatError(path, f"{where}: malformed vehicle result ({type(exc).__name__}: {exc})") from None
+
+
+_KNOWN_KEYS = {f.name for f in fields(VehicleResult)} - {"extra"}
 
 
 @dataclass(frozen=True)
@@ -81,14 +354,8 @@ def _array(value: np.ndarray | None) -> Any:
 
 
 def vehicle_to_json(v: VehicleResult) -> dict[str, Any]:
-    """The JSON object of one vehicle, fixed keys first."""
-    out: dict[str, Any] = {
-        "id": v.id, "status": v.status, "error": v.error, "prototype": v.prototype,
-        "R_cam_vehicle": _array(v.R_cam_vehicle), "t_cam_vehicle": _array(v.t_cam_vehicle),
-        "dimensions": _array(v.dimensions), "box2d": _array(v.box2d),
-    }
-    out.update(v.details)
-    return out
+    """The JSON object of one vehicle, fixed keys first (:meth:`VehicleResult.to_json`)."""
+    return v.to_json()
 
 
 def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -134,31 +401,11 @@ def read_results(path: str | Path) -> list[ImageResult]:
         K = json_numbers(camera.get("K"), (3, 3), path, f"{where}.camera.K")
         t_cam_rect = json_numbers(camera.get("t_cam_rect", [0.0, 0.0, 0.0]), (3,), path, f"{where}.camera.t_cam_rect")
         size = camera.get("image_size")
-        vehicles = []
-        for j, v in enumerate(json_field(im, "vehicles", list, path, where)):
-            vw = f"{where}.vehicles[{j}]"
-            status = json_field(v, "status", str, path, vw)
-            posed = status == "ok"
-            details = {k: val for k, val in v.items() if k not in _FIXED_KEYS}
-            vehicles.append(VehicleResult(
-                id=str(json_field(v, "id", str, path, vw)), status=status, error=v.get("error"),
-                prototype=str(v.get("prototype", "")),
-                R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{vw}.R_cam_vehicle")
-                if posed else None,
-                t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{vw}.t_cam_vehicle")
-                if posed else None,
-                dimensions=json_numbers(v.get("dimensions"), (3,), path, f"{vw}.dimensions") if posed else None,
-                box2d=json_numbers(v["box2d"], (4,), path, f"{vw}.box2d") if v.get("box2d") is not None else None,
-                details=details,
-            ))
+        vehicles = [VehicleResult.from_json(v, path, f"{where}.vehicles[{j}]")
+                    for j, v in enumerate(json_field(im, "vehicles", list, path, where))]
         images.append(ImageResult(
             id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=im.get("ground"),
         ))
     return images
-
-
-_FIXED_KEYS = {"id", "status", "error", "prototype", "R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"}
-
-

@@ -29,7 +29,18 @@ from toosicubix.annotations.schema import InputFileError
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
-from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results, results_to_json
+from toosicubix.formats.results import (
+    RESULTS_FILENAME,
+    Alternative,
+    Cues,
+    ImageResult,
+    Observability,
+    Sigma,
+    SolverStats,
+    VehicleResult,
+    read_results,
+    results_to_json,
+)
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
@@ -97,67 +108,58 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
         return VehicleResult(
             id=vehicle.id, status="failed", prototype=vehicle.prototype,
             error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
-            details={"kitti_type": prior.kitti_type},
+            kitti_type=prior.kitti_type,
         )
     return _vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks)
 
 
-def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]:
+def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
     """What besides the clicks shapes a vehicle's fit."""
-    return {
-        "size_prior": True,
-        "upright": ground is not None,
-        "ground_contact": ground is not None and ground.camera_height is not None,
-        "known_sizes": [m.label for m in parts.measurements],
-    }
+    return Cues(size_prior=True, upright=ground is not None,
+                ground_contact=ground is not None and ground.camera_height is not None,
+                known_sizes=tuple(m.label for m in parts.measurements))
 
 
 def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
                     ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0) -> VehicleResult:
-    click_labels, param_names = parts.click_labels, parts.param_names
-    details: dict[str, Any] = {
-        "kitti_type": prior.kitti_type,
-        "constraints": fit.constraints,
-        "clicks": fit.n_clicks,
-        "aux_unknowns": fit.n_aux,
-        "cues": active_cues(parts, ground),
-    }
+    common = {"id": vehicle.id, "prototype": vehicle.prototype, "kitti_type": prior.kitti_type,
+              "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
+              "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
     if not fit.ok:
-        details["solver"] = _solver_details(fit)
-        return VehicleResult(id=vehicle.id, status="failed", error=fit.reason, prototype=vehicle.prototype,
-                             box2d=vehicle.box2d, details=details)
+        return VehicleResult(status="failed", error=fit.reason, box2d=vehicle.box2d, **common)
     R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
     box2d, truncated = _box2d(vehicle, camera, R, t, d)
     ry, pitch, roll = ypr_from_R_cam_vehicle(R)
-    details.update({
-        "box2d_source": "annotated" if vehicle.box2d is not None else "projected",
-        "truncated": truncated,
-        "yaw_pitch_roll_deg": np.rad2deg([ry, pitch, roll]).tolist(),
-        "rms_px": fit.rms_px,
-        "residuals_px": fit.residuals_px.tolist(),
-        "click_labels": list(click_labels),
-        "cost": fit.cost,
-        "prior_mahalanobis2": fit.cost_prior,
-        "parameters": {name: float(v) for name, v in zip(param_names[3:], fit.p[3:], strict=True)},
-        "scale_from": fit.scale_from,
-        "scale_shares": fit.scale_shares,
-        "sigma": fit.uncertainty.to_json() if fit.uncertainty is not None else None,
-        "confidence": confidence(fit.uncertainty) if fit.uncertainty is not None else None,
-        "observability": fit.observability.to_json() if fit.observability is not None else None,
-        "ambiguous": fit.ambiguous,
-        "alternatives": [a.to_json() for a in fit.alternatives],
-        "warnings": list(fit.warnings),
-        "solver": _solver_details(fit),
-    })
+    suggestions: dict[str, Any] = {}
     if next_clicks > 0:
-        details.update(_next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks))
-    return VehicleResult(id=vehicle.id, status="ok", error=None, prototype=vehicle.prototype, R_cam_vehicle=R,
-                         t_cam_vehicle=t, dimensions=d, box2d=box2d, details=details)
+        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks)
+    return VehicleResult(
+        status="ok", error=None, R_cam_vehicle=R, t_cam_vehicle=t, dimensions=d, box2d=box2d, **common,
+        box2d_source="annotated" if vehicle.box2d is not None else "projected",
+        truncated=truncated,
+        yaw_pitch_roll_deg=tuple(np.rad2deg([ry, pitch, roll]).tolist()),
+        rms_px=fit.rms_px,
+        residuals_px=fit.residuals_px,
+        click_labels=tuple(parts.click_labels),
+        cost=fit.cost,
+        prior_mahalanobis2=fit.cost_prior,
+        parameters={name: float(v) for name, v in zip(parts.param_names[3:], fit.p[3:], strict=True)},
+        scale_from=fit.scale_from,
+        scale_shares=fit.scale_shares,
+        sigma=Sigma.from_json(fit.uncertainty.to_json()) if fit.uncertainty is not None else None,
+        confidence=confidence(fit.uncertainty) if fit.uncertainty is not None else None,
+        observability=Observability.from_json(fit.observability.to_json()) if fit.observability is not None else None,
+        ambiguous=fit.ambiguous,
+        alternatives=tuple(Alternative.from_json(a.to_json()) for a in fit.alternatives),
+        warnings=tuple(fit.warnings),
+        **suggestions,
+    )
 
 
 def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
                  ground: GroundPlane | None, n: int) -> dict[str, Any]:
-    """The ``n`` best parts to click next, for results.json; an error here never fails the vehicle."""
+    """The ``n`` best parts to click next (``next_clicks``, or ``next_clicks_error`` when guidance failed);
+    an error here never fails the vehicle."""
     try:
         suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
                                      box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type))
@@ -166,10 +168,10 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitRes
     return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
 
 
-def _solver_details(fit: FitResult) -> dict[str, Any]:
-    return {"starts": fit.starts, "starts_from_lines": fit.starts_from_lines,
-            "descent_iterations": fit.descent_iterations, "refine_iterations": fit.refine_iterations,
-            "initial_cost": fit.initial_cost}
+def _solver_stats(fit: FitResult) -> SolverStats:
+    return SolverStats(starts=fit.starts, starts_from_lines=fit.starts_from_lines,
+                       descent_iterations=fit.descent_iterations, refine_iterations=fit.refine_iterations,
+                       initial_cost=fit.initial_cost)
 
 
 def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
@@ -195,11 +197,10 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     for v in image_result.vehicles:
         if not v.ok:
             continue
-        score = v.details.get("confidence")
         obj = kitti.object_from_pose(
-            v.details["kitti_type"], v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
-            truncated=v.details.get("truncated", 0.0), occluded=kitti.OCCLUSION_UNKNOWN,
-            score=1.0 if score is None else score,
+            v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
+            truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
+            score=1.0 if v.confidence is None else v.confidence,
         )
         lines.append(kitti.format_label_line(obj))
     return lines
@@ -277,7 +278,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         parts = build_parts_model(v.parts, v.known_dimensions)
         problem = Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d, options.lambda_px)
         r = vehicles[k]
-        p = np.concatenate([r.dimensions, [r.details["parameters"][name] for name in parts.param_names[3:]]])
+        p = np.concatenate([r.dimensions, [r.parameters[name] for name in parts.param_names[3:]]])
         joint_vehicles.append(JointVehicle(problem, r.R_cam_vehicle, r.t_cam_vehicle, p))
         models.append(parts)
     try:
@@ -295,16 +296,14 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
                          options.part_sigma)
         fit = FitResult(
-            "ok", None, vehicles[k].details["constraints"], parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
+            "ok", None, vehicles[k].constraints, parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
             t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
-            warnings=tuple(vehicles[k].details.get("warnings", [])),
+            warnings=vehicles[k].warnings,
         )
         updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks)
-        details = dict(updated.details)
-        details["cues"] = {**details["cues"], "joint_ground": True}
-        details["solver"] = {**vehicles[k].details.get("solver", {}), "joint_iterations": result.iterations}
-        out[k] = replace(updated, details=details)
+        out[k] = replace(updated, cues=replace(updated.cues, joint_ground=True),
+                         solver=replace(vehicles[k].solver, joint_iterations=result.iterations))
     return out, {**_ground_json(ground, True, result.camera_height, result.normal),
                  "joint_iterations": result.iterations, "vehicles": len(fitted)}
 
@@ -405,7 +404,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     scale_from: dict[str, int] = {}
     for im in results:
         for v in im.vehicles:
-            if v.ok and v.details.get("scale_from"):
-                scale_from[v.details["scale_from"]] = scale_from.get(v.details["scale_from"], 0) + 1
+            if v.ok and v.scale_from:
+                scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
     return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir,
                         scale_from=scale_from)

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from toosicubix.annotations.convert import load_images, with_ground
-from toosicubix.formats.results import VehicleResult
+from toosicubix.formats.results import Alternative, VehicleResult
 from toosicubix.pipeline.batch import check_prototypes, fit_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
@@ -71,20 +71,24 @@ class VehicleCheck:
         return not self.problems
 
     def to_json(self) -> dict[str, Any]:
-        r, d = self.result, self.result.details
+        r = self.result
         return {
             "image": self.image_id, "id": r.id, "json_path": self.json_path, "prototype": r.prototype,
             "status": r.status, "error": r.error, "well_determined": self.well_determined,
-            "problems": list(self.problems), "constraints": d.get("constraints"), "clicks": d.get("clicks"),
-            "aux_unknowns": d.get("aux_unknowns"), "sigma": d.get("sigma"), "confidence": d.get("confidence"),
-            "observability": d.get("observability"), "ambiguous": d.get("ambiguous"),
-            "alternatives": [_brief(a) for a in d.get("alternatives", [])], "warnings": d.get("warnings", []),
-            "next_clicks": d.get("next_clicks", []),
+            "problems": list(self.problems), "constraints": r.constraints, "clicks": r.clicks,
+            "aux_unknowns": r.aux_unknowns, "sigma": None if r.sigma is None else r.sigma.to_json(),
+            "confidence": r.confidence,
+            "observability": None if r.observability is None else r.observability.to_json(),
+            "ambiguous": r.ambiguous if r.ok else None,
+            "alternatives": [_brief(a) for a in r.alternatives], "warnings": list(r.warnings),
+            "next_clicks": list(r.next_clicks or []),
         }
 
 
-def _brief(alternative: dict[str, Any]) -> dict[str, Any]:
-    return {k: alternative[k] for k in ("cost", "rotation_deg", "turned_around", "implausible", "close")}
+def _brief(alternative: Alternative) -> dict[str, Any]:
+    a = alternative
+    return {"cost": a.cost, "rotation_deg": a.rotation_deg, "turned_around": a.turned_around,
+            "implausible": a.implausible, "close": a.close}
 
 
 def _value(sigma: float | None) -> float:
@@ -101,17 +105,16 @@ def judge(result: VehicleResult, thresholds: Thresholds) -> tuple[str, ...]:
     """Why a fitted vehicle is not well determined (empty: it is)."""
     if not result.ok:
         return (f"failed: {result.error}",)
-    d = result.details
     out = []
-    sigma = d.get("sigma")
+    sigma = result.sigma
     if sigma is None:
         return ("no uncertainty could be computed",)
-    yaw, depth = _value(sigma["yaw_deg"]), _value(sigma["depth_rel"])
+    yaw, depth = _value(sigma.yaw_deg), _value(sigma.depth_rel)
     if not yaw <= thresholds.max_yaw_sigma_deg:
         out.append(f"yaw sigma {_show(yaw)} deg > {thresholds.max_yaw_sigma_deg:g}")
     if not depth <= thresholds.max_depth_sigma_rel:
         out.append(f"depth sigma {_show(100 * depth)} % > {100 * thresholds.max_depth_sigma_rel:g}")
-    if d.get("ambiguous") and not thresholds.allow_ambiguous:
+    if result.ambiguous and not thresholds.allow_ambiguous:
         out.append("ambiguous: another answer fits the clicks about as well")
     return tuple(out)
 
@@ -136,7 +139,7 @@ class ValidationReport:
         good = sum(v.well_determined for v in self.vehicles)
         return {"vehicles": len(self.vehicles), "well_determined": good,
                 "not_well_determined": len(self.vehicles) - good - failed, "failed": failed,
-                "ambiguous": sum(bool(v.result.details.get("ambiguous")) for v in self.vehicles)}
+                "ambiguous": sum(bool(v.result.ambiguous) for v in self.vehicles)}
 
     def to_json(self) -> dict[str, Any]:
         return {"toosicubix_validation": VALIDATION_VERSION, "annotations": str(self.source),
@@ -159,42 +162,44 @@ class ValidationReport:
 
 def describe(check: VehicleCheck) -> str:
     """One vehicle's paragraph of the text report."""
-    r, d = check.result, check.result.details
+    r = check.result
     verdict = "well determined" if check.well_determined else "NOT well determined: " + "; ".join(check.problems)
     lines = [f"image {check.image_id} vehicle {r.id} ({r.prototype}, {check.json_path}): {verdict}"]
-    if d.get("constraints") is not None:
-        lines.append(f"  constraints {d['constraints']} from {d.get('clicks')} clicked points "
-                     f"({d.get('aux_unknowns')} auxiliary unknowns); 8 fix the cuboid up to scale")
+    if r.constraints is not None:
+        lines.append(f"  constraints {r.constraints} from {r.clicks} clicked points "
+                     f"({r.aux_unknowns} auxiliary unknowns); 8 fix the cuboid up to scale")
     if not r.ok:
         return "\n".join(lines)
-    sigma = d.get("sigma") or {}
-    if sigma:
-        dims = " x ".join(_show(v, 2) for v in sigma["dimensions"])
-        lines.append(f"  sigma: yaw {_show(sigma['yaw_deg'])} deg, pitch {_show(sigma['pitch_deg'])}, roll "
-                     f"{_show(sigma['roll_deg'])}; depth {_show(sigma['depth_m'], 2)} m "
-                     f"({_show(100 * _value(sigma['depth_rel']))} %); size {dims} m; scale "
-                     f"{_show(100 * _value(sigma['scale_rel']))} %; confidence {d.get('confidence') or 0.0:.2f}")
-    for sentence in (d.get("observability") or {}).get("sentences", []):
+    sigma = r.sigma
+    if sigma is not None:
+        dims = " x ".join(_show(v, 2) for v in sigma.dimensions)
+        lines.append(f"  sigma: yaw {_show(sigma.yaw_deg)} deg, pitch {_show(sigma.pitch_deg)}, roll "
+                     f"{_show(sigma.roll_deg)}; depth {_show(sigma.depth_m, 2)} m "
+                     f"({_show(100 * _value(sigma.depth_rel))} %); size {dims} m; scale "
+                     f"{_show(100 * _value(sigma.scale_rel))} %; confidence {r.confidence or 0.0:.2f}")
+    for sentence in r.observability.sentences if r.observability is not None else ():
         lines.append(f"  {sentence}")
-    for a in d.get("alternatives", []):
-        if a["close"]:
-            what = "turned around" if a["turned_around"] else f"rotated by {a['rotation_deg']:.0f} deg"
-            if a["implausible"]:
-                lines.append(f"  rejected: an answer {what} costs {a['cost']:.2f} against {d['cost']:.2f}, but is "
-                             f"implausible ({a['implausible']})")
+    for a in r.alternatives:
+        if a.close:
+            what = "turned around" if a.turned_around else f"rotated by {a.rotation_deg:.0f} deg"
+            if a.implausible:
+                lines.append(f"  rejected: an answer {what} costs {a.cost:.2f} against {r.cost:.2f}, but is "
+                             f"implausible ({a.implausible})")
             else:
-                lines.append(f"  ambiguous: an answer {what} costs {a['cost']:.2f} against {d['cost']:.2f}")
-    for warning in d.get("warnings", []):
+                lines.append(f"  ambiguous: an answer {what} costs {a.cost:.2f} against {r.cost:.2f}")
+    for warning in r.warnings:
         lines.append(f"  warning: {warning}")
-    suggestions = d.get("next_clicks") or []
+    suggestions = r.next_clicks or []
     if suggestions:
         lines.append("  click next:")
     for k, s in enumerate(suggestions, 1):
         where = ", ".join(f"({u:.0f}, {v:.0f})" for u, v in s["uv"])
         caveat = "" if s["visible"] and s["inside_image"] else (
             " [on a face turned away]" if not s["visible"] else " [outside the image]")
-        lines.append(f"    {k}. {s['label']} near {where}: yaw sigma {_show(sigma.get('yaw_deg'))} -> "
-                     f"{_show(s['yaw_sigma_deg'])} deg, depth {_show(100 * _value(sigma.get('depth_rel')))} -> "
+        yaw_now = None if sigma is None else sigma.yaw_deg
+        depth_now = None if sigma is None else sigma.depth_rel
+        lines.append(f"    {k}. {s['label']} near {where}: yaw sigma {_show(yaw_now)} -> "
+                     f"{_show(s['yaw_sigma_deg'])} deg, depth {_show(100 * _value(depth_now))} -> "
                      f"{_show(100 * _value(s['depth_sigma_rel']))} %{caveat}")
     return "\n".join(lines)
 

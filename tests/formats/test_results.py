@@ -1,0 +1,116 @@
+"""The typed vehicle result of results.json (:class:`toosicubix.formats.results.VehicleResult`) round-trips."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.conftest import REPO
+from toosicubix.annotations.convert import load_images, with_ground
+from toosicubix.formats import FormatError
+from toosicubix.formats.results import (
+    Alternative,
+    Cues,
+    Sigma,
+    SolverStats,
+    VehicleResult,
+    dumps,
+    read_results,
+    results_to_json,
+)
+from toosicubix.model import KITTI_GROUND
+from toosicubix.pipeline.batch import fit_images
+from toosicubix.priors.table import load_priors
+from toosicubix.solver import SolverOptions
+
+SAMPLE = REPO / "samples" / "annotations.json"
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["own", "joint"])
+def fitted(request):
+    """The sample fitted with next clicks, on its own (alternatives) or with its ground plane (joint blocks)."""
+    images = load_images(SAMPLE)
+    if request.param:
+        images = with_ground(images, dict(KITTI_GROUND))
+    return fit_images(images, load_priors(), SolverOptions(), joint_ground=request.param, next_clicks=2)
+
+
+def test_every_vehicle_round_trips_through_json(fitted):
+    vehicles = [v for im in fitted for v in im.vehicles]
+    joint = any(v.cues is not None and v.cues.joint_ground for v in vehicles)
+    assert len(vehicles) == 6 and all(v.ok for v in vehicles)  # every vehicle of the sample fits
+    for v in vehicles:
+        text = json.dumps(v.to_json(), allow_nan=False)
+        again = VehicleResult.from_json(json.loads(text))
+        assert again.to_json() == json.loads(text)
+        if v.ok:
+            # The typed fields survive: arrays exactly (JSON keeps float64 to the last bit).
+            np.testing.assert_array_equal(again.R_cam_vehicle, v.R_cam_vehicle)
+            np.testing.assert_array_equal(again.residuals_px, v.residuals_px)
+            assert again.sigma == v.sigma and again.cues == v.cues and again.solver == v.solver
+            assert not joint or (again.cues.joint_ground is True and again.solver.joint_iterations is not None)
+            assert len(again.next_clicks) == 2
+            for a, b in zip(again.alternatives, v.alternatives, strict=True):
+                assert a.to_json() == b.to_json()
+
+
+def test_results_file_round_trips(fitted, tmp_path):
+    doc = results_to_json(fitted, {"generator": "test"})
+    path = tmp_path / "results.json"
+    path.write_text(dumps(doc))
+    read = read_results(path)
+    assert dumps(results_to_json(read, {"generator": "test"})) == path.read_text()
+
+
+def test_keys_of_a_fitted_vehicle_keep_results_json_order(fitted):
+    v = next(v for im in fitted for v in im.vehicles if v.ok)
+    keys = list(v.to_json())
+    assert keys[:9] == ["id", "status", "error", "prototype", "R_cam_vehicle", "t_cam_vehicle", "dimensions",
+                        "box2d", "kitti_type"]
+    assert keys.index("cues") < keys.index("sigma") < keys.index("solver") < keys.index("next_clicks")
+
+
+def test_a_failed_vehicle_writes_only_what_it_has():
+    v = VehicleResult(id="1", status="failed", error="too few constraints", prototype="Car", kitti_type="Car")
+    assert v.to_json() == {"id": "1", "status": "failed", "error": "too few constraints", "prototype": "Car",
+                           "R_cam_vehicle": None, "t_cam_vehicle": None, "dimensions": None, "box2d": None,
+                           "kitti_type": "Car"}
+    assert VehicleResult.from_json(v.to_json()) == v
+
+
+def test_unknown_keys_are_kept_and_written_last():
+    v = VehicleResult(id="1", status="failed", error=None, prototype="Car", kitti_type="Car",
+                      cues=Cues(True, False, False, ("known dx",)), solver=SolverStats(3, True, 1, 0, None))
+    doc = {**v.to_json(), "from_a_later_version": {"x": 1}}
+    again = VehicleResult.from_json(doc)
+    assert again.extra == {"from_a_later_version": {"x": 1}}
+    assert list(again.to_json())[-1] == "from_a_later_version"
+    assert again.cues.known_sizes == ("known dx",) and again.solver.starts == 3
+
+
+def test_sigma_keeps_null_for_infinite():
+    s = Sigma(None, 1.0, 2.0, 0.5, 0.02, (0.1, None, 0.05), (0.2, 0.5), None)
+    assert Sigma.from_json(json.loads(json.dumps(s.to_json()))) == s
+
+
+def test_a_fitted_vehicle_with_alternatives_round_trips():
+    a = Alternative(3.5, 178.0, True, "tilted 60 degrees from upright", True, np.eye(3), np.array([1.0, 2.0, 20.0]),
+                    np.array([4.0, 1.7, 1.5]))
+    v = VehicleResult(id="2", status="ok", error=None, prototype="Van", R_cam_vehicle=np.eye(3),
+                      t_cam_vehicle=np.array([1.0, 1.6, 20.0]), dimensions=np.array([4.5, 1.8, 1.9]),
+                      box2d=np.array([1.0, 2.0, 30.0, 40.0]), kitti_type="Van", constraints=9, clicks=8,
+                      aux_unknowns=7, cues=Cues(True, True, True, ()), residuals_px=np.zeros((2, 2)),
+                      click_labels=("wheel-front-left", "wheel-rear-left"), cost=1.25, ambiguous=False,
+                      alternatives=(a,), warnings=("no plausible answer",))
+    again = VehicleResult.from_json(json.loads(json.dumps(v.to_json())))
+    assert again.alternatives[0].to_json() == a.to_json()
+    assert again.alternatives[0].implausible == "tilted 60 degrees from upright"
+    assert again.to_json() == v.to_json()
+    assert again.click_labels == v.click_labels and again.warnings == v.warnings
+
+
+def test_a_malformed_vehicle_names_its_json_path(tmp_path):
+    doc = {"id": "1", "status": "ok", "error": None, "prototype": "Car", "R_cam_vehicle": np.eye(3).tolist(),
+           "t_cam_vehicle": [0, 0, 10], "dimensions": [4, 2, 1.5], "box2d": None, "sigma": {"yaw_deg": 1.0}}
+    with pytest.raises(FormatError, match=r"\$\.images\[0\]\.vehicles\[3\]"):
+        VehicleResult.from_json(doc, tmp_path / "results.json", "$.images[0].vehicles[3]")
