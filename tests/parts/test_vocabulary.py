@@ -79,3 +79,11 @@ def test_corners_suit_box_shaped_prototypes_only():
     assert vocabulary.suits(corner, ("Van",)) and vocabulary.suits(corner, ("Mid Size Car", "Truck"))
     assert not vocabulary.suits(corner, ("Car",))
     assert vocabulary.suits(vocabulary.entry("point", "wheel-rear-right"), ("Car",))
+
+
+def test_the_schema_has_a_class_per_kind_with_the_vocabulary_s_file_keys():
+    assert set(schema.PART_ANNOTATIONS) == set(vocabulary.KINDS)
+    for kind, cls in schema.PART_ANNOTATIONS.items():
+        k = vocabulary.KINDS[kind]
+        assert cls.__name__ == k.schema["class"]
+        assert list(cls.model_fields) == ["kind", k.name_field, *k.clicks, *k.known]

@@ -22,9 +22,9 @@ from toosicubix.parts.vocabulary import KINDS
 # -- file -> model ---------------------------------------------------------------------------------------------------
 
 
-def part_from_schema(p: schemas.PointAnnotation | schemas.SymmetryAnnotation | schemas.DirectionAnnotation
-                     | schemas.LengthAnnotation, json_path: str) -> Part:
-    """The :class:`Part` of one parsed annotation; its fields are named by the kind's vocabulary entry."""
+def part_from_schema(p: Any, json_path: str) -> Part:
+    """The :class:`Part` of one parsed annotation (an instance of a class of ``schemas.PART_ANNOTATIONS``); its
+    fields are named by the kind's vocabulary entry."""
     kind = KINDS[p.kind]
     uv = np.array([getattr(p, key) for key in kind.clicks], dtype=float)
     known = tuple(float(getattr(p, key)) for key in kind.known) if kind.known else None

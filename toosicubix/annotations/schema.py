@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
 
 from toosicubix.parts import vocabulary
 
@@ -23,12 +23,7 @@ SYMMETRY_FACES = vocabulary.names("symmetry")
 DIRECTION_AXES = vocabulary.names("direction")
 #: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
 LENGTH_FEATURES = {name: vocabulary.entry("length", name).get("description") for name in vocabulary.names("length")}
-LengthFeature = Literal[tuple(LENGTH_FEATURES)]  # type: ignore[valid-type]
 DIMENSION_AXES = ("dx", "dy", "dz")
-
-PointPart = Literal[POINT_PARTS]  # type: ignore[valid-type]
-SymmetryFace = Literal[SYMMETRY_FACES]  # type: ignore[valid-type]
-DirectionAxis = Literal[DIRECTION_AXES]  # type: ignore[valid-type]
 
 Pixel = Annotated[tuple[float, float], Field(description="Pixel position (x, y): x right, y down.")]
 Row3 = tuple[float, float, float]
@@ -64,46 +59,32 @@ class _Model(BaseModel):
 _M = TypeVar("_M", bound=_Model)
 
 
-class PointAnnotation(_Model):
-    """One click on a named vehicle part (see the parts table in the README)."""
+def _part_annotation(kind: vocabulary.Kind) -> type[_Model]:
+    """The pydantic class of one part kind, from its vocabulary entry: ``kind``, the name (one of the kind's
+    names), the clicked pixels, and the known size's positive numbers when the kind states one."""
+    described = kind.schema.get("fields", {})
 
-    kind: Literal["point"]
-    part: PointPart = Field(description="Which part was clicked, e.g. 'wheel-front-left'.")
-    xy: Pixel
+    def field(key: str, **extra: Any) -> Any:
+        return Field(description=described[key], **extra) if key in described else (Field(**extra) if extra else ...)
 
-
-class SymmetryAnnotation(_Model):
-    """Two clicks on laterally symmetric features (lights, mirrors) of the front, rear or roof."""
-
-    kind: Literal["symmetry"]
-    face: SymmetryFace
-    left: Pixel = Field(description="The feature on the vehicle's own left side (+Y).")
-    right: Pixel = Field(description="Its mirror image on the vehicle's right side (-Y).")
-
-
-class DirectionAnnotation(_Model):
-    """An arrow drawn along one of the vehicle's axes, on the vehicle or on the ground beside it."""
-
-    kind: Literal["direction"]
-    axis: DirectionAxis
-    tail: Pixel
-    head: Pixel
+    fields: dict[str, Any] = {
+        "kind": (Literal[kind.kind], ...),
+        kind.name_field: (Literal[tuple(kind.names)], field(kind.name_field)),  # type: ignore[valid-type]
+        **{key: (Pixel, field(key)) for key in kind.clicks},
+        **{key: (float, field(key, gt=0)) for key in kind.known},
+    }
+    return create_model(kind.schema["class"], __base__=_Model, __doc__=kind.schema["description"],
+                        __module__=__name__, **fields)
 
 
-class LengthAnnotation(_Model):
-    """Two clicks on a feature whose size is known: a licence plate's width, the wheelbase, a tyre's diameter."""
+#: The pydantic class of every part kind of the vocabulary (``PointAnnotation``, ...), by kind.
+PART_ANNOTATIONS: dict[str, type[_Model]] = {k: _part_annotation(kind) for k, kind in vocabulary.KINDS.items()}
+PointAnnotation = PART_ANNOTATIONS["point"]
+SymmetryAnnotation = PART_ANNOTATIONS["symmetry"]
+DirectionAnnotation = PART_ANNOTATIONS["direction"]
+LengthAnnotation = PART_ANNOTATIONS["length"]
 
-    kind: Literal["length"]
-    feature: LengthFeature = Field(description="Which feature; see the README for what a and b mark.")
-    a: Pixel
-    b: Pixel
-    metres: float = Field(gt=0, description="The feature's known size, metres.")
-    sigma: float = Field(gt=0, description="Its uncertainty (one standard deviation), metres.")
-
-
-PartAnnotation = Annotated[
-    PointAnnotation | SymmetryAnnotation | DirectionAnnotation | LengthAnnotation, Field(discriminator="kind")
-]
+PartAnnotation = Annotated[Union[tuple(PART_ANNOTATIONS.values())], Field(discriminator="kind")]  # noqa: UP007
 
 
 class KnownSize(_Model):

@@ -14,6 +14,7 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.parts.vocabulary import KINDS
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ def true_parameters(specs: list[PartSpec], dimensions: np.ndarray,
     parts : the annotations with zero pixels
     p : (P,) ordered as ``build_parts_model(parts).param_names``
     """
-    parts = [Part(s.kind, s.name, np.zeros((1 if s.kind == "point" else 2, 2)), f"spec[{k}]", s.known)
+    parts = [Part(s.kind, s.name, np.zeros((len(KINDS[s.kind].clicks), 2)), f"spec[{k}]", s.known)
              for k, s in enumerate(specs)]
     model = build_parts_model(parts)
     values = {"dx": dimensions[0], "dy": dimensions[1], "dz": dimensions[2], "Xwf": wheel_x[0], "Xwr": wheel_x[1]}

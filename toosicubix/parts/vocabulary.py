@@ -9,6 +9,8 @@ questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``leng
 - ``labels``: the label of each click, ``{name}`` standing for the name (``symmetry-{name}/left``);
 - ``on_body``: whether its clicks lie on the vehicle (a direction arrow may be drawn on the ground);
 - ``suggest_once``: suggest none of the kind once one of it is clicked (direction arrows);
+- ``schema``: its pydantic class in :mod:`toosicubix.annotations.schema` (``class``, ``description``, and
+  ``fields``: descriptions of its file keys, where a click's differs from the generic pixel's);
 - ``names``: every name, in the order the schema lists them.
 
 Per **name**:
@@ -27,8 +29,9 @@ Per **name**:
 
 **Adding a kind** is one entry under ``kinds`` in ``vocabulary.json`` plus its linear form: a function in
 :mod:`toosicubix.parts.linear` decorated ``@linear_form("kind")`` that adds the kind's points ``X = A p`` (and
-any lines or measurements) to the model. (The pydantic schema in :mod:`toosicubix.annotations.schema` lists
-the kinds' file fields and needs the new kind's annotation class as well.) **Adding a name** to a kind is one
+any lines or measurements) to the model. The entry gives its names the attributes the linear form reads, their
+faces and typical positions; the annotation file's schema builds the kind's class from the entry (then
+regenerate ``schemas/annotations.schema.json`` with ``toosicubix schema``). **Adding a name** to a kind is one
 entry under its ``names``. ``tests/parts/test_vocabulary.py`` checks that every kind has its linear form and
 that every name's faces and typical positions are well formed.
 """
@@ -83,6 +86,7 @@ class Kind:
     labels: tuple[str, ...]
     on_body: bool
     suggest_once: bool
+    schema: dict[str, Any]
     names: dict[str, Name]
 
     def click_labels(self, name: str) -> tuple[str, ...]:
@@ -117,7 +121,7 @@ def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
             )
         kinds[kind] = Kind(kind=kind, name_field=k["name_field"], clicks=tuple(k["clicks"]),
                            known=tuple(k.get("known", ())), labels=tuple(k["labels"]), on_body=bool(k["on_body"]),
-                           suggest_once=bool(k.get("suggest_once", False)), names=names)
+                           suggest_once=bool(k.get("suggest_once", False)), schema=dict(k["schema"]), names=names)
     groups = {group: frozenset(members) for group, members in doc["prototype_groups"].items()}
     return kinds, groups
 
