@@ -8,6 +8,7 @@ questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``leng
 - ``known``: the keys of a known size it states (``metres``, ``sigma``), if any;
 - ``labels``: the label of each click, ``{name}`` standing for the name (``symmetry-{name}/left``);
 - ``on_body``: whether its clicks lie on the vehicle (a direction arrow may be drawn on the ground);
+- ``hint``: how a suggestion names it to a person (``{name} arrow on the ground``; default ``{name}``);
 - ``suggest_once``: suggest none of the kind once one of it is clicked (direction arrows);
 - ``schema``: its pydantic class in :mod:`toosicubix.annotations.schema` (``class``, ``description``, and
   ``fields``: descriptions of its file keys, where a click's differs from the generic pixel's);
@@ -86,6 +87,7 @@ class Kind:
     labels: tuple[str, ...]
     on_body: bool
     suggest_once: bool
+    hint: str
     schema: dict[str, Any]
     names: dict[str, Name]
 
@@ -121,7 +123,8 @@ def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
             )
         kinds[kind] = Kind(kind=kind, name_field=k["name_field"], clicks=tuple(k["clicks"]),
                            known=tuple(k.get("known", ())), labels=tuple(k["labels"]), on_body=bool(k["on_body"]),
-                           suggest_once=bool(k.get("suggest_once", False)), schema=dict(k["schema"]), names=names)
+                           suggest_once=bool(k.get("suggest_once", False)), hint=k.get("hint", "{name}"),
+                           schema=dict(k["schema"]), names=names)
     groups = {group: frozenset(members) for group, members in doc["prototype_groups"].items()}
     return kinds, groups
 

@@ -337,30 +337,30 @@ def _real_points(spec: PartSpec, d: np.ndarray, wheel_x: tuple[float, float], ty
     placement offsets recorded in the spec's private ``_`` keys."""
     dx, dy, dz = d
     a = spec.aux
+    e = vocabulary.entry(spec.kind, spec.name)
     sx = {"front": 1.0, "rear": -1.0}
     sy = {"left": 1.0, "right": -1.0}
     if spec.kind == "point":
-        name = spec.name
-        if name.startswith("wheel-"):
-            _, axle, side = name.split("-")
-            return np.array([[wheel_x[0] if axle == "front" else wheel_x[1], sy[side] * (dy / 2 - tyre_inset), 0.0]])
-        if name in ("front-center", "rear-center"):
+        shape, end, side = e.get("shape"), e.get("end"), e.get("side")
+        if shape == "wheel":
+            x = wheel_x[0] if e.get("axle") == "front" else wheel_x[1]
+            return np.array([[x, sy[side] * (dy / 2 - tyre_inset), 0.0]])
+        if shape == "end-center":
             return np.array([[a["_X"], 0.0, a["Z"]]])
-        if name == "top-center":
+        if shape == "top-center":
             return np.array([[a["X"], 0.0, a["_Z"]]])
-        if name.startswith("edge-"):
-            _, end, side = name.split("-")
+        if shape == "edge":
             return np.array([[sx[end] * (dx / 2 - a["_in"]), sy[side] * (dy / 2 - a["_in"]), a["Z"]]])
-        _, _, end, side = name.split("-")  # corner-top-*
+        # a top corner (the person clicks no other)
         return np.array([[sx[end] * (dx / 2 - a["_in"]), sy[side] * (dy / 2 - a["_in"]), dz - a["_in"]]])
     if spec.kind == "symmetry":
-        if spec.name == "roof":
+        if e.get("end") is None:  # on the roof
             return np.array([[a["X"], a["Y"], a["_Z"]], [a["X"], -a["Y"], a["_Z"]]])
         return np.array([[a["_X"], a["Y"], a["Z"]], [a["_X"], -a["Y"], a["Z"]]])
     tail = np.array([a["X"], a["Y"], a["Z"]])
-    axis = {"forward": (0, 1.0), "backward": (0, -1.0), "leftward": (1, 1.0), "rightward": (1, -1.0)}[spec.name]
+    axis = ("dx", "dy", "dz").index(e.get("axis"))
     step = np.zeros(3)
-    step[axis[0]] = axis[1] * d[axis[0]]
+    step[axis] = float(e.get("sign")) * d[axis]
     return np.array([tail, tail + rot_z(arrow_yaw) @ step])
 
 

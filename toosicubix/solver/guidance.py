@@ -72,8 +72,8 @@ class Suggestion:
 
     @property
     def label(self) -> str:
-        return {"point": self.name, "symmetry": f"symmetry {self.name} (a left-right pair)",
-                "direction": f"{self.name} arrow on the ground"}.get(self.kind, self.name)
+        """How the vocabulary names the part to a person (its kind's ``hint``), e.g. 'forward arrow on the ground'."""
+        return vocabulary.KINDS[self.kind].hint.replace("{name}", self.name)
 
     def to_json(self) -> dict:
         """As results.json has it (``null`` for an infinite standard deviation or an undefined gain)."""
