@@ -13,6 +13,8 @@ from typing import Annotated, Any, Literal, TypeVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from toosicubix.errors import InputError
+
 SCHEMA_VERSION = 1
 
 WHEEL_PARTS = tuple(f"wheel-{fr}-{lr}" for fr in ("front", "rear") for lr in ("left", "right"))
@@ -46,7 +48,7 @@ Row3 = tuple[float, float, float]
 Row4 = tuple[float, float, float, float]
 
 
-class InputFileError(ValueError):
+class InputFileError(InputError):
     """An input file (annotations, priors, settings) that cannot be used, with every problem found.
 
     Attributes
@@ -58,10 +60,7 @@ class InputFileError(ValueError):
     """
 
     def __init__(self, file: str | Path, problems: list[tuple[str, str]]):
-        self.file = str(file)
-        self.problems = problems
-        lines = [f"{self.file}: {path}: {message}" for path, message in problems]
-        super().__init__("\n".join(lines))
+        super().__init__(file, problems)
 
 
 #: The name used for annotation files.

@@ -9,16 +9,16 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix.errors import InputError
 
-class FormatError(ValueError):
+
+class FormatError(InputError):
     """A file that cannot be read, naming the file and, where there is one, the line (1-based)."""
 
     def __init__(self, file: str | Path, message: str, line: int | None = None):
-        self.file = str(file)
         self.line = line
         self.message = message
-        where = f"{self.file}:{line}" if line is not None else self.file
-        super().__init__(f"{where}: {message}")
+        super().__init__(file, [(line, message)])
 
 
 def read_json(path: Path) -> Any:

@@ -26,6 +26,7 @@ import numpy as np
 from toosicubix import __version__
 from toosicubix.annotations.schema import InputFileError
 from toosicubix.camera import Camera
+from toosicubix.errors import InputError
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results, results_to_json
@@ -42,8 +43,11 @@ from toosicubix.solver.uncertainty import analyse, confidence
 LABEL_DIR = "label_2"
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(InputError):
     """The output folder cannot be used (for instance, it holds label files toosicubix did not write)."""
+
+    def __init__(self, message: str, folder: str | Path | None = None):
+        super().__init__(folder, [(None, message)])
 
 
 @dataclass(frozen=True)

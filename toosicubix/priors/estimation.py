@@ -36,6 +36,7 @@ import numpy as np
 from scipy import integrate, linalg, optimize, stats
 
 from toosicubix.annotations import schema as schemas
+from toosicubix.errors import InputError
 from toosicubix.evaluation.ground_truth import CityscapesGroundTruth, KittiObjectGroundTruth, KittiTrackingGroundTruth
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_text
@@ -65,8 +66,11 @@ DEFAULT_DESCRIPTION = (
 )
 
 
-class PriorEstimationError(ValueError):
+class PriorEstimationError(InputError):
     """Input that gives no prior: a missing sequence, no class with enough samples; the message says which."""
+
+    def __init__(self, message: str, file: str | Path | None = None):
+        super().__init__(file, [(None, message)])
 
 
 @lru_cache(maxsize=8)
