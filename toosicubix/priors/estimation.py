@@ -37,16 +37,17 @@ from scipy import integrate, linalg, optimize, stats
 
 from toosicubix.annotations import schema as schemas
 from toosicubix.errors import InputError
-from toosicubix.evaluation.ground_truth import CityscapesGroundTruth, KittiObjectGroundTruth, KittiTrackingGroundTruth
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.formats.cityscapes import read_gtbbox3d
+from toosicubix.formats.datasets import KITTI_VEHICLE_CLASSES, CityscapesFolder, KittiObjectFolder, KittiTrackingFolder
 from toosicubix.priors.geometric_median import GeometricMedianOptions, GeometricMedianResult, geometric_median
 
 Method = Literal["paper", "whitened"]
 METHODS: tuple[str, ...] = ("paper", "whitened")
 
 #: Classes estimated from KITTI labels when none are asked for.
-KITTI_DEFAULT_CLASSES = ("Car", "Van", "Truck")
+KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
 #: Cityscapes labels whose boxes are vehicles; their ``type`` names are the default classes.
 CITYSCAPES_VEHICLE_LABELS = ("car", "truck", "bus", "train", "motorcycle", "bicycle", "caravan", "trailer")
 #: KITTI type written for a Cityscapes 3D prototype; any other name gets ``Misc``.
@@ -278,7 +279,7 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
     Parameters
     ----------
     kind : 'kitti' (object labels), 'kitti-tracking' or 'cityscapes'
-    root : the folder, laid out as :func:`toosicubix.evaluation.ground_truth.open_ground_truth` expects
+    root : the folder, laid out as :mod:`toosicubix.formats.datasets` describes
     classes : class names, matched case-insensitively (KITTI ``type``, Cityscapes ``3d.type``); default
         Car, Van, Truck for KITTI and every prototype ``type`` of a vehicle box for Cityscapes
     sequences : tracking only: sequence names such as '0003'; default all
@@ -291,10 +292,8 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
 
     Raises
     ------
-    toosicubix.evaluation.EvaluationInputError
-        Missing folder or no label files.
     toosicubix.formats.FormatError
-        A malformed label line or file (file and line, or JSON path).
+        Missing folder, no label files, or a malformed label line or file (file and line, or JSON path).
     PriorEstimationError
         ``sequences`` for a source other than tracking, or a requested sequence without a label file.
     """
@@ -331,18 +330,17 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
 
 
 def _kitti_object_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    label_dir = KittiObjectGroundTruth(root).label_dir
-    return [(obj.type, obj.dimensions) for path in sorted(label_dir.glob("*.txt"))
+    return [(obj.type, obj.dimensions) for path in KittiObjectFolder(root).label_files()
             for obj in kitti.read_label_file(path) if obj.type != "DontCare"]
 
 
 def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[list[tuple[str, np.ndarray]],
                                                                                 list[str]]:
-    label_dir = KittiTrackingGroundTruth(root).label_dir
+    folder = KittiTrackingFolder(root)
     if sequences is None:
-        paths = sorted(label_dir.glob("*.txt"))
+        paths = folder.label_files()
     else:
-        paths = [label_dir / f"{name}.txt" for name in sequences]
+        paths = [folder.label_file(name) for name in sequences]
         absent = [str(p) for p in paths if not p.is_file()]
         if absent:
             raise PriorEstimationError(f"no label file for the requested sequences: expected {', '.join(absent)}")
@@ -367,12 +365,15 @@ def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[l
 
 
 def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    source = CityscapesGroundTruth(root)
+    folder = CityscapesFolder(root)
     rows = []
-    for image_id in source.image_ids():
-        for obj in source.load(image_id).objects:
-            if obj.cls in CITYSCAPES_VEHICLE_LABELS and obj.subtype and obj.cuboid_rect is not None:
-                rows.append((obj.subtype, obj.cuboid_rect.dimensions))
+    for image_id in folder.image_ids():
+        clash = folder.clash(image_id)
+        if clash is not None:
+            raise PriorEstimationError(clash, folder.root)
+        for box in read_gtbbox3d(folder.files[image_id]).objects:
+            if box.label in CITYSCAPES_VEHICLE_LABELS and box.type:
+                rows.append((box.type, np.asarray(box.dimensions, dtype=float)))
     return rows
 
 
