@@ -48,6 +48,29 @@ def parse_tracking_image_id(image_id: str) -> tuple[str, int] | None:
     return None if m is None else (m.group(1), int(m.group(2)))
 
 
+def parse_sequences(value: str | None) -> tuple[str, ...] | None:
+    """Tracking sequence names from ranges: ``'0010-0012,0015'`` -> ``('0010', '0011', '0012', '0015')``.
+
+    The width of each range's first number is kept (``'7-9'`` -> ``('7', '8', '9')``); None stays None.
+
+    Raises
+    ------
+    ValueError
+        An item that is not a number or a range of numbers.
+    """
+    if value is None:
+        return None
+    names: list[str] = []
+    for item in value.split(","):
+        item = item.strip()
+        first, dash, last = item.partition("-")
+        if not (first.isdigit() and (not dash or last.isdigit())):
+            raise ValueError(f"expected sequence numbers like 0010-0020 or 0001,0005, got {item!r}")
+        width = len(first)
+        names += [f"{n:0{width}d}" for n in range(int(first), int(last if dash else first) + 1)]
+    return tuple(names)
+
+
 def kitti_image_size(camera: Camera) -> tuple[int, int]:
     """The KITTI image size (width, height) for a P2 focal length, else the most common one."""
     return KITTI_IMAGE_SIZES.get(round(float(camera.K[0, 0]), 1), DEFAULT_IMAGE_SIZE)
@@ -246,6 +269,6 @@ class CityscapesFolder:
 
 __all__ = [
     "DEFAULT_IMAGE_SIZE", "GTBBOX3D_SUFFIX", "KITTI_IMAGE_SIZES", "KITTI_VEHICLE_CLASSES", "CityscapesFolder",
-    "KittiFolder", "KittiObjectFolder", "KittiTrackingFolder", "kitti_image_size", "parse_tracking_image_id",
-    "tracking_image_id",
+    "KittiFolder", "KittiObjectFolder", "KittiTrackingFolder", "kitti_image_size", "parse_sequences",
+    "parse_tracking_image_id", "tracking_image_id",
 ]

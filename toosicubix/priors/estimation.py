@@ -272,6 +272,19 @@ def format_sequences(names: Sequence[str]) -> str:
     return ",".join(parts)
 
 
+def priors_command_line(kind: str, root: str | Path, classes: Sequence[str] | None = None,
+                        sequences: Sequence[str] | None = None, method: str = "paper") -> str:
+    """The ``toosicubix priors`` command that estimates these priors, recorded in every entry's source."""
+    command = f"toosicubix priors --{kind} {root}"
+    if sequences is not None:
+        command += f" --sequences {format_sequences(sequences)}"
+    if classes is not None:
+        command += f" --classes {','.join(classes)}"
+    if method != "paper":
+        command += f" --covariance {method}"
+    return command
+
+
 def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | None = None,
                        sequences: Sequence[str] | None = None) -> DimensionSamples:
     """Read the dimensions of every object of the asked classes from a ground-truth folder.
@@ -525,6 +538,6 @@ __all__ = [
     "CITYSCAPES_KITTI_TYPES", "CITYSCAPES_VEHICLE_LABELS", "DEFAULT_DESCRIPTION", "KITTI_DEFAULT_CLASSES", "METHODS",
     "MIN_EIGENVALUE_RATIO", "MIN_VARIANCE", "ClassPrior", "DimensionSamples", "PriorEstimates", "PriorEstimationError",
     "RobustGaussian", "collect_dimensions", "estimate_priors", "format_sequences", "kitti_type_for",
-    "make_positive_definite", "outer_product_median_factor", "outer_products", "priors_document", "robust_gaussian",
-    "write_priors_file",
+    "make_positive_definite", "outer_product_median_factor", "outer_products", "priors_command_line", "priors_document",
+    "robust_gaussian", "write_priors_file",
 ]

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from toosicubix.camera import Camera
+from toosicubix.formats import FormatError
 from toosicubix.formats.datasets import (
     DEFAULT_IMAGE_SIZE,
     KITTI_VEHICLE_CLASSES,
@@ -214,6 +215,25 @@ def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None)
                                               camera))
     out.sort(key=lambda g: (g.image_id, int(g.vehicle_id)))
     return out
+
+
+def select_vehicles(kind: str, root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """The vehicles of a ground-truth folder that pass the selection.
+
+    Parameters
+    ----------
+    kind : 'kitti' (:func:`select_kitti_object`) or 'kitti-tracking' (:func:`select_kitti_tracking`)
+
+    Raises
+    ------
+    toosicubix.formats.FormatError
+        An unknown kind, a missing folder or calibration file, a malformed label line.
+    """
+    if kind == "kitti":
+        return select_kitti_object(root, sel)
+    if kind == "kitti-tracking":
+        return select_kitti_tracking(root, sel)
+    raise FormatError(root, f"cannot simulate from {kind!r} ground truth; expected kitti or kitti-tracking")
 
 
 def vehicle_rng(seed: int, image_id: str, vehicle_id: str) -> np.random.Generator:
