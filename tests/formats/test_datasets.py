@@ -115,3 +115,13 @@ def test_one_definition_of_the_vehicle_classes_and_tracking_ids():
     assert estimation.KITTI_DEFAULT_CLASSES is KITTI_VEHICLE_CLASSES
     assert annotator.VEHICLE_CLASSES is KITTI_VEHICLE_CLASSES
     assert annotator.tracking_image_id is tracking_image_id
+
+
+def test_sequence_ranges():
+    from toosicubix.formats.datasets import parse_sequences
+
+    assert parse_sequences("0010-0012, 0015") == ("0010", "0011", "0012", "0015")
+    assert parse_sequences("7-9") == ("7", "8", "9")
+    assert parse_sequences(None) is None
+    with pytest.raises(ValueError, match="expected sequence numbers like 0010-0020 or 0001,0005, got '00x0'"):
+        parse_sequences("00x0")
