@@ -32,7 +32,7 @@ class BadInput(InputError, click.ClickException):
 
     def __init__(self, message: str):
         InputError.__init__(self, None, [(None, message)])
-        self.message = message
+        click.ClickException.__init__(self, message)
 
     def show(self, file=None) -> None:
         click.echo(f"Error: {self.format_message()}", err=True)
@@ -85,8 +85,8 @@ def float_list(value: str, name: str) -> tuple[float, ...]:
 
 #: Help of each ground-truth option (one layout per dataset, see toosicubix.formats.datasets).
 GROUND_TRUTH_HELP = {
-    "kitti": "KITTI object ground truth: a root with label_2/ and calib/, or a folder of label .txt files "
-             "(calib then looked for beside it). Example: --kitti data/kitti",
+    "kitti": "KITTI object ground truth: a root with label_2/ and calib/ (eval and priors also take a folder of "
+             "label .txt files, calib then looked for beside it). Example: --kitti data/kitti",
     "kitti-tracking": "KITTI tracking ground truth: a root with label_02/<seq>.txt and calib/<seq>.txt; image ids "
                       "are <seq>_<frame as 6 digits>. Example: --kitti-tracking data/kitti_tracking",
     "cityscapes": "Cityscapes 3D ground truth: a folder searched recursively for *_gtBbox3d.json; image id = file "
