@@ -307,3 +307,12 @@ def test_tuning_split_of_kitti_tracking(shared_data):
     np.testing.assert_array_less(np.abs(car.mean - published_mean), 0.25 * published_std)
     # The robust spread is below the classical one (the tails are heavy) but of the same order.
     assert np.all(car.std < 1.2 * published_std) and np.all(car.std > 0.5 * published_std)
+
+
+def test_command_line_recorded_in_the_sources():
+    from toosicubix.priors.estimation import priors_command_line
+
+    assert priors_command_line("kitti", "data/kitti") == "toosicubix priors --kitti data/kitti"
+    assert (priors_command_line("kitti-tracking", "gt", ("Car", "Van"), ("0000", "0001", "0002", "0005"), "whitened")
+            == "toosicubix priors --kitti-tracking gt --sequences 0000-0002,0005 --classes Car,Van "
+               "--covariance whitened")

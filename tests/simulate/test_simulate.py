@@ -248,7 +248,7 @@ def test_cli_needs_exactly_one_ground_truth(tmp_path):
 
 
 def test_cli_sequence_ranges():
-    from toosicubix.cli import _parse_sequences
+    from toosicubix.cli.options import parse_sequences as _parse_sequences
 
     assert _parse_sequences("0010-0012,0015") == ("0010", "0011", "0012", "0015")
     assert _parse_sequences(None) is None

@@ -13,6 +13,8 @@ from typing import Annotated, Any, Literal, TypeVar, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
 
+from toosicubix import formats
+from toosicubix.errors import InputError
 from toosicubix.parts import vocabulary
 
 SCHEMA_VERSION = 1
@@ -30,7 +32,7 @@ Row3 = tuple[float, float, float]
 Row4 = tuple[float, float, float, float]
 
 
-class InputFileError(ValueError):
+class InputFileError(InputError):
     """An input file (annotations, priors, settings) that cannot be used, with every problem found.
 
     Attributes
@@ -42,10 +44,7 @@ class InputFileError(ValueError):
     """
 
     def __init__(self, file: str | Path, problems: list[tuple[str, str]]):
-        self.file = str(file)
-        self.problems = problems
-        lines = [f"{self.file}: {path}: {message}" for path, message in problems]
-        super().__init__("\n".join(lines))
+        super().__init__(file, problems)
 
 
 #: The name used for annotation files.
@@ -288,25 +287,17 @@ def _validate(model: type[_M], data: Any, source: str | Path) -> _M:
 
 
 def read_json(path: str | Path) -> Any:
-    """Decoded JSON of a file.
+    """Decoded JSON of a file, by :func:`toosicubix.formats.read_json`, its problem reported at ``$``.
 
     Raises
     ------
     InputFileError
         The file is missing, unreadable or not JSON (with line and column).
     """
-    path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputFileError(path, [("$", f"cannot read the file: {exc.strerror or exc}")]) from None
-    except UnicodeDecodeError as exc:
-        raise InputFileError(path, [("$", f"expected UTF-8 JSON text: {exc.reason}")]) from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        message = f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-        raise InputFileError(path, [("$", message)]) from None
+        return formats.read_json(path)
+    except formats.FormatError as exc:
+        raise InputFileError(path, [("$", exc.message)]) from None
 
 
 def parse_annotations(data: Any, source: str | Path = "<annotations>") -> AnnotationFile:

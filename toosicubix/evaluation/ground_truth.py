@@ -17,7 +17,6 @@ Only images that are asked for are read.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,11 +24,19 @@ import numpy as np
 
 from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.errors import EvaluationInputError
-from toosicubix.formats import kitti
+from toosicubix.formats import FormatError, kitti
 from toosicubix.formats.cityscapes import read_gtbbox3d
+from toosicubix.formats.datasets import (
+    GTBBOX3D_SUFFIX,
+    KITTI_VEHICLE_CLASSES,
+    CityscapesFolder,
+    KittiObjectFolder,
+    KittiTrackingFolder,
+    parse_tracking_image_id,
+)
 
 #: Classes scored by default, compared case-insensitively.
-KITTI_DEFAULT_CLASSES = ("Car", "Van", "Truck")
+KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
 CITYSCAPES_DEFAULT_CLASSES = ("car", "truck", "bus", "caravan", "trailer", "train")
 #: Class of a Cityscapes ``ignore`` region (it has no 3D box and is never scored).
 CITYSCAPES_IGNORE_CLASS = "ignore"
@@ -106,7 +113,7 @@ class GroundTruthSource:
     def __init__(self, root: str | Path):
         self.root = Path(root)
         if not self.root.is_dir():
-            raise EvaluationInputError(f"{self.root}: ground-truth folder not found ({self.kind})")
+            raise EvaluationInputError(f"ground-truth folder not found ({self.kind})", self.root)
 
     def image_ids(self) -> list[str]:
         """Every image id that has ground truth, sorted."""
@@ -133,19 +140,12 @@ class GroundTruthSource:
         return f"{self.kind} ground truth in {self.root}"
 
 
-def _find_label_dir(root: Path, name: str, kind: str) -> tuple[Path, Path | None]:
-    """``(label folder, calib folder or None)`` of a KITTI root or a bare label folder."""
-    for candidate in (root / name, root / "training" / name):
-        if candidate.is_dir():
-            calib = candidate.parent / "calib"
-            return candidate, calib if calib.is_dir() else None
-    if any(root.glob("*.txt")):
-        calib = root.parent / "calib"
-        return root, calib if calib.is_dir() else None
-    raise EvaluationInputError(
-        f"{root}: expected a KITTI {kind} root with {name}/ (and calib/), or a folder of .txt label files; "
-        f"found neither"
-    )
+def _walk(walker: type[KittiObjectFolder | KittiTrackingFolder | CityscapesFolder], root: Path):
+    """The dataset's folder walker; a folder without its files is an :class:`EvaluationInputError`."""
+    try:
+        return walker(root)
+    except FormatError as exc:
+        raise EvaluationInputError(exc.message, exc.file) from None
 
 
 def _kitti_gt_object(obj: kitti.KittiObject, index: int, source: Path) -> GtObject:
@@ -176,32 +176,24 @@ class KittiObjectGroundTruth(GroundTruthSource):
 
     def __init__(self, root: str | Path):
         super().__init__(root)
-        self.label_dir, self.calib_dir = _find_label_dir(self.root, "label_2", "object")
+        self.folder: KittiObjectFolder = _walk(KittiObjectFolder, self.root)
+        self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
 
     def image_ids(self) -> list[str]:
-        return sorted(p.stem for p in self.label_dir.glob("*.txt"))
+        return self.folder.image_ids()
 
     def load(self, image_id: str) -> GtImage:
-        path = self.label_dir / f"{image_id}.txt"
+        path = self.folder.label_file(image_id)
         if not path.is_file():
             raise EvaluationInputError(f"no ground truth for image {image_id!r}: expected {path}")
         objects = tuple(_kitti_gt_object(obj, i, path) for i, obj in enumerate(kitti.read_label_file(path)))
-        calib = self.calib_dir / f"{image_id}.txt" if self.calib_dir is not None else None
-        t_cam_rect, K, calib_source = _calib_offset(calib)
+        t_cam_rect, K, calib_source = _calib_offset(self.folder.calib_file(image_id))
         return GtImage(id=image_id, objects=objects, t_cam_rect=t_cam_rect, K=K, source=str(path),
                        calib_source=calib_source)
 
     def describe(self) -> str:
         calib = self.calib_dir if self.calib_dir is not None else "none found"
         return f"KITTI object labels in {self.label_dir} (calib: {calib})"
-
-
-_TRACKING_ID = re.compile(r"^(\d+)_(\d+)$")
-
-
-def tracking_image_id(sequence: str, frame: int) -> str:
-    """The image id of a tracking frame: ``<seq>_<frame as 6 digits>``, e.g. ``0010_000123``."""
-    return f"{sequence}_{frame:06d}"
 
 
 class KittiTrackingGroundTruth(GroundTruthSource):
@@ -213,51 +205,38 @@ class KittiTrackingGroundTruth(GroundTruthSource):
 
     def __init__(self, root: str | Path):
         super().__init__(root)
-        self.label_dir, self.calib_dir = _find_label_dir(self.root, "label_02", "tracking")
+        self.folder: KittiTrackingFolder = _walk(KittiTrackingFolder, self.root)
+        self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
         self._sequences: dict[str, dict[int, list[kitti.KittiObject]]] = {}
 
     def image_ids(self) -> list[str]:
         """Frames 0 to the last labelled frame of every sequence (a frame without rows has no objects)."""
-        ids = []
-        for path in sorted(self.label_dir.glob("*.txt")):
-            # Only the frame column is needed here: a cheap scan instead of a full parse.
-            last = -1
-            for line in path.read_text(encoding="utf-8").splitlines():
-                first = line.split(maxsplit=1)[:1]
-                if first and first[0].isdigit():
-                    last = max(last, int(first[0]))
-            ids.extend(tracking_image_id(path.stem, f) for f in range(last + 1))
-        return ids
+        return self.folder.image_ids()
 
     def _sequence(self, sequence: str) -> dict[int, list[kitti.KittiObject]]:
         if sequence not in self._sequences:
-            self._sequences[sequence] = kitti.read_tracking_file(self.label_dir / f"{sequence}.txt")
+            self._sequences[sequence] = kitti.read_tracking_file(self.folder.label_file(sequence))
         return self._sequences[sequence]
 
     def load(self, image_id: str) -> GtImage:
-        m = _TRACKING_ID.match(image_id)
-        if m is None:
+        parsed = parse_tracking_image_id(image_id)
+        if parsed is None:
             raise EvaluationInputError(
                 f"image id {image_id!r} is not a KITTI tracking id: expected <sequence>_<frame>, e.g. 0010_000123")
-        sequence, frame = m.group(1), int(m.group(2))
-        path = self.label_dir / f"{sequence}.txt"
+        sequence, frame = parsed
+        path = self.folder.label_file(sequence)
         if not path.is_file():
             raise EvaluationInputError(f"no ground truth for image {image_id!r}: expected {path} (sequence {sequence})")
         # A frame without rows has no labelled objects.
         rows = self._sequence(sequence).get(frame, [])
         objects = tuple(_kitti_gt_object(obj, i, path) for i, obj in enumerate(rows))
-        calib = self.calib_dir / f"{sequence}.txt" if self.calib_dir is not None else None
-        t_cam_rect, K, calib_source = _calib_offset(calib)
+        t_cam_rect, K, calib_source = _calib_offset(self.folder.calib_file(sequence))
         return GtImage(id=image_id, objects=objects, t_cam_rect=t_cam_rect, K=K, source=f"{path} frame {frame}",
                        calib_source=calib_source)
 
     def describe(self) -> str:
         calib = self.calib_dir if self.calib_dir is not None else "none found"
         return f"KITTI tracking labels in {self.label_dir} (calib: {calib})"
-
-
-_GTBBOX3D_SUFFIX = "_gtBbox3d"
-_IMAGE_SUFFIXES = ("_leftImg8bit", "_gtBbox3d")
 
 
 class CityscapesGroundTruth(GroundTruthSource):
@@ -270,44 +249,24 @@ class CityscapesGroundTruth(GroundTruthSource):
 
     def __init__(self, root: str | Path):
         super().__init__(root)
-        self._files: dict[str, Path] = {}
-        self._clashes: dict[str, list[Path]] = {}
-        for path in sorted(self.root.rglob("*.json")):
-            stem = path.stem
-            preferred = stem.endswith(_GTBBOX3D_SUFFIX)
-            image_id = stem[: -len(_GTBBOX3D_SUFFIX)] if preferred else stem
-            known = self._files.get(image_id)
-            if known is None:
-                self._files[image_id] = path
-            elif preferred and not known.stem.endswith(_GTBBOX3D_SUFFIX):
-                self._files[image_id] = path
-            elif preferred == known.stem.endswith(_GTBBOX3D_SUFFIX):
-                self._clashes.setdefault(image_id, [known]).append(path)
-        if not self._files:
-            raise EvaluationInputError(
-                f"{self.root}: no Cityscapes 3D *_gtBbox3d.json files found (searched recursively)")
+        self.folder: CityscapesFolder = _walk(CityscapesFolder, self.root)
 
     def image_ids(self) -> list[str]:
-        return sorted(self._files)
+        return self.folder.image_ids()
 
     def resolve_id(self, image_id: str) -> str:
-        if image_id in self._files:
-            return image_id
-        for suffix in _IMAGE_SUFFIXES:
-            if image_id.endswith(suffix) and image_id[: -len(suffix)] in self._files:
-                return image_id[: -len(suffix)]
-        return image_id
+        return self.folder.resolve_id(image_id)
 
     def load(self, image_id: str) -> GtImage:
         gt_id = self.resolve_id(image_id)
-        if gt_id in self._clashes:
-            files = ", ".join(str(p) for p in self._clashes[gt_id])
+        if gt_id in self.folder.clashes:
+            files = ", ".join(str(p) for p in self.folder.clashes[gt_id])
             raise EvaluationInputError(f"image {image_id!r}: several ground-truth files have that name: {files}")
-        path = self._files.get(gt_id)
+        path = self.folder.files.get(gt_id)
         if path is None:
             raise EvaluationInputError(
                 f"no ground truth for image {image_id!r}: "
-                f"expected a file {gt_id}{_GTBBOX3D_SUFFIX}.json under {self.root}")
+                f"expected a file {gt_id}{GTBBOX3D_SUFFIX}.json under {self.root}")
         ann = read_gtbbox3d(path)
         objects = []
         for box in ann.objects:
@@ -327,7 +286,7 @@ class CityscapesGroundTruth(GroundTruthSource):
                        calib_source=str(path))
 
     def describe(self) -> str:
-        return f"Cityscapes 3D gtBbox3d files under {self.root} ({len(self._files)} images)"
+        return f"Cityscapes 3D gtBbox3d files under {self.root} ({len(self.folder.files)} images)"
 
 
 #: The ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` sources by kind.

@@ -9,34 +9,40 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix.errors import InputError
 
-class FormatError(ValueError):
+
+class FormatError(InputError):
     """A file that cannot be read, naming the file and, where there is one, the line (1-based)."""
 
     def __init__(self, file: str | Path, message: str, line: int | None = None):
-        self.file = str(file)
         self.line = line
         self.message = message
-        where = f"{self.file}:{line}" if line is not None else self.file
-        super().__init__(f"{where}: {message}")
+        super().__init__(file, [(line, message)])
 
 
-def read_json(path: Path) -> Any:
-    """The parsed contents of a JSON file.
+def read_json(path: str | Path) -> Any:
+    """The parsed contents of a JSON file: the one JSON reader of every input file.
 
     Raises
     ------
     FormatError
-        The file cannot be read, is not UTF-8, or is not valid JSON (with the line).
+        The file cannot be read, is not UTF-8, or is not valid JSON (``line`` set, the message says the
+        line and column too). Readers that report JSON paths (:mod:`toosicubix.annotations.schema`)
+        pass the message on at ``$``.
     """
+    path = Path(path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
+        raise FormatError(path, f"cannot read the file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(path, f"expected UTF-8 JSON text: {exc.reason}") from None
+    try:
+        return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+        message = f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        raise FormatError(path, message, exc.lineno) from None
 
 
 def json_field(obj: Any, key: str, kind: type | tuple[type, ...], path: Path, where: str) -> Any:

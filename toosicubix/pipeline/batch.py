@@ -27,6 +27,7 @@ from toosicubix import __version__
 from toosicubix.annotations.convert import load_images, with_ground
 from toosicubix.annotations.schema import InputFileError
 from toosicubix.camera import Camera
+from toosicubix.errors import InputError
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.results import (
@@ -61,8 +62,11 @@ from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 LABEL_DIR = "label_2"
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(InputError):
     """The output folder cannot be used (for instance, it holds label files toosicubix did not write)."""
+
+    def __init__(self, message: str, folder: str | Path | None = None):
+        super().__init__(folder, [(None, message)])
 
 
 @dataclass(frozen=True)

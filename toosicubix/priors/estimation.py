@@ -36,16 +36,18 @@ import numpy as np
 from scipy import integrate, linalg, optimize, stats
 
 from toosicubix.annotations import schema as schemas
-from toosicubix.evaluation.ground_truth import CityscapesGroundTruth, KittiObjectGroundTruth, KittiTrackingGroundTruth
+from toosicubix.errors import InputError
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.formats.cityscapes import read_gtbbox3d
+from toosicubix.formats.datasets import KITTI_VEHICLE_CLASSES, CityscapesFolder, KittiObjectFolder, KittiTrackingFolder
 from toosicubix.priors.geometric_median import GeometricMedianOptions, GeometricMedianResult, geometric_median
 
 Method = Literal["paper", "whitened"]
 METHODS: tuple[str, ...] = ("paper", "whitened")
 
 #: Classes estimated from KITTI labels when none are asked for.
-KITTI_DEFAULT_CLASSES = ("Car", "Van", "Truck")
+KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
 #: Cityscapes labels whose boxes are vehicles; their ``type`` names are the default classes.
 CITYSCAPES_VEHICLE_LABELS = ("car", "truck", "bus", "train", "motorcycle", "bicycle", "caravan", "trailer")
 #: KITTI type written for a Cityscapes 3D prototype; any other name gets ``Misc``.
@@ -65,8 +67,11 @@ DEFAULT_DESCRIPTION = (
 )
 
 
-class PriorEstimationError(ValueError):
+class PriorEstimationError(InputError):
     """Input that gives no prior: a missing sequence, no class with enough samples; the message says which."""
+
+    def __init__(self, message: str, file: str | Path | None = None):
+        super().__init__(file, [(None, message)])
 
 
 @lru_cache(maxsize=8)
@@ -267,6 +272,19 @@ def format_sequences(names: Sequence[str]) -> str:
     return ",".join(parts)
 
 
+def priors_command_line(kind: str, root: str | Path, classes: Sequence[str] | None = None,
+                        sequences: Sequence[str] | None = None, method: str = "paper") -> str:
+    """The ``toosicubix priors`` command that estimates these priors, recorded in every entry's source."""
+    command = f"toosicubix priors --{kind} {root}"
+    if sequences is not None:
+        command += f" --sequences {format_sequences(sequences)}"
+    if classes is not None:
+        command += f" --classes {','.join(classes)}"
+    if method != "paper":
+        command += f" --covariance {method}"
+    return command
+
+
 def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | None = None,
                        sequences: Sequence[str] | None = None) -> DimensionSamples:
     """Read the dimensions of every object of the asked classes from a ground-truth folder.
@@ -274,7 +292,7 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
     Parameters
     ----------
     kind : 'kitti' (object labels), 'kitti-tracking' or 'cityscapes'
-    root : the folder, laid out as :func:`toosicubix.evaluation.ground_truth.open_ground_truth` expects
+    root : the folder, laid out as :mod:`toosicubix.formats.datasets` describes
     classes : class names, matched case-insensitively (KITTI ``type``, Cityscapes ``3d.type``); default
         Car, Van, Truck for KITTI and every prototype ``type`` of a vehicle box for Cityscapes
     sequences : tracking only: sequence names such as '0003'; default all
@@ -287,10 +305,8 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
 
     Raises
     ------
-    toosicubix.evaluation.EvaluationInputError
-        Missing folder or no label files.
     toosicubix.formats.FormatError
-        A malformed label line or file (file and line, or JSON path).
+        Missing folder, no label files, or a malformed label line or file (file and line, or JSON path).
     PriorEstimationError
         ``sequences`` for a source other than tracking, or a requested sequence without a label file.
     """
@@ -327,18 +343,17 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
 
 
 def _kitti_object_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    label_dir = KittiObjectGroundTruth(root).label_dir
-    return [(obj.type, obj.dimensions) for path in sorted(label_dir.glob("*.txt"))
+    return [(obj.type, obj.dimensions) for path in KittiObjectFolder(root).label_files()
             for obj in kitti.read_label_file(path) if obj.type != "DontCare"]
 
 
 def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[list[tuple[str, np.ndarray]],
                                                                                 list[str]]:
-    label_dir = KittiTrackingGroundTruth(root).label_dir
+    folder = KittiTrackingFolder(root)
     if sequences is None:
-        paths = sorted(label_dir.glob("*.txt"))
+        paths = folder.label_files()
     else:
-        paths = [label_dir / f"{name}.txt" for name in sequences]
+        paths = [folder.label_file(name) for name in sequences]
         absent = [str(p) for p in paths if not p.is_file()]
         if absent:
             raise PriorEstimationError(f"no label file for the requested sequences: expected {', '.join(absent)}")
@@ -363,12 +378,15 @@ def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[l
 
 
 def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    source = CityscapesGroundTruth(root)
+    folder = CityscapesFolder(root)
     rows = []
-    for image_id in source.image_ids():
-        for obj in source.load(image_id).objects:
-            if obj.cls in CITYSCAPES_VEHICLE_LABELS and obj.subtype and obj.cuboid_rect is not None:
-                rows.append((obj.subtype, obj.cuboid_rect.dimensions))
+    for image_id in folder.image_ids():
+        clash = folder.clash(image_id)
+        if clash is not None:
+            raise PriorEstimationError(clash, folder.root)
+        for box in read_gtbbox3d(folder.files[image_id]).objects:
+            if box.label in CITYSCAPES_VEHICLE_LABELS and box.type:
+                rows.append((box.type, np.asarray(box.dimensions, dtype=float)))
     return rows
 
 
@@ -520,6 +538,6 @@ __all__ = [
     "CITYSCAPES_KITTI_TYPES", "CITYSCAPES_VEHICLE_LABELS", "DEFAULT_DESCRIPTION", "KITTI_DEFAULT_CLASSES", "METHODS",
     "MIN_EIGENVALUE_RATIO", "MIN_VARIANCE", "ClassPrior", "DimensionSamples", "PriorEstimates", "PriorEstimationError",
     "RobustGaussian", "collect_dimensions", "estimate_priors", "format_sequences", "kitti_type_for",
-    "make_positive_definite", "outer_product_median_factor", "outer_products", "priors_document", "robust_gaussian",
-    "write_priors_file",
+    "make_positive_definite", "outer_product_median_factor", "outer_products", "priors_command_line", "priors_document",
+    "robust_gaussian", "write_priors_file",
 ]

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from toosicubix.errors import InputError
+
 
 @dataclass(frozen=True)
 class SizePrior:
@@ -51,7 +53,7 @@ class SizePrior:
         return float(r @ r)
 
 
-class UnknownPrototypeError(KeyError):
+class UnknownPrototypeError(InputError, KeyError):
     """A prototype that is not in the priors table; the message lists the known ones."""
 
     def __init__(self, prototype: str, known: list[str]):
@@ -59,10 +61,7 @@ class UnknownPrototypeError(KeyError):
         self.known = known
         close = difflib.get_close_matches(prototype, known, n=3, cutoff=0.6)
         hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-        super().__init__(f"unknown prototype {prototype!r}.{hint} Known prototypes: {', '.join(known)}")
-
-    def __str__(self) -> str:
-        return str(self.args[0])
+        super().__init__(None, [(None, f"unknown prototype {prototype!r}.{hint} Known prototypes: {', '.join(known)}")])
 
 
 class Priors(Mapping[str, SizePrior]):

@@ -56,17 +56,21 @@ import numpy as np
 from toosicubix.annotations.convert import vehicle_json
 from toosicubix.camera import Camera
 from toosicubix.formats import FormatError
-from toosicubix.formats.kitti import KittiObject, read_calib, read_label_file, read_tracking_file
+from toosicubix.formats.datasets import (
+    DEFAULT_IMAGE_SIZE,
+    KITTI_VEHICLE_CLASSES,
+    KittiObjectFolder,
+    KittiTrackingFolder,
+    tracking_image_id,
+)
+from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
 from toosicubix.model import Part, Vehicle
 from toosicubix.parts import vocabulary
 from toosicubix.parts.synthesis import PartSpec, true_parameters
 
-#: KITTI image sizes by the focal length of P2 (one per recording date); other cameras: the option.
-KITTI_IMAGE_SIZES = {721.5: (1242, 375), 707.0: (1224, 370), 707.1: (1226, 370), 718.3: (1238, 374),
-                     718.9: (1241, 376)}
-DEFAULT_IMAGE_SIZE = (1242, 375)
-VEHICLE_CLASSES = ("Car", "Van", "Truck")
+#: KITTI's vehicle types (defined once, in :mod:`toosicubix.formats.datasets`).
+VEHICLE_CLASSES = KITTI_VEHICLE_CLASSES
 STRAIGHT_VIEW_DEG = 15.0
 EDGE_MARGIN_PX = 2.0
 MIN_PAIR_SEPARATION_PX = 3.0
@@ -165,11 +169,6 @@ class SimulatedVehicle:
         return sum(len(p.uv) for p in self.parts)
 
 
-def kitti_image_size(camera: Camera) -> tuple[int, int]:
-    """The KITTI image size for a P2 focal length, else the most common one."""
-    return KITTI_IMAGE_SIZES.get(round(float(camera.K[0, 0]), 1), DEFAULT_IMAGE_SIZE)
-
-
 def _keep(obj: KittiObject, camera: Camera, sel: SelectionOptions) -> bool:
     if obj.type not in sel.classes or obj.truncated > sel.max_truncation or obj.occluded > sel.max_occlusion:
         return False
@@ -182,53 +181,31 @@ def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -
 
     Raises
     ------
-    FormatError
+    toosicubix.formats.FormatError
         A missing folder or calibration file, a malformed label line.
     """
     sel = sel or SelectionOptions()
-    label_dir, calib_dir = _label_and_calib_dirs(root, "label_2", "object")
+    folder = KittiObjectFolder(root, strict=True)
     out = []
-    for path in sorted(label_dir.glob("*.txt")):
-        calib_path = calib_dir / path.name
-        if not calib_path.is_file():
-            raise FormatError(path, f"no calibration file {calib_path}")
-        camera = read_calib(calib_path).camera(2)
-        camera = Camera(K=camera.K, t_cam_rect=camera.t_cam_rect, image_size=kitti_image_size(camera))
+    for path in folder.label_files():
+        camera = folder.camera(path.stem)
         for index, obj in enumerate(read_label_file(path)):
             if _keep(obj, camera, sel):
                 out.append(GroundTruthVehicle(path.stem, str(index), obj, camera))
     return out
 
 
-def _label_and_calib_dirs(root: str | Path, labels: str, kind: str) -> tuple[Path, Path]:
-    """``root/labels`` and ``root/calib``, both required to exist."""
-    label_dir, calib_dir = Path(root) / labels, Path(root) / "calib"
-    for folder in (label_dir, calib_dir):
-        if not folder.is_dir():
-            raise FormatError(folder, f"expected a KITTI {kind} folder with {labels}/ and calib/")
-    return label_dir, calib_dir
-
-
-def tracking_image_id(sequence: str, frame: int) -> str:
-    """Image id of a tracking frame: ``<sequence>_<frame as 6 digits>``, e.g. ``0010_000123``."""
-    return f"{sequence}_{frame:06d}"
-
-
 def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
     """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``): at most ``frames_per_track``
     eligible frames per track, evenly spread over its eligible frames."""
     sel = sel or SelectionOptions()
-    label_dir, calib_dir = _label_and_calib_dirs(root, "label_02", "tracking")
+    folder = KittiTrackingFolder(root, strict=True)
     out = []
-    for path in sorted(label_dir.glob("*.txt")):
+    for path in folder.label_files():
         sequence = path.stem
         if sel.sequences is not None and sequence not in sel.sequences:
             continue
-        calib_path = calib_dir / path.name
-        if not calib_path.is_file():
-            raise FormatError(path, f"no calibration file {calib_path}")
-        camera = read_calib(calib_path).camera(2)
-        camera = Camera(K=camera.K, t_cam_rect=camera.t_cam_rect, image_size=kitti_image_size(camera))
+        camera = folder.camera(sequence)
         tracks: dict[int, list[KittiObject]] = {}
         for frame in sorted(frames := read_tracking_file(path)):
             for obj in frames[frame]:
@@ -244,6 +221,25 @@ def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None)
                                               camera))
     out.sort(key=lambda g: (g.image_id, int(g.vehicle_id)))
     return out
+
+
+def select_vehicles(kind: str, root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """The vehicles of a ground-truth folder that pass the selection.
+
+    Parameters
+    ----------
+    kind : 'kitti' (:func:`select_kitti_object`) or 'kitti-tracking' (:func:`select_kitti_tracking`)
+
+    Raises
+    ------
+    toosicubix.formats.FormatError
+        An unknown kind, a missing folder or calibration file, a malformed label line.
+    """
+    if kind == "kitti":
+        return select_kitti_object(root, sel)
+    if kind == "kitti-tracking":
+        return select_kitti_tracking(root, sel)
+    raise FormatError(root, f"cannot simulate from {kind!r} ground truth; expected kitti or kitti-tracking")
 
 
 def vehicle_rng(seed: int, image_id: str, vehicle_id: str) -> np.random.Generator:

@@ -1,0 +1,63 @@
+"""The shared CLI pieces: one ground-truth option set, one input-error handler, one-line registration."""
+
+from __future__ import annotations
+
+import click
+from click.testing import CliRunner
+
+from toosicubix.cli import main
+from toosicubix.cli.options import BadInput, CommandGroup, GroundTruth, ground_truth_options
+from toosicubix.errors import InputError
+from toosicubix.formats import FormatError
+
+
+def _group() -> click.Group:
+    @click.group(cls=CommandGroup)
+    def group() -> None:
+        """A test group."""
+
+    @click.command("show")
+    @ground_truth_options()
+    def show(ground_truth: GroundTruth) -> None:
+        click.echo(f"{ground_truth.kind} {ground_truth.root} {ground_truth.flag}")
+
+    @click.command("broken")
+    def broken() -> None:
+        raise FormatError("labels/000001.txt", "expected 15 or 16 fields", 3)
+
+    group.add_command(show)
+    group.add_command(broken)
+    return group
+
+
+def test_exactly_one_ground_truth_reaches_the_command(tmp_path):
+    group = _group()
+    result = CliRunner().invoke(group, ["show", "--kitti-tracking", str(tmp_path)])
+    assert result.exit_code == 0 and result.output == f"kitti-tracking {tmp_path} --kitti-tracking\n"
+    for args in ([], ["--kitti", "a", "--cityscapes", "b"]):
+        result = CliRunner().invoke(group, ["show", *args])
+        assert result.exit_code == 2
+        assert ("give exactly one ground truth: --kitti DIR, --kitti-tracking DIR or --cityscapes DIR"
+                in result.output)
+
+
+def test_an_input_error_a_command_lets_through_exits_2_naming_file_and_line():
+    result = CliRunner().invoke(_group(), ["broken"])
+    assert result.exit_code == 2
+    assert result.output == "Error: labels/000001.txt:3: expected 15 or 16 fields\n"
+
+
+def test_bad_input_is_an_input_error():
+    error = BadInput("cannot write out.json: Permission denied")
+    assert isinstance(error, InputError) and isinstance(error, click.ClickException)
+    assert str(error) == "cannot write out.json: Permission denied" and error.exit_code == 2
+
+
+def test_the_ground_truth_options_are_declared_once():
+    helps = {}
+    for name in ("eval", "priors", "tune", "simulate"):
+        for param in main.commands[name].params:
+            if param.name.startswith("ground_truth_"):
+                helps.setdefault(param.name, set()).add(param.help)
+    assert set(helps) == {"ground_truth_kitti", "ground_truth_kitti_tracking", "ground_truth_cityscapes"}
+    assert all(len(texts) == 1 for texts in helps.values())

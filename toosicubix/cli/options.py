@@ -1,0 +1,278 @@
+"""What the commands share: exit codes, the input-error handling, option decorators declared once, a progress bar.
+
+- :func:`ground_truth_options`: exactly one of ``--kitti``, ``--kitti-tracking``, ``--cityscapes``; the
+  command receives ``ground_truth`` (a :class:`GroundTruth`).
+- :func:`fitting_options`: priors, weights, settings file, click and part noise, ground cues, jobs; the
+  command receives ``fitting`` (a :class:`Fitting`).
+- :class:`CommandGroup`: any :class:`toosicubix.errors.InputError` a command lets through is printed as
+  ``Error: <message>`` and exits 2, so commands do not catch input errors themselves.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import click
+
+from toosicubix.errors import InputError
+from toosicubix.solver import SolverOptions
+
+EXIT_OK, EXIT_SOME_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class BadInput(InputError, click.ClickException):
+    """A bad input file or option value found by the CLI itself: printed as is, exit code 2."""
+
+    exit_code = EXIT_BAD_INPUT
+
+    def __init__(self, message: str):
+        InputError.__init__(self, None, [(None, message)])
+        click.ClickException.__init__(self, message)
+
+    def show(self, file=None) -> None:
+        click.echo(f"Error: {self.format_message()}", err=True)
+
+
+class CommandGroup(click.Group):
+    """A group whose commands' input errors exit 2 with their message (file and JSON path or line)."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except click.ClickException:
+            raise
+        except InputError as exc:
+            raise BadInput(str(exc)) from None
+
+
+def parse_classes(value: str | None) -> tuple[str, ...] | None:
+    """``'Car, Van'`` -> ``('Car', 'Van')``; None stays None (the command's default classes)."""
+    if value is None:
+        return None
+    classes = tuple(c.strip() for c in value.split(",") if c.strip())
+    if not classes:
+        raise click.BadParameter("expected at least one class name", param_hint="--classes")
+    return classes
+
+
+def parse_sequences(value: str | None) -> tuple[str, ...] | None:
+    """'0010-0020' or '0001,0005,0007' -> sequence names; None stays None (all sequences)."""
+    from toosicubix.formats.datasets import parse_sequences as parse
+
+    try:
+        return parse(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--sequences") from None
+
+
+def float_list(value: str, name: str) -> tuple[float, ...]:
+    """``'0.1,1,10'`` -> positive numbers, for the option ``name``."""
+    try:
+        values = tuple(float(v) for v in value.split(",") if v.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated numbers, got {value!r}", param_hint=name) from None
+    if not values or min(values) <= 0:
+        raise click.BadParameter(f"expected positive numbers, got {value!r}", param_hint=name)
+    return values
+
+
+# --- ground truth ------------------------------------------------------------------------------------------
+
+#: Help of each ground-truth option (one layout per dataset, see toosicubix.formats.datasets).
+GROUND_TRUTH_HELP = {
+    "kitti": "KITTI object ground truth: a root with label_2/ and calib/ (eval and priors also take a folder of "
+             "label .txt files, calib then looked for beside it). Example: --kitti data/kitti",
+    "kitti-tracking": "KITTI tracking ground truth: a root with label_02/<seq>.txt and calib/<seq>.txt; image ids "
+                      "are <seq>_<frame as 6 digits>. Example: --kitti-tracking data/kitti_tracking",
+    "cityscapes": "Cityscapes 3D ground truth: a folder searched recursively for *_gtBbox3d.json; image id = file "
+                  "stem without _gtBbox3d. Example: --cityscapes gtBbox3d/val",
+}
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The one ground-truth folder given: ``kind`` ('kitti', 'kitti-tracking', 'cityscapes') and ``root``."""
+
+    kind: str
+    root: Path
+
+    @property
+    def flag(self) -> str:
+        """The option that gave it, e.g. ``--kitti-tracking``."""
+        return f"--{self.kind}"
+
+
+def _parameter(kind: str) -> str:
+    return f"ground_truth_{kind.replace('-', '_')}"
+
+
+def ground_truth_options(*kinds: str) -> Callable:
+    """Add ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` (or only ``kinds``); exactly one must be given.
+
+    The command receives ``ground_truth: GroundTruth`` instead of the three options.
+    """
+    kinds = kinds or tuple(GROUND_TRUTH_HELP)
+    flags = [f"--{kind} DIR" for kind in kinds]
+    if len(flags) == 2:
+        usage = f"give exactly one of {flags[0]} and {flags[1]}"
+    else:
+        usage = f"give exactly one ground truth: {', '.join(flags[:-1])} or {flags[-1]}"
+
+    def decorate(command: Callable) -> Callable:
+        @functools.wraps(command)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            given = [(kind, kwargs.pop(_parameter(kind))) for kind in kinds]
+            given = [(kind, root) for kind, root in given if root is not None]
+            if len(given) != 1:
+                raise click.UsageError(usage)
+            return command(*args, ground_truth=GroundTruth(*given[0]), **kwargs)
+
+        for kind in reversed(kinds):
+            wrapper = click.option(f"--{kind}", _parameter(kind), type=click.Path(path_type=Path), default=None,
+                                   help=GROUND_TRUTH_HELP[kind])(wrapper)
+        return wrapper
+
+    return decorate
+
+
+# --- fitting -----------------------------------------------------------------------------------------------
+
+_FITTING_OPTIONS = [
+    click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help="Size priors file (JSON, see README); default: the bundled KITTI and Cityscapes 3D table."),
+    click.option("--lambda", "lambda_3d", type=click.FloatRange(min=0.0, min_open=True),
+                 default=SolverOptions.lambda_3d, show_default=True,
+                 help="Weight of the size prior in the coordinate descent's 3D cost."),
+    click.option("--lambda-p", "lambda_px", type=click.FloatRange(min=0.0, min_open=True),
+                 default=SolverOptions.lambda_px, show_default=True,
+                 help="Weight of the size prior in the pixel cost, in px^2 per squared Mahalanobis unit: the click "
+                      "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more."),
+    click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
+    click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=SolverOptions.click_sigma,
+                 show_default=True,
+                 help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) is for."),
+    click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
+                 help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
+                      "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
+    click.option("--kitti-ground", is_flag=True,
+                 help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
+                      "deg, vehicles upright within 2 deg. The options below then change single fields."),
+    click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Camera height above the road, metres, for every image (enables the ground contact)."),
+    click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
+    click.option("--road-normal", default=None, help="Road normal in camera coordinates, x,y,z [default 0,-1,0]."),
+    click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
+    click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
+    click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Uncertainty of the normal, degrees [default 1]."),
+    click.option("--upright-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="How far vehicles lean from the road normal, degrees [default 2]."),
+    click.option("--joint-ground", is_flag=True,
+                 help="Refine each image's vehicles together with its ground plane (images with a ground block or "
+                      "the options above); the camera height may then be unknown: the vehicles' sizes fix it."),
+    click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+                 help="Worker processes; the output is the same for any number."),
+]
+_FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "kitti_ground",
+                  "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
+                  "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "jobs")
+
+
+@dataclass(frozen=True)
+class Fitting:
+    """What the fitting options amount to.
+
+    Attributes
+    ----------
+    priors_path : the priors file, or None for the bundled table
+    options : defaults, then the settings file, then the options given on the command line
+    ground : ground-block fields (schema names) to set on every image
+    joint_ground : refine each image's vehicles together with its ground plane
+    jobs : worker processes
+    """
+
+    priors_path: Path | None
+    options: SolverOptions
+    ground: dict[str, object]
+    joint_ground: bool
+    jobs: int
+
+
+def _road_normal(value: str | None) -> tuple[float, float, float] | None:
+    if value is None:
+        return None
+    try:
+        normal = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        normal = ()
+    if len(normal) != 3:
+        raise click.BadParameter(f"expected three numbers x,y,z, got {value!r}", param_hint="--road-normal")
+    return normal  # type: ignore[return-value]
+
+
+def _fitting(values: dict[str, Any]) -> Fitting:
+    from toosicubix.pipeline.settings import ground_overrides, solver_options
+
+    ctx = click.get_current_context()
+    explicit = {k: values[k] for k in ("lambda_3d", "lambda_px")
+                if ctx.get_parameter_source(k) is not click.core.ParameterSource.DEFAULT}
+    options = replace(solver_options(values["config_path"], **explicit),
+                      click_sigma=values["click_sigma"], part_sigma=values["part_sigma"])
+    normal = _road_normal(values["road_normal"])
+    given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
+                                    "normal_sigma_deg", "upright_sigma_deg")}
+    if (given["camera_pitch_deg"] is not None or given["camera_roll_deg"] is not None) and normal is not None:
+        raise click.UsageError("give --road-normal or --camera-pitch-deg/--camera-roll-deg, not both")
+    ground = ground_overrides(values["kitti_ground"], normal, **given)
+    return Fitting(values["priors_path"], options, ground, values["joint_ground"], values["jobs"])
+
+
+def fitting_options(command: Callable) -> Callable:
+    """Add the options ``fit`` and ``validate`` share; the command receives ``fitting: Fitting`` instead."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name) for name in _FITTING_NAMES}
+        return command(*args, fitting=_fitting(values), **kwargs)
+
+    for option in reversed(_FITTING_OPTIONS):
+        wrapper = option(wrapper)
+    return wrapper
+
+
+class ProgressBar:
+    """A progress bar on stderr for batches of more than a few vehicles."""
+
+    MIN_VEHICLES = 50
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.bar = None
+
+    def start(self, total: int) -> None:
+        if not self.quiet and total >= self.MIN_VEHICLES:
+            self.bar = click.progressbar(length=total, label="fitting", file=sys.stderr, show_eta=True)
+            self.bar.__enter__()
+
+    def update(self, n: int) -> None:
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def finish(self) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+            self.bar = None
+
+
+__all__ = [
+    "EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "GROUND_TRUTH_HELP", "BadInput", "CommandGroup", "Fitting",
+    "GroundTruth", "ProgressBar", "fitting_options", "float_list", "ground_truth_options", "parse_classes",
+    "parse_sequences",
+]

@@ -1,0 +1,73 @@
+"""``toosicubix tune``: thin over :func:`toosicubix.pipeline.tuning.tune`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from toosicubix.cli.options import GroundTruth, float_list, ground_truth_options
+
+
+@click.command("tune")
+@click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
+@ground_truth_options()
+@click.option("-o", "--out", "config_out", type=click.Path(dir_okay=False, path_type=Path),
+              default="toosicubix-settings.json", show_default=True,
+              help="Settings file to write, for `toosicubix fit --config`.")
+@click.option("--lambdas", default=",".join(f"{v:g}" for v in (0.01, 0.1, 1, 10)), show_default=True,
+              help="Values of lambda (descent prior weight) to try.")
+@click.option("--lambda-ps", default=",".join(f"{v:g}" for v in (0.01, 0.1, 1, 10, 100)), show_default=True,
+              help="Values of lambda_p (pixel-cost prior weight) to try.")
+@click.option("--refine/--no-refine", default=True, show_default=True,
+              help="Then try the half-steps around the best pair.")
+@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Size priors file; default: the bundled one.")
+@click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
+              help="2D box IoU needed to pair a fit with a ground-truth vehicle.")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
+def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path, lambdas: str, lambda_ps: str,
+                 refine: bool, priors_path: Path | None, min_iou: float, jobs: int) -> None:
+    """Choose lambda and lambda_p by maximising mean sIoU against ground truth, as the paper does.
+
+    Fits every vehicle of ANNOTATIONS with each pair of weights on a log grid (then the half-steps around
+    the best), scores the fits as `toosicubix eval` does, prints the landscape (mean sIoU; mean IoU and
+    median E_R of the best beside it) and writes the best pair to a settings file for `fit --config`.
+    Tune on vehicles you will not report accuracy on.
+
+    \b
+    Example:
+      toosicubix simulate --kitti-tracking data/kitti_tracking --sequences 0000-0009 -o tuning.json
+      toosicubix tune tuning.json --kitti tuning_gt -o settings.json --jobs 2
+      toosicubix fit annotations.json --config settings.json
+    """
+    from toosicubix.annotations.convert import load_images
+    from toosicubix.evaluation import EvalOptions, open_ground_truth
+    from toosicubix.pipeline.batch import check_prototypes
+    from toosicubix.pipeline.settings import settings_document, write_settings_file
+    from toosicubix.pipeline.tuning import tune
+    from toosicubix.priors.table import load_priors
+
+    grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")
+    images = load_images(annotations)
+    priors = load_priors(priors_path)
+    check_prototypes(images, priors, annotations)
+    source = open_ground_truth(ground_truth.kind, ground_truth.root)
+    n = sum(len(im.vehicles) for im in images)
+    click.echo(f"tuning on {n} vehicles in {len(images)} images", err=True)
+
+    def report(point) -> None:
+        click.echo(f"  lambda {point.lambda_3d:<8.3g} lambda_p {point.lambda_px:<8.3g} mean sIoU "
+                   f"{point.siou_mean:.4f}  mean IoU {point.iou_mean:.4f}  median E_R {point.e_r_median_deg:.2f} deg"
+                   f"  ({point.n_matched} matched, {point.n_failed} failed)", err=True)
+
+    result = tune(images, priors, source, grid_l, grid_p, eval_options=EvalOptions(min_iou=min_iou), refine=refine,
+                  jobs=jobs, progress=report)
+    best = result.best
+    click.echo(result.landscape())
+    click.echo(f"best: lambda {best.lambda_3d:g}, lambda_p {best.lambda_px:g}: mean sIoU {best.siou_mean:.4f}, "
+               f"mean IoU {best.iou_mean:.4f}, median E_R {best.e_r_median_deg:.2f} deg ({best.n_matched} vehicles)")
+    tuned = {"annotations": str(annotations), "ground_truth": f"{ground_truth.flag} {ground_truth.root}",
+             "priors": str(priors_path) if priors_path else "bundled", **result.to_json()}
+    write_settings_file(config_out, settings_document(best.lambda_3d, best.lambda_px, tuned))
+    click.echo(f"wrote {config_out}", err=True)

@@ -1,0 +1,66 @@
+"""``toosicubix validate``: thin over :func:`toosicubix.pipeline.validation.validate_file`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
+from toosicubix.pipeline.validation import Thresholds
+
+
+@click.command("validate")
+@click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--max-yaw-sigma", "max_yaw_sigma_deg", type=click.FloatRange(min=0.0, min_open=True),
+              default=Thresholds.max_yaw_sigma_deg, show_default=True,
+              help="A vehicle is well determined when its yaw standard deviation is at most this, degrees ...")
+@click.option("--max-depth-sigma", "max_depth_sigma_rel", type=click.FloatRange(min=0.0, min_open=True),
+              default=Thresholds.max_depth_sigma_rel, show_default=True,
+              help="... its depth standard deviation at most this share of its depth ...")
+@click.option("--allow-ambiguous", is_flag=True,
+              help="... and (unless this flag is given) no second answer fits the clicks about as well.")
+@click.option("--next-clicks", type=click.IntRange(min=0), default=3, show_default=True,
+              help="How many parts to suggest clicking next, per vehicle.")
+@fitting_options
+@click.option("--all", "show_all", is_flag=True, help="Describe every vehicle, not only those that need work.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout instead of text.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar on stderr.")
+def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigma_rel: float, allow_ambiguous: bool,
+                     next_clicks: int, fitting: Fitting, show_all: bool, as_json: bool, quiet: bool) -> None:
+    """Check an annotation file and say which vehicles need more clicks; writes nothing.
+
+    Schema errors are listed with their JSON paths (exit code 2). Otherwise every vehicle is fitted as
+    `toosicubix fit` would fit it with the same options, and for each vehicle that is not well determined
+    the report gives its constraint count, the standard deviations of its pose and size for clicks off by
+    --click-sigma pixels, what its clicks leave to the prior, any second answer (e.g. turned around) that
+    fits nearly as well, and the parts to click next, with where they should appear in the image and how
+    much each would shrink the yaw and depth uncertainty.
+
+    Exit code 0 when every vehicle is well determined, 1 when some are not (or cannot be fitted), 2 for a
+    bad input file or option.
+
+    \b
+    Example:
+      toosicubix validate annotations.json
+      toosicubix validate annotations.json --kitti-ground --max-yaw-sigma 3 --all
+      toosicubix validate annotations.json --json > report.json
+    """
+    from toosicubix.pipeline.validation import validate_file
+
+    thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous)
+    bar = ProgressBar(quiet)
+    try:
+        report = validate_file(annotations, fitting.priors_path, fitting.options, thresholds, fitting.ground,
+                               fitting.joint_ground, next_clicks, fitting.jobs, progress=bar.update,
+                               on_start=bar.start)
+    finally:
+        bar.finish()
+    if as_json:
+        from toosicubix.formats.results import dumps
+
+        click.echo(dumps(report.to_json()), nl=False)
+    else:
+        click.echo(report.text(show_all), nl=False)
+    sys.exit(EXIT_OK if report.ok else EXIT_SOME_FAILED)
