@@ -696,5 +696,14 @@ def eval_command(out: Path, kitti_dir: Path | None, tracking_dir: Path | None, c
 # --- end of eval -----------------------------------------------------------------------------------------
 
 
+from toosicubix.cli.export import export_group  # noqa: E402  (issue 15)
+from toosicubix.cli.import_tools import import_group  # noqa: E402  (issue 15; joins issue 14's import group)
+from toosicubix.cli.template import template_command  # noqa: E402  (issue 15: labelling tools)
+
+main.add_command(template_command)
+main.add_command(import_group)
+main.add_command(export_group)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
