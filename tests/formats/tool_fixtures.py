@@ -10,10 +10,14 @@ with ``original_width``, ``original_height``, ``image_rotation``, ``value`` in p
 
 from __future__ import annotations
 
+import functools
 import json
+import tempfile
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 from tests.conftest import REPO
 from toosicubix.parts.keypoints import KEYPOINTS, keypoints_from_parts
@@ -43,17 +47,19 @@ def cameras_doc(doc: dict[str, Any]) -> dict[str, Any]:
 
 
 def _meta(kind: str, labels: list[str]) -> str:
-    label_xml = "".join(
-        f"\n        <label>\n          <name>{name}</name>\n          <color>#33ddff</color>\n          <type>points</type>"
-        f"\n          <attributes>\n          </attributes>\n          <parent>vehicle</parent>\n        </label>"
+    sub = "".join(
+        f"\n        <label>\n          <name>{name}</name>\n          <color>#33ddff</color>"
+        "\n          <type>points</type>\n          <attributes>\n          </attributes>"
+        "\n          <parent>vehicle</parent>\n        </label>"
         for name in labels)
-    return (f"\n  <meta>\n    <{kind}>\n      <id>7</id>\n      <name>toosicubix</name>\n      <labels>\n        <label>"
-            "\n          <name>vehicle</name>\n          <color>#ff6037</color>\n          <type>skeleton</type>"
-            "\n          <attributes>\n            <attribute>\n              <name>prototype</name>"
-            "\n              <mutable>False</mutable>\n              <input_type>select</input_type>"
-            "\n              <default_value>Car</default_value>\n              <values>Car\nVan\nTruck</values>"
-            "\n            </attribute>\n          </attributes>\n          <svg>&lt;circle r=\"0.75\"&gt;&lt;/circle&gt;"
-            f"</svg>\n          <parent></parent>\n        </label>{label_xml}\n      </labels>\n    </{kind}>"
+    return (f"\n  <meta>\n    <{kind}>\n      <id>7</id>\n      <name>toosicubix</name>\n      <labels>"
+            "\n        <label>\n          <name>vehicle</name>\n          <color>#ff6037</color>"
+            "\n          <type>skeleton</type>\n          <attributes>\n            <attribute>"
+            "\n              <name>prototype</name>\n              <mutable>False</mutable>"
+            "\n              <input_type>select</input_type>\n              <default_value>Car</default_value>"
+            "\n              <values>Car\nVan\nTruck</values>\n            </attribute>\n          </attributes>"
+            "\n          <svg>&lt;circle r=\"0.75\"&gt;&lt;/circle&gt;</svg>\n          <parent></parent>"
+            f"\n        </label>{sub}\n      </labels>\n    </{kind}>"
             "\n    <dumped>2026-11-22 10:00:00.000000+00:00</dumped>\n  </meta>")
 
 
@@ -131,3 +137,45 @@ def label_studio_export(doc: dict[str, Any], parent_ids: bool = True, completion
 def write_json(path: Path, doc: Any) -> Path:
     path.write_text(json.dumps(doc, indent=1))
     return path
+
+
+def fit_results(annotations: Path) -> dict[str, Any]:
+    """``results.json`` of fitting an annotation file with the default settings."""
+    from toosicubix.pipeline.batch import fit_file
+
+    with tempfile.TemporaryDirectory() as out:
+        fit_file(annotations, Path(out) / "fit")
+        return json.loads((Path(out) / "fit" / "results.json").read_text())
+
+
+@functools.lru_cache(maxsize=1)
+def sample_fit() -> str:
+    """The sample's ``results.json`` as text (cached: one fit per test session)."""
+    return json.dumps(fit_results(SAMPLE))
+
+
+def max_pose_difference(a: dict[str, Any], b: dict[str, Any]) -> float:
+    """Largest difference of R_cam_vehicle, t_cam_vehicle (m) and dimensions (m) between two results files whose
+    images and vehicles come in the same order; every vehicle must be fitted in both."""
+    worst = 0.0
+    assert [im["id"] for im in a["images"]] == [im["id"] for im in b["images"]]
+    for image_a, image_b in zip(a["images"], b["images"], strict=True):
+        for va, vb in zip(image_a["vehicles"], image_b["vehicles"], strict=True):
+            assert va["status"] == vb["status"] == "ok"
+            for key in ("R_cam_vehicle", "t_cam_vehicle", "dimensions"):
+                worst = max(worst, float(np.abs(np.array(va[key]) - np.array(vb[key])).max()))
+    return worst
+
+
+def same_clicks(doc_a: dict[str, Any], doc_b: dict[str, Any]) -> bool:
+    """Whether two annotation documents hold the same vehicles (in order) with the same named clicks."""
+    for image_a, image_b in zip(doc_a["images"], doc_b["images"], strict=True):
+        if len(image_a["vehicles"]) != len(image_b["vehicles"]):
+            return False
+        for va, vb in zip(image_a["vehicles"], image_b["vehicles"], strict=True):
+            ka, kb = dict(keypoints_from_parts(va["parts"])), dict(keypoints_from_parts(vb["parts"]))
+            if ka.keys() != kb.keys() or va["prototype"] != vb["prototype"]:
+                return False
+            if any(abs(ka[k][i] - kb[k][i]) > 1e-9 for k in ka for i in (0, 1)):
+                return False
+    return len(doc_a["images"]) == len(doc_b["images"])
