@@ -1,6 +1,7 @@
 """Label Studio JSON export import (fixtures as Label Studio exports them)."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -127,3 +128,13 @@ def test_errors_name_the_file_and_json_path(tmp_path):
         read_label_studio(write_json(tmp_path / "e.json", [good]), None)
     with pytest.raises(FormatError, match=r"\$: expected a list of tasks"):
         read_label_studio(write_json(tmp_path / "e.json", "tasks"), None)
+
+
+def test_a_real_label_studio_export(tmp_path):
+    # Exported by Label Studio 1.23.2 through its API (tests/integration/labelstudio_roundtrip.py) after a project
+    # was made from `toosicubix template label-studio` and the sample's clicks were posted, nested in their boxes.
+    path = Path(__file__).parent / "fixtures" / "labelstudio-1.23.2-export.json"
+    imported, summary = read_label_studio(path, _cameras(tmp_path))
+    assert summary.warnings == []
+    assert [im["file"] for im in imported["images"]] == [f"/frames/{im['id']}.png" for im in sample_doc()["images"]]
+    assert same_clicks(imported, sample_doc())

@@ -41,7 +41,12 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from tests.formats.tool_fixtures import cameras_doc, label_studio_results, sample_doc  # noqa: E402
+from tests.formats.tool_fixtures import (  # noqa: E402
+    cameras_doc,
+    label_studio_results,
+    same_clicks,
+    sample_doc,
+)
 from toosicubix.formats.templates import label_studio_config  # noqa: E402
 from toosicubix.parts.keypoints import keypoints_from_parts  # noqa: E402
 
@@ -164,10 +169,7 @@ def main() -> int:
         if run.returncode != 0:
             return 1
         imported = json.loads(imported_path.read_text())
-        same_parts = all(
-            sorted(keypoints_from_parts(vi["parts"])) == sorted(keypoints_from_parts(vs["parts"]))
-            for ii, is_ in zip(imported["images"], doc["images"], strict=True)
-            for vi, vs in zip(ii["vehicles"], is_["vehicles"], strict=True))
+        same_parts = same_clicks(imported, doc)  # same vehicles, names and prototypes, clicks within 1e-9 px
         worst_click = max(
             abs(a[1][k] - b[1][k])
             for ii, is_ in zip(imported["images"], doc["images"], strict=True)
@@ -175,7 +177,7 @@ def main() -> int:
             for a, b in zip(sorted(keypoints_from_parts(vi["parts"])), sorted(keypoints_from_parts(vs["parts"])),
                             strict=True)
             for k in (0, 1))
-        print(f"imported parts equal the sample's: {same_parts} (largest click difference {worst_click:.2e} px)")
+        print(f"imported clicks equal the sample's: {same_parts} (largest click difference {worst_click:.2e} px)")
 
         fits = {}
         for name, path in (("sample", REPO / "samples" / "annotations.json"), ("imported", imported_path)):

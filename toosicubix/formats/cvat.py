@@ -36,9 +36,9 @@ from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolK
 
 
 def _parse(path: Path) -> ET.Element:
-    if "<!DOCTYPE" in path.read_text(encoding="utf-8", errors="replace")[:4096].upper():
-        raise FormatError(path, "a DOCTYPE is not allowed in CVAT XML")
     try:
+        if "<!DOCTYPE" in path.read_text(encoding="utf-8", errors="replace")[:4096].upper():
+            raise FormatError(path, "a DOCTYPE is not allowed in CVAT XML (entities are not expanded)")
         return ET.parse(path).getroot()
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
