@@ -138,3 +138,15 @@ def test_a_real_label_studio_export(tmp_path):
     assert summary.warnings == []
     assert [im["file"] for im in imported["images"]] == [f"/frames/{im['id']}.png" for im in sample_doc()["images"]]
     assert same_clicks(imported, sample_doc())
+
+
+def test_an_image_without_vehicles_needs_no_camera(tmp_path):
+    empty = _task([])
+    labelled = _task([_box("b", "Car", 10, 10, 20, 20), _kp("k", "top-center", 20, 20, parent="b")])
+    labelled["data"]["image"] = "frames/b.png"
+    cameras = load_cameras(write_json(tmp_path / "c.json", {"cameras": [
+        {"match": "frames/*", "K": [[800, 0, 500], [0, 800, 250], [0, 0, 1]]}]}))
+    doc, summary = read_label_studio(write_json(tmp_path / "e.json", [empty, labelled]), cameras)
+    assert [im["id"] for im in doc["images"]] == ["b"]
+    assert summary.warnings == [f"{tmp_path / 'e.json'}: image '/data/upload/3/5f3a2b1c-a.png', image: no vehicles and "
+                                f"no camera (no entry of {tmp_path / 'c.json'} matches it): image left out"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import json
 import tempfile
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
@@ -20,7 +21,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from tests.conftest import REPO
-from toosicubix.parts.keypoints import KEYPOINTS, keypoints_from_parts
+from toosicubix.formats.templates import cvat_labels, label_studio_config
+from toosicubix.parts.keypoints import keypoints_from_parts
 
 SAMPLE = REPO / "samples" / "annotations.json"
 
@@ -64,17 +66,20 @@ def _meta(kind: str, labels: list[str]) -> str:
 
 
 def cvat_xml(doc: dict[str, Any], project: bool = False, outside_absent: bool = True) -> str:
-    """CVAT for images 1.1: one skeleton per vehicle with every keypoint, those not clicked ``outside="1"``."""
+    """CVAT for images 1.1 of a task made from ``toosicubix template cvat``: one skeleton per vehicle with every
+    sublabel of the template, those not clicked ``outside="1"``."""
+    skeleton = cvat_labels()[0]
+    sublabels = [s["name"] for s in skeleton["sublabels"]]
     out = ['<?xml version="1.0" encoding="utf-8"?>\n<annotations>\n  <version>1.1</version>',
-           _meta("project" if project else "task", list(KEYPOINTS))]
+           _meta("project" if project else "task", sublabels)]
     for index, image in enumerate(doc["images"]):
         w, h = image["size"]
         extra = ' subset="default" task_id="3"' if project else ""
         out.append(f'\n  <image id="{index}" name={quoteattr(file_name(image))}{extra} width="{w}" height="{h}">')
         for vehicle in image["vehicles"]:
             clicked = dict(keypoints_from_parts(vehicle["parts"]))
-            out.append('\n    <skeleton label="vehicle" source="manual" z_order="0">')
-            for name in KEYPOINTS:
+            out.append(f'\n    <skeleton label="{skeleton["name"]}" source="manual" z_order="0">')
+            for name in sublabels:
                 if name in clicked:
                     x, y = clicked[name]
                     out.append(f'\n      <points label="{name}" source="manual" outside="0" occluded="0" '
@@ -82,17 +87,25 @@ def cvat_xml(doc: dict[str, Any], project: bool = False, outside_absent: bool = 
                 elif outside_absent:
                     out.append(f'\n      <points label="{name}" source="manual" outside="1" occluded="0" '
                                f'points="10.00,10.00">\n      </points>')
-            out.append(f'\n      <attribute name="prototype">{vehicle["prototype"]}</attribute>\n    </skeleton>')
+            attribute = skeleton["attributes"][0]["name"]
+            out.append(f'\n      <attribute name="{attribute}">{vehicle["prototype"]}</attribute>\n    </skeleton>')
         out.append("\n  </image>")
     out.append("\n</annotations>\n")
     return "".join(out)
 
 
+def _control_names() -> dict[str, str]:
+    """The names of the controls of ``toosicubix template label-studio``: tag -> name."""
+    root = ET.fromstring(label_studio_config())
+    return {child.tag: child.get("name") for child in root if child.get("name")}
+
+
 def _region(image: dict[str, Any], rid: str, kind: str, value: dict[str, Any], parent: str | None) -> dict[str, Any]:
     w, h = image["size"]
+    names = _control_names()
     region = {"original_width": w, "original_height": h, "image_rotation": 0, "value": value, "id": rid,
-              "from_name": "vehicle" if kind == "rectanglelabels" else "keypoint", "to_name": "image",
-              "type": kind, "origin": "manual"}
+              "from_name": names["RectangleLabels" if kind == "rectanglelabels" else "KeyPointLabels"],
+              "to_name": names["Image"], "type": kind, "origin": "manual"}
     if parent is not None:
         region["parentID"] = parent
     return region

@@ -110,10 +110,6 @@ class DocumentBuilder:
             raise FormatError(self.source, f"images {self._files[image_id]!r} and {file_name!r} get the same "
                                            f"image id {image_id!r}: rename one")
         self._files[image_id] = file_name
-        camera = self.cameras.camera_for(file_name) if self.cameras is not None else None
-        if camera is None:
-            hint = f"no entry of {self.cameras.source} matches it" if self.cameras else "give --cameras CAMERAS.json"
-            raise FormatError(self.source, f"image {file_name!r}: no camera ({hint})")
         out_vehicles = []
         ids: set[str] = set()
         for vehicle in vehicles:
@@ -124,6 +120,13 @@ class DocumentBuilder:
                 raise FormatError(self.source, f"image {file_name!r}: two vehicles with id {converted['id']!r}")
             ids.add(converted["id"])
             out_vehicles.append(converted)
+        camera = self.cameras.camera_for(file_name) if self.cameras is not None else None
+        if camera is None:
+            hint = f"no entry of {self.cameras.source} matches it" if self.cameras else "give --cameras CAMERAS.json"
+            if not out_vehicles:
+                self.warn(file_name, "image", f"no vehicles and no camera ({hint}): image left out")
+                return
+            raise FormatError(self.source, f"image {file_name!r}: no camera ({hint})")
         image: dict[str, Any] = {"id": image_id, "file": file_name}
         if size is not None:
             image["size"] = [int(size[0]), int(size[1])]
