@@ -30,8 +30,7 @@ def _known_image() -> FittedImage:
              {"kind": "symmetry", "face": "rear", "left": [580.0, 330.0], "right": [660.0, 331.0]}]
     K = np.array([[700.0, 0.0, 640.0], [0.0, 700.0, 360.0], [0.0, 0.0, 1.0]])
     return FittedImage("000123", "frames/000123.png", (1280, 720), Camera(K, np.array([-0.1, 0.01, 0, 0, 0])),
-                       {"K": K.tolist()}, [FittedVehicle(ok, parts, [550.0, 300.0, 700.0, 420.0]),
-                                           FittedVehicle(failed, parts[:1])])
+                       [FittedVehicle(ok, parts, [550.0, 300.0, 700.0, 420.0]), FittedVehicle(failed, parts[:1])])
 
 
 def test_known_cuboid_val_number_by_number():

@@ -24,6 +24,8 @@ def test_cvat_skeleton_has_one_node_per_keypoint():
     assert all(s["type"] == "points" for s in skeleton["sublabels"])
     assert skeleton["attributes"] == [{"name": "prototype", "mutable": False, "input_type": "select",
                                        "default_value": "Car", "values": ["Car", "Van"]}]
+    # cvat-core wraps the field in <svg>...</svg> itself; a wrapper of our own would hide every node from it.
+    assert "<svg" not in skeleton["svg"]
     svg = ET.fromstring(f"<svg>{skeleton['svg']}</svg>")
     nodes = [e for e in svg if e.get("data-type") == "element node"]
     assert [n.get("data-label-name") for n in nodes] == list(KEYPOINTS)

@@ -36,7 +36,6 @@ class FittedImage:
     file: str | None
     size: tuple[int, int] | None
     camera: Camera
-    camera_json: dict[str, Any]
     vehicles: list[FittedVehicle] = field(default_factory=list)
 
 
@@ -96,6 +95,5 @@ def load_fitted(out_dir: str | Path, annotations: str | Path | None = None) -> t
             parts = [p.model_dump(mode="json") for p in v.parts]
             vehicles.append(FittedVehicle(v_result, parts, None if v.box2d is None else list(v.box2d)))
         images.append(FittedImage(im.id, im.file, None if im.size is None else (im.size[0], im.size[1]),
-                                  camera_from_schema(im.camera, im.size),
-                                  im.camera.model_dump(mode="json", exclude_none=True), vehicles))
+                                  camera_from_schema(im.camera, im.size), vehicles))
     return images, annotations
