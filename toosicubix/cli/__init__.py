@@ -42,5 +42,14 @@ main.add_command(tune.tune_command)
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "BadInput", "main"]
 
+from toosicubix.cli.export import export_group  # noqa: E402  (issue 15)
+from toosicubix.cli.import_tools import import_group  # noqa: E402  (issue 15; joins issue 14's import group)
+from toosicubix.cli.template import template_command  # noqa: E402  (issue 15: labelling tools)
+
+main.add_command(template_command)
+main.add_command(import_group)
+main.add_command(export_group)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -1,0 +1,144 @@
+"""``toosicubix import cvat|label-studio``: labelling-tool exports -> annotation file v1.
+
+The commands are plain click commands; :data:`COMMANDS` lists them for the ``import`` group.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from toosicubix.cli import BadInput
+
+
+def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:
+    from toosicubix.annotations.schema import LENGTH_FEATURES
+
+    out = {}
+    for value in values:
+        feature, _, size = value.partition("=")
+        metres, _, sigma = size.partition(":")
+        try:
+            known = (float(metres), float(sigma) if sigma else 0.01)
+        except ValueError:
+            known = (-1.0, -1.0)
+        if feature not in LENGTH_FEATURES or min(known) <= 0:
+            raise click.BadParameter(f"expected FEATURE=METRES[:SIGMA] with a feature of {', '.join(LENGTH_FEATURES)}"
+                                     f" and positive sizes, got {value!r}", param_hint="--length")
+        out[feature] = known
+    return out
+
+
+_COMMON = [
+    click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help='Cameras file: {"cameras": [{"match": GLOB on the image name, "K": 3x3, "distortion": [...]}]}, '
+                      "first match wins. Every image needs a camera."),
+    click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+                 help="The annotation file to write (v1)."),
+    click.option("--default-prototype", default="Car", show_default=True,
+                 help="Prototype of vehicles the export gives none (a warning names each)."),
+    click.option("--length", "lengths", multiple=True, metavar="FEATURE=METRES[:SIGMA]",
+                 help="Known size of a length feature, e.g. plate-rear=0.44:0.01 (plates default to EU 0.52 m)."),
+    click.option("--strict", is_flag=True, help="Treat every warning as an error: exit 2 and write nothing."),
+    click.option("-q", "--quiet", is_flag=True, help="No warnings or summary on stderr."),
+]
+
+
+def _common(command):
+    for option in reversed(_COMMON):
+        command = option(command)
+    return command
+
+
+def _run(read, source: Path, cameras_path: Path | None, out_path: Path, strict: bool, quiet: bool) -> None:
+    from toosicubix.annotations.schema import InputFileError, parse_annotations
+    from toosicubix.formats import FormatError
+    from toosicubix.formats.atomic import atomic_write_text
+    from toosicubix.formats.cameras import load_cameras
+
+    try:
+        cameras = load_cameras(cameras_path) if cameras_path is not None else None
+        doc, summary = read(source, cameras)
+        parse_annotations(doc, out_path)  # what we write must be a valid annotation file
+    except (FormatError, InputFileError) as exc:
+        raise BadInput(str(exc)) from None
+    if strict and summary.warnings:
+        raise BadInput("\n".join(summary.warnings) + f"\n--strict: {len(summary.warnings)} warnings, nothing written")
+    if not quiet:
+        for warning in summary.warnings:
+            click.echo(f"warning: {warning}", err=True)
+    try:
+        atomic_write_text(out_path, json.dumps(doc, indent=1) + "\n")
+    except OSError as exc:
+        raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
+    if not quiet:
+        for line in summary.lines():
+            click.echo(line, err=True)
+        click.echo(f"wrote {out_path}", err=True)
+
+
+@click.command("cvat")
+@click.argument("annotations_xml", type=click.Path(dir_okay=False, path_type=Path))
+@_common
+def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Path, default_prototype: str,
+                 lengths: tuple[str, ...], strict: bool, quiet: bool) -> None:
+    """Import a CVAT for images 1.1 export (annotations.xml) as an annotation file.
+
+    Skeletons (from `toosicubix template cvat`) are vehicles, their points the keypoints; points marked
+    outside are not clicked. Loose points are grouped into vehicles by group_id (a box in the group gives
+    the prototype and box). Task, job and project exports are read. Keypoints that cannot be grouped,
+    unknown names and points outside the image are warnings that name the image and the element.
+
+    \b
+    Example:
+      toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
+    """
+    from toosicubix.formats.cvat import read_cvat
+
+    known = _lengths(lengths)
+    _run(lambda path, cameras: read_cvat(path, cameras, default_prototype, known),
+         annotations_xml, cameras_path, out_path, strict, quiet)
+
+
+@click.command("label-studio")
+@click.argument("export_json", type=click.Path(dir_okay=False, path_type=Path))
+@_common
+@click.option("--image-key", default=None, help="The task data key of the image [default: image].")
+def label_studio_command(export_json: Path, cameras_path: Path | None, out_path: Path, default_prototype: str,
+                         lengths: tuple[str, ...], strict: bool, quiet: bool, image_key: str | None) -> None:
+    """Import a Label Studio JSON export as an annotation file.
+
+    Boxes are vehicles (their label is the prototype); keypoints (percent of original_width and
+    original_height) belong to the box named by their parentID, else to the box a relation ties them to,
+    else to the one box that contains them. Old exports with 'completions' are read too.
+
+    \b
+    Example:
+      toosicubix import label-studio export.json --cameras cameras.json -o annotations.json
+    """
+    from toosicubix.formats.labelstudio import read_label_studio
+
+    known = _lengths(lengths)
+    _run(lambda path, cameras: read_label_studio(path, cameras, default_prototype, known, image_key),
+         export_json, cameras_path, out_path, strict, quiet)
+
+
+#: The commands of the ``import`` group this module contributes.
+COMMANDS = (cvat_command, label_studio_command)
+
+
+@click.group("import")
+def import_group() -> None:
+    """Import labelling-tool exports as annotation files (v1).
+
+    \b
+    Example:
+      toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
+      toosicubix import label-studio export.json --cameras cameras.json -o annotations.json
+    """
+
+
+for _command in COMMANDS:
+    import_group.add_command(_command)

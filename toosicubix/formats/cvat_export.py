@@ -1,0 +1,96 @@
+"""Fitted cuboids as CVAT for images 1.1 review shapes, for CVAT to import into the task that holds the clicks.
+
+Each fitted vehicle becomes a ``polyline`` over the 12 edges of its cuboid (label
+:data:`~toosicubix.formats.templates.CUBOID_LABEL`) and a ``polygon`` on its front face (``FRONT_LABEL``),
+projected with the image's camera including lens distortion (edges are sampled, so they bend as the lens
+bends them). Both carry the vehicle id; the polyline also its status. CVAT's own ``cuboid`` shape is a 2D
+pseudo-cuboid with no 3D meaning, so it is not used. Images are matched by ``name``: the annotation file's
+``file``, which the CVAT importer sets to CVAT's image name. The template's review labels must be in the task
+(``toosicubix template cvat`` adds them).
+"""
+
+from __future__ import annotations
+
+import itertools
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from toosicubix.formats.fitted import FittedImage
+from toosicubix.formats.templates import CUBOID_LABEL, FRONT_LABEL
+from toosicubix.geometry import cuboid_corners_cam
+
+#: A walk over all 12 edges of a cuboid (corner indices of :func:`toosicubix.geometry.cuboid_corners_vehicle`:
+#: bottom 0-3 front-left, rear-left, rear-right, front-right; top 4-7 the same), each edge at least once.
+EDGE_WALK = (0, 1, 2, 3, 0, 4, 5, 6, 7, 4, 5, 1, 2, 6, 7, 3)
+#: The front face (+X): bottom front-left, bottom front-right, top front-right, top front-left.
+FRONT_FACE = (0, 3, 7, 4)
+#: Nearest a corner may be to the camera plane, metres; a cuboid closer than that is not drawn.
+Z_NEAR = 0.1
+
+
+def _path_cam(corners_cam: np.ndarray, walk: tuple[int, ...], samples: int, closed: bool) -> np.ndarray:
+    """Points along the walk's segments in camera coordinates, ``samples`` per segment: (n, 3)."""
+    idx = list(walk) + ([walk[0]] if closed else [])
+    out = []
+    for a, b in itertools.pairwise(idx):
+        s = np.linspace(0.0, 1.0, samples, endpoint=False)[:, None]
+        out.append(corners_cam[a] + s * (corners_cam[b] - corners_cam[a]))
+    if not closed:
+        out.append(corners_cam[idx[-1]][None])
+    return np.vstack(out)
+
+
+def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[list[dict], list[str]]:
+    """Per fitted vehicle its polyline (N, 2) and front polygon (M, 2), pixels; and warnings for the left out.
+
+    Returns
+    -------
+    (shapes, warnings) : shapes are ``{"id", "status", "polyline", "front"}``
+    """
+    samples = samples_per_edge if image.camera.has_distortion else 1
+    shapes, warnings = [], []
+    for fv in image.vehicles:
+        v = fv.result
+        if not v.ok:
+            continue
+        corners_cam = cuboid_corners_cam(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)  # (8, 3)
+        if corners_cam[:, 2].min() < Z_NEAR:
+            warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid reaches behind the camera: left out")
+            continue
+        polyline = image.camera.project(_path_cam(corners_cam, EDGE_WALK, samples, closed=False))
+        front = image.camera.project(_path_cam(corners_cam, FRONT_FACE, samples, closed=True))
+        shapes.append({"id": v.id, "status": v.status, "polyline": polyline, "front": front})
+    return shapes, warnings
+
+
+def _fmt(uv: np.ndarray) -> str:
+    return ";".join(f"{u:.2f},{v:.2f}" for u, v in uv)
+
+
+def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[str, list[str]]:
+    """The CVAT for images 1.1 document with every fitted cuboid, and the warnings.
+
+    Images need a ``file`` (CVAT matches by name) and a ``size``; ids are their order in the file.
+    """
+    root = ET.Element("annotations")
+    ET.SubElement(root, "version").text = "1.1"
+    warnings: list[str] = []
+    for index, image in enumerate(images):
+        name = image.file or image.id
+        attrs = {"id": str(index), "name": name}
+        if image.size is not None:
+            attrs.update(width=str(image.size[0]), height=str(image.size[1]))
+        node = ET.SubElement(root, "image", attrs)
+        shapes, image_warnings = projected_shapes(image, samples_per_edge)
+        warnings += image_warnings
+        for shape in shapes:
+            line = ET.SubElement(node, "polyline", {"label": CUBOID_LABEL, "source": "auto", "occluded": "0",
+                                                    "points": _fmt(shape["polyline"]), "z_order": "0"})
+            ET.SubElement(line, "attribute", {"name": "vehicle_id"}).text = shape["id"]
+            ET.SubElement(line, "attribute", {"name": "status"}).text = shape["status"]
+            face = ET.SubElement(node, "polygon", {"label": FRONT_LABEL, "source": "auto", "occluded": "0",
+                                                   "points": _fmt(shape["front"]), "z_order": "0"})
+            ET.SubElement(face, "attribute", {"name": "vehicle_id"}).text = shape["id"]
+    ET.indent(root, "  ")
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n", warnings

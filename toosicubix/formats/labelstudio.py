@@ -1,0 +1,206 @@
+"""Label Studio's JSON export -> annotation file v1.
+
+The export is a list of tasks ``{"id", "data": {"image": URL}, "annotations": [{"id", "result": [...],
+"was_cancelled"}], ...}`` (exports of old versions say ``completions`` instead of ``annotations``). Results
+this importer reads:
+
+- ``rectanglelabels``: one vehicle; its label is the prototype, its box ``box2d``;
+- ``keypointlabels``: one keypoint named by its label (:mod:`toosicubix.parts.keypoints`); ``value.x`` and
+  ``value.y`` are **percent** of ``original_width`` / ``original_height``;
+- ``relation`` (``from_id``, ``to_id``): ties a keypoint to a box, like ``parentID``.
+
+A keypoint belongs to the box named by its ``parentID`` (set when the point is nested under the box), else
+to the box a relation ties it to, else to the one box that contains it (grown by 10 % each way); an image
+without any box makes one vehicle of all its keypoints. Anything else is a warning naming the task, the
+image and the region id.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+from urllib.parse import unquote, urlparse
+
+from toosicubix.formats import FormatError, read_json
+from toosicubix.formats.cameras import CameraTable
+from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolKeypoint, ToolVehicle
+
+#: How far a box is grown, as a share of its size each way, when keypoints are grouped by containment.
+CONTAINMENT_MARGIN = 0.1
+
+
+def _number(value: Any, path: Path, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise FormatError(path, f"{where}: expected a number, got {value!r:.40}")
+    return float(value)
+
+
+def _file_name(data: dict[str, Any], image_key: str | None) -> str | None:
+    value = data.get(image_key) if image_key else data.get("image")
+    if value is None and image_key is None:
+        value = next((v for v in data.values() if isinstance(v, str)), None)
+    if not isinstance(value, str):
+        return None
+    parsed = urlparse(value)
+    if parsed.query and "d=" in parsed.query:  # local files: /data/local-files/?d=folder/image.png
+        value = unquote(parsed.query.split("d=", 1)[1].split("&", 1)[0])
+    elif parsed.scheme in ("http", "https", "s3", "gs"):
+        value = unquote(parsed.path)
+    return value
+
+
+def _pick_annotation(task: dict[str, Any], where: str, builder: DocumentBuilder, name: str,
+                     path: Path) -> tuple[dict[str, Any] | None, str]:
+    key = "annotations" if "annotations" in task else "completions"
+    entries = task.get(key) or []
+    if not isinstance(entries, list):
+        raise FormatError(path, f"{where}.{key}: expected a list")
+    usable = [(i, a) for i, a in enumerate(entries) if isinstance(a, dict) and not a.get("was_cancelled")]
+    if not usable:
+        return None, key
+    if len(usable) > 1:
+        builder.warn(name, f"task {task.get('id')}", f"{len(usable)} annotations: the last one "
+                                                      f"({key}[{usable[-1][0]}]) is used")
+    index, annotation = usable[-1]
+    return annotation, f"{where}.{key}[{index}]"
+
+
+def _regions(result: list[Any], path: Path, where: str) -> tuple[list[dict], list[dict], list[dict], tuple | None]:
+    boxes, points, relations = [], [], []
+    size = None
+    for j, region in enumerate(result):
+        rw = f"{where}.result[{j}]"
+        if not isinstance(region, dict):
+            raise FormatError(path, f"{rw}: expected an object")
+        kind = region.get("type")
+        if kind == "relation":
+            relations.append(region)
+            continue
+        if kind not in ("rectanglelabels", "keypointlabels"):
+            continue
+        value = region.get("value")
+        if not isinstance(value, dict):
+            raise FormatError(path, f"{rw}.value: missing")
+        width = _number(region.get("original_width"), path, f"{rw}.original_width")
+        height = _number(region.get("original_height"), path, f"{rw}.original_height")
+        if size is None:
+            size = (round(width), round(height))
+        if region.get("image_rotation", 0) not in (0, 0.0, None):
+            raise FormatError(path, f"{rw}.image_rotation: rotated images are not supported "
+                                    f"(got {region['image_rotation']})")
+        labels = value.get(kind)
+        if not isinstance(labels, list) or len(labels) != 1 or not isinstance(labels[0], str):
+            raise FormatError(path, f"{rw}.value.{kind}: expected one label, got {labels!r:.60}")
+        x = _number(value.get("x"), path, f"{rw}.value.x") / 100.0 * width
+        y = _number(value.get("y"), path, f"{rw}.value.y") / 100.0 * height
+        entry = {"id": str(region.get("id", j)), "label": labels[0], "where": rw, "x": x, "y": y,
+                 "parent": region.get("parentID")}
+        if kind == "rectanglelabels":
+            w = _number(value.get("width"), path, f"{rw}.value.width") / 100.0 * width
+            h = _number(value.get("height"), path, f"{rw}.value.height") / 100.0 * height
+            entry["box"] = (x, y, x + w, y + h)
+            entry["rotated"] = bool(value.get("rotation", 0))
+            boxes.append(entry)
+        else:
+            points.append(entry)
+    return boxes, points, relations, size
+
+
+def _inside(box: tuple[float, float, float, float], x: float, y: float) -> bool:
+    mx = CONTAINMENT_MARGIN * (box[2] - box[0])
+    my = CONTAINMENT_MARGIN * (box[3] - box[1])
+    return box[0] - mx <= x <= box[2] + mx and box[1] - my <= y <= box[3] + my
+
+
+def read_label_studio(path: str | Path, cameras: CameraTable | None, default_prototype: str = "Car",
+                      lengths: dict[str, tuple[float, float]] | None = None,
+                      image_key: str | None = None) -> tuple[dict[str, Any], ImportSummary]:
+    """Read a Label Studio JSON export into an annotation file v1 document.
+
+    Parameters
+    ----------
+    path : the export (JSON, a list of tasks)
+    cameras : intrinsics by image file name; every image needs one
+    default_prototype : for vehicles without a box (no prototype label)
+    lengths : known sizes of length features, feature -> (metres, sigma)
+    image_key : the task ``data`` key of the image (default ``image``, else the first text value)
+
+    Returns
+    -------
+    (document, summary)
+
+    Raises
+    ------
+    FormatError
+        Not JSON, not a list of tasks, malformed regions, an image without camera: naming the file and JSON path.
+    """
+    path = Path(path)
+    tasks = read_json(path)
+    if isinstance(tasks, dict):  # a single task
+        tasks = [tasks]
+    if not isinstance(tasks, list):
+        raise FormatError(path, "$: expected a list of tasks (Label Studio's JSON export)")
+    builder = DocumentBuilder(str(path), cameras, default_prototype, lengths)
+    for t, task in enumerate(tasks):
+        where = f"$[{t}]"
+        if not isinstance(task, dict) or not isinstance(task.get("data"), dict):
+            raise FormatError(path, f"{where}.data: missing (not a Label Studio task)")
+        name = _file_name(task["data"], image_key)
+        if name is None:
+            raise FormatError(path, f"{where}.data: no image ({image_key or 'image'})")
+        annotation, awhere = _pick_annotation(task, where, builder, name, path)
+        if annotation is None:
+            builder.warn(name, f"task {task.get('id')}", "no annotation that is not cancelled: image left out")
+            continue
+        result = annotation.get("result")
+        if not isinstance(result, list):
+            raise FormatError(path, f"{awhere}.result: expected a list")
+        boxes, points, relations, size = _regions(result, path, awhere)
+        builder.add_image(name, size, _vehicles(boxes, points, relations, builder, name, task.get("id")))
+    return builder.document(), builder.summary
+
+
+def _vehicles(boxes: list[dict], points: list[dict], relations: list[dict], builder: DocumentBuilder, name: str,
+              task_id: Any) -> list[ToolVehicle]:
+    vehicles = []
+    by_id: dict[str, ToolVehicle] = {}
+    for i, box in enumerate(boxes):
+        vehicle = ToolVehicle(id=str(i + 1), element=f"task {task_id}, box {box['id']} ({box['where']})",
+                              prototype=box["label"], box2d=None if box["rotated"] else box["box"])
+        if box["rotated"]:
+            builder.warn(name, vehicle.element, "rotated box: not used as box2d")
+        vehicles.append(vehicle)
+        by_id[box["id"]] = vehicle
+    related: dict[str, str] = {}
+    for rel in relations:
+        a, b = str(rel.get("from_id")), str(rel.get("to_id"))
+        if a in by_id and b not in by_id:
+            related[b] = a
+        elif b in by_id and a not in by_id:
+            related[a] = b
+    loose: list[ToolKeypoint] = []
+    for point in points:
+        element = f"task {task_id}, keypoint {point['id']} {point['label']!r} ({point['where']})"
+        keypoint = ToolKeypoint(point["label"], (point["x"], point["y"]), element)
+        parent = point["parent"]
+        if parent is not None and str(parent) in by_id:
+            by_id[str(parent)].keypoints.append(keypoint)
+            continue
+        if parent is not None:
+            builder.warn(name, element, f"parentID {parent!r} is not a vehicle box of this annotation")
+        if point["id"] in related:
+            by_id[related[point["id"]]].keypoints.append(keypoint)
+            continue
+        holders = [v for v, box in zip(vehicles, boxes, strict=True) if _inside(box["box"], *keypoint.xy)]
+        if len(holders) == 1:
+            holders[0].keypoints.append(keypoint)
+        elif not boxes:
+            loose.append(keypoint)
+        else:
+            why = "inside no vehicle box" if not holders else f"inside {len(holders)} vehicle boxes"
+            builder.warn(name, element, f"cannot be grouped to a vehicle (no parentID, no relation, {why}): "
+                                        "left out")
+            builder.summary.left_out[keypoint.name] += 1
+    if loose:
+        vehicles.append(ToolVehicle(id="1", element=f"task {task_id}, keypoints without a box", keypoints=loose))
+    return vehicles

@@ -1,0 +1,169 @@
+"""Fitted cuboids as ASAM OpenLABEL 1.0.0 JSON.
+
+Layout::
+
+    {"openlabel": {
+      "metadata": {"schema_version": "1.0.0", "annotator": "toosicubix X", ...},
+      "coordinate_systems": {"camera1": {"type": "sensor_cs", "parent": "", "children": []}},
+      "streams": {"camera1": {"type": "camera", "description": ..., "stream_properties": {"intrinsics_pinhole":
+                  {"width_px", "height_px", "camera_matrix_3x4": [12], "distortion_coeffs_1xN": [...]}}}},
+      "objects": {"0": {"name": "<image id>/<vehicle id>", "type": "<prototype>", "coordinate_system": "camera1",
+                        "frame_intervals": [{"frame_start": f, "frame_end": f}]}},
+      "frames": {"0": {"frame_properties": {"streams": {"camera1": {"uri": "<image file>"}}},
+                       "objects": {"0": {"object_data": {"cuboid": [...], "point2d": [...], "bbox": [...],
+                                                         "text": [...]}}}}}}}
+
+- One frame per image, one stream (and sensor coordinate system) per distinct camera. Intrinsics are written
+  as ``camera_matrix_3x4`` and ``distortion_coeffs_1xN``, as the standard's own example does (its schema says
+  ``camera_matrix``; see FORMATS.md). For a KITTI ``P`` the matrix is ``[K | 0]``: the cuboids are in the
+  frame where ``K`` applies (camera 2), as in results.json.
+- ``cuboid.val`` = ``[x, y, z, qx, qy, qz, qw, dx, dy, dz]``: the box **centre** in the camera frame
+  (x right, y down, z forward), ``t_cam_vehicle + R_cam_vehicle (0, 0, dz/2)``; the scalar-last unit
+  quaternion of ``R_cam_vehicle`` (``qw >= 0``); the dimensions (length, width, height) along the vehicle's
+  own axes X forward, Y left, Z up (ISO 8855 like). The uncertainty (``results.json``'s ``sigma`` and
+  ``confidence``), ``rms_px`` and ``ambiguous`` are the cuboid's attributes.
+- Every click is a ``point2d`` named by its keypoint (:mod:`toosicubix.parts.keypoints`), pixels as clicked;
+  the annotated box is a ``bbox`` ``[cx, cy, w, h]``; ``status``, ``prototype`` and (for failed vehicles,
+  which get no cuboid) ``error`` are ``text`` entries.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from toosicubix import __version__
+from toosicubix.formats.fitted import FittedImage
+from toosicubix.parts.keypoints import KeypointProblem, keypoints_from_parts
+
+SCHEMA_VERSION = "1.0.0"
+
+
+def cuboid_val(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> list[float]:
+    """OpenLABEL's 10-value cuboid of a fitted vehicle.
+
+    Parameters
+    ----------
+    R_cam_vehicle : (3, 3) rotation, vehicle frame (X forward, Y left, Z up) to camera frame
+    t_cam_vehicle : (3,) bottom-face centre in the camera frame, metres
+    dimensions : (3,) ``(dx, dy, dz)`` metres
+
+    Returns
+    -------
+    [x, y, z, qx, qy, qz, qw, dx, dy, dz] : box centre (camera frame), scalar-last quaternion with qw >= 0,
+    dimensions
+    """
+    R = np.asarray(R_cam_vehicle, dtype=float)
+    d = np.asarray(dimensions, dtype=float)
+    centre_cam = np.asarray(t_cam_vehicle, dtype=float) + R @ np.array([0.0, 0.0, d[2] / 2.0])
+    q_xyzw = Rotation.from_matrix(R).as_quat()
+    if q_xyzw[3] < 0:
+        q_xyzw = -q_xyzw
+    return [float(v) for v in (*centre_cam, *q_xyzw, *d)]
+
+
+def _camera_key(image: FittedImage) -> tuple:
+    dist = image.camera.distortion
+    return (tuple(np.round(image.camera.K, 9).ravel()), None if dist is None else tuple(dist), image.size)
+
+
+def _stream(image: FittedImage) -> dict[str, Any]:
+    K = image.camera.K
+    pinhole: dict[str, Any] = {}
+    if image.size is not None:
+        pinhole["width_px"], pinhole["height_px"] = int(image.size[0]), int(image.size[1])
+    pinhole["camera_matrix_3x4"] = [float(v) for v in np.hstack([K, np.zeros((3, 1))]).ravel()]
+    if image.camera.distortion is not None:
+        pinhole["distortion_coeffs_1xN"] = [float(v) for v in image.camera.distortion]
+    return {"type": "camera", "description": "pinhole camera, x right, y down, z forward; OpenCV distortion order",
+            "stream_properties": {"intrinsics_pinhole": pinhole}}
+
+
+def _cuboid_attributes(details: dict[str, Any]) -> dict[str, Any]:
+    num, vec, boolean = [], [], []
+    sigma = details.get("sigma") or {}
+    for key, name in (("yaw_deg", "sigma_yaw_deg"), ("pitch_deg", "sigma_pitch_deg"), ("roll_deg", "sigma_roll_deg"),
+                      ("depth_m", "sigma_depth_m"), ("depth_rel", "sigma_depth_rel"),
+                      ("scale_rel", "sigma_scale_rel")):
+        if isinstance(sigma.get(key), (int, float)):
+            num.append({"name": name, "val": float(sigma[key])})
+    for key, name in (("dimensions", "sigma_dimensions_m"), ("position_m", "sigma_position_m")):
+        values = sigma.get(key)
+        if isinstance(values, list) and all(isinstance(v, (int, float)) for v in values):
+            vec.append({"name": name, "val": [float(v) for v in values]})
+    for key in ("confidence", "rms_px"):
+        if isinstance(details.get(key), (int, float)):
+            num.append({"name": key, "val": float(details[key])})
+    if isinstance(details.get("ambiguous"), bool):
+        boolean.append({"name": "ambiguous", "val": details["ambiguous"]})
+    out: dict[str, Any] = {}
+    for key, items in (("num", num), ("vec", vec), ("boolean", boolean)):
+        if items:
+            out[key] = items
+    return out
+
+
+def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[str, Any], list[str]]:
+    """The OpenLABEL 1.0.0 document of fitted images, and warnings (clicks the flat vocabulary cannot name)."""
+    streams: dict[str, Any] = {}
+    stream_of: dict[tuple, str] = {}
+    objects: dict[str, Any] = {}
+    frames: dict[str, Any] = {}
+    warnings: list[str] = []
+    for f, image in enumerate(images):
+        key = _camera_key(image)
+        if key not in stream_of:
+            stream_of[key] = f"camera{len(stream_of) + 1}"
+            streams[stream_of[key]] = _stream(image)
+        cam = stream_of[key]
+        frame_objects: dict[str, Any] = {}
+        for fv in image.vehicles:
+            v = fv.result
+            uid = str(len(objects))
+            objects[uid] = {"name": f"{image.id}/{v.id}", "type": v.prototype, "coordinate_system": cam,
+                            "frame_intervals": [{"frame_start": f, "frame_end": f}]}
+            data: dict[str, Any] = {}
+            if v.ok:
+                cuboid = {"name": "cuboid", "val": cuboid_val(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions),
+                          "coordinate_system": cam}
+                attributes = _cuboid_attributes(v.details)
+                if attributes:
+                    cuboid["attributes"] = attributes
+                data["cuboid"] = [cuboid]
+            try:
+                clicks = keypoints_from_parts(fv.parts)
+            except KeypointProblem as exc:
+                warnings.append(f"image {image.id!r}, vehicle {v.id!r}: {exc}: its clicks are left out")
+                clicks = []
+            if clicks:
+                data["point2d"] = [{"name": kp, "val": [x, y], "coordinate_system": cam} for kp, (x, y) in clicks]
+            if fv.box2d is not None:
+                x1, y1, x2, y2 = fv.box2d
+                data["bbox"] = [{"name": "box2d", "val": [(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1],
+                                 "coordinate_system": cam}]
+            text = [{"name": "status", "val": v.status}, {"name": "prototype", "val": v.prototype}]
+            if v.error:
+                text.append({"name": "error", "val": v.error})
+            data["text"] = text
+            frame_objects[uid] = {"object_data": data}
+        frame: dict[str, Any] = {"frame_properties": {"streams": {cam: {"uri": image.file or image.id}}}}
+        if frame_objects:
+            frame["objects"] = frame_objects
+        frames[str(f)] = frame
+    metadata = {"schema_version": SCHEMA_VERSION, "annotator": f"toosicubix {__version__}",
+                "comment": "cuboid val = [x, y, z, qx, qy, qz, qw, dx, dy, dz]: box centre in the camera frame "
+                           "(x right, y down, z forward), scalar-last quaternion of R_cam_vehicle, dimensions along "
+                           "the vehicle's X forward, Y left, Z up"}
+    if name:
+        metadata["name"] = name
+    doc = {"openlabel": {
+        "metadata": metadata,
+        "coordinate_systems": {cam: {"type": "sensor_cs", "parent": "", "children": []} for cam in streams},
+        "streams": streams,
+        "objects": objects,
+        "frames": frames,
+        "frame_intervals": [{"frame_start": 0, "frame_end": len(images) - 1}] if images else [],
+    }}
+    return doc, warnings

@@ -1,0 +1,170 @@
+"""What the labelling-tool importers share: named keypoints per vehicle -> annotation file v1.
+
+An importer (:mod:`toosicubix.formats.cvat`, :mod:`toosicubix.formats.labelstudio`) reads its tool's export
+into :class:`ToolVehicle` objects per image and hands them to :class:`DocumentBuilder`, which checks the
+points against the image, turns keypoints into parts (:mod:`toosicubix.parts.keypoints`), attaches the camera
+from a cameras file and collects every warning with the image and element it is about.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import PurePosixPath
+from typing import Any
+
+from toosicubix.formats import FormatError
+from toosicubix.formats.cameras import CameraTable
+from toosicubix.parts.keypoints import parts_from_keypoints
+
+
+@dataclass
+class ToolKeypoint:
+    """One clicked keypoint as the tool stored it.
+
+    Attributes
+    ----------
+    name : the keypoint (label) name
+    xy : (x, y) pixels
+    element : where it is in the export, for messages (e.g. "skeleton 2, points 'wheel-front-left'")
+    """
+
+    name: str
+    xy: tuple[float, float]
+    element: str
+
+
+@dataclass
+class ToolVehicle:
+    """One vehicle as the tool stored it: its keypoints and, where the tool has them, prototype and box."""
+
+    id: str
+    element: str
+    prototype: str | None = None
+    box2d: tuple[float, float, float, float] | None = None
+    keypoints: list[ToolKeypoint] = field(default_factory=list)
+
+
+@dataclass
+class ImportSummary:
+    """What an import did: counts, and every warning (also printed by the CLI)."""
+
+    images: int = 0
+    vehicles: int = 0
+    keypoints: int = 0
+    warnings: list[str] = field(default_factory=list)
+    left_out: Counter = field(default_factory=Counter)  # keypoint name -> how many were left out
+
+    def lines(self) -> list[str]:
+        out = [f"{self.images} images, {self.vehicles} vehicles, {self.keypoints} keypoints used"]
+        if self.left_out:
+            out.append("left out: " + ", ".join(f"{name} x{n}" for name, n in sorted(self.left_out.items())))
+        return out
+
+
+_ID_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
+
+
+def image_id_for(file_name: str) -> str:
+    """The annotation file's image id for a file name: its stem, other characters than ``A-Za-z0-9_.-`` as ``_``."""
+    stem = PurePosixPath(file_name.replace("\\", "/")).stem or "image"
+    image_id = _ID_BAD.sub("_", stem)
+    return image_id if image_id[0].isalnum() else f"i{image_id}"
+
+
+class DocumentBuilder:
+    """Collects images and builds the annotation file v1 document.
+
+    Parameters
+    ----------
+    source : the tool's export file, for messages
+    cameras : the cameras file; every image needs an entry
+    default_prototype : for vehicles the export gives none (a warning says so)
+    lengths : feature -> (metres, sigma) of length features (see :mod:`toosicubix.parts.keypoints`)
+    """
+
+    def __init__(self, source: str, cameras: CameraTable | None, default_prototype: str = "Car",
+                 lengths: dict[str, tuple[float, float]] | None = None):
+        self.source = source
+        self.cameras = cameras
+        self.default_prototype = default_prototype
+        self.lengths = lengths or {}
+        self.summary = ImportSummary()
+        self._images: list[dict[str, Any]] = []
+        self._files: dict[str, str] = {}
+
+    def warn(self, image: str, element: str, message: str) -> None:
+        self.summary.warnings.append(f"{self.source}: image {image!r}, {element}: {message}")
+
+    def add_image(self, file_name: str, size: tuple[int, int] | None, vehicles: list[ToolVehicle]) -> None:
+        """Add one image with its vehicles.
+
+        Raises
+        ------
+        FormatError
+            No camera for the image, or two images with the same id.
+        """
+        image_id = image_id_for(file_name)
+        if image_id in self._files:
+            raise FormatError(self.source, f"images {self._files[image_id]!r} and {file_name!r} get the same "
+                                           f"image id {image_id!r}: rename one")
+        self._files[image_id] = file_name
+        out_vehicles = []
+        ids: set[str] = set()
+        for vehicle in vehicles:
+            converted = self._vehicle(file_name, size, vehicle)
+            if converted is None:
+                continue
+            if converted["id"] in ids:
+                raise FormatError(self.source, f"image {file_name!r}: two vehicles with id {converted['id']!r}")
+            ids.add(converted["id"])
+            out_vehicles.append(converted)
+        camera = self.cameras.camera_for(file_name) if self.cameras is not None else None
+        if camera is None:
+            hint = f"no entry of {self.cameras.source} matches it" if self.cameras else "give --cameras CAMERAS.json"
+            if not out_vehicles:
+                self.warn(file_name, "image", f"no vehicles and no camera ({hint}): image left out")
+                return
+            raise FormatError(self.source, f"image {file_name!r}: no camera ({hint})")
+        image: dict[str, Any] = {"id": image_id, "file": file_name}
+        if size is not None:
+            image["size"] = [int(size[0]), int(size[1])]
+        image["camera"] = camera
+        image["vehicles"] = out_vehicles
+        self._images.append(image)
+        self.summary.images += 1
+
+    def _vehicle(self, file_name: str, size: tuple[int, int] | None, vehicle: ToolVehicle) -> dict[str, Any] | None:
+        named = []
+        for kp in vehicle.keypoints:
+            x, y = kp.xy
+            if size is not None and not (0.0 <= x <= size[0] and 0.0 <= y <= size[1]):
+                self.warn(file_name, kp.element, f"({x:.1f}, {y:.1f}) lies outside the {size[0]}x{size[1]} image: "
+                                                 "left out")
+                self.summary.left_out[kp.name] += 1
+                continue
+            named.append((kp.name, kp.xy))
+        conversion = parts_from_keypoints(named, self.lengths)
+        elements = {kp.name: kp.element for kp in vehicle.keypoints}
+        for name, message in conversion.problems:
+            self.warn(file_name, elements.get(name, vehicle.element), f"keypoint {name!r}: {message}: left out")
+            self.summary.left_out[name] += 1
+        if not conversion.parts:
+            self.warn(file_name, vehicle.element, "no usable keypoints: vehicle left out")
+            return None
+        prototype = vehicle.prototype
+        if not prototype:
+            self.warn(file_name, vehicle.element, f"no prototype: {self.default_prototype!r} assumed")
+            prototype = self.default_prototype
+        out: dict[str, Any] = {"id": vehicle.id, "prototype": prototype}
+        if vehicle.box2d is not None:
+            out["box2d"] = [float(v) for v in vehicle.box2d]
+        out["parts"] = conversion.parts
+        self.summary.vehicles += 1
+        self.summary.keypoints += sum(1 if p["kind"] == "point" else 2 for p in conversion.parts)
+        return out
+
+    def document(self) -> dict[str, Any]:
+        """The annotation file v1 document (JSON-ready)."""
+        return {"toosicubix": 1, "images": self._images}
