@@ -11,7 +11,7 @@ from tests.formats.tool_fixtures import sample_doc, write_json
 from toosicubix.camera import Camera
 from toosicubix.formats.fitted import FittedImage, FittedVehicle, load_fitted
 from toosicubix.formats.openlabel import cuboid_val, openlabel_document
-from toosicubix.formats.results import VehicleResult
+from toosicubix.formats.results import Sigma, VehicleResult
 
 #: The official ASAM OpenLABEL 1.0.0 JSON Schema; see fixtures/openlabel_json_schema-1.0.0.md for its source.
 SCHEMA = json.loads((Path(__file__).parent / "fixtures" / "openlabel_json_schema-1.0.0.json").read_text())
@@ -23,8 +23,9 @@ R_AHEAD = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 def _known_image() -> FittedImage:
     ok = VehicleResult("3", "ok", None, "Car", R_AHEAD, np.array([1.0, 1.5, 10.0]), np.array([4.0, 1.8, 1.5]),
-                       details={"sigma": {"yaw_deg": 2.0, "pitch_deg": None, "depth_m": 0.4,
-                                          "dimensions": [0.2, 0.05, 0.04]}, "confidence": 0.8, "ambiguous": False})
+                       sigma=Sigma(yaw_deg=2.0, pitch_deg=None, roll_deg=None, depth_m=0.4, depth_rel=None,
+                                   dimensions=(0.2, 0.05, 0.04), position_m=(), scale_rel=None),
+                       confidence=0.8, ambiguous=False)
     failed = VehicleResult("4", "failed", "degenerate clicks", "Van")
     parts = [{"kind": "point", "part": "wheel-rear-left", "xy": [600.0, 400.0]},
              {"kind": "symmetry", "face": "rear", "left": [580.0, 330.0], "right": [660.0, 331.0]}]

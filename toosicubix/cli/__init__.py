@@ -16,7 +16,7 @@ import sys
 import click
 
 from toosicubix import __version__
-from toosicubix.cli import evaluate, fit, priors, schema, simulate, tune, validate
+from toosicubix.cli import evaluate, export, fit, import_tools, priors, schema, simulate, template, tune, validate
 from toosicubix.cli.options import EXIT_BAD_INPUT, EXIT_OK, EXIT_SOME_FAILED, BadInput, CommandGroup
 
 
@@ -39,16 +39,11 @@ main.add_command(evaluate.eval_command)
 main.add_command(simulate.simulate_command)
 main.add_command(priors.priors_command)
 main.add_command(tune.tune_command)
+main.add_command(template.template_command)
+main.add_command(import_tools.import_group)
+main.add_command(export.export_group)
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "BadInput", "main"]
-
-from toosicubix.cli.export import export_group  # noqa: E402  (issue 15)
-from toosicubix.cli.import_tools import import_group  # noqa: E402  (issue 15; joins issue 14's import group)
-from toosicubix.cli.template import template_command  # noqa: E402  (issue 15: labelling tools)
-
-main.add_command(template_command)
-main.add_command(import_group)
-main.add_command(export_group)
 
 
 if __name__ == "__main__":  # pragma: no cover

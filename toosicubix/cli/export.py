@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli import BadInput
+from toosicubix.cli.options import BadInput
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 

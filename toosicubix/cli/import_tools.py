@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli import BadInput
+from toosicubix.cli.options import BadInput
 
 
 def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:

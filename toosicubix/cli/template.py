@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli import BadInput
+from toosicubix.cli.options import BadInput
 
 
 @click.command("template")

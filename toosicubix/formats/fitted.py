@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from toosicubix.annotations.convert import camera_from_schema
 from toosicubix.annotations.schema import InputFileError, load_annotations
 from toosicubix.camera import Camera
 from toosicubix.formats import FormatError, read_json
 from toosicubix.formats.results import RESULTS_FILENAME, VehicleResult, read_results
-from toosicubix.model import camera_from_schema
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from scipy.spatial.transform import Rotation
 
 from toosicubix import __version__
 from toosicubix.formats.fitted import FittedImage
+from toosicubix.formats.results import VehicleResult
 from toosicubix.parts.keypoints import KeypointProblem, keypoints_from_parts
 
 SCHEMA_VERSION = "1.0.0"
@@ -81,23 +82,25 @@ def _stream(image: FittedImage) -> dict[str, Any]:
             "stream_properties": {"intrinsics_pinhole": pinhole}}
 
 
-def _cuboid_attributes(details: dict[str, Any]) -> dict[str, Any]:
+def _cuboid_attributes(v: VehicleResult) -> dict[str, Any]:
+    """The cuboid's uncertainty, confidence, rms and ambiguity as OpenLABEL attributes (absent values left out)."""
     num, vec, boolean = [], [], []
-    sigma = details.get("sigma") or {}
-    for key, name in (("yaw_deg", "sigma_yaw_deg"), ("pitch_deg", "sigma_pitch_deg"), ("roll_deg", "sigma_roll_deg"),
-                      ("depth_m", "sigma_depth_m"), ("depth_rel", "sigma_depth_rel"),
-                      ("scale_rel", "sigma_scale_rel")):
-        if isinstance(sigma.get(key), (int, float)):
-            num.append({"name": name, "val": float(sigma[key])})
-    for key, name in (("dimensions", "sigma_dimensions_m"), ("position_m", "sigma_position_m")):
-        values = sigma.get(key)
-        if isinstance(values, list) and all(isinstance(v, (int, float)) for v in values):
-            vec.append({"name": name, "val": [float(v) for v in values]})
+    if v.sigma is not None:
+        for key, name in (("yaw_deg", "sigma_yaw_deg"), ("pitch_deg", "sigma_pitch_deg"),
+                          ("roll_deg", "sigma_roll_deg"), ("depth_m", "sigma_depth_m"),
+                          ("depth_rel", "sigma_depth_rel"), ("scale_rel", "sigma_scale_rel")):
+            value = getattr(v.sigma, key)
+            if value is not None:
+                num.append({"name": name, "val": float(value)})
+        for key, name in (("dimensions", "sigma_dimensions_m"), ("position_m", "sigma_position_m")):
+            values = getattr(v.sigma, key)
+            if values and all(x is not None for x in values):
+                vec.append({"name": name, "val": [float(x) for x in values]})
     for key in ("confidence", "rms_px"):
-        if isinstance(details.get(key), (int, float)):
-            num.append({"name": key, "val": float(details[key])})
-    if isinstance(details.get("ambiguous"), bool):
-        boolean.append({"name": "ambiguous", "val": details["ambiguous"]})
+        value = getattr(v, key)
+        if value is not None:
+            num.append({"name": key, "val": float(value)})
+    boolean.append({"name": "ambiguous", "val": bool(v.ambiguous)})
     out: dict[str, Any] = {}
     for key, items in (("num", num), ("vec", vec), ("boolean", boolean)):
         if items:
@@ -128,7 +131,7 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
             if v.ok:
                 cuboid = {"name": "cuboid", "val": cuboid_val(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions),
                           "coordinate_system": cam}
-                attributes = _cuboid_attributes(v.details)
+                attributes = _cuboid_attributes(v)
                 if attributes:
                     cuboid["attributes"] = attributes
                 data["cuboid"] = [cuboid]
