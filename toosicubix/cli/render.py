@@ -71,10 +71,13 @@ class _ImageBar:
 @click.option("--next-clicks", is_flag=True,
               help="Draw the parts suggested to click next (results.json of `fit --next-clicks N`) as targets.")
 @click.option("--no-birds-eye", is_flag=True, help="Leave out the bird's-eye view beside each overlay.")
+@click.option("--png-compression", type=click.IntRange(0, 9), default=1, show_default=True,
+              help="zlib level of the PNG files: 1 is fast, 9 gives the smallest files (about half as large).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar, warnings or summary on stderr.")
 def render_command(out: Path, render_dir: Path | None, annotations: Path | None, images_dir: Path | None,
                    only: str | None, kitti_dir: Path | None, tracking_dir: Path | None, cityscapes_dir: Path | None,
-                   apollo_dir: Path | None, next_clicks: bool, no_birds_eye: bool, quiet: bool) -> None:
+                   apollo_dir: Path | None, next_clicks: bool, no_birds_eye: bool, png_compression: int,
+                   quiet: bool) -> None:
     """Draw every fit of OUT (a `toosicubix fit` folder) over its image: one PNG per image.
 
     Each fitted cuboid's 12 edges are projected with the camera's lens distortion and cut where they pass
@@ -112,7 +115,8 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
         if "apollocar3d" not in SOURCES:  # the hook: drawn as soon as `eval` can read it
             raise _BadInput("--apollocar3d: ApolloCar3D ground truth cannot be read yet (toosicubix eval does not "
                             "know it); render without ground truth")
-    options = RenderOptions(overlay=OverlayOptions(birds_eye=not no_birds_eye, next_clicks=next_clicks), only=only)
+    options = RenderOptions(overlay=OverlayOptions(birds_eye=not no_birds_eye, next_clicks=next_clicks), only=only,
+                            png_compression=png_compression)
     bar = _ImageBar(quiet)
     try:
         summary = render_folder(out, render_dir, annotations, images_dir, given[0] if given else None, options,
