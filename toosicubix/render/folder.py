@@ -34,6 +34,8 @@ from toosicubix.render.overlay import (
     compose,
     draw_birds_eye,
     draw_overlay,
+    line_thickness,
+    text_scale,
 )
 
 #: ``--only`` choices: images with a failed vehicle, an ambiguous one, or one not well determined
@@ -203,8 +205,9 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
     gt = ground_truth or []
     draw_overlay(canvas, camera, vehicles, gt, options)
     if note:
-        cv2.putText(canvas, note, (6, canvas.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1,
-                    cv2.LINE_AA)
+        scale = text_scale(canvas.shape[0])
+        cv2.putText(canvas, note, (6, canvas.shape[0] - int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                    (200, 200, 200), line_thickness(canvas.shape[0]), cv2.LINE_AA)
     panel = draw_birds_eye(birds_eye_side(canvas.shape[0]), camera, vehicles, gt, canvas.shape[1]) \
         if options.birds_eye else None
     return compose(canvas, panel)

@@ -281,11 +281,17 @@ class _LabelPlacer:
         line = th + base + 3
         x = int(np.clip(anchor_uv[0], 0, max(0, w - tw - 2)))
         y0 = float(anchor_uv[1])
-        for shift in (0, -1, -2, -3, 1, 2, 3, -4, 4, -5, 5, 0):
+        best: tuple[int, int, tuple[int, int, int, int]] | None = None
+        for shift in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -8, 8, -10, 10):
             y = int(np.clip(y0 + shift * line, th + 2, max(th + 2, h - base - 1)))
             rect = (x - 1, y - th - 2, x + tw + 1, y + base)
-            if not any(rect[0] < r[2] and r[0] < rect[2] and rect[1] < r[3] and r[1] < rect[3] for r in self.placed):
+            overlap = sum(max(0, min(rect[2], r[2]) - max(rect[0], r[0]))
+                          * max(0, min(rect[3], r[3]) - max(rect[1], r[1])) for r in self.placed)
+            if best is None or overlap < best[0]:
+                best = (overlap, y, rect)
+            if overlap == 0:
                 break
+        _, y, rect = best
         self.placed.append(rect)
         cv2.rectangle(self.canvas, rect[:2], rect[2:], (0, 0, 0), -1)
         cv2.putText(self.canvas, text, (x, y), _FONT, scale, colour, 1, cv2.LINE_AA)
@@ -297,9 +303,14 @@ def _polylines(canvas: np.ndarray, lines: list[np.ndarray], colour: tuple[int, i
         cv2.polylines(canvas, [_fixed(p) for p in lines], closed, colour, thickness, cv2.LINE_AA, SHIFT)
 
 
-def _text_scale(size: tuple[int, int]) -> float:
-    """Font scale for an image: 0.4 for KITTI's 375 px height, growing with larger images."""
-    return float(np.clip(size[1] / 900.0, 0.4, 1.6))
+def text_scale(height: int) -> float:
+    """Font scale for an image ``height`` pixels high: 0.4 for KITTI's 375 px, growing with larger images."""
+    return float(np.clip(height / 1000.0, 0.4, 1.2))
+
+
+def line_thickness(height: int) -> int:
+    """Base line thickness in pixels: 1 for KITTI's 375 px, 2 for 720 px, up to 5 for large images."""
+    return int(np.clip(round(height / 450.0), 1, 5))
 
 
 def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVehicle],
@@ -320,8 +331,8 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     options = options or OverlayOptions()
     size = (canvas.shape[1], canvas.shape[0])
     max_radius = valid_radius(camera, size)
-    scale = _text_scale(size)
-    thick = 1 if size[1] < 700 else 2
+    scale = text_scale(size[1])
+    thick = line_thickness(size[1])
     fills = canvas.copy()
     any_fill = False
     drawn = []
@@ -468,11 +479,13 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     all_xz = np.concatenate([f[1] for f in footprints] + gt_prints + [np.zeros((1, 2))])
     z_max = max(20.0, float(np.max(all_xz[:, 1])) * 1.1)
     x_half = max(z_max / 2.0, float(np.max(np.abs(all_xz[:, 0]))) * 1.1)
-    margin_left, margin_bottom, margin_top = 34, 34, 22
+    scale = float(np.clip(side / 1000.0, 0.38, 1.2))
+    m = scale / 0.38  # everything grows with the text
+    lw = max(1, round(m))
+    margin_left, margin_bottom, margin_top = int(34 * m), int(34 * m), int(22 * m)
     usable = side - margin_left - 8
     s = min(usable / (2.0 * x_half), (side - margin_bottom - margin_top) / (z_max + 2.0))
     frame = _BevFrame(s, margin_left + usable / 2.0, side - margin_bottom - 2.0 * s)
-    scale = 0.38 if side < 700 else 0.6
     step = _nice_step(max(z_max, 2.0 * x_half))
     grid = (70, 70, 70)
     for z in np.arange(0.0, z_max + 1e-9, step):
@@ -480,16 +493,18 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
         cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), grid, 1, cv2.LINE_AA, SHIFT)
         y = frame.uv([[0.0, z]])[0, 1]
         if margin_top <= y <= side - margin_bottom + 4:
-            cv2.putText(panel, f"{z:g}", (2, int(y) + 4), _FONT, scale, TEXT_BGR, 1, cv2.LINE_AA)
+            cv2.putText(panel, f"{z:g}", (2, int(y + 4 * m)), _FONT, scale, TEXT_BGR, lw, cv2.LINE_AA)
     for x in np.arange(-np.floor(x_half / step) * step, x_half + 1e-9, step):
         a, b = frame.uv([[x, -2.0], [x, z_max * 2]])
         cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), grid, 1, cv2.LINE_AA, SHIFT)
         u = frame.uv([[x, 0.0]])[0, 0]
         if margin_left <= u <= side - 10:
-            cv2.putText(panel, f"{x:g}", (int(u) - 8, side - margin_bottom + 16), _FONT, scale, TEXT_BGR, 1,
-                        cv2.LINE_AA)
-    cv2.putText(panel, "x (m, right)", (side // 2 - 40, side - 4), _FONT, scale, TEXT_BGR, 1, cv2.LINE_AA)
-    cv2.putText(panel, "z (m) forward, top view", (margin_left, 15), _FONT, scale, TEXT_BGR, 1, cv2.LINE_AA)
+            cv2.putText(panel, f"{x:g}", (int(u - 8 * m), int(side - margin_bottom + 16 * m)), _FONT, scale, TEXT_BGR,
+                        lw, cv2.LINE_AA)
+    cv2.putText(panel, "x (m, right)", (int(side / 2 - 40 * m), int(side - 4 * m)), _FONT, scale, TEXT_BGR, lw,
+                cv2.LINE_AA)
+    cv2.putText(panel, "z (m) forward, top view", (margin_left, int(15 * m)), _FONT, scale, TEXT_BGR, lw,
+                cv2.LINE_AA)
     if image_width is not None:
         K = camera.K
         for u_px in (0.0, image_width - 1.0):
@@ -497,34 +512,34 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
             a, b = frame.uv([[0.0, 0.0], [x_per_z * z_max * 3, z_max * 3]])
             cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), (110, 110, 110), 1, cv2.LINE_AA, SHIFT)
     cam = frame.uv([[0.0, 0.0]])[0]
-    cv2.circle(panel, tuple(_fixed(cam)), 3 << SHIFT, TEXT_BGR, -1, cv2.LINE_AA, SHIFT)
+    cv2.circle(panel, tuple(_fixed(cam)), int(3 * m) << SHIFT, TEXT_BGR, -1, cv2.LINE_AA, SHIFT)
     for corners in gt_prints:
         for line in _dashed(np.vstack([frame.uv(corners), frame.uv(corners[:1])]), 5.0):
             _polylines(panel, [line], GROUND_TRUTH_BGR, 1)
     for i, corners, v in footprints:
         colour = colour_of(i)
-        _polylines(panel, [frame.uv(corners)], colour, 2, closed=True)
+        _polylines(panel, [frame.uv(corners)], colour, lw + 1, closed=True)
         centre = corners.mean(axis=0)
         front = corners[[0, 3]].mean(axis=0)
-        _polylines(panel, [frame.uv(np.array([centre, front]))], colour, 2)
+        _polylines(panel, [frame.uv(np.array([centre, front]))], colour, lw + 1)
         if v.sigma_yaw is not None and np.isfinite(v.sigma_yaw):
             heading = np.arctan2(front[1] - centre[1], front[0] - centre[0])
             reach = max(float(np.linalg.norm(front - centre)) * 1.6, 1.5)
             for sign in (-1.0, 1.0):
                 a = heading + sign * min(v.sigma_yaw, np.pi)
                 tip = centre + reach * np.array([np.cos(a), np.sin(a)])
-                _polylines(panel, [frame.uv(np.array([centre, tip]))], colour, 1)
+                _polylines(panel, [frame.uv(np.array([centre, tip]))], colour, lw)
         if v.sigma_depth is not None and np.isfinite(v.sigma_depth) and centre[1] > 0:
             ray = centre / np.linalg.norm(centre)
             depth = float(np.linalg.norm(centre))
             sd = float(v.sigma_depth) * depth / max(centre[1], 1e-6)  # sigma of z -> along the ray
             near, far = centre - sd * ray, centre + sd * ray
-            _polylines(panel, [frame.uv(np.array([near, far]))], colour, 1)
-            normal = np.array([-ray[1], ray[0]]) * (3.0 / s)
+            _polylines(panel, [frame.uv(np.array([near, far]))], colour, lw)
+            normal = np.array([-ray[1], ray[0]]) * (3.0 * m / s)
             for end in (near, far):
-                _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, 1)
+                _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, lw)
         label_uv = frame.uv(corners).max(axis=0)
-        cv2.putText(panel, v.id, (int(label_uv[0]) + 2, int(label_uv[1])), _FONT, scale, colour, 1, cv2.LINE_AA)
+        cv2.putText(panel, v.id, (int(label_uv[0] + 2 * m), int(label_uv[1])), _FONT, scale, colour, lw, cv2.LINE_AA)
     return panel
 
 
@@ -540,5 +555,5 @@ def compose(overlay: np.ndarray, panel: np.ndarray | None) -> np.ndarray:
 
 
 def birds_eye_side(image_height: int) -> int:
-    """The bird's-eye panel's side for an image: its height, kept within 360-900 px."""
-    return int(np.clip(image_height, 360, 900))
+    """The bird's-eye panel's side for an image: its height, kept within 360-1400 px."""
+    return int(np.clip(image_height, 360, 1400))
