@@ -106,3 +106,15 @@ def test_clicks_residual_lines_and_downweighted_marks():
     red = np.all(np.abs(canvas.astype(int) - np.array(DOWNWEIGHTED_BGR)) < 40, axis=2)
     assert red[390:411, 490:511].any()  # click 1 is crossed out
     assert not red[90:111, 90:111].any()  # click 0 is not
+
+
+def test_dashes_of_many_straight_lines_at_once_match_one_by_one(rng):
+    from toosicubix.render.overlay import _dashed, _dashed_all
+
+    lines = [rng.uniform(-100.0, 1000.0, (2, 2)) for _ in range(20)] + [np.array([[0.0, 0.0], [3.0, 4.0]])]
+    curved = np.array([[0.0, 0.0], [10.0, 5.0], [30.0, 5.0]])
+    one_by_one = [d for line in [curved, *lines] for d in _dashed(line)]
+    at_once = _dashed_all([curved, *lines])
+    assert len(one_by_one) == len(at_once)
+    for a, b in zip(one_by_one, at_once, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-9)  # the same arithmetic reordered: rounding only

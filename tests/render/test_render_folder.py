@@ -134,3 +134,22 @@ def test_fitted_positions_round_trip_through_the_distortion():
     # Zero residuals: the fit puts each click where it was (1e-6 px: the iterative undistortion's tolerance).
     np.testing.assert_allclose(_fitted_uv(camera, clicks, np.zeros((3, 2))), clicks, atol=1e-6)
     assert _fitted_uv(camera, clicks, np.zeros((2, 2))) is None  # residuals that do not line up
+
+
+def test_only_failed_renders_the_images_with_a_failed_vehicle_boxed_in_red(fitted, tmp_path):
+    root, annotations = fitted
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    doc = json.loads((out / "results.json").read_text())
+    failed = doc["images"][2]["vehicles"][0]
+    failed.update(status="failed", error="test: no lines", R_cam_vehicle=None, t_cam_vehicle=None, dimensions=None)
+    (out / "results.json").write_text(json.dumps(doc))
+    result = run(out, "--annotations", annotations, "--only", "failed", "-o", tmp_path / "r", "--no-birds-eye")
+    assert result.exit_code == 0, result.output
+    assert "rendered 1 images, 1 on a blank canvas -> " in result.stderr
+    assert "(2 left out by --only failed)" in result.stderr
+    assert [p.name for p in (tmp_path / "r").iterdir()] == [f"{doc['images'][2]['id']}.png"]
+    picture = cv2.imread(str(next((tmp_path / "r").iterdir())))
+    x1, y1, x2, _ = (round(v) for v in failed["box2d"])
+    red = np.all(np.abs(picture.astype(int) - np.array([40, 40, 230])) < 30, axis=2)
+    assert red[y1 - 1:y1 + 2, x1 + 5:x2 - 5].mean() > 0.5  # the box's top edge is red along its length

@@ -33,7 +33,9 @@ GROUND_TRUTH_BGR = (255, 255, 255)
 FAILED_BGR = (40, 40, 230)
 DOWNWEIGHTED_BGR = (60, 60, 255)
 RESIDUAL_BGR = (0, 255, 255)
-BLANK_BGR = (48, 48, 48)
+BLANK_GREY = 48  # grey canvases are filled by one memset (np.full with a scalar), 300 times faster than a BGR fill
+BLANK_BGR = (BLANK_GREY,) * 3
+PANEL_GREY = 28
 TEXT_BGR = (235, 235, 235)
 
 #: The front face (vehicle +X) as corner indices of :func:`toosicubix.geometry.cuboid_corners_vehicle`.
@@ -118,9 +120,7 @@ def colour_of(index: int) -> tuple[int, int, int]:
 def blank_canvas(size: tuple[int, int]) -> np.ndarray:
     """A dark grey (height, width, 3) uint8 canvas for ``size = (width, height)``."""
     width, height = size
-    canvas = np.empty((height, width, 3), dtype=np.uint8)
-    canvas[:] = BLANK_BGR
-    return canvas
+    return np.full((height, width, 3), BLANK_GREY, dtype=np.uint8)
 
 
 def valid_radius(camera: Camera, size: tuple[int, int] | None) -> float:
@@ -196,24 +196,51 @@ def project_polylines(camera: Camera, segments_cam: Sequence[tuple[np.ndarray, n
     return out
 
 
+_FIXED_LIMIT = float(2 ** 28)
+
+
 def _fixed(uv: np.ndarray) -> np.ndarray:
     """Pixels as OpenCV's fixed-point int32 (``SHIFT`` fractional bits), clamped far outside any image."""
-    return np.clip(np.round(np.asarray(uv) * (1 << SHIFT)), -(2 ** 28), 2 ** 28).astype(np.int32)
+    scaled = np.rint(np.asarray(uv, dtype=float) * (1 << SHIFT))
+    if np.abs(scaled).max(initial=0.0) > _FIXED_LIMIT:
+        scaled = np.clip(scaled, -_FIXED_LIMIT, _FIXED_LIMIT)
+    return scaled.astype(np.int32)
 
 
 def _dashed(polyline: np.ndarray, dash_px: float = 8.0) -> list[np.ndarray]:
-    """Split a (k, 2) polyline into dashes of ``dash_px`` pixels with gaps as long."""
+    """Split a (k, 2) polyline into dashes of ``dash_px`` pixels with gaps as long: a list of (2, 2) arrays
+    (straight dashes; a dash is short next to any bend of a distorted edge)."""
     steps = np.linalg.norm(np.diff(polyline, axis=0), axis=1)
     total = float(steps.sum())
     if total <= dash_px:
         return [polyline]
     arc = np.concatenate([[0.0], np.cumsum(steps)])
     total = min(total, 20000.0)  # a segment running far off the image: its first 20,000 px are plenty
-    out = []
-    for start in np.arange(0.0, total, 2.0 * dash_px):
-        ts = np.array([start, min(start + dash_px, total)])
-        out.append(np.column_stack([np.interp(ts, arc, polyline[:, 0]), np.interp(ts, arc, polyline[:, 1])]))
-    return out
+    starts = np.arange(0.0, total, 2.0 * dash_px)
+    ts = np.column_stack([starts, np.minimum(starts + dash_px, total)]).ravel()
+    ends = np.column_stack([np.interp(ts, arc, polyline[:, 0]), np.interp(ts, arc, polyline[:, 1])])
+    return list(ends.reshape(-1, 2, 2))
+
+
+def _dashed_all(lines: Sequence[np.ndarray], dash_px: float = 8.0) -> list[np.ndarray]:
+    """:func:`_dashed` for many polylines; the straight ones (2 points, every edge of a pinhole camera) at once."""
+    straight = [p for p in lines if len(p) == 2]
+    out = [dash for p in lines if len(p) != 2 for dash in _dashed(p, dash_px)]
+    if not straight:
+        return out
+    ab = np.asarray(straight, dtype=float)  # (n, 2, 2)
+    direction = ab[:, 1] - ab[:, 0]
+    length = np.linalg.norm(direction, axis=1)
+    usable = np.minimum(length, 20000.0)  # as in _dashed
+    counts = np.maximum(1, np.ceil(usable / (2.0 * dash_px)).astype(int))
+    which = np.repeat(np.arange(len(ab)), counts)
+    k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    start = k * 2.0 * dash_px
+    end = np.minimum(start + dash_px, usable[which])
+    unit = direction[which] / np.maximum(length[which], 1e-12)[:, None]
+    origin = ab[which, 0]
+    dashes = np.stack([origin + start[:, None] * unit, origin + end[:, None] * unit], axis=1)  # (m, 2, 2)
+    return out + list(dashes)
 
 
 def cuboid_polylines(camera: Camera, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray,
@@ -299,8 +326,15 @@ class _LabelPlacer:
 
 def _polylines(canvas: np.ndarray, lines: list[np.ndarray], colour: tuple[int, int, int], thickness: int,
                closed: bool = False) -> None:
-    if lines:
-        cv2.polylines(canvas, [_fixed(p) for p in lines], closed, colour, thickness, cv2.LINE_AA, SHIFT)
+    if not lines:
+        return
+    lengths = [len(p) for p in lines]
+    fixed = _fixed(np.concatenate(lines))  # one conversion for all: dashed lines come in thousands of pieces
+    if min(lengths) == max(lengths):
+        pieces = list(fixed.reshape(len(lines), lengths[0], 2))
+    else:
+        pieces = np.split(fixed, np.cumsum(lengths)[:-1])
+    cv2.polylines(canvas, pieces, closed, colour, thickness, cv2.LINE_AA, SHIFT)
 
 
 def text_scale(height: int) -> float:
@@ -350,8 +384,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     for g in ground_truth:
         edges, _, heading = cuboid_polylines(camera, g.R_cam_vehicle, g.t_cam_vehicle, g.dimensions, options,
                                              max_radius)
-        for line in edges + heading:
-            _polylines(canvas, _dashed(line), GROUND_TRUTH_BGR, 1)
+        _polylines(canvas, _dashed_all(edges + heading), GROUND_TRUTH_BGR, 1)
     for i, _v, edges, heading in drawn:
         colour = colour_of(i)
         _polylines(canvas, edges, colour, thick + 1)
@@ -467,8 +500,7 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     -------
     (side, side, 3) uint8 BGR panel
     """
-    panel = np.zeros((side, side, 3), dtype=np.uint8)
-    panel[:] = (28, 28, 28)
+    panel = np.full((side, side, 3), PANEL_GREY, dtype=np.uint8)
     footprints: list[tuple[int, np.ndarray, DrawnVehicle | None]] = []
     for i, v in enumerate(vehicles):
         if v.ok and v.R_cam_vehicle is not None:
@@ -514,8 +546,7 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     cam = frame.uv([[0.0, 0.0]])[0]
     cv2.circle(panel, tuple(_fixed(cam)), int(3 * m) << SHIFT, TEXT_BGR, -1, cv2.LINE_AA, SHIFT)
     for corners in gt_prints:
-        for line in _dashed(np.vstack([frame.uv(corners), frame.uv(corners[:1])]), 5.0):
-            _polylines(panel, [line], GROUND_TRUTH_BGR, 1)
+        _polylines(panel, _dashed(np.vstack([frame.uv(corners), frame.uv(corners[:1])]), 5.0), GROUND_TRUTH_BGR, 1)
     for i, corners, v in footprints:
         colour = colour_of(i)
         _polylines(panel, [frame.uv(corners)], colour, lw + 1, closed=True)
