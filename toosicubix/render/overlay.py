@@ -570,7 +570,9 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
             for end in (near, far):
                 _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, lw)
         label_uv = frame.uv(corners).max(axis=0)
-        cv2.putText(panel, v.id, (int(label_uv[0] + 2 * m), int(label_uv[1])), _FONT, scale, colour, lw, cv2.LINE_AA)
+        (tw, _), _ = cv2.getTextSize(v.id, _FONT, scale, lw)
+        x = int(min(label_uv[0] + 2 * m, side - tw - 2))  # kept inside the panel
+        cv2.putText(panel, v.id, (x, int(label_uv[1])), _FONT, scale, colour, lw, cv2.LINE_AA)
     return panel
 
 
