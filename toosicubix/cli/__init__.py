@@ -16,7 +16,19 @@ import sys
 import click
 
 from toosicubix import __version__
-from toosicubix.cli import evaluate, export, fit, import_tools, priors, schema, simulate, template, tune, validate
+from toosicubix.cli import (
+    evaluate,
+    export,
+    fit,
+    import_tools,
+    priors,
+    render,
+    schema,
+    simulate,
+    template,
+    tune,
+    validate,
+)
 from toosicubix.cli.options import EXIT_BAD_INPUT, EXIT_OK, EXIT_SOME_FAILED, BadInput, CommandGroup
 
 
@@ -42,6 +54,7 @@ main.add_command(tune.tune_command)
 main.add_command(template.template_command)
 main.add_command(import_tools.import_group)
 main.add_command(export.export_group)
+main.add_command(render.render_command)
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "BadInput", "main"]
 

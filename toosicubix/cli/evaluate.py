@@ -23,9 +23,12 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
                    "Example: --json eval.json")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write one CSV row per matched object. Example: --csv eval.csv")
+@click.option("--plots", "plots_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Also write PNG plots into this folder: errors against depth, each metric's distribution, and "
+                   "the calibration of the predicted sigmas. Example: --plots eval-plots")
 @click.option("-q", "--quiet", is_flag=True, help="No warnings or notes on stderr; the table still goes to stdout.")
 def eval_command(out: Path, ground_truth: GroundTruth, min_iou: float, classes: str | None, json_path: Path | None,
-                 csv_path: Path | None, quiet: bool) -> None:
+                 csv_path: Path | None, plots_dir: Path | None, quiet: bool) -> None:
     """Score fitted cuboids against KITTI or Cityscapes 3D ground truth, as the paper's Evaluation does.
 
     Reads OUT (a `toosicubix fit` output folder, default toosicubix-out): results.json with full rotations,
@@ -55,9 +58,13 @@ def eval_command(out: Path, ground_truth: GroundTruth, min_iou: float, classes: 
             write_json(result, json_path)
         if csv_path is not None:
             write_csv(result, csv_path)
+        if plots_dir is not None:
+            from toosicubix.render.plots import write_evaluation_plots
+
+            write_evaluation_plots(result, plots_dir, out / "results.json")
     except OSError as exc:
         raise BadInput(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
     if not quiet:
-        written = [str(p) for p in (json_path, csv_path) if p is not None]
+        written = [str(p) for p in (json_path, csv_path, plots_dir) if p is not None]
         if written:
             click.echo(f"wrote {' and '.join(written)}", err=True)

@@ -111,26 +111,29 @@ def _parameter(kind: str) -> str:
     return f"ground_truth_{kind.replace('-', '_')}"
 
 
-def ground_truth_options(*kinds: str) -> Callable:
-    """Add ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` (or only ``kinds``); exactly one must be given.
+def ground_truth_options(*kinds: str, required: bool = True) -> Callable:
+    """Add ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` (or only ``kinds``); exactly one must be given
+    (at most one when not ``required``).
 
-    The command receives ``ground_truth: GroundTruth`` instead of the three options.
+    The command receives ``ground_truth: GroundTruth`` (or None when none is given and none is required) instead
+    of the options.
     """
     kinds = kinds or tuple(GROUND_TRUTH_HELP)
     flags = [f"--{kind} DIR" for kind in kinds]
+    quantity = "exactly one" if required else "at most one"
     if len(flags) == 2:
-        usage = f"give exactly one of {flags[0]} and {flags[1]}"
+        usage = f"give {quantity} of {flags[0]} and {flags[1]}"
     else:
-        usage = f"give exactly one ground truth: {', '.join(flags[:-1])} or {flags[-1]}"
+        usage = f"give {quantity} ground truth: {', '.join(flags[:-1])} or {flags[-1]}"
 
     def decorate(command: Callable) -> Callable:
         @functools.wraps(command)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
             given = [(kind, kwargs.pop(_parameter(kind))) for kind in kinds]
             given = [(kind, root) for kind, root in given if root is not None]
-            if len(given) != 1:
+            if len(given) > 1 or (required and not given):
                 raise click.UsageError(usage)
-            return command(*args, ground_truth=GroundTruth(*given[0]), **kwargs)
+            return command(*args, ground_truth=GroundTruth(*given[0]) if given else None, **kwargs)
 
         for kind in reversed(kinds):
             wrapper = click.option(f"--{kind}", _parameter(kind), type=click.Path(path_type=Path), default=None,
@@ -248,17 +251,18 @@ def fitting_options(command: Callable) -> Callable:
 
 
 class ProgressBar:
-    """A progress bar on stderr for batches of more than a few vehicles."""
+    """A progress bar on stderr for batches of more than a few items (vehicles fitted, images rendered)."""
 
-    MIN_VEHICLES = 50
+    MIN_ITEMS = 50
 
-    def __init__(self, quiet: bool):
+    def __init__(self, quiet: bool, label: str = "fitting"):
         self.quiet = quiet
+        self.label = label
         self.bar = None
 
     def start(self, total: int) -> None:
-        if not self.quiet and total >= self.MIN_VEHICLES:
-            self.bar = click.progressbar(length=total, label="fitting", file=sys.stderr, show_eta=True)
+        if not self.quiet and total >= self.MIN_ITEMS:
+            self.bar = click.progressbar(length=total, label=self.label, file=sys.stderr, show_eta=True)
             self.bar.__enter__()
 
     def update(self, n: int) -> None:

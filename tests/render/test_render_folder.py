@@ -1,0 +1,152 @@
+"""`toosicubix render` over the fitted sample: files, messages, blank canvases, identical re-runs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.conftest import REPO
+from toosicubix.camera import Camera
+from toosicubix.cli import main
+from toosicubix.formats.results import read_results
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.render.folder import _fitted_uv, selected
+from toosicubix.render.overlay import BLANK_BGR
+
+SAMPLE = REPO / "samples" / "annotations.json"
+PHOTO_BGR = (10, 200, 30)
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory) -> tuple[Path, Path]:
+    """The sample fitted, with image 000001's file missing and 000002's a plain green photo."""
+    root = tmp_path_factory.mktemp("render")
+    doc = json.loads(SAMPLE.read_text())
+    doc["images"][0]["file"] = "images/missing.png"
+    doc["images"][1]["file"] = "images/000002.png"
+    (root / "images").mkdir()
+    w, h = doc["images"][1]["size"]
+    photo = np.empty((h, w, 3), np.uint8)
+    photo[:] = PHOTO_BGR
+    cv2.imwrite(str(root / "images" / "000002.png"), photo)
+    annotations = root / "annotations.json"
+    annotations.write_text(json.dumps(doc))
+    fit_file(annotations, root / "out")
+    return root, annotations
+
+
+def run(*args) -> object:
+    return CliRunner().invoke(main, ["render", *[str(a) for a in args]])
+
+
+def test_render_writes_one_png_per_image_missing_file_gives_message_and_blank_canvas(fitted):
+    root, annotations = fitted
+    result = run(root / "out", "--annotations", annotations, "-o", root / "pictures")
+    assert result.exit_code == 0, result.output
+    missing = root / "images" / "missing.png"
+    assert f"warning: image 000001: {missing} not found ($.images[0].file in {annotations}); drawn on a blank " \
+           "canvas" in result.stderr
+    assert "rendered 3 images, 2 on a blank canvas" in result.stderr
+    names = sorted(p.name for p in (root / "pictures").iterdir())
+    assert names == ["000001.png", "000002.png", "000003.png"]  # and no temporary files left
+    blank = cv2.imread(str(root / "pictures" / "000001.png"))
+    photo = cv2.imread(str(root / "pictures" / "000002.png"))
+    w, h = 1242, 375
+    assert blank.shape[0] == h and blank.shape[1] > w  # the overlay and the bird's-eye view beside it
+    assert tuple(blank[5, 5]) == BLANK_BGR
+    assert tuple(photo[5, 5]) == PHOTO_BGR
+    assert not np.all(photo[:, :w] == np.array(PHOTO_BGR, np.uint8))  # something was drawn on the photo
+
+
+def test_rendering_twice_gives_identical_files(fitted, tmp_path):
+    root, annotations = fitted
+    for name in ("a", "b"):
+        assert run(root / "out", "--annotations", annotations, "-o", tmp_path / name, "-q").exit_code == 0
+    for path in (tmp_path / "a").iterdir():
+        assert path.read_bytes() == (tmp_path / "b" / path.name).read_bytes(), path.name
+
+
+def test_annotation_file_found_from_results_json_and_default_output(fitted, tmp_path, monkeypatch):
+    root, _ = fitted
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    monkeypatch.chdir(root)  # results.json names the annotation file as fit was given it (absolute here)
+    result = run(out, "-q")
+    assert result.exit_code == 0, result.output
+    assert len(list((out / "render").glob("*.png"))) == 3
+
+
+def test_bad_inputs_exit_2_with_the_file_named(fitted, tmp_path):
+    root, annotations = fitted
+    result = run(tmp_path / "nothing")
+    assert result.exit_code == 2
+    assert f"Error: {tmp_path / 'nothing'}: no results.json" in result.stderr
+    doc = json.loads((root / "out" / "results.json").read_text())
+    doc["annotations"] = "gone.json"
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "results.json").write_text(json.dumps(doc))
+    result = run(tmp_path / "out")
+    assert result.exit_code == 2
+    assert "results.json: $.annotations: annotation file gone.json not found; give it with --annotations" \
+        in result.stderr
+    result = run(root / "out", "--annotations", annotations, "--images", tmp_path / "no-such-dir")
+    assert result.exit_code == 2 and "image folder not found" in result.stderr
+
+
+def test_ground_truth_is_drawn_dashed_white(fitted, tmp_path):
+    root, annotations = fitted
+    args = (root / "out", "--annotations", annotations, "--no-birds-eye", "-q")
+    assert run(*args, "-o", tmp_path / "plain").exit_code == 0
+    result = run(*args, "-o", tmp_path / "gt", "--kitti", REPO / "samples" / "ground_truth")
+    assert result.exit_code == 0, result.output
+    plain = cv2.imread(str(tmp_path / "plain" / "000003.png"))
+    with_gt = cv2.imread(str(tmp_path / "gt" / "000003.png"))
+    added = np.any(with_gt != plain, axis=2)
+    assert added.sum() > 200
+    # What was added is white blended (1 px, anti-aliased) into the grey canvas: grey, brighter than the canvas;
+    # where it runs under a fitted edge (the sample's fits are near exact) the edge's colour shows instead.
+    spread = with_gt[added].max(axis=1).astype(int) - with_gt[added].min(axis=1)
+    assert np.median(spread) < 10 and np.median(with_gt[added]) > 100
+
+
+def test_only_keeps_images_with_failed_vehicles(fitted):
+    root, _ = fitted
+    results = read_results(root / "out" / "results.json")
+    assert not any(selected(r, "failed") for r in results)  # every sample vehicle is fitted
+    assert all(selected(r, None) for r in results)
+    uncertain = [r.id for r in results if selected(r, "uncertain")]
+    assert uncertain  # the sample has vehicles with yaw sigmas far above 5 degrees (see README, validate)
+
+
+def test_fitted_positions_round_trip_through_the_distortion():
+    camera = Camera(K=np.array([[700.0, 0, 600], [0, 700, 200], [0, 0, 1]]),
+                    distortion=np.array([-0.3, 0.1, 0.001, 0.002, 0.0]), image_size=(1200, 400))
+    clicks = np.array([[100.0, 50.0], [600.0, 200.0], [1100.0, 380.0]])
+    # Zero residuals: the fit puts each click where it was (1e-6 px: the iterative undistortion's tolerance).
+    np.testing.assert_allclose(_fitted_uv(camera, clicks, np.zeros((3, 2))), clicks, atol=1e-6)
+    assert _fitted_uv(camera, clicks, np.zeros((2, 2))) is None  # residuals that do not line up
+
+
+def test_only_failed_renders_the_images_with_a_failed_vehicle_boxed_in_red(fitted, tmp_path):
+    root, annotations = fitted
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    doc = json.loads((out / "results.json").read_text())
+    failed = doc["images"][2]["vehicles"][0]
+    failed.update(status="failed", error="test: no lines", R_cam_vehicle=None, t_cam_vehicle=None, dimensions=None)
+    (out / "results.json").write_text(json.dumps(doc))
+    result = run(out, "--annotations", annotations, "--only", "failed", "-o", tmp_path / "r", "--no-birds-eye")
+    assert result.exit_code == 0, result.output
+    assert "rendered 1 images, 1 on a blank canvas -> " in result.stderr
+    assert "(2 left out by --only failed)" in result.stderr
+    assert [p.name for p in (tmp_path / "r").iterdir()] == [f"{doc['images'][2]['id']}.png"]
+    picture = cv2.imread(str(next((tmp_path / "r").iterdir())))
+    x1, y1, x2, _ = (round(v) for v in failed["box2d"])
+    red = np.all(np.abs(picture.astype(int) - np.array([40, 40, 230])) < 30, axis=2)
+    assert red[y1 - 1:y1 + 2, x1 + 5:x2 - 5].mean() > 0.5  # the box's top edge is red along its length
