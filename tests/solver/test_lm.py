@@ -73,6 +73,7 @@ def test_lm_solves_a_toy_problem_from_several_starts(rng):
     assert set(result.stopped) <= {"gradient", "step"}
     assert np.all(result.iterations >= 1) and np.all(result.iterations < 100)
     assert np.all(result.cost < 1e-16 * result.initial_cost)
+    assert result.seconds > 0.0
     for k in range(starts):
         assert geodesic_angle(R[k], R_true) < 1e-8
         np.testing.assert_allclose(t[k], t_true, atol=1e-8)

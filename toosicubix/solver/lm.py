@@ -35,6 +35,7 @@ a few iterations, see :class:`LMOptions`).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -124,6 +125,7 @@ class LMResult:
     cost, initial_cost : (B,) the final and starting cost ``sum rho(r^2)``
     iterations : (B,) int, accepted and rejected steps
     stopped : the reason per start, one of :data:`STATUS_NAMES` but 'running'
+    seconds : wall time of the whole batch
     """
 
     state: State
@@ -131,6 +133,7 @@ class LMResult:
     initial_cost: np.ndarray
     iterations: np.ndarray
     stopped: tuple[str, ...]
+    seconds: float
 
 
 def _weigh(loss: Loss, r: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -168,6 +171,7 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
     -------
     LMResult
     """
+    started = time.perf_counter()
     loss = TrivialLoss() if loss is None else loss
     state = tuple(np.array(a) for a in state)
     r, J = problem.residuals(state, True)
@@ -244,7 +248,8 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
         status[ka[(drop <= options.cost_tolerance * new_cost) & ~small]] = _COST
         status[ka[small]] = _STEP
     status[status == _RUNNING] = _MAX_ITERATIONS
-    return LMResult(state, cost, initial_cost, iterations, tuple(STATUS_NAMES[s] for s in status))
+    return LMResult(state, cost, initial_cost, iterations, tuple(STATUS_NAMES[s] for s in status),
+                    time.perf_counter() - started)
 
 
 def _solve_batch(H: np.ndarray, b: np.ndarray, which: np.ndarray) -> np.ndarray:
