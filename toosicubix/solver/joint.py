@@ -11,17 +11,21 @@ become unknowns shared by every vehicle. Rows, all cue rows weighed by ``sqrt(la
 With the height unknown, the vehicles' size priors fix it together: each vehicle's scale is tied to the
 same ``h`` by its contact, so their size errors average out. A vehicle's rotation increment turns it about
 the centroid of its clicked points, as in :mod:`.refine`.
+
+The fit is a problem (:class:`JointProblem`) for the one Levenberg-Marquardt of :mod:`.lm`, a batch of one start
+whose state is ``(R, t, p, n, h)``: (1, V, 3, 3), (1, V, 3), (1, sum P_k) (the vehicles' ``p`` one after
+another), (1, 3), (1,).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
-from scipy.linalg import lapack
 
+from toosicubix.geometry import hat, so3_exp
 from toosicubix.model import GroundPlane
+from toosicubix.solver import lm
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import MIN_DEPTH, residuals_batch
 
@@ -72,11 +76,11 @@ def _tangent_basis(n: np.ndarray) -> np.ndarray:
     return np.column_stack([b1, np.cross(n, b1)])
 
 
-def _hat(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+class JointProblem:
+    """The joint fit as a problem of :func:`.lm.levenberg_marquardt` (see the module docstring): residuals and
+    Jacobian (:meth:`evaluate`), update, feasibility (every vehicle's dimensions positive and its clicked
+    points and bottom centre in front of the camera)."""
 
-
-class _Joint:
     def __init__(self, vehicles: list[JointVehicle], ground: GroundPlane):
         self.vehicles = vehicles
         self.ground = ground
@@ -116,7 +120,7 @@ class _Joint:
                 up[:, o + 1] = w_up * R[k][:, 0]
                 up[:, gh + 1:gh + 3] = -w_up * dn
                 contact = np.zeros((1, self.n_params))
-                contact[0, o:o + 3] = w_c * (n @ (R[k] @ _hat(pivot)))
+                contact[0, o:o + 3] = w_c * (n @ (R[k] @ hat(pivot)))
                 contact[0, o + 3:o + 6] = w_c * n
                 contact[0, gh] = w_c
                 contact[0, gh + 1:gh + 3] = w_c * (t[k] @ dn)
@@ -137,25 +141,43 @@ class _Joint:
         r = np.concatenate(rows)
         return r, (np.vstack(jac_rows) if with_jacobian else None)
 
-    def step(self, R, t, p, n, h, x):
-        R2, t2, p2 = [], [], []
-        for k, v in enumerate(self.vehicles):
-            o = self.offsets[k]
-            pivot = v.problem.A_mean @ p[k]
-            Rk = R[k] @ cv2.Rodrigues(x[o:o + 3])[0]
-            R2.append(Rk)
-            t2.append(t[k] + x[o + 3:o + 6] + (R[k] - Rk) @ pivot)
-            p2.append(p[k] + x[o + 6:o + self.sizes[k]])
-        gh = self.offsets[-1]
-        basis = _tangent_basis(n)
-        n2 = cv2.Rodrigues(basis @ x[gh + 1:gh + 3])[0] @ n
-        return R2, t2, p2, n2 / np.linalg.norm(n2), h + x[gh]
+    def split(self, state: tuple[np.ndarray, ...]) -> tuple[list, list, list, np.ndarray, float]:
+        """The per-vehicle lists R, t, p and the plane ``n``, ``h`` of a state (a batch of one)."""
+        R, t, p, n, h = state
+        ends = np.cumsum([size - 6 for size in self.sizes])
+        return list(R[0]), list(t[0]), np.split(p[0], ends[:-1]), n[0], float(h[0])
 
-    def feasible(self, R, t, p) -> bool:
+    def residuals(self, state: tuple[np.ndarray, ...], with_jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        r, J = self.evaluate(*self.split(state), with_jacobian=with_jacobian)
+        return r[None], None if J is None else J[None]
+
+    def update(self, state: tuple[np.ndarray, ...], step: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``R_k <- R_k exp([delta_k]x)`` about vehicle k's pivot, ``t_k``, ``p_k`` and ``h`` additive, and
+        ``n <- exp([B s]x) n`` for the normal's tangent step ``s`` (``B`` the tangent basis at ``n``)."""
+        R, t, p, n, h = state
+        x = step[0]
+        columns = [self.offsets[k] + np.arange(6, size) for k, size in enumerate(self.sizes)]
+        delta = np.stack([x[o:o + 6] for o in self.offsets[:-1]])  # (V, 6)
+        pivots = np.stack([v.problem.A_mean @ pk for v, pk in zip(self.vehicles, self.split(state)[2], strict=True)])
+        R2 = R[0] @ so3_exp(delta[:, :3])
+        t2 = t[0] + delta[:, 3:6] + np.einsum("kij,kj->ki", R[0] - R2, pivots)
+        p2 = p[0] + x[np.concatenate(columns)]
+        gh = self.offsets[-1]
+        n2 = so3_exp(_tangent_basis(n[0]) @ x[gh + 1:gh + 3]) @ n[0]
+        return R2[None], t2[None], p2[None], (n2 / np.linalg.norm(n2))[None], h + x[gh]
+
+    def feasible(self, state: tuple[np.ndarray, ...]) -> np.ndarray:
+        R, t, p, _, _ = self.split(state)
         for k, v in enumerate(self.vehicles):
             if np.any(p[k][:3] <= 0) or t[k][2] <= MIN_DEPTH or v.problem.min_depth(R[k], t[k], p[k]) <= MIN_DEPTH:
-                return False
-        return True
+                return np.array([False])
+        return np.array([True])
+
+    def settle(self, state: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        return state
+
+    def step_is_small(self, step: np.ndarray, tolerance: float, starts: np.ndarray) -> np.ndarray:
+        return np.abs(step).max(axis=1) <= tolerance
 
 
 def fit_jointly(vehicles: list[JointVehicle], ground: GroundPlane, max_iterations: int = 100,
@@ -173,49 +195,16 @@ def fit_jointly(vehicles: list[JointVehicle], ground: GroundPlane, max_iteration
     -------
     JointResult
     """
-    joint = _Joint(vehicles, ground)
-    R = [v.R_cam_vehicle.copy() for v in vehicles]
-    t = [v.t_cam_vehicle.copy() for v in vehicles]
-    p = [v.p.copy() for v in vehicles]
+    joint = JointProblem(vehicles, ground)
     n = ground.normal.copy()
+    t = np.array([v.t_cam_vehicle for v in vehicles], dtype=float)
     h = ground.camera_height if ground.camera_height is not None else float(np.median([-(n @ tk) for tk in t]))
-    r, J = joint.evaluate(R, t, p, n, h)
-    cost = float(r @ r)
-    initial_cost = cost
-    mu, nu = 1e-3, 2.0
-    stopped, iterations = "max-iterations", 0
-    while iterations < max_iterations:
-        iterations += 1
-        g = J.T @ r
-        H = J.T @ J
-        D = np.maximum(np.diag(H), 1e-12 * np.max(np.diag(H)))
-        Hd = H + mu * np.diag(D)
-        _, x, info = lapack.dposv(Hd, -g)
-        if info != 0:
-            mu *= nu
-            nu *= 2.0
-            continue
-        R2, t2, p2, n2, h2 = joint.step(R, t, p, n, h, x)
-        rho = -1.0
-        if joint.feasible(R2, t2, p2):
-            r2, _ = joint.evaluate(R2, t2, p2, n2, h2, with_jacobian=False)
-            new_cost = float(r2 @ r2)
-            predicted = -(2.0 * x @ g + x @ H @ x)
-            rho = (cost - new_cost) / predicted if predicted > 0 else -1.0
-        if rho > 0:
-            R, t, p, n, h = R2, t2, p2, n2, h2
-            r, J = joint.evaluate(R, t, p, n, h)
-            drop = cost - new_cost
-            cost = new_cost
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
-            if drop <= cost_tolerance * cost:
-                stopped = "cost"
-                break
-        else:
-            mu *= nu
-            nu *= 2.0
-            if mu > 1e16:
-                stopped = "damping"
-                break
-    return JointResult(R, t, p, n, h, cost, initial_cost, iterations, stopped)
+    state = (np.array([v.R_cam_vehicle for v in vehicles], dtype=float)[None], t[None],
+             np.concatenate([v.p for v in vehicles]).astype(float)[None], n[None], np.array([h], dtype=float))
+    # No gradient or step test: the joint fit stops on the cost's relative drop (or the damping, or the cap).
+    options = lm.LMOptions(max_iterations=max_iterations, gradient_tolerance=0.0, step_tolerance=0.0,
+                           cost_tolerance=cost_tolerance)
+    result = lm.levenberg_marquardt(joint, state, options)
+    R, t, p, n, h = joint.split(result.state)
+    return JointResult(R, t, [pk.copy() for pk in p], n, h, float(result.cost[0]), float(result.initial_cost[0]),
+                       int(result.iterations[0]), result.stopped[0])

@@ -7,33 +7,27 @@ SO(3) through the exponential map about a pivot ``c`` (the centroid of the click
 ``R <- R exp([delta]x)``, ``t <- t + dt + (R_old - R_new) c``, so the Jacobian of ``Y_i = R X_i + t`` is
 ``-R [X_i - c]x`` for ``delta``, ``I`` for ``t`` and ``R A_i`` for ``p``.
 
-Damping: ``(J^T J + mu D) step = -J^T r`` with ``D`` the (floored) diagonal of ``J^T J``; ``mu`` follows
-Nielsen's rule: after a step with gain ratio ``rho`` it is multiplied by ``max(1/3, 1 - (2 rho - 1)^3)``,
-after a rejected step by ``nu``, which doubles with each rejection in a row. Steps that put a
-clicked point or the bottom centre behind the camera, make a dimension non-positive, or tilt an upright start
-past the plausible bound, are rejected.
-
-Several starts are refined in lockstep (:func:`levenberg_marquardt_batch`): residuals, Jacobians and the
-damped normal equations of all of them are computed in one pass of batched array operations, each start
-keeping its own damping, acceptance and stopping. A start still far above the best one after a few
-iterations is abandoned.
+The refinement is a problem (:class:`RefineProblem`) for the one Levenberg-Marquardt of :mod:`.lm`, which
+states the damping and stopping rules. Its state is ``(R, t, p, pivot)``, (B, 3, 3), (B, 3), (B, P),
+(B, 3): several starts refined in lockstep (:func:`levenberg_marquardt_batch`). Steps that put a clicked
+point or the bottom centre behind the camera, make a dimension non-positive, or tilt an upright start past
+the plausible bound, are infeasible. A start still far above the best one after a few iterations is
+abandoned.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
-from scipy.linalg import lapack
 
+from toosicubix.geometry import hat, so3_exp
+from toosicubix.solver import lm
 from toosicubix.solver.problem import ARROW_ZONE_SIGMA, Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
 MIN_DEPTH = 1e-3
 
-_RUNNING, _GRADIENT, _STEP, _COST, _MAX_ITERATIONS, _DAMPING, _ABANDONED = range(7)
-_STATUS_NAMES = ("running", "gradient", "step", "cost", "max-iterations", "damping", "abandoned")
 
 
 @dataclass(frozen=True)
@@ -116,11 +110,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     Ga = np.zeros((B, m, 6 + P))
     Gt = problem.G[:, :3]
     if pivot is not None and Gt.any():
-        c_hat = np.zeros((B, 3, 3))
-        c_hat[:, 0, 1], c_hat[:, 0, 2] = -pivot[:, 2], pivot[:, 1]
-        c_hat[:, 1, 0], c_hat[:, 1, 2] = pivot[:, 2], -pivot[:, 0]
-        c_hat[:, 2, 0], c_hat[:, 2, 1] = -pivot[:, 1], pivot[:, 0]
-        Ga[:, :, 0:3] = Gt @ (R @ c_hat)
+        Ga[:, :, 0:3] = Gt @ (R @ hat(pivot))
     Ga[:, :, 3:6] = Gt
     Ga[:, :, 6:] = problem.G[:, 3:]
     if profile_scale:
@@ -153,12 +143,6 @@ def residuals_and_jacobian(problem: Problem, R: np.ndarray, t: np.ndarray, p: np
     return r[0], None if J is None else J[0]
 
 
-def _so3_exp_batch(omega: np.ndarray) -> np.ndarray:
-    """The exponential map of (B, 3) rotation vectors: (B, 3, 3). OpenCV's Rodrigues in a loop: for the few
-    starts of a batch this beats the vectorized formula (about 1 microsecond each)."""
-    return np.array([cv2.Rodrigues(w)[0] for w in omega])
-
-
 def _at_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Move each (t, p) of a batch, (B, 3) and (B, P), to the scale the cues prefer (when positive)."""
     a, b = problem.scale_terms(t, p)
@@ -173,25 +157,76 @@ def _pivots(problem: Problem, p: np.ndarray) -> np.ndarray:
     return p @ problem.A_mean.T
 
 
+class RefineProblem:
+    """Stage (c) as a problem of :func:`.lm.levenberg_marquardt`: state ``(R, t, p, pivot)``, (B, 3, 3),
+    (B, 3), (B, P), (B, 3); step ``(delta, dt, dp)`` (B, 6 + P).
+
+    Update: ``R <- R exp([delta]x)``, ``t <- t + dt + (R_old - R_new) pivot`` (the turn is about the pivot),
+    ``p <- p + dp``. The pixel rows do not change with the scale of ``(t, p)``; only the cues fix it, with a
+    curvature far below the other directions' that damping would all but freeze. So the cue rows are profiled
+    over the scale (their minimum over s), leaving an exact null direction, and every trial point is moved to
+    its best scale (:meth:`settle`): the minimum is that of the plain cost.
+    """
+
+    def __init__(self, problem: Problem, max_tilt: float | None = None):
+        self.problem = problem
+        self.up = problem.up
+        self.min_up = -np.inf if max_tilt is None else np.cos(max_tilt)
+        self.keep_upright: np.ndarray | None = None
+        self.size: np.ndarray | None = None
+
+    def start(self, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The state of B starts, (B, 3, 3), (B, 3), (B, P), at their best scale; fixes the starts' sizes
+        (for the step test) and which of them stay upright (``R e_z . up`` no smaller than ``cos(max_tilt)``)."""
+        t, p = _at_prior_scale(self.problem, np.array(t, dtype=float), np.array(p, dtype=float))
+        self.size = np.sqrt(np.einsum("ki,ki->k", t, t)) + np.sqrt(np.einsum("ki,ki->k", p, p)) + 1.0
+        self.keep_upright = R[:, :, 2] @ self.up >= self.min_up
+        return R, t, p, _pivots(self.problem, p)
+
+    def residuals(self, state: tuple[np.ndarray, ...], with_jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        R, t, p, pivot = state
+        return residuals_batch(self.problem, R, t, p, with_jacobian, pivot, True)
+
+    def update(self, state: tuple[np.ndarray, ...], step: np.ndarray) -> tuple[np.ndarray, ...]:
+        R, t, p, pivot = state
+        R_new = R @ so3_exp(step[:, :3])
+        t_new = t + step[:, 3:6] + np.einsum("kij,kj->ki", R - R_new, pivot)
+        return R_new, t_new, p + step[:, 6:], pivot  # the pivot is set anew by settle()
+
+    def feasible(self, state: tuple[np.ndarray, ...]) -> np.ndarray:
+        R, t, p, _ = state
+        depths = self.problem.points_vehicle_batch(p) @ R[:, 2, :, None]
+        return ((p[:, :3] > 0.0).all(axis=1) & (t[:, 2] > MIN_DEPTH)
+                & (depths[..., 0].min(axis=1) + t[:, 2] > MIN_DEPTH)
+                & (~self.keep_upright | (R[:, :, 2] @ self.up >= self.min_up)))
+
+    def settle(self, state: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        R, t, p, _ = state
+        t, p = _at_prior_scale(self.problem, t, p)
+        return R, t, p, _pivots(self.problem, p)
+
+    def step_is_small(self, step: np.ndarray, tolerance: float, starts: np.ndarray) -> np.ndarray:
+        """The rotation moves by at most ``tolerance`` radians and ``(t, p)`` by at most that fraction of
+        their size ``|t| + |p| + 1`` at the start."""
+        return (np.abs(step[:, :3]).max(axis=1) <= tolerance) & (
+            np.sqrt(np.einsum("ki,ki->k", step[:, 3:], step[:, 3:])) <= tolerance * self.size[starts])
+
+
 def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
                               p: np.ndarray, max_iterations: int = 100, gradient_tolerance: float = 1e-6,
                               step_tolerance: float = 1e-10, cost_tolerance: float = 1e-8,
                               abandon_factor: float | None = None, abandon_after: int = 10,
                               abandon_above: float | None = None,
                               max_tilt: float | None = None) -> list[RefineResult]:
-    """Levenberg-Marquardt from several feasible starts at once.
+    """Levenberg-Marquardt (:func:`.lm.levenberg_marquardt` on a :class:`RefineProblem`) from several
+    feasible starts at once.
 
     Parameters
     ----------
     R_cam_vehicle : (B, 3, 3); t_cam_vehicle : (B, 3); p : (B, P)
-    gradient_tolerance : stop when the residual is this close to orthogonal to every Jacobian column
-        (the largest ``|J_j^T r| / (|J_j| |r|)``, MINPACK's gtol)
-    step_tolerance : stop when an accepted step changes the rotation by less than this many radians and
-        ``t``, ``p`` by less than this fraction of their size
-    cost_tolerance : stop when an accepted step lowers the cost by less than this fraction
-    abandon_factor, abandon_after, abandon_above : a start is stopped ('abandoned') when after
-        ``abandon_after`` iterations its cost is still above ``abandon_factor`` times the lowest cost in the
-        batch, or above ``abandon_above`` (an answer already in hand)
+    gradient_tolerance, step_tolerance, cost_tolerance, abandon_factor, abandon_after, abandon_above : see
+        :class:`.lm.LMOptions`; a step is small when it changes the rotation by at most ``step_tolerance``
+        radians and ``t``, ``p`` by at most that fraction of their size
     max_tilt : radians; a start whose up axis leans less than this from the road normal (else the camera's
         up direction -y) never takes a step that leans it further (see :mod:`.plausibility`)
 
@@ -199,119 +234,20 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     -------
     list of RefineResult, one per start
     """
-    B = len(p)
-    R = np.array(R_cam_vehicle, dtype=float)
     # Rotation increments turn the vehicle about the centroid of its clicked points, not its bottom centre:
     # that keeps rotation and translation nearly uncoupled, so the valley the steps follow is straighter.
-    # The pixel rows do not change with the scale of (t, p); only the prior fixes it, with a curvature far
-    # below the other directions' that damping would all but freeze. So the prior is profiled over the
-    # scale (its minimum over s), leaving an exact null direction, and every accepted iterate is moved to
-    # its best scale: the minimum is that of the plain cost.
-    t, p = _at_prior_scale(problem, np.array(t_cam_vehicle, dtype=float), np.array(p, dtype=float))
-    pivot = _pivots(problem, p)
-    r, J = residuals_batch(problem, R, t, p, True, pivot, True)
-    cost = np.einsum("km,km->k", r, r)
-    initial_cost = cost.copy()
-    n = J.shape[2]
-    diagonal = np.arange(n)
-    mu = np.full(B, 1e-3)
-    nu = np.full(B, 2.0)
-    iterations = np.zeros(B, dtype=int)
-    status = np.full(B, _RUNNING)
-    size = np.sqrt(np.einsum("ki,ki->k", t, t)) + np.sqrt(np.einsum("ki,ki->k", p, p)) + 1.0
-    # R e_z . up is the cosine of the tilt; starts within the bound are kept within it.
-    up = problem.up
-    min_up = -np.inf if max_tilt is None else np.cos(max_tilt)
-    keep_upright = R[:, :, 2] @ up >= min_up
-
-    # Every array keeps all B starts; the ones that stopped ride along (a few more rows cost less than the
-    # gathers to leave them out) but are never updated.
-    for _ in range(max_iterations):
-        running = status == _RUNNING
-        if abandon_factor is not None or abandon_above is not None:
-            bar = np.inf if abandon_above is None else abandon_above
-            if abandon_factor is not None:
-                bar = min(bar, abandon_factor * float(cost.min()) + 1e-6)
-            gone = running & (iterations >= abandon_after) & (cost > bar)
-            status[gone] = _ABANDONED
-            running &= ~gone
-        if not running.any():
-            break
-        g = np.einsum("kmi,km->ki", J, r)
-        column_sq = np.einsum("kmi,kmi->ki", J, J)  # squared column norms
-        # max_j |g_j| / |J_j| <= gtol |r|, squared
-        cosines_sq = (g * g / np.maximum(column_sq, 1e-300)).max(axis=1)
-        done = running & ((cost == 0.0) | (cosines_sq <= gradient_tolerance**2 * cost))
-        status[done] = _GRADIENT
-        running &= ~done
-        if not running.any():
-            break
-        iterations += running
-        H = J.transpose(0, 2, 1) @ J
-        Dg = np.maximum(column_sq, 1e-12 * column_sq.max(axis=1, keepdims=True) + 1e-300)
-        H[:, diagonal, diagonal] += mu[:, None] * Dg
-        step = _solve_batch(H, -g, running)
-        solved = np.isfinite(step).all(axis=1)  # only running starts are solved
-        step[~solved] = 0.0
-        R_new = R @ _so3_exp_batch(step[:, :3])
-        t_new = t + step[:, 3:6] + np.einsum("kij,kj->ki", R - R_new, pivot)
-        p_new = p + step[:, 6:]
-        depths = problem.points_vehicle_batch(p_new) @ R_new[:, 2, :, None]
-        feasible = (solved & (p_new[:, :3] > 0.0).all(axis=1) & (t_new[:, 2] > MIN_DEPTH)
-                    & (depths[..., 0].min(axis=1) + t_new[:, 2] > MIN_DEPTH)
-                    & (~keep_upright | (R_new[:, :, 2] @ up >= min_up)))
-        rho = np.full(B, -1.0)
-        if feasible.any():
-            # The trial point goes to its best scale before it is evaluated (the profiled cost does not change
-            # with the scale), with its Jacobian: most steps are accepted, and then it is the next iterate's.
-            R_try = R_new[feasible]
-            t_try, p_try = _at_prior_scale(problem, t_new[feasible], p_new[feasible])
-            pivot_try = _pivots(problem, p_try)
-            r_try, J_try = residuals_batch(problem, R_try, t_try, p_try, True, pivot_try, True)
-            new_cost = np.einsum("km,km->k", r_try, r_try)
-            sf = step[feasible]
-            predicted = np.einsum("ki,ki->k", sf, mu[feasible, None] * Dg[feasible] * sf - g[feasible])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                rho[feasible] = np.where(predicted > 0, (cost[feasible] - new_cost) / predicted, -1.0)
-        accept = rho > 0  # implies feasible, hence running
-        rejected = running & ~accept
-        mu[rejected] *= nu[rejected]
-        nu[rejected] *= 2.0
-        status[rejected & (mu > 1e16)] = _DAMPING
-        if not accept.any():
-            continue
-        sa = step[accept]
-        taken = accept[feasible]  # the accepted among the evaluated trials
-        small = (np.abs(sa[:, :3]).max(axis=1) <= step_tolerance) & (
-            np.sqrt(np.einsum("ki,ki->k", sa[:, 3:], sa[:, 3:])) <= step_tolerance * size[accept])
-        R[accept], t[accept], p[accept], pivot[accept] = R_try[taken], t_try[taken], p_try[taken], pivot_try[taken]
-        r[accept], J[accept] = r_try[taken], J_try[taken]
-        new_cost = new_cost[taken]
-        drop = cost[accept] - new_cost
-        cost[accept] = new_cost
-        mu[accept] = np.maximum(mu[accept] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho[accept] - 1.0) ** 3), 1e-15)
-        nu[accept] = 2.0
-        ka = accept.nonzero()[0]
-        status[ka[(drop <= cost_tolerance * new_cost) & ~small]] = _COST
-        status[ka[small]] = _STEP
-    status[status == _RUNNING] = _MAX_ITERATIONS
+    refine = RefineProblem(problem, max_tilt)
+    state = refine.start(np.array(R_cam_vehicle, dtype=float), t_cam_vehicle, p)
+    options = lm.LMOptions(max_iterations=max_iterations, gradient_tolerance=gradient_tolerance,
+                        step_tolerance=step_tolerance, cost_tolerance=cost_tolerance, abandon_factor=abandon_factor,
+                        abandon_after=abandon_after, abandon_above=abandon_above)
+    result = lm.levenberg_marquardt(refine, state, options)
+    R, t, p, _ = result.state
     # Re-orthonormalize against drift from many small exp() products.
     U, _, Vt = np.linalg.svd(R)
     R = U @ Vt
-    return [RefineResult(R[k], t[k], p[k], float(cost[k]), float(initial_cost[k]), int(iterations[k]),
-                         _STATUS_NAMES[status[k]]) for k in range(B)]
-
-
-def _solve_batch(H: np.ndarray, b: np.ndarray, which: np.ndarray) -> np.ndarray:
-    """Solve ``H x = b`` for the rows ``which`` (B,) bool of a batch (B, n, n), (B, n) of symmetric positive
-    definite systems (LAPACK dposv, one call each: cheaper than a batched solve for a few starts); rows not
-    asked for or not positive definite come back NaN."""
-    out = np.full(b.shape, np.nan)
-    for k in which.nonzero()[0]:
-        _, x, info = lapack.dposv(H[k], b[k])
-        if info == 0:
-            out[k] = x
-    return out
+    return [RefineResult(R[k], t[k], p[k], float(result.cost[k]), float(result.initial_cost[k]),
+                         int(result.iterations[k]), result.stopped[k]) for k in range(len(R))]
 
 
 def levenberg_marquardt(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
