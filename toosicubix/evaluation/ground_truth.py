@@ -25,7 +25,7 @@ import numpy as np
 
 from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.errors import EvaluationInputError
-from toosicubix.formats import kitti
+from toosicubix.formats import FormatError, kitti
 from toosicubix.formats.cityscapes import read_gtbbox3d
 
 #: Classes scored by default, compared case-insensitively.
@@ -222,9 +222,12 @@ class KittiTrackingGroundTruth(GroundTruthSource):
         for path in sorted(self.label_dir.glob("*.txt")):
             # Only the frame column is needed here: a cheap scan instead of a full parse.
             last = -1
-            for line in path.read_text(encoding="utf-8").splitlines():
+            for number, line in enumerate(kitti.read_text(path).splitlines(), 1):
                 first = line.split(maxsplit=1)[:1]
-                if first and first[0].isdigit():
+                if first and first[0].isascii() and first[0].isdigit():
+                    if int(first[0]) > kitti.MAX_FRAME:  # before range() allocates an id per frame
+                        raise FormatError(path, f"expected a frame number from 0 to {kitti.MAX_FRAME}, got "
+                                                f"{first[0]}", number)
                     last = max(last, int(first[0]))
             ids.extend(tracking_image_id(path.stem, f) for f in range(last + 1))
         return ids

@@ -28,7 +28,14 @@ from toosicubix.annotations.schema import InputFileError
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
-from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results, results_to_json
+from toosicubix.formats.results import (
+    RESULTS_FILENAME,
+    ImageResult,
+    VehicleResult,
+    non_finite_path,
+    read_results,
+    results_to_json,
+)
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle, load_images, with_ground
 from toosicubix.parts.linear import PartsModel, build_parts_model
@@ -84,14 +91,53 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
+        with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
+            return checked_result(_vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks))
+    except UnusableFit as exc:
+        return _failed(vehicle, prior, str(exc))
     except Exception as exc:  # one vehicle must never stop the batch
         where = traceback.extract_tb(exc.__traceback__)[-1]
-        return VehicleResult(
-            id=vehicle.id, status="failed", prototype=vehicle.prototype,
-            error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
-            details={"kitti_type": prior.kitti_type},
-        )
-    return _vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks)
+        return _failed(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
+                                       f"(at {Path(where.filename).name}:{where.lineno})")
+
+
+class UnusableFit(ValueError):
+    """A vehicle's fit that cannot be written: behind the camera, or with a non-finite number."""
+
+
+def _failed(vehicle: Vehicle, prior: SizePrior, reason: str) -> VehicleResult:
+    return VehicleResult(id=vehicle.id, status="failed", prototype=vehicle.prototype, error=reason,
+                         details={"kitti_type": prior.kitti_type})
+
+
+def checked_result(result: VehicleResult) -> VehicleResult:
+    """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
+    front of the camera or any number in it (pose, box, details) is not finite.
+
+    Raises
+    ------
+    UnusableFit
+        With the reason, e.g. "the fitted cuboid lies behind the camera (depth -3.2 m)".
+    """
+    if not result.ok:
+        return result
+    for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
+        value = getattr(result, name)
+        if value is None or not np.all(np.isfinite(value)):
+            raise UnusableFit(f"the fit has a non-finite or missing {name}: {value}")
+    if np.any(result.dimensions <= 0):
+        raise UnusableFit(f"the fit has non-positive dimensions {result.dimensions.tolist()}")
+    corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
+    if corners_cam[:, 2].max() <= 0.0:
+        raise UnusableFit(f"the fitted cuboid lies behind the camera (its nearest corner at depth "
+                          f"{corners_cam[:, 2].max():.4g} m)")
+    if result.t_cam_vehicle[2] <= 0.0:
+        raise UnusableFit(f"the fitted cuboid's bottom centre lies behind the camera (depth "
+                          f"{result.t_cam_vehicle[2]:.4g} m)")
+    bad = non_finite_path(result.details, "details")
+    if bad is not None:
+        raise UnusableFit(f"the fit has a non-finite value at {bad}")
+    return result
 
 
 def active_cues(parts: PartsModel, ground: GroundPlane | None) -> dict[str, Any]:
@@ -167,8 +213,14 @@ def _solver_details(fit: FitResult) -> dict[str, Any]:
 def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
     """The label's 2D box (annotated, else the projected cuboid clipped to the image) and the
     truncation: the share of the projected cuboid's box outside the image."""
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t)) and np.all(np.isfinite(d))):
+        raise UnusableFit(f"the fit has a non-finite pose: t_cam_vehicle {t.tolist()}, dimensions {d.tolist()}")
     points_cam = clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, d))
+    if len(points_cam) == 0:
+        raise UnusableFit("the fitted cuboid lies wholly behind the camera (no 2D box)")
     uv = camera.project(points_cam)
+    if not np.all(np.isfinite(uv)):
+        raise UnusableFit("the fitted cuboid projects to non-finite pixels (no 2D box)")
     full = box2d_of_points(uv)
     truncated = 0.0
     clipped = full
@@ -292,7 +344,12 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
             warnings=tuple(vehicles[k].details.get("warnings", [])),
         )
-        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks)
+        try:
+            updated = checked_result(
+                _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks))
+        except UnusableFit as exc:
+            out[k] = _failed(v, jv.problem.prior, f"after the joint refinement: {exc}")
+            continue
         details = dict(updated.details)
         details["cues"] = {**details["cues"], "joint_ground": True}
         details["solver"] = {**vehicles[k].details.get("solver", {}), "joint_iterations": result.iterations}
