@@ -350,11 +350,16 @@ def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotati
 
     if (kitti_dir is None) == (tracking_dir is None):
         raise click.UsageError("give exactly one of --kitti DIR and --kitti-tracking DIR")
-    selection = SelectionOptions(
-        classes=tuple(c.strip() for c in classes.split(",") if c.strip()), max_truncation=max_truncation,
-        max_occlusion=max_occlusion, min_depth=min_depth, max_depth=max_depth, min_box_height=min_box_height,
-        frames_per_track=frames_per_track, sequences=_parse_sequences(sequences),
-    )
+    try:
+        selection = SelectionOptions(
+            classes=tuple(c.strip() for c in classes.split(",") if c.strip()), max_truncation=max_truncation,
+            max_occlusion=max_occlusion, min_depth=min_depth, max_depth=max_depth, min_box_height=min_box_height,
+            frames_per_track=frames_per_track, sequences=_parse_sequences(sequences),
+        )
+        options = AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement, max_clicks=max_clicks,
+                                   seed=seed)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
     try:
         if kitti_dir is not None:
             vehicles = select_kitti_object(kitti_dir, selection)
@@ -362,12 +367,14 @@ def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotati
             vehicles = select_kitti_tracking(tracking_dir, selection)
     except FormatError as exc:
         raise BadInput(str(exc)) from None
-    simulated = simulate(vehicles, AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement,
-                                                    max_clicks=max_clicks, seed=seed))
+    simulated = simulate(vehicles, options)
     gt_dir = gt_out or annotations.with_name(annotations.stem + "_gt")
     from toosicubix.model import KITTI_GROUND
 
-    write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
+    try:
+        write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
+    except FormatError as exc:
+        raise BadInput(str(exc)) from None
     clicks = [sv.n_clicks for sv in simulated]
     images = len({sv.source.image_id for sv in simulated})
     few = sum(1 for c in clicks if c < 3)
