@@ -300,8 +300,9 @@ def trial(index: int, seed: int, work: Path, timeout: float, baseline_out: Path)
         if command == "validate" and not r.get("hang") and r.get("exit") in (0, 1):
             try:
                 json.loads(r["output"], parse_constant=_reject_constant)
-            except ValueError as exc:
-                r["non_finite"] = f"stdout: {str(exc)[:100]}"
+            except ValueError as exc:  # not JSON at all is a traceback's doing, counted as such
+                if "non-finite" in str(exc):
+                    r["non_finite"] = f"stdout: {str(exc)[:100]}"
         records.append(r)
     written = [p for p in out.rglob("*") if p.is_file()] if out.is_dir() else []
     for p in written:

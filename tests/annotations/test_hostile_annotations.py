@@ -143,3 +143,12 @@ def test_cli_exits_2_and_writes_nothing(tmp_path, command):
     result = CliRunner().invoke(main, [command, str(deep), "-q"] + (["-o", str(out)] if command == "fit" else []))
     assert result.exit_code == 2 and "nested 1000 deep" in result.output, result.output
     assert not out.exists()
+
+
+def test_image_ids_differing_only_in_case_are_refused(tmp_path):
+    doc = sample()
+    doc["images"][1]["id"] = doc["images"][0]["id"] + "a"
+    doc["images"][2]["id"] = doc["images"][0]["id"] + "A"  # one label file on a case-insensitive disk
+    problems = problems_of(tmp_path, doc)
+    assert problems == [("$.images", "expected unique image (ignoring case: they name files) ids, got '000001a' "
+                                     "at [1] and [2]")]

@@ -74,3 +74,14 @@ def test_a_cuboid_half_behind_the_camera_keeps_its_box():
     assert np.all(np.isfinite(box)) and 0.0 <= truncated <= 1.0
     with pytest.raises(batch.UnusableFit, match="wholly behind"):
         batch._box2d(vehicle, camera, np.eye(3), np.array([0.0, 1.5, -10.0]), np.array([4.0, 1.7, 1.5]))
+
+
+def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
+    from toosicubix.formats.results import VehicleResult, dumps, results_to_json
+
+    failed = VehicleResult(id="1", status="failed", error="degenerate clicks: ...", prototype="Car",
+                           details={"kitti_type": "Car", "solver": {"initial_cost": float("nan")}})
+    checked = batch.checked_result(failed)
+    assert checked.error == failed.error and checked.details == {"kitti_type": "Car"}
+    with pytest.raises(ValueError, match=r"NaN or infinity \(not JSON\) at \$\.images\[0\]\.vehicles\[0\]\.solver"):
+        dumps(results_to_json([batch.ImageResult("a", np.eye(3), np.zeros(3), None, [failed])]))

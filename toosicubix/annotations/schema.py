@@ -347,6 +347,8 @@ class AnnotationFile(_Model):
     @classmethod
     def _ensure_unique_image_ids(cls, images: list[ImageAnnotation]) -> list[ImageAnnotation]:
         _ensure_unique([im.id for im in images], "image")
+        # They name files, and some file systems ignore case: 'A' and 'a' would share one label file.
+        _ensure_unique([im.id.lower() for im in images], "image (ignoring case: they name files)")
         return images
 
 

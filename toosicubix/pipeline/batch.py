@@ -112,15 +112,18 @@ def _failed(vehicle: Vehicle, prior: SizePrior, reason: str) -> VehicleResult:
 
 def checked_result(result: VehicleResult) -> VehicleResult:
     """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
-    front of the camera or any number in it (pose, box, details) is not finite.
+    front of the camera or any number in it (pose, box, details) is not finite. A failed result keeps its
+    reason and loses any details with a NaN or infinity.
 
     Raises
     ------
     UnusableFit
         With the reason, e.g. "the fitted cuboid lies behind the camera (depth -3.2 m)".
     """
-    if not result.ok:
-        return result
+    if not result.ok:  # keep the reason; drop details that could not be written
+        if non_finite_path(result.details, "details") is None:
+            return result
+        return replace(result, details={"kitti_type": result.details.get("kitti_type")})
     for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
         value = getattr(result, name)
         if value is None or not np.all(np.isfinite(value)):
