@@ -32,7 +32,7 @@ SAMPLE_GT = REPO / "samples" / "ground_truth"
 SMALL = {**json.loads(SAMPLE.read_text()), "images": [json.loads(SAMPLE.read_text())["images"][2]]}
 LABEL = "Car 0.00 0 0.187878 399.61 186.27 685.93 301.16 1.5000 1.6500 3.9000 -1.0600 1.6000 10.5000 0.087266"
 P2 = "720 0 620 43.2 0 720 180 0 0 0 1 0"
-FUZZ = settings(max_examples=10, deadline=None, database=None, derandomize=True,
+FUZZ = settings(max_examples=40, deadline=None, database=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
