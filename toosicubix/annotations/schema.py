@@ -11,7 +11,16 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from toosicubix import formats
 from toosicubix.errors import InputError
@@ -27,9 +36,58 @@ DIRECTION_AXES = vocabulary.names("direction")
 LENGTH_FEATURES = {name: vocabulary.entry("length", name).get("description") for name in vocabulary.names("length")}
 DIMENSION_AXES = ("dx", "dy", "dz")
 
-Pixel = Annotated[tuple[float, float], Field(description="Pixel position (x, y): x right, y down.")]
+#: The largest pixel coordinate (and image side) a file may hold. The largest camera images are some 10^5
+#: pixels across; a click a million pixels off is a typo, and the solver's squared pixel costs of larger
+#: numbers lose every digit a click carries (and overflow float64 near 1e154).
+MAX_PIXEL = 1e6
+#: The largest size in metres a ``length`` feature, known dimension or camera height may have: no road
+#: vehicle or camera mount is 100 m.
+MAX_METRES = 100.0
+#: The smallest sigma in metres: no vehicle's size is known to a tenth of a millimetre, and a smaller sigma
+#: makes the prior's weight (1 / sigma^2) swamp every click.
+MIN_SIGMA_METRES = 1e-4
+#: Image ids name files (``label_2/<id>.txt``, and a temporary file beside it with 14 more characters):
+#: most file systems allow 255 bytes per name; this leaves room for both. Vehicle ids and prototypes have
+#: the same bound so that messages and results stay readable.
+MAX_ID_LENGTH = 128
+#: Focal lengths in pixels: below 1 px the clicks cannot be pixels; above 10^6 px no lens gives it.
+FOCAL_RANGE_PX = (1.0, 1e6)
+#: The largest camera offset ``|K^-1 P[:, 3]|`` (metres) a ``P`` may hold (KITTI's: 0.06 m).
+MAX_CAMERA_OFFSET = 100.0
+
+
+
+def _ensure_pixel(value: float) -> float:
+    if not -MAX_PIXEL <= value <= MAX_PIXEL:
+        raise ValueError(f"expected a pixel coordinate within +-{MAX_PIXEL:g} (no camera image is that large; "
+                         f"the solver's pixel arithmetic loses a click's precision beyond it), got {value:g}")
+    return value
+
+
+def _ensure_metres(value: float) -> float:
+    if not 0.0 < value <= MAX_METRES:
+        raise ValueError(f"expected a size in metres greater than 0 and at most {MAX_METRES:g} (no road vehicle or "
+                         f"camera mount is larger), got {value:g}")
+    return value
+
+
+def _ensure_sigma_metres(value: float) -> float:
+    if not MIN_SIGMA_METRES <= value <= MAX_METRES:
+        raise ValueError(f"expected a sigma in metres greater than 0, from {MIN_SIGMA_METRES:g} (no vehicle's size "
+                         f"is known better; a smaller one swamps every click) to {MAX_METRES:g}, got {value:g}")
+    return value
+
+
+Coordinate = Annotated[float, AfterValidator(_ensure_pixel),
+                       Field(json_schema_extra={"minimum": -MAX_PIXEL, "maximum": MAX_PIXEL})]
+Pixel = Annotated[tuple[Coordinate, Coordinate], Field(description="Pixel position (x, y): x right, y down.")]
 Row3 = tuple[float, float, float]
 Row4 = tuple[float, float, float, float]
+Metres = Annotated[float, AfterValidator(_ensure_metres),
+                   Field(json_schema_extra={"exclusiveMinimum": 0, "maximum": MAX_METRES})]
+SigmaMetres = Annotated[float, AfterValidator(_ensure_sigma_metres),
+                        Field(json_schema_extra={"minimum": MIN_SIGMA_METRES, "maximum": MAX_METRES})]
+ImageSide = Annotated[int, Field(gt=0, le=int(MAX_PIXEL))]
 
 
 class InputFileError(InputError):
@@ -58,6 +116,10 @@ class _Model(BaseModel):
 _M = TypeVar("_M", bound=_Model)
 
 
+#: The type of each known-size key a part kind may state (``length``: its size and sigma, bounded).
+_KNOWN_SIZE_TYPES = {"metres": Metres, "sigma": SigmaMetres}
+
+
 def _part_annotation(kind: vocabulary.Kind) -> type[_Model]:
     """The pydantic class of one part kind, from its vocabulary entry: ``kind``, the name (one of the kind's
     names), the clicked pixels, and the known size's positive numbers when the kind states one."""
@@ -70,7 +132,7 @@ def _part_annotation(kind: vocabulary.Kind) -> type[_Model]:
         "kind": (Literal[kind.kind], ...),
         kind.name_field: (Literal[tuple(kind.names)], field(kind.name_field)),  # type: ignore[valid-type]
         **{key: (Pixel, field(key)) for key in kind.clicks},
-        **{key: (float, field(key, gt=0)) for key in kind.known},
+        **{key: (_KNOWN_SIZE_TYPES[key], field(key)) for key in kind.known},
     }
     return create_model(kind.schema["class"], __base__=_Model, __doc__=kind.schema["description"],
                         __module__=__name__, **fields)
@@ -89,33 +151,37 @@ PartAnnotation = Annotated[Union[tuple(PART_ANNOTATIONS.values())], Field(discri
 class KnownSize(_Model):
     """A known dimension, e.g. from the vehicle's make and model."""
 
-    metres: float = Field(gt=0)
-    sigma: float = Field(gt=0, description="One standard deviation, metres.")
+    metres: Metres
+    sigma: SigmaMetres = Field(description="One standard deviation, metres.")
 
 
 class GroundModel(_Model):
     """The road under the vehicles, in camera coordinates: its normal (pointing up, toward the camera side)
     and the camera's height above it. KITTI's cameras sit about 1.65 m above a road whose normal is -y."""
 
-    camera_height: float | None = Field(
-        default=None, gt=0, description="Camera height above the road, metres; leave out when unknown.")
-    camera_height_sigma: float = Field(default=0.05, gt=0, description="Its uncertainty, metres.")
+    camera_height: Metres | None = Field(
+        default=None, description="Camera height above the road, metres; leave out when unknown.")
+    camera_height_sigma: SigmaMetres = Field(default=0.05, description="Its uncertainty, metres.")
     normal: Row3 | None = Field(
         default=None, description="Road normal in camera coordinates (x right, y down, z forward), pointing up; "
                                   "default [0, -1, 0] (a level camera).")
     camera_pitch_deg: float | None = Field(
-        default=None, description="Instead of the normal: the camera's pitch above the road, degrees (nose up > 0).")
+        default=None, ge=-90, le=90,
+        description="Instead of the normal: the camera's pitch above the road, degrees (nose up > 0).")
     camera_roll_deg: float | None = Field(
-        default=None, description="Instead of the normal: the camera's roll, degrees (clockwise as seen > 0).")
-    normal_sigma_deg: float = Field(default=1.0, gt=0, description="Uncertainty of the normal, degrees.")
+        default=None, ge=-180, le=180,
+        description="Instead of the normal: the camera's roll, degrees (clockwise as seen > 0).")
+    normal_sigma_deg: float = Field(default=1.0, ge=1e-6, le=180, description="Uncertainty of the normal, degrees.")
     upright_sigma_deg: float = Field(
-        default=2.0, gt=0, description="How far vehicles lean from the road normal (pitch and roll), degrees.")
+        default=2.0, ge=1e-6, le=180,
+        description="How far vehicles lean from the road normal (pitch and roll), degrees.")
 
     @field_validator("normal")
     @classmethod
     def _ensure_nonzero_normal(cls, normal: Row3 | None) -> Row3 | None:
-        if normal is not None and float(np.linalg.norm(normal)) < 1e-9:
-            raise ValueError(f"expected a non-zero road normal, got {list(normal)}")
+        if normal is not None and not 1e-9 <= float(np.linalg.norm(normal)) <= 1e9:
+            raise ValueError(f"expected a non-zero road normal, of length between 1e-9 and 1e9 (it is normalised), "
+                             f"got {list(normal)}")
         return normal
 
     @model_validator(mode="after")
@@ -132,7 +198,7 @@ class CameraModel(_Model):
     P: tuple[Row4, Row4, Row4] | None = Field(
         default=None, description="KITTI projection matrix K [I | t]; poses come out in the K = P[:, :3] frame."
     )
-    distortion: list[float] | None = Field(
+    distortion: list[Annotated[float, Field(ge=-1e6, le=1e6)]] | None = Field(
         default=None,
         description="OpenCV distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]).",
     )
@@ -141,14 +207,14 @@ class CameraModel(_Model):
     @classmethod
     def _ensure_invertible_K(cls, K: tuple[Row3, Row3, Row3] | None) -> tuple[Row3, Row3, Row3] | None:
         if K is not None:
-            _check_intrinsics(np.array(K))
+            check_intrinsics(np.array(K))
         return K
 
     @field_validator("P")
     @classmethod
     def _ensure_invertible_P(cls, P: tuple[Row4, Row4, Row4] | None) -> tuple[Row4, Row4, Row4] | None:
         if P is not None:
-            _check_intrinsics(np.array(P)[:, :3])
+            check_projection(np.array(P))
         return P
 
     @field_validator("distortion")
@@ -165,22 +231,53 @@ class CameraModel(_Model):
         return self
 
 
-def _check_intrinsics(K: np.ndarray) -> None:
-    if not np.allclose(K[2], [0.0, 0.0, 1.0], atol=1e-9):
+def check_projection(P: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``P`` (3, 4) = K [I | t] with a camera's K (see :func:`check_intrinsics`)
+    and an offset ``|t|`` of at most ``MAX_CAMERA_OFFSET`` metres."""
+    check_intrinsics(P[:, :3])
+    if np.abs(P[:, 3]).max() > MAX_PIXEL * MAX_CAMERA_OFFSET:
+        raise ValueError(f"expected P[:, 3] = K t within +-{MAX_PIXEL * MAX_CAMERA_OFFSET:g} (a camera offset "
+                         f"t of at most {MAX_CAMERA_OFFSET:g} m), got {P[:, 3].tolist()}")
+    offset = np.linalg.solve(P[:, :3], P[:, 3])
+    if float(np.linalg.norm(offset)) > MAX_CAMERA_OFFSET:
+        raise ValueError(
+            f"expected P = K [I | t] with |t| = |K^-1 P[:, 3]| at most {MAX_CAMERA_OFFSET:g} m (a camera's "
+            f"offset from the reference camera; KITTI's is 0.06 m), got t = {offset.tolist()} from "
+            f"P[:, 3] = {P[:, 3].tolist()}")
+
+
+def check_intrinsics(K: np.ndarray) -> None:
+    """What a pinhole camera's K (3, 3) can be: upper triangular [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with
+    focal lengths in ``FOCAL_RANGE_PX``, skew and principal point within ``MAX_PIXEL``, and well conditioned."""
+    if not np.allclose(K[2], [0.0, 0.0, 1.0], atol=1e-9, rtol=0.0):
         raise ValueError(f"expected the last row of K to be [0, 0, 1], got {K[2].tolist()}")
+    if np.abs(K).max() > MAX_PIXEL:
+        raise ValueError(f"expected the entries of K within +-{MAX_PIXEL:g} pixels (focal lengths, skew, principal "
+                         f"point), got K = {K.tolist()}")
     scale = max(abs(K[0, 0]), abs(K[1, 1]), 1e-300)
     if abs(np.linalg.det(K)) <= 1e-12 * scale * scale:
         raise ValueError(f"expected an invertible K, got det(K) = {np.linalg.det(K):.3g} for K = {K.tolist()}")
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"expected positive focal lengths K[0][0] and K[1][1], got {K[0, 0]} and {K[1, 1]}")
+    if abs(K[1, 0]) > 1e-9:
+        raise ValueError(f"expected K[1][0] = 0 (K is upper triangular: [[fx, s, cx], [0, fy, cy], [0, 0, 1]]), "
+                         f"got {K[1, 0]:g}")
+    low, high = FOCAL_RANGE_PX
+    for name, f in (("K[0][0]", K[0, 0]), ("K[1][1]", K[1, 1])):
+        if not low <= f <= high:
+            raise ValueError(f"expected a focal length {name} between {low:g} and {high:g} pixels, got {f:g}")
+    f = max(K[0, 0], K[1, 1])
+    cond = float(np.linalg.cond(np.diag([1.0 / f, 1.0 / f, 1.0]) @ K))  # in units of the focal length
+    if not cond <= 1e8:
+        raise ValueError(f"expected a well-conditioned K, got condition number {cond:.3g} for K = {K.tolist()}")
 
 
 class VehicleAnnotation(_Model):
     """One vehicle: its prototype (size class) and the parts clicked on it."""
 
-    id: str = Field(min_length=1, description="Unique within its image.")
-    prototype: str = Field(min_length=1, description="Size class in the priors file, e.g. 'Car', 'Mid Size Car'.")
-    box2d: Row4 | None = Field(
+    id: str = Field(min_length=1, max_length=MAX_ID_LENGTH, pattern=r"^[^\x00-\x1f\x7f]*$",
+                    description="Unique within its image; no control characters.")
+    prototype: str = Field(min_length=1, max_length=MAX_ID_LENGTH,
+                           description="Size class in the priors file, e.g. 'Car', 'Mid Size Car'.")
+    box2d: tuple[Coordinate, Coordinate, Coordinate, Coordinate] | None = Field(
         default=None, description="Annotated 2D box (x1, y1, x2, y2) in pixels, written to the KITTI file."
     )
     parts: list[PartAnnotation] = Field(default_factory=list)
@@ -189,7 +286,7 @@ class VehicleAnnotation(_Model):
 
     @field_validator("box2d")
     @classmethod
-    def _ensure_box_order(cls, box: Row4 | None) -> Row4 | None:
+    def _ensure_box_order(cls, box: tuple[float, ...] | None) -> tuple[float, ...] | None:
         if box is not None and not (box[2] > box[0] and box[3] > box[1]):
             raise ValueError(f"expected x1 < x2 and y1 < y2, got {list(box)}")
         return box
@@ -199,11 +296,12 @@ class ImageAnnotation(_Model):
     """One image: its camera and its annotated vehicles."""
 
     id: str = Field(
-        pattern=r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$",
-        description="Image id; names the KITTI label file, so letters, digits, '_', '.', '-' only.",
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$", max_length=MAX_ID_LENGTH,
+        description=f"Image id; names the KITTI label file, so letters, digits, '_', '.', '-' only, at most "
+                    f"{MAX_ID_LENGTH} characters.",
     )
     file: str | None = Field(default=None, description="Image path relative to the annotation file.")
-    size: tuple[Annotated[int, Field(gt=0)], Annotated[int, Field(gt=0)]] | None = Field(
+    size: tuple[ImageSide, ImageSide] | None = Field(
         default=None, description="(width, height) in pixels; projected boxes are clipped to it."
     )
     camera: CameraModel
@@ -229,6 +327,8 @@ class AnnotationFile(_Model):
     @classmethod
     def _ensure_unique_image_ids(cls, images: list[ImageAnnotation]) -> list[ImageAnnotation]:
         _ensure_unique([im.id for im in images], "image")
+        # They name files, and some file systems ignore case: 'A' and 'a' would share one label file.
+        _ensure_unique([im.id.lower() for im in images], "image (ignoring case: they name files)")
         return images
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from toosicubix.cli.options import GroundTruth, ground_truth_options, parse_sequences
+from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, parse_sequences
 
 
 @click.command("simulate")
@@ -63,14 +63,18 @@ def simulate_command(ground_truth: GroundTruth, annotations: Path, gt_out: Path 
         write_simulation,
     )
 
-    selection = SelectionOptions(
-        classes=tuple(c.strip() for c in classes.split(",") if c.strip()), max_truncation=max_truncation,
-        max_occlusion=max_occlusion, min_depth=min_depth, max_depth=max_depth, min_box_height=min_box_height,
-        frames_per_track=frames_per_track, sequences=parse_sequences(sequences),
-    )
+    try:  # the options check themselves (simulate.annotator): say what is wrong before any file is read
+        selection = SelectionOptions(
+            classes=tuple(c.strip() for c in classes.split(",") if c.strip()), max_truncation=max_truncation,
+            max_occlusion=max_occlusion, min_depth=min_depth, max_depth=max_depth, min_box_height=min_box_height,
+            frames_per_track=frames_per_track, sequences=parse_sequences(sequences),
+        )
+        options = AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement, max_clicks=max_clicks,
+                                   seed=seed)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
     vehicles = select_vehicles(ground_truth.kind, ground_truth.root, selection)
-    simulated = simulate(vehicles, AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement,
-                                                    max_clicks=max_clicks, seed=seed))
+    simulated = simulate(vehicles, options)
     gt_dir = gt_out or annotations.with_name(annotations.stem + "_gt")
     write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
     clicks = [sv.n_clicks for sv in simulated]

@@ -49,8 +49,9 @@ def metric_stats(records: Sequence[MatchedObject]) -> dict[str, float | None]:
     out: dict[str, float | None] = {}
     for mean_key, median_key, attr in _STAT_KEYS:
         values = np.array([getattr(r.metrics, attr) for r in records], dtype=float)
-        out[mean_key] = float(values.mean()) if len(values) else None
-        out[median_key] = float(np.median(values)) if len(values) else None
+        usable = len(values) > 0 and bool(np.all(np.isfinite(values)))  # a NaN or infinity is never a mean
+        out[mean_key] = float(values.mean()) if usable else None
+        out[median_key] = float(np.median(values)) if usable else None
     return out
 
 
@@ -123,7 +124,7 @@ _COLUMNS = (("IoU", "iou"), ("sIoU", "siou"), ("E_R deg", "e_r_deg"), ("E_t", "e
 
 
 def _cell(value: float | None, attr: str) -> str:
-    if value is None:
+    if value is None or not math.isfinite(value):
         return "-"
     return f"{value:.2f}" if attr == "e_r_deg" else f"{value:.3f}"
 
@@ -237,7 +238,8 @@ def result_to_csv(result: EvaluationResult) -> str:
     writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, lineterminator="\n")
     writer.writeheader()
     for r in result.matched:
-        writer.writerow({k: "" if v is None else v for k, v in r.row().items()})
+        writer.writerow({k: "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+                         for k, v in r.row().items()})
     return buffer.getvalue()
 
 

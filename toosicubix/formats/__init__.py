@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -21,28 +22,55 @@ class FormatError(InputError):
         super().__init__(file, [(line, message)])
 
 
+#: The deepest nesting of JSON arrays and objects a file may have (an annotation file needs 7, results 6);
+#: far below the depth at which Python's JSON reader runs out of stack.
+MAX_JSON_DEPTH = 32
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+
+
+def json_nesting(text: str) -> tuple[int, int]:
+    """The deepest nesting of arrays and objects in JSON ``text`` (strings ignored) and the 1-based line
+    where it is first reached; (0, 1) for a scalar. Linear in the text; no recursion."""
+    skeleton = _JSON_STRING.sub('""', text).encode("utf-8", "surrogatepass")
+    codes = np.frombuffer(skeleton, dtype=np.uint8)
+    if codes.size == 0:
+        return 0, 1
+    step = (np.isin(codes, (ord("["), ord("{"))).astype(np.int32)
+            - np.isin(codes, (ord("]"), ord("}"))).astype(np.int32))
+    depth = np.cumsum(step)
+    deepest = int(np.argmax(depth))
+    return int(depth[deepest]), int(np.count_nonzero(codes[:deepest] == ord("\n"))) + 1
+
+
 def read_json(path: str | Path) -> Any:
-    """The parsed contents of a JSON file: the one JSON reader of every input file.
+    """The parsed contents of a JSON file: the one JSON reader of every input file (a UTF-8 byte order mark is
+    skipped).
 
     Raises
     ------
     FormatError
-        The file cannot be read, is not UTF-8, or is not valid JSON (``line`` set, the message says the
-        line and column too). Readers that report JSON paths (:mod:`toosicubix.annotations.schema`)
-        pass the message on at ``$``.
+        The file cannot be read, is not UTF-8, is nested deeper than ``MAX_JSON_DEPTH``, or is not valid JSON
+        (``line`` set, the message says the line and column too). Readers that report JSON paths
+        (:mod:`toosicubix.annotations.schema`) pass the message on at ``$``.
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise FormatError(path, f"cannot read the file: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
-        raise FormatError(path, f"expected UTF-8 JSON text: {exc.reason}") from None
+        raise FormatError(path, f"expected UTF-8 JSON text: {exc.reason} at byte {exc.start}") from None
+    depth, line = json_nesting(text)
+    if depth > MAX_JSON_DEPTH:
+        raise FormatError(path, f"arrays and objects nested {depth} deep (first at line {line}); at most "
+                                f"{MAX_JSON_DEPTH} allowed", line)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         message = f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         raise FormatError(path, message, exc.lineno) from None
+    except RecursionError:  # pragma: no cover - the depth check comes first
+        raise FormatError(path, "not valid JSON: nested too deep") from None
 
 
 def json_field(obj: Any, key: str, kind: type | tuple[type, ...], path: Path, where: str) -> Any:

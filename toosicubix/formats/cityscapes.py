@@ -27,8 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix.annotations.schema import check_intrinsics
 from toosicubix.camera import Camera
 from toosicubix.formats import FormatError, json_field, json_numbers, read_json
+from toosicubix.formats.kitti import MAX_DISTANCE_M, MAX_PIXEL, MAX_SIZE_M
 
 #: Sensor axes (x forward, y left, z up) to camera axes (x right, y down, z forward); ``get_K_multiplier()``
 #: in cityscapesScripts.
@@ -197,12 +199,15 @@ def parse_gtbbox3d(doc: Any, path: str | Path = "<gtBbox3d>") -> CityscapesAnnot
     intr = {k: float(json_numbers(json_field(sensor, k, (int, float), path, "$.sensor"), (), path, f"$.sensor.{k}"))
             for k in ("fx", "fy", "u0", "v0")}
     baseline = sensor.get("baseline")
+    _check_sensor(T, intr, path)
     camera = CityscapesCamera(R_sensor_ego=T[:, :3], t_sensor_ego=T[:, 3], baseline=_optional_float(
         baseline, path, "$.sensor.baseline"), **intr)
     size = None
     if "imgWidth" in doc and "imgHeight" in doc:
-        size = (int(json_numbers(doc["imgWidth"], (), path, "$.imgWidth")),
-                int(json_numbers(doc["imgHeight"], (), path, "$.imgHeight")))
+        for key in ("imgWidth", "imgHeight"):
+            if not 0 < float(json_numbers(doc[key], (), path, f"$.{key}")) <= MAX_PIXEL:
+                raise FormatError(path, f"$.{key}: expected a size from 1 to {MAX_PIXEL:g} pixels, got {doc[key]!r}")
+        size = (int(doc["imgWidth"]), int(doc["imgHeight"]))
     objects = [_box(obj, i, path) for i, obj in enumerate(json_field(doc, "objects", list, path, "$"))]
     ignore = []
     for i, entry in enumerate(doc.get("ignore") or []):
@@ -226,6 +231,11 @@ def _box(obj: Any, i: int, path: Path) -> CityscapesBox:
                         f"{where}.3d.dimensions")
     if np.any(dims <= 0.0):
         raise FormatError(path, f"{where}.3d.dimensions: expected positive [l, w, h], got {dims.tolist()}")
+    if dims.max() > MAX_SIZE_M:
+        raise FormatError(path, f"{where}.3d.dimensions: expected at most {MAX_SIZE_M:g} m (no road vehicle is "
+                                f"larger), got {dims.tolist()}")
+    if np.abs(centre).max() > MAX_DISTANCE_M:
+        raise FormatError(path, f"{where}.3d.center: expected within {MAX_DISTANCE_M:g} m, got {centre.tolist()}")
     q = json_numbers(json_field(box3d, "rotation", list, path, f"{where}.3d"), (4,), path, f"{where}.3d.rotation")
     if abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
         raise FormatError(path, f"{where}.3d.rotation: expected a unit quaternion [w, x, y, z], "
@@ -240,6 +250,9 @@ def _box(obj: Any, i: int, path: Path) -> CityscapesBox:
     amodal = json_numbers(json_field(box2d, amodal_key, list, path, f"{where}.2d"), (4,), path,
                           f"{where}.2d.{amodal_key}")
     modal = json_numbers(box2d.get(modal_key), (4,), path, f"{where}.2d.{modal_key}")
+    for key, box in ((amodal_key, amodal), (modal_key, modal)):
+        if np.abs(box).max() > MAX_PIXEL:
+            raise FormatError(path, f"{where}.2d.{key}: expected pixels within +-{MAX_PIXEL:g}, got {box.tolist()}")
     return CityscapesBox(
         index=i, label=str(json_field(obj, "label", str, path, where)), type=str(box3d.get("type", "")),
         instance_id=_optional_int(obj.get("instanceId"), path, f"{where}.instanceId"),
@@ -249,6 +262,26 @@ def _box(obj: Any, i: int, path: Path) -> CityscapesBox:
         truncation=_optional_float(obj.get("truncation"), path, f"{where}.truncation"),
         score=_optional_float(obj.get("score"), path, f"{where}.score"),
     )
+
+
+def _check_sensor(T: np.ndarray, intr: dict[str, float], path: Path) -> None:
+    """The camera must be one: a rotation (3, 3) and a bounded translation in ``T`` (3, 4), and intrinsics that
+    pass :func:`toosicubix.annotations.schema.check_intrinsics`.
+
+    Raises
+    ------
+    FormatError
+        Naming ``$.sensor`` or ``$.sensor.sensor_T_ISO_8855``.
+    """
+    R = T[:, :3]
+    if not (np.allclose(R @ R.T, np.eye(3), atol=1e-3) and np.linalg.det(R) > 0) or np.abs(T[:, 3]).max() > 100.0:
+        raise FormatError(path, f"$.sensor.sensor_T_ISO_8855: expected [R | t] with R a rotation and |t| <= 100 m, "
+                                f"got {T.tolist()}")
+    K = np.array([[intr["fx"], 0.0, intr["u0"]], [0.0, intr["fy"], intr["v0"]], [0.0, 0.0, 1.0]])
+    try:
+        check_intrinsics(K)
+    except ValueError as exc:
+        raise FormatError(path, f"$.sensor: fx, fy, u0, v0 are not a camera: {exc}") from None
 
 
 def _optional_float(value: Any, path: Path, where: str) -> float | None:

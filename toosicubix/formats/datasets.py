@@ -202,11 +202,20 @@ class KittiTrackingFolder(KittiFolder):
         return [p.stem for p in self.label_files()]
 
     def last_frame(self, sequence: str) -> int:
-        """The last frame with a label row (-1 for none), from a cheap scan of the frame column."""
+        """The last frame with a label row (-1 for none), from a cheap scan of the frame column.
+
+        Raises FormatError for a frame number past ``kitti.MAX_FRAME``, before any caller allocates an id per frame.
+        """
+        from toosicubix.formats import FormatError, kitti
+
         last = -1
-        for line in self.label_file(sequence).read_text(encoding="utf-8").splitlines():
+        path = self.label_file(sequence)
+        for number, line in enumerate(kitti.read_text(path).splitlines(), 1):
             first = line.split(maxsplit=1)[:1]
-            if first and first[0].isdigit():
+            if first and first[0].isascii() and first[0].isdigit():
+                if int(first[0]) > kitti.MAX_FRAME:
+                    raise FormatError(path, f"expected a frame number from 0 to {kitti.MAX_FRAME}, got {first[0]}",
+                                      number)
                 last = max(last, int(first[0]))
         return last
 

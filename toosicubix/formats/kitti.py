@@ -18,12 +18,21 @@ from pathlib import Path
 
 import numpy as np
 
+from toosicubix.annotations.schema import check_projection
 from toosicubix.camera import Camera
 from toosicubix.formats import FormatError
 from toosicubix.geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
 
 #: KITTI's code for "occlusion unknown", written for fitted objects.
 OCCLUSION_UNKNOWN = 3
+#: Bounds a label line must keep, checked before anything is allocated for it: no road vehicle is larger
+#: than ``MAX_SIZE_M`` (KITTI's largest is a 16.8 m tram) and none is labelled farther than ``MAX_DISTANCE_M``
+#: (KITTI's farthest is under 100 m); boxes lie within ``MAX_PIXEL`` pixels of the image; tracking frames run
+#: from 0 to ``MAX_FRAME`` (KITTI's longest sequence has 1,106; 10^5 frames is nearly 3 hours at 10 Hz).
+MAX_SIZE_M = 100.0
+MAX_DISTANCE_M = 10_000.0
+MAX_PIXEL = 1e6
+MAX_FRAME = 100_000
 
 
 @dataclass(frozen=True)
@@ -99,7 +108,19 @@ def object_from_pose(
 
 
 def format_label_line(obj: KittiObject) -> str:
-    """One label line: 15 fields, 16 with a score; single spaces; no frame or track id."""
+    """One label line: 15 fields, 16 with a score; single spaces; no frame or track id.
+
+    Raises
+    ------
+    ValueError
+        A NaN or infinity among the numbers (a label file never holds one).
+    """
+    numbers = np.concatenate([[obj.truncated, obj.alpha, obj.rotation_y, 0.0 if obj.score is None else obj.score],
+                              obj.box2d, obj.dimensions, obj.location_rect]).astype(float)
+    if not np.all(np.isfinite(numbers)):
+        raise ValueError(f"refusing to write a KITTI label with a NaN or infinity: {obj.type} box {obj.box2d.tolist()} "
+                         f"dimensions {obj.dimensions.tolist()} location {obj.location_rect.tolist()} "
+                         f"ry {obj.rotation_y} alpha {obj.alpha} score {obj.score}")
     dx, dy, dz = obj.dimensions
     fields = [
         obj.type, f"{obj.truncated:.2f}", f"{obj.occluded:d}", f"{obj.alpha:.6f}",
@@ -136,11 +157,22 @@ def parse_label_line(text: str, file: str | Path = "<label>", line: int | None =
         raise FormatError(file, f"expected numbers after the type: {exc}", line) from None
     if not all(math.isfinite(v) for v in values):
         raise FormatError(file, f"expected finite numbers, got {text.strip()[:80]!r}", line)
+    if frame is not None and not 0 <= frame <= MAX_FRAME:
+        raise FormatError(file, f"expected a frame number from 0 to {MAX_FRAME}, got {frame}", line)
     truncated, occluded, alpha = values[0], values[1], values[2]
     h, w, l_ = values[7:10]
     obj_type = tokens[offset]
     if obj_type != "DontCare" and min(h, w, l_) <= 0.0:
         raise FormatError(file, f"expected positive h, w, l, got {h}, {w}, {l_}", line)
+    if max(abs(h), abs(w), abs(l_)) > (MAX_SIZE_M if obj_type != "DontCare" else MAX_DISTANCE_M):  # DontCare: -1000
+        raise FormatError(file, f"expected h, w, l of at most {MAX_SIZE_M:g} m (no road vehicle is larger), "
+                                f"got {h:g}, {w:g}, {l_:g}", line)
+    if max(abs(v) for v in values[10:13]) > MAX_DISTANCE_M:
+        raise FormatError(file, f"expected a location within {MAX_DISTANCE_M:g} m of the camera, got "
+                                f"{values[10]:g}, {values[11]:g}, {values[12]:g}", line)
+    if max(abs(v) for v in values[3:7]) > MAX_PIXEL or max(abs(alpha), abs(values[13])) > 100.0:
+        raise FormatError(file, f"expected a 2D box within +-{MAX_PIXEL:g} pixels and angles in radians, got "
+                                f"{text.strip()[:80]!r}", line)
     return KittiObject(
         type=obj_type, truncated=truncated, occluded=int(occluded), alpha=alpha,
         box2d=np.array(values[3:7]), dimensions=np.array([l_, w, h]), location_rect=np.array(values[10:13]),
@@ -152,7 +184,7 @@ def parse_label_line(text: str, file: str | Path = "<label>", line: int | None =
 def read_label_file(path: str | Path) -> list[KittiObject]:
     """All objects of a KITTI object label file (blank lines skipped)."""
     path = Path(path)
-    text = _read_text(path)
+    text = read_text(path)
     return [parse_label_line(ln, path, i) for i, ln in enumerate(text.splitlines(), 1) if ln.strip()]
 
 
@@ -160,7 +192,7 @@ def read_tracking_file(path: str | Path) -> dict[int, list[KittiObject]]:
     """A KITTI tracking label file, objects grouped by frame number."""
     path = Path(path)
     frames: dict[int, list[KittiObject]] = {}
-    for i, ln in enumerate(_read_text(path).splitlines(), 1):
+    for i, ln in enumerate(read_text(path).splitlines(), 1):
         if ln.strip():
             obj = parse_label_line(ln, path, i, tracking=True)
             frames.setdefault(int(obj.frame), []).append(obj)  # type: ignore[arg-type]
@@ -187,7 +219,8 @@ def read_calib(path: str | Path) -> KittiCalib:
     """Read an object-style (``P2:``, ``R0_rect:``) or tracking-style (``R_rect``) calibration file."""
     path = Path(path)
     entries: dict[str, np.ndarray] = {}
-    for i, ln in enumerate(_read_text(path).splitlines(), 1):
+    lines: dict[str, int] = {}
+    for i, ln in enumerate(read_text(path).splitlines(), 1):
         if not ln.strip():
             continue
         key, sep, rest = ln.partition(":")
@@ -198,11 +231,18 @@ def read_calib(path: str | Path) -> KittiCalib:
             entries[key] = np.array([float(v) for v in rest.split()])
         except ValueError:
             raise FormatError(path, f"expected numbers after {key!r}", i) from None
+        if not np.all(np.isfinite(entries[key])):
+            raise FormatError(path, f"expected finite numbers after {key!r}, got {rest.strip()[:80]!r}", i)
+        lines[key] = i
     P = []
     for k in range(4):
         value = entries.get(f"P{k}")
         if value is None or value.size != 12:
             raise FormatError(path, f"expected a line 'P{k}:' with 12 numbers")
+        try:
+            check_projection(value.reshape(3, 4))
+        except ValueError as exc:
+            raise FormatError(path, f"P{k} is not a camera: {exc}", lines[f"P{k}"]) from None
         P.append(value.reshape(3, 4))
     R0 = entries.get("R0_rect", np.eye(3).ravel())
     if R0.size != 9:
@@ -211,14 +251,26 @@ def read_calib(path: str | Path) -> KittiCalib:
     return KittiCalib(P=tuple(P), R0_rect=R0.reshape(3, 3), extra=extra)  # type: ignore[arg-type]
 
 
-def _read_text(path: Path) -> str:
+def read_text(path: Path) -> str:
+    """The file's text; a UTF-8 byte order mark is dropped.
+
+    Raises
+    ------
+    FormatError
+        Unreadable, or not UTF-8 (naming the line and byte of the first bad byte).
+    """
     try:
-        return path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise FormatError(path, f"not UTF-8 text: {exc.reason} at byte {exc.start}", line) from None
 
 
 __all__ = [
     "OCCLUSION_UNKNOWN", "KittiCalib", "KittiObject", "format_label_line", "object_from_pose",
-    "parse_label_line", "read_calib", "read_label_file", "read_tracking_file",
+    "parse_label_line", "read_calib", "read_label_file", "read_text", "read_tracking_file",
 ]

@@ -378,8 +378,38 @@ def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = N
 
 
 def dumps(doc: dict[str, Any]) -> str:
-    """JSON text with NaN and infinities refused (they are not JSON)."""
+    """JSON text with NaN and infinities refused (they are not JSON).
+
+    Raises
+    ------
+    ValueError
+        Naming the JSON path of the first NaN or infinity.
+    """
+    bad = non_finite_path(doc)
+    if bad is not None:
+        raise ValueError(f"refusing to write a NaN or infinity (not JSON) at {bad}")
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+
+
+def non_finite_path(value: Any, path: str = "$") -> str | None:
+    """The JSON path of the first NaN or infinity in nested dicts, lists and arrays, else None."""
+    if isinstance(value, float | np.floating):
+        return None if np.isfinite(value) else path
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "fc" or np.all(np.isfinite(value)):
+            return None
+        return f"{path}{[int(i) for i in np.argwhere(~np.isfinite(value))[0]]}"
+    if isinstance(value, dict):
+        items: Any = ((f"{path}.{k}", v) for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        items = ((f"{path}[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    for sub_path, sub in items:
+        found = non_finite_path(sub, sub_path)
+        if found is not None:
+            return found
+    return None
 
 
 def read_results(path: str | Path) -> list[ImageResult]:

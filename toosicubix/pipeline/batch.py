@@ -39,6 +39,7 @@ from toosicubix.formats.results import (
     Sigma,
     SolverStats,
     VehicleResult,
+    non_finite_path,
     read_results,
     results_to_json,
 )
@@ -107,14 +108,57 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
+        with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
+            return checked_result(_vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks))
+    except UnusableFit as exc:
+        return _failed(vehicle, prior, str(exc))
     except Exception as exc:  # one vehicle must never stop the batch
         where = traceback.extract_tb(exc.__traceback__)[-1]
-        return VehicleResult(
-            id=vehicle.id, status="failed", prototype=vehicle.prototype,
-            error=f"internal error: {type(exc).__name__}: {exc} (at {Path(where.filename).name}:{where.lineno})",
-            kitti_type=prior.kitti_type,
-        )
-    return _vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks)
+        return _failed(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
+                                       f"(at {Path(where.filename).name}:{where.lineno})")
+
+
+class UnusableFit(ValueError):
+    """A vehicle's fit that cannot be written: behind the camera, or with a non-finite number."""
+
+
+def _failed(vehicle: Vehicle, prior: SizePrior, reason: str) -> VehicleResult:
+    return VehicleResult(id=vehicle.id, status="failed", prototype=vehicle.prototype, error=reason,
+                         kitti_type=prior.kitti_type)
+
+
+def checked_result(result: VehicleResult) -> VehicleResult:
+    """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
+    front of the camera or any number in it (pose, box, uncertainty, diagnostics) is not finite. A failed
+    result keeps its reason and loses any diagnostics with a NaN or infinity.
+
+    Raises
+    ------
+    UnusableFit
+        With the reason, e.g. "the fitted cuboid lies behind the camera (depth -3.2 m)".
+    """
+    if not result.ok:  # keep the reason; drop diagnostics that could not be written
+        if non_finite_path(result.to_json()) is None:
+            return result
+        return VehicleResult(id=result.id, status=result.status, error=result.error, prototype=result.prototype,
+                             kitti_type=result.kitti_type)
+    for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
+        value = getattr(result, name)
+        if value is None or not np.all(np.isfinite(value)):
+            raise UnusableFit(f"the fit has a non-finite or missing {name}: {value}")
+    if np.any(result.dimensions <= 0):
+        raise UnusableFit(f"the fit has non-positive dimensions {result.dimensions.tolist()}")
+    corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
+    if corners_cam[:, 2].max() <= 0.0:
+        raise UnusableFit(f"the fitted cuboid lies behind the camera (its nearest corner at depth "
+                          f"{corners_cam[:, 2].max():.4g} m)")
+    if result.t_cam_vehicle[2] <= 0.0:
+        raise UnusableFit(f"the fitted cuboid's bottom centre lies behind the camera (depth "
+                          f"{result.t_cam_vehicle[2]:.4g} m)")
+    bad = non_finite_path(result.to_json())
+    if bad is not None:
+        raise UnusableFit(f"the fit has a non-finite value at {bad}")
+    return result
 
 
 def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
@@ -181,8 +225,14 @@ def _solver_stats(fit: FitResult) -> SolverStats:
 def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
     """The label's 2D box (annotated, else the projected cuboid clipped to the image) and the
     truncation: the share of the projected cuboid's box outside the image."""
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t)) and np.all(np.isfinite(d))):
+        raise UnusableFit(f"the fit has a non-finite pose: t_cam_vehicle {t.tolist()}, dimensions {d.tolist()}")
     points_cam = clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, d))
+    if len(points_cam) == 0:
+        raise UnusableFit("the fitted cuboid lies wholly behind the camera (no 2D box)")
     uv = camera.project(points_cam)
+    if not np.all(np.isfinite(uv)):
+        raise UnusableFit("the fitted cuboid projects to non-finite pixels (no 2D box)")
     full = box2d_of_points(uv)
     truncated = 0.0
     clipped = full
@@ -305,7 +355,12 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
             warnings=vehicles[k].warnings,
         )
-        updated = _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks)
+        try:
+            updated = checked_result(
+                _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks))
+        except UnusableFit as exc:
+            out[k] = _failed(v, jv.problem.prior, f"after the joint refinement: {exc}")
+            continue
         out[k] = replace(updated, cues=replace(updated.cues, joint_ground=True),
                          solver=replace(vehicles[k].solver, joint_iterations=result.iterations))
     return out, {**_ground_json(ground, True, result.camera_height, result.normal),

@@ -99,6 +99,10 @@ class AnnotatorOptions:
     max_clicks: int = 12
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        _ensure_range("noise_px", self.noise_px, 0.0, MAX_NOISE_PX, "pixels")
+        _ensure_range("max_clicks", self.max_clicks, 1, 10_000, "clicks")
+
 
 @dataclass(frozen=True)
 class SelectionOptions:
@@ -123,6 +127,27 @@ class SelectionOptions:
     min_box_height: float = 25.0
     frames_per_track: int | None = 3
     sequences: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        _ensure_range("max_truncation", self.max_truncation, 0.0, 2.0, "(fraction, or tracking level 0-2)")
+        _ensure_range("max_occlusion", self.max_occlusion, 0, 3, "(level)")
+        _ensure_range("min_depth", self.min_depth, 0.0, MAX_DEPTH_M, "metres")
+        _ensure_range("max_depth", self.max_depth, self.min_depth, MAX_DEPTH_M, "metres (and at least min_depth)")
+        _ensure_range("min_box_height", self.min_box_height, 0.0, 1e6, "pixels")
+        if self.frames_per_track is not None:
+            _ensure_range("frames_per_track", self.frames_per_track, 1, 10**9, "frames")
+
+
+#: Bounds of the simulation options: click noise beyond 100 px is no click on a vehicle; no KITTI label is
+#: 1 km away.
+MAX_NOISE_PX = 100.0
+MAX_DEPTH_M = 1000.0
+
+
+def _ensure_range(name: str, value: float, low: float, high: float, unit: str) -> None:
+    """Raise ``ValueError`` naming the option unless ``low <= value <= high`` (so never NaN or infinite)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+        raise ValueError(f"option {name}: expected a number from {low:g} to {high:g} {unit}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -470,16 +495,46 @@ def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path,
     from toosicubix.formats.results import dumps
 
     gt_dir = Path(gt_dir)
-    (gt_dir / "label_2").mkdir(parents=True, exist_ok=True)
-    (gt_dir / "calib").mkdir(parents=True, exist_ok=True)
-    by_image: dict[str, list[SimulatedVehicle]] = {}
-    for sv in simulated:
-        by_image.setdefault(sv.source.image_id, []).append(sv)
-    for image_id, vehicles in by_image.items():
-        lines = [format_label_line(_without_tracking(sv.source.label)) for sv in vehicles]
-        atomic_write_text(gt_dir / "label_2" / f"{image_id}.txt", "".join(f"{ln}\n" for ln in lines))
-        atomic_write_text(gt_dir / "calib" / f"{image_id}.txt", _calib_text(vehicles[0].source.camera))
-    atomic_write_text(Path(annotations), dumps(annotation_document(simulated, ground)))
+    _check_output_names(simulated, Path(annotations), gt_dir)
+    try:
+        (gt_dir / "label_2").mkdir(parents=True, exist_ok=True)
+        (gt_dir / "calib").mkdir(parents=True, exist_ok=True)
+        by_image: dict[str, list[SimulatedVehicle]] = {}
+        for sv in simulated:
+            by_image.setdefault(sv.source.image_id, []).append(sv)
+        for image_id, vehicles in by_image.items():
+            lines = [format_label_line(_without_tracking(sv.source.label)) for sv in vehicles]
+            atomic_write_text(gt_dir / "label_2" / f"{image_id}.txt", "".join(f"{ln}\n" for ln in lines))
+            atomic_write_text(gt_dir / "calib" / f"{image_id}.txt", _calib_text(vehicles[0].source.camera))
+        atomic_write_text(Path(annotations), dumps(annotation_document(simulated, ground)))
+    except OSError as exc:
+        raise FormatError(exc.filename or gt_dir, f"cannot write: {exc.strerror or exc}") from None
+
+
+def _check_output_names(simulated: list[SimulatedVehicle], annotations: Path, gt_dir: Path) -> None:
+    """Refuse, before anything is written, output paths that would collide or that no file system takes.
+
+    Raises
+    ------
+    FormatError
+        Naming the path: the annotation file and the ground-truth folder are the same or nested, or a file
+        name is longer than ``MAX_NAME_BYTES``.
+    """
+    ann, gt = annotations.resolve(), gt_dir.resolve()
+    if ann == gt or gt in ann.parents or ann in gt.parents:
+        raise FormatError(annotations, f"the annotation file and the ground-truth folder (--gt-out) {gt_dir} must "
+                                       f"be apart: one would overwrite the other")
+    names = [(annotations, annotations.name), (gt_dir, gt_dir.name)]
+    if simulated:
+        names.append((gt_dir / "label_2", max((f"{sv.source.image_id}.txt" for sv in simulated), key=len)))
+    for where, name in names:
+        if len(name.encode("utf-8")) > MAX_NAME_BYTES:
+            raise FormatError(where, f"a file name of {len(name.encode('utf-8'))} bytes; at most {MAX_NAME_BYTES} "
+                                     f"(file systems allow 255, and a temporary name adds 14)")
+
+
+#: The longest file name written (255 bytes, the common limit, less the temporary file's 14 more).
+MAX_NAME_BYTES = 240
 
 
 def _without_tracking(obj: KittiObject) -> KittiObject:

@@ -230,7 +230,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
     if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
         return FitResult("failed", _too_few(parts, options.min_constraints), **counts)
-    short = _short_arrows(parts)
+    short = _short_arrows(parts) or _degenerate_spread(parts.uv)
     if short:
         return FitResult("failed", f"degenerate clicks: {short}", **counts)
 
@@ -304,6 +304,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
                   timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings)
+    degenerate = degenerate or _absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
     if degenerate:
         return FitResult("failed", degenerate, **common)
     shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
@@ -438,6 +439,42 @@ def _short_arrows(parts: PartsModel) -> str | None:
             axis = click(parts.click_labels[i]).name
             found.append(f"the {axis} arrow of annotation parts[{parts.click_part[i]}] is {length:.2f} px long")
     return "; ".join(found) + f" (an arrow needs at least {MIN_ARROW_PX:g} px)" if found else None
+
+
+#: Clicks whose spread (root mean square distance from their centroid along their main direction) is below
+#: this many pixels are one blob: a vehicle that small in the image cannot be annotated part by part.
+MIN_CLICK_SPREAD_PX = 4.0
+#: Clicks whose root mean square distance from their best-fitting line is below this many pixels lie on one
+#: line (clicks on a real vehicle's wheels, lights and edges span an area).
+MIN_CLICK_THICKNESS_PX = 0.5
+#: A fit this far away (metres) is absurd for a vehicle whose parts were clicked.
+MAX_DEPTH_M = 1000.0
+
+
+def _degenerate_spread(uv: np.ndarray) -> str | None:
+    """Why the clicks ``uv`` (N, 2), pixels, cannot determine a cuboid (clustered or collinear), else None."""
+    if len(uv) < 3:
+        return None
+    spread = np.linalg.svd(uv - uv.mean(axis=0), compute_uv=False) / np.sqrt(len(uv))  # RMS along the axes
+    if spread[0] < MIN_CLICK_SPREAD_PX:
+        return (f"all {len(uv)} clicks lie in one cluster ({spread[0]:.2f} px RMS spread; at least "
+                f"{MIN_CLICK_SPREAD_PX:g} px needed)")
+    if spread[1] < MIN_CLICK_THICKNESS_PX:
+        return (f"all {len(uv)} clicks lie on one line ({spread[1]:.2f} px RMS off it; at least "
+                f"{MIN_CLICK_THICKNESS_PX:g} px needed)")
+    return None
+
+
+def _absurd_depth(camera: Camera, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> str | None:
+    """Why a fit at ``t_cam_vehicle`` (3,), metres, with ``dimensions`` (3,) is too far to be believed, else None:
+    beyond ``MAX_DEPTH_M``, or so far that the vehicle spans fewer than ``MIN_CLICK_SPREAD_PX`` pixels."""
+    depth = float(t_cam_vehicle[2])
+    focal = float(max(camera.K[0, 0], camera.K[1, 1]))
+    extent_px = focal * float(np.max(dimensions)) / depth if depth > 0 else np.inf
+    if not (np.isfinite(depth) and depth <= MAX_DEPTH_M and extent_px >= MIN_CLICK_SPREAD_PX):
+        return (f"degenerate clicks: the fit is at an absurd depth ({depth:.4g} m, where the vehicle spans "
+                f"{extent_px:.3g} px; at most {MAX_DEPTH_M:g} m and {MIN_CLICK_SPREAD_PX:g} px)")
+    return None
 
 
 def _too_few(parts: PartsModel, needed: int) -> str:

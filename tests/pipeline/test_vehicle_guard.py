@@ -1,0 +1,88 @@
+"""A vehicle whose fit goes wrong anywhere is failed with a reason; the batch goes on (issue 13)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.conftest import REPO
+from toosicubix.formats.results import read_results
+from toosicubix.geometry import R_cam_vehicle_from_ypr
+from toosicubix.pipeline import batch
+from toosicubix.solver import FitResult
+
+SAMPLE = REPO / "samples" / "annotations.json"
+
+
+def fake_fit(t_cam_vehicle, dimensions=(4.0, 1.7, 1.5), first_only=True):
+    """A stand-in for fit_vehicle that returns ``t_cam_vehicle`` for the sample's first vehicle."""
+    real = batch.fit_vehicle
+    calls = []
+
+    def fit(parts, camera, prior, options, ground):
+        calls.append(1)
+        result = real(parts, camera, prior, options, ground)
+        if first_only and len(calls) > 1:
+            return result
+        p = np.array(result.p, dtype=float)
+        p[:3] = dimensions
+        t = np.asarray(t_cam_vehicle, dtype=float)
+        return FitResult("ok", None, result.constraints, result.n_clicks, result.n_aux,
+                         R_cam_vehicle=R_cam_vehicle_from_ypr(0.3), t_cam_vehicle=t, p=p,
+                         cost=result.cost, cost_prior=result.cost_prior, residuals_px=result.residuals_px)
+    return fit
+
+
+def without_boxes(tmp_path):
+    doc = json.loads(SAMPLE.read_text())
+    for im in doc["images"]:
+        for v in im["vehicles"]:
+            v.pop("box2d", None)  # the projected box is what crashed
+    path = tmp_path / "a.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize(("t", "dimensions", "reason"), [
+    ((0.0, 1.0, -1e9), (4.0, 1.7, 1.5), "lies wholly behind the camera"),  # issue 13: aborted the batch
+    ((0.0, 1.0, -2.0), (4.0, 1.7, 1.5), "lies wholly behind the camera"),
+    ((0.0, 1.0, np.nan), (4.0, 1.7, 1.5), "non-finite"),
+    ((0.0, 1.0, 10.0), (np.inf, 1.7, 1.5), "non-finite"),
+])
+def test_an_unusable_fit_is_failed_and_the_batch_goes_on(tmp_path, monkeypatch, t, dimensions, reason):
+    monkeypatch.setattr(batch, "fit_vehicle", fake_fit(t, dimensions))
+    out = tmp_path / "out"
+    summary = batch.fit_file(without_boxes(tmp_path), out)
+    vehicles = [v for im in read_results(out / "results.json") for v in im.vehicles]
+    assert vehicles[0].status == "failed" and reason in vehicles[0].error, vehicles[0].error
+    assert not vehicles[0].error.startswith("internal error")
+    assert all(v.ok for v in vehicles[1:]) and summary.ok == len(vehicles) - 1
+    for label in (out / "label_2").glob("*.txt"):
+        text = label.read_text().lower()
+        assert "nan" not in text and "inf" not in text
+
+
+def test_a_cuboid_half_behind_the_camera_keeps_its_box():
+    # The bottom centre 1 m in front, the 4 m body reaching behind: still a usable fit with a clipped box.
+    from toosicubix.camera import Camera
+    from toosicubix.model import Vehicle
+
+    camera = Camera(K=np.array([[720.0, 0, 620], [0, 720, 180], [0, 0, 1]]), image_size=(1242, 375))
+    vehicle = Vehicle(id="1", prototype="Car", box2d=None, parts=(), json_path="$")
+    box, truncated = batch._box2d(vehicle, camera, R_cam_vehicle_from_ypr(np.pi / 2), np.array([0.0, 1.5, 1.0]),
+                                  np.array([4.0, 1.7, 1.5]))
+    assert np.all(np.isfinite(box)) and 0.0 <= truncated <= 1.0
+    with pytest.raises(batch.UnusableFit, match="wholly behind"):
+        batch._box2d(vehicle, camera, np.eye(3), np.array([0.0, 1.5, -10.0]), np.array([4.0, 1.7, 1.5]))
+
+
+def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
+    from toosicubix.formats.results import SolverStats, VehicleResult, dumps, results_to_json
+
+    failed = VehicleResult(id="1", status="failed", error="degenerate clicks: ...", prototype="Car", kitti_type="Car",
+                           solver=SolverStats(starts=4, starts_from_lines=True, descent_iterations=0,
+                                              refine_iterations=0, initial_cost=float("nan")))
+    checked = batch.checked_result(failed)
+    assert checked.error == failed.error and checked.kitti_type == "Car" and checked.solver is None
+    with pytest.raises(ValueError, match=r"NaN or infinity \(not JSON\) at \$\.images\[0\]\.vehicles\[0\]\.solver"):
+        dumps(results_to_json([batch.ImageResult("a", np.eye(3), np.zeros(3), None, [failed])]))

@@ -1,0 +1,65 @@
+"""Degenerate click sets fail with the reason instead of passing as confident fits (issue 13, item 2)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.conftest import REPO
+from toosicubix.camera import Camera
+from toosicubix.formats.results import read_results
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.solver import MAX_DEPTH_M, MIN_CLICK_SPREAD_PX, _absurd_depth, _degenerate_spread
+
+SAMPLE = REPO / "samples" / "annotations.json"
+KEYS = ("xy", "left", "right", "tail", "head")
+
+
+def move_clicks(doc: dict, place) -> None:
+    """Put the k-th click of the first vehicle at ``place(k)``."""
+    k = 0
+    for part in doc["images"][0]["vehicles"][0]["parts"]:
+        for key in KEYS:
+            if key in part:
+                part[key] = list(place(k))
+                k += 1
+
+
+@pytest.mark.parametrize(("place", "reason"), [
+    (lambda k: (300.0 + 17.0 * k, 200.0), "clicks lie on one line"),  # issue 13: was ok, confidence 0.66
+    (lambda k: (500.0 + k % 2, 200.0), "clicks lie in one cluster"),  # issue 13: was ok at 3.5 km
+    (lambda k: (300.0 + 17.0 * k, 200.0 + 0.1 * k), "clicks lie on one line"),
+])
+def test_degenerate_clicks_fail_with_the_reason_and_the_batch_goes_on(tmp_path, place, reason):
+    doc = json.loads(SAMPLE.read_text())
+    move_clicks(doc, place)
+    path = tmp_path / "a.json"
+    path.write_text(json.dumps(doc))
+    summary = fit_file(path, tmp_path / "out")
+    vehicles = [v for im in read_results(tmp_path / "out" / "results.json") for v in im.vehicles]
+    first = vehicles[0]
+    assert first.status == "failed" and reason in first.error, first.error
+    assert first.confidence is None
+    assert all(v.ok for v in vehicles[1:])
+    assert summary.ok == len(vehicles) - 1
+
+
+def test_spread_checks_know_a_real_vehicle_from_a_blob(rng):
+    uv_vehicle = np.array([[825.8, 272.9], [834.8, 258.1], [728.0, 268.8], [732.3, 223.4], [807.0, 224.9]])
+    assert _degenerate_spread(uv_vehicle) is None
+    blob = 500.0 + rng.uniform(-1.0, 1.0, size=(8, 2))  # RMS spread about 0.6 px
+    assert "one cluster" in _degenerate_spread(blob)
+    line = np.column_stack([np.linspace(0, 100, 8), np.linspace(0, 50, 8)])  # exactly collinear
+    assert "one line" in _degenerate_spread(line)
+    assert _degenerate_spread(line[:2]) is None  # too few clicks is judged elsewhere
+
+
+def test_absurd_depth():
+    camera = Camera(K=np.array([[720.0, 0, 620], [0, 720, 180], [0, 0, 1]]))
+    d = np.array([4.0, 1.7, 1.5])
+    assert _absurd_depth(camera, np.array([1.0, 1.5, 20.0]), d) is None
+    assert "absurd depth (3500 m" in _absurd_depth(camera, np.array([0.0, 1.5, 3500.0]), d)
+    # 720 px * 4 m / depth < MIN_CLICK_SPREAD_PX beyond 720 m: the vehicle would be a dot.
+    far = 720.0 * 4.0 / MIN_CLICK_SPREAD_PX + 1.0
+    assert far < MAX_DEPTH_M and "spans 4 px" not in _absurd_depth(camera, np.array([0.0, 0.0, far]), d)
+    assert _absurd_depth(camera, np.array([0.0, 0.0, np.nan]), d) is not None
