@@ -36,6 +36,10 @@ LENGTH_FEATURES = {
 }
 LengthFeature = Literal[tuple(LENGTH_FEATURES)]  # type: ignore[valid-type]
 DIMENSION_AXES = ("dx", "dy", "dz")
+#: The most clicked points one vehicle may have (a point part is one, a pair or an arrow two). The whole
+#: part vocabulary clicked once is about 40; the solver's work grows with the square of the clicks and
+#: more, so a vehicle past this is refused rather than left to run for minutes.
+MAX_CLICKS_PER_VEHICLE = 64
 
 PointPart = Literal[POINT_PARTS]  # type: ignore[valid-type]
 SymmetryFace = Literal[SYMMETRY_FACES]  # type: ignore[valid-type]
@@ -224,6 +228,15 @@ class VehicleAnnotation(_Model):
         if box is not None and not (box[2] > box[0] and box[3] > box[1]):
             raise ValueError(f"expected x1 < x2 and y1 < y2, got {list(box)}")
         return box
+
+    @field_validator("parts")
+    @classmethod
+    def _ensure_few_clicks(cls, parts: list[PartAnnotation]) -> list[PartAnnotation]:
+        clicks = sum(1 if isinstance(part, PointAnnotation) else 2 for part in parts)
+        if clicks > MAX_CLICKS_PER_VEHICLE:
+            raise ValueError(f"expected at most {MAX_CLICKS_PER_VEHICLE} clicked points per vehicle "
+                             f"(MAX_CLICKS_PER_VEHICLE), found {clicks} in {len(parts)} parts")
+        return parts
 
 
 class ImageAnnotation(_Model):
