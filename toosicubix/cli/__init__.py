@@ -342,6 +342,7 @@ def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotati
     from toosicubix.simulate.annotator import (
         AnnotatorOptions,
         SelectionOptions,
+        SimulationOutputError,
         select_kitti_object,
         select_kitti_tracking,
         simulate,
@@ -367,7 +368,10 @@ def simulate_command(kitti_dir: Path | None, tracking_dir: Path | None, annotati
     gt_dir = gt_out or annotations.with_name(annotations.stem + "_gt")
     from toosicubix.model import KITTI_GROUND
 
-    write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
+    try:
+        write_simulation(simulated, annotations, gt_dir, KITTI_GROUND if ground_kind == "kitti" else None)
+    except SimulationOutputError as exc:
+        raise BadInput(str(exc)) from None
     clicks = [sv.n_clicks for sv in simulated]
     images = len({sv.source.image_id for sv in simulated})
     few = sum(1 for c in clicks if c < 3)
