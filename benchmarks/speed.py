@@ -109,16 +109,18 @@ def peak_memory_mb(annotations: Path, out: Path, jobs: int = 1) -> tuple[float, 
     return int(main_kib) / 1024.0, int(worker_kib) / 1024.0  # ru_maxrss is in KiB on Linux
 
 
-def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 1000) -> Path:
+def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 1000, parts: int | None = None) -> Path:
     """An annotation file of ``n`` vehicles: the images of ``base`` simulated vehicles (first tracking
-    vehicles, 1 px noise), copied under new image ids until there are ``n`` vehicles."""
+    vehicles, 1 px noise), copied under new image ids until there are ``n`` vehicles. With ``parts``, each
+    vehicle keeps only its first ``parts`` parts (``parts=1``: every vehicle fails at once with too few
+    constraints, which measures what the batch keeps per vehicle without the solver's time)."""
     base_path = folder / f"annotations-base-{base}.json"
     if not base_path.is_file():
         vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(frames_per_track=None))[:base]
         write_simulation(simulate(vehicles, AnnotatorOptions(noise_px=1.0)), base_path, folder / f"gt-base-{base}")
     doc = json.loads(base_path.read_text())
     source = doc["images"]
-    path = folder / f"annotations-replicated-{n}.json"
+    path = folder / f"annotations-replicated-{n}-{parts}.json"
     count, copy = 0, 0
     with open(path, "w") as handle:  # written image by image: the benchmark itself stays small
         handle.write('{"toosicubix": 1, "images": [')
@@ -126,7 +128,8 @@ def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 100
             for im in source:
                 if count >= n:
                     break
-                vehicles = im["vehicles"][: n - count]
+                vehicles = [v if parts is None else {**v, "parts": v["parts"][:parts]}
+                            for v in im["vehicles"][: n - count]]
                 handle.write(("," if count else "") + json.dumps({**im, "id": f"{im['id']}_r{copy}",
                                                                   "vehicles": vehicles}))
                 count += len(vehicles)
@@ -173,6 +176,9 @@ def main() -> None:
                         help="batch sizes for the --jobs 2 peak-memory part, comma-separated")
     parser.add_argument("--only", choices=["all", "memory"], default="all",
                         help="memory: only the --jobs 2 peak-memory part")
+    parser.add_argument("--memory-parts", type=int, default=None,
+                        help="keep only this many parts per vehicle in the peak-memory part (1: every vehicle "
+                             "fails at once; the batch's own memory without the solver's time)")
     args = parser.parse_args()
     if not (args.data / "kitti_tracking").is_dir():
         sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
@@ -185,12 +191,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for size in (int(v) for v in args.memory_vehicles.split(",")):
-            ann = replicated_annotation_file(args.data, size, folder)
+            ann = replicated_annotation_file(args.data, size, folder, parts=args.memory_parts)
             start = time.perf_counter()
             main_mb, worker_mb = peak_memory_mb(ann, folder / f"mem2-{size}", jobs=2)
             seconds = time.perf_counter() - start
             report["peak_memory_jobs2_mb"][size] = {"main": main_mb, "largest_worker": worker_mb,
-                                                    "seconds": seconds,
+                                                    "seconds": seconds, "parts_per_vehicle": args.memory_parts,
                                                     "annotation_file_mb": ann.stat().st_size / 2**20}
             print(f"peak memory, {size} vehicles, --jobs 2: main process {main_mb:.0f} MB, largest worker "
                   f"{worker_mb:.0f} MB ({seconds:.0f} s; annotation file {ann.stat().st_size / 2**20:.0f} MB)",

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,14 +31,14 @@ class AnnotationIndex:
 
     Attributes
     ----------
-    prototypes : every vehicle's prototype with its JSON path, in file order (for the priors check)
+    prototypes : the prototype names the vehicles use
     """
 
     path: Path
     text: str
     spans: tuple[tuple[int, int], ...]
     vehicles: int
-    prototypes: tuple[tuple[str, str], ...]
+    prototypes: frozenset[str]
 
 
 class _Scanner:
@@ -125,8 +125,10 @@ def _problems(exc: ValidationError, prefix: tuple[int | str, ...]) -> list[tuple
     return [(_json_path(prefix + tuple(err["loc"])), _describe(err)) for err in exc.errors()]
 
 
-def index_annotations(path: str | Path) -> AnnotationIndex:
+def index_annotations(path: str | Path, known_prototypes: Collection[str] | None = None) -> AnnotationIndex:
     """Validate an annotation file image by image; keep its text and the images' spans.
+
+    ``known_prototypes``: when given, a vehicle whose prototype is not among them is a problem too.
 
     Raises
     ------
@@ -143,7 +145,8 @@ def index_annotations(path: str | Path) -> AnnotationIndex:
     scanner = _Scanner(text, path)
     header: dict[str, Any] = {}
     spans: list[tuple[int, int]] = []
-    prototypes: list[tuple[str, str]] = []
+    prototypes: set[str] = set()
+    known = None if known_prototypes is None else set(known_prototypes)
     problems: list[tuple[str, str]] = []
     first_index: dict[str, int] = {}
     vehicles = 0
@@ -172,14 +175,18 @@ def index_annotations(path: str | Path) -> AnnotationIndex:
                                                        f"[{first_index[image.id]}] and [{i}]"))
             first_index.setdefault(image.id, i)
             vehicles += len(image.vehicles)
-            prototypes += [(f"$.images[{i}].vehicles[{j}]", v.prototype) for j, v in enumerate(image.vehicles)]
+            prototypes.update(v.prototype for v in image.vehicles)
+            if known is not None:
+                problems += [(f"$.images[{i}].vehicles[{j}].prototype",
+                              f"unknown prototype {v.prototype!r}; known: {', '.join(sorted(known))}")
+                             for j, v in enumerate(image.vehicles) if v.prototype not in known]
     try:
         AnnotationFile.model_validate({**header, "images": header.get("images", [])} if images_seen else header)
     except ValidationError as exc:
         problems = _problems(exc, ()) + problems
     if problems:
         raise InputFileError(path, problems[:MAX_PROBLEMS])
-    return AnnotationIndex(path, text, tuple(spans), vehicles, tuple(prototypes))
+    return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes))
 
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:

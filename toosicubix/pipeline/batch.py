@@ -55,6 +55,10 @@ from toosicubix.solver.uncertainty import analyse, confidence
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fit_images", "fit_one"]
 
 
+#: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
+FAILED_KEPT = 1000
+
+
 @dataclass(frozen=True)
 class BatchSummary:
     """What a batch did."""
@@ -62,9 +66,15 @@ class BatchSummary:
     images: int
     vehicles: int
     ok: int
-    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason)
+    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason), the first FAILED_KEPT in file order
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
+
+    @property
+    def n_failed(self) -> int:
+        """How many vehicles failed (``failed`` lists only the first :data:`FAILED_KEPT`; all are in
+        results.json)."""
+        return self.vehicles - self.ok
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -426,13 +436,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     """
     annotations, out_dir = Path(annotations), Path(out_dir)
     options = options or SolverOptions()
-    index = index_annotations(annotations)
     priors = load_priors(priors_path)
-    known = sorted(priors)
-    unknown = [(f"{where}.prototype", f"unknown prototype {name!r}; known: {', '.join(known)}")
-               for where, name in index.prototypes if name not in priors]
-    if unknown:
-        raise InputFileError(annotations, unknown)
+    index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     if on_start is not None:
         on_start(index.vehicles)
@@ -453,7 +458,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
             if not v.ok:
-                failed.append((im.id, v.id, v.error or ""))
+                if len(failed) < FAILED_KEPT:
+                    failed.append((im.id, v.id, v.error or ""))
             elif v.details.get("scale_from"):
                 scale_from[v.details["scale_from"]] = scale_from.get(v.details["scale_from"], 0) + 1
 
