@@ -8,10 +8,15 @@
    byte-identical.
 3. Peak memory (maximum resident set size) of ``toosicubix fit --jobs 1`` on 1,000 and 10,000 vehicles,
    each run in a fresh process.
+4. Peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
+   1,000, 10,000 and 100,000): the main process and the largest worker, each run in a fresh process, on
+   annotation files made by replicating 1,000 simulated vehicles (images copied under new ids). Flat in
+   the number of vehicles is the target (issue 13: under 500 MB at 100,000).
 
-Run from the repository root (about four minutes on 2 cores):
+Run from the repository root (about four minutes on 2 cores for parts 1-3; part 4 fits every vehicle,
+about 40 minutes at 100,000):
 
-    python benchmarks/speed.py [--json benchmarks/results/speed.json]
+    python benchmarks/speed.py [--json benchmarks/results/speed.json] [--only memory]
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ try:
     main(sys.argv[1:], standalone_mode=False)
 except SystemExit:
     pass
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 """
 
 
@@ -96,23 +101,45 @@ def fit_cli(annotations: Path, out: Path, jobs: int) -> float:
     return time.perf_counter() - start
 
 
-def peak_memory_mb(annotations: Path, out: Path) -> float:
+def peak_memory_mb(annotations: Path, out: Path, jobs: int = 1) -> tuple[float, float]:
+    """Peak resident set of ``toosicubix fit`` (main process, largest worker), MB."""
     output = subprocess.run([sys.executable, "-c", _PEAK_MEMORY_CHILD, "fit", str(annotations), "-o", str(out),
-                             "-q"], capture_output=True, text=True, check=True).stdout
-    return int(output.strip().splitlines()[-1]) / 1024.0  # ru_maxrss is in KiB on Linux
+                             "-q", "--jobs", str(jobs)], capture_output=True, text=True, check=True).stdout
+    main_kib, worker_kib = output.strip().splitlines()[-1].split()
+    return int(main_kib) / 1024.0, int(worker_kib) / 1024.0  # ru_maxrss is in KiB on Linux
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=default_data_dir())
-    parser.add_argument("--throughput-vehicles", type=int, default=3000)
-    parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
-    if not (args.data / "kitti_tracking").is_dir():
-        sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
-    report: dict = {"machine": machine()}
-    print(f"machine: {report['machine']}", flush=True)
+def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 1000, parts: int | None = None) -> Path:
+    """An annotation file of ``n`` vehicles: the images of ``base`` simulated vehicles (first tracking
+    vehicles, 1 px noise), copied under new image ids until there are ``n`` vehicles. With ``parts``, each
+    vehicle keeps only its first ``parts`` parts (``parts=1``: every vehicle fails at once with too few
+    constraints, which measures what the batch keeps per vehicle without the solver's time)."""
+    base_path = folder / f"annotations-base-{base}.json"
+    if not base_path.is_file():
+        vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(frames_per_track=None))[:base]
+        write_simulation(simulate(vehicles, AnnotatorOptions(noise_px=1.0)), base_path, folder / f"gt-base-{base}")
+    doc = json.loads(base_path.read_text())
+    source = doc["images"]
+    path = folder / f"annotations-replicated-{n}-{parts}.json"
+    count, copy = 0, 0
+    with open(path, "w") as handle:  # written image by image: the benchmark itself stays small
+        handle.write('{"toosicubix": 1, "images": [')
+        while count < n:
+            for im in source:
+                if count >= n:
+                    break
+                vehicles = [v if parts is None else {**v, "parts": v["parts"][:parts]}
+                            for v in im["vehicles"][: n - count]]
+                handle.write(("," if count else "") + json.dumps({**im, "id": f"{im['id']}_r{copy}",
+                                                                  "vehicles": vehicles}))
+                count += len(vehicles)
+            copy += 1
+        handle.write("]}\n")
+    return path
 
+
+def speed_and_memory(args: argparse.Namespace, report: dict) -> None:
+    """Parts 1-3 of the module docstring."""
     report["per_vehicle"] = per_vehicle_times(args.data)
     for which, s in report["per_vehicle"].items():
         print(f"fit time per vehicle ({which}, n={s['n']}): median {s['median_ms']:.2f} ms, p95 {s['p95_ms']:.1f} ms, "
@@ -135,9 +162,45 @@ def main() -> None:
         report["peak_memory_mb"] = {}
         for size in (1000, 10000):
             ann = annotation_file(args.data, size, folder)
-            peak = peak_memory_mb(ann, folder / f"mem-{size}")
+            peak, _ = peak_memory_mb(ann, folder / f"mem-{size}")
             report["peak_memory_mb"][size] = peak
             print(f"peak memory, {size} vehicles, --jobs 1: {peak:.0f} MB", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=default_data_dir())
+    parser.add_argument("--throughput-vehicles", type=int, default=3000)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--memory-vehicles", default="1000,10000,100000",
+                        help="batch sizes for the --jobs 2 peak-memory part, comma-separated")
+    parser.add_argument("--only", choices=["all", "memory"], default="all",
+                        help="memory: only the --jobs 2 peak-memory part")
+    parser.add_argument("--memory-parts", type=int, default=None,
+                        help="keep only this many parts per vehicle in the peak-memory part (1: every vehicle "
+                             "fails at once; the batch's own memory without the solver's time)")
+    args = parser.parse_args()
+    if not (args.data / "kitti_tracking").is_dir():
+        sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
+    report: dict = {"machine": machine()}
+    print(f"machine: {report['machine']}", flush=True)
+
+    if args.only == "all":
+        speed_and_memory(args, report)
+    report["peak_memory_jobs2_mb"] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for size in (int(v) for v in args.memory_vehicles.split(",")):
+            ann = replicated_annotation_file(args.data, size, folder, parts=args.memory_parts)
+            start = time.perf_counter()
+            main_mb, worker_mb = peak_memory_mb(ann, folder / f"mem2-{size}", jobs=2)
+            seconds = time.perf_counter() - start
+            report["peak_memory_jobs2_mb"][size] = {"main": main_mb, "largest_worker": worker_mb,
+                                                    "seconds": seconds, "parts_per_vehicle": args.memory_parts,
+                                                    "annotation_file_mb": ann.stat().st_size / 2**20}
+            print(f"peak memory, {size} vehicles, --jobs 2: main process {main_mb:.0f} MB, largest worker "
+                  f"{worker_mb:.0f} MB ({seconds:.0f} s; annotation file {ann.stat().st_size / 2**20:.0f} MB)",
+                  flush=True)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1) + "\n")

@@ -6,6 +6,7 @@ import pytest
 from tests.conftest import REPO
 from toosicubix.annotations.schema import (
     DIRECTION_AXES,
+    MAX_CLICKS_PER_VEHICLE,
     POINT_PARTS,
     AnnotationFile,
     InputFileError,
@@ -161,3 +162,22 @@ def test_priors_file_rejects_non_spd_covariance(tmp_path):
     path.write_text(json.dumps({"toosicubix_priors": 1, "prototypes": {"Car": entry}}))
     with pytest.raises(InputFileError, match=r"\$\.prototypes\.Car\.cov: expected a positive definite"):
         load_priors_file(path)
+
+
+def test_clicks_per_vehicle_are_limited():
+    # At the limit a vehicle parses; one clicked point more is refused with its JSON path and the limit.
+    def doc_with(n_pairs: int, n_points: int):
+        doc = copy.deepcopy(DESIGN_EXAMPLE)
+        pair = {"kind": "symmetry", "face": "rear", "left": [390.1, 190.3], "right": [410.8, 190.6]}
+        point = {"kind": "point", "part": "wheel-front-left", "xy": [401.2, 202.0]}
+        doc["images"][0]["vehicles"][0]["parts"] = [pair] * n_pairs + [point] * n_points
+        return doc
+
+    half = MAX_CLICKS_PER_VEHICLE // 2
+    parse_annotations(doc_with(half, MAX_CLICKS_PER_VEHICLE - 2 * half))
+    problems = problems_of(doc_with(half, MAX_CLICKS_PER_VEHICLE - 2 * half + 1))
+    assert len(problems) == 1
+    path, message = problems[0]
+    assert path == "$.images[0].vehicles[0].parts"
+    assert f"at most {MAX_CLICKS_PER_VEHICLE} clicked points" in message
+    assert f"found {MAX_CLICKS_PER_VEHICLE + 1}" in message

@@ -123,3 +123,14 @@ def test_help_has_an_example():
     result = CliRunner().invoke(main, ["eval", "--help"])
     assert result.exit_code == 0
     assert "Example:" in result.output and "--kitti-tracking" in result.output and "--cityscapes" in result.output
+
+
+def test_a_folder_is_never_scored_against_itself(kitti_setup):
+    # issue 13: fit -o on a KITTI root, then eval on that root, scored predictions against themselves
+    _, gt, out = kitti_setup
+    cases = [(gt, gt, "is"), (gt / "label_2", gt, "is inside"), (out, out / "label_2", "contains")]
+    for pred, truth, relation in cases:
+        result = run(pred, "--kitti", truth)
+        assert result.exit_code == 2, result.output
+        assert f"predictions folder {relation} the ground-truth folder" in result.output
+        assert "against itself" in result.output

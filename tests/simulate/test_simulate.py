@@ -278,3 +278,28 @@ def test_cli_can_give_every_image_kittis_ground(tmp_path):
     image = json.loads(ann.read_text())["images"][0]
     assert image["ground"]["camera_height"] == 1.65 and image["ground"]["normal"] == [0.0, -1.0, 0.0]
     assert parse_annotations(json.loads(ann.read_text())).images[0].ground is not None
+
+
+def test_cli_never_writes_into_a_dataset_or_over_its_annotation_file(tmp_path):
+    vehicles = [gt_vehicle(ry, loc, vehicle_id=str(i)) for i, (ry, loc) in enumerate(VIEWS)]
+    write_kitti_folder(tmp_path / "kitti", vehicles)
+    kitti_files = {p: p.read_bytes() for p in (tmp_path / "kitti").rglob("*") if p.is_file()}
+    runner = CliRunner()
+
+    def simulate(*args: str):
+        return runner.invoke(main, ["simulate", "--kitti", str(tmp_path / "kitti"), *args])
+
+    # issue 13: --gt-out into an existing KITTI folder overwrote its label and calib files
+    result = simulate("-o", str(tmp_path / "sim.json"), "--gt-out", str(tmp_path / "kitti"))
+    assert result.exit_code == 2 and "did not write" in result.output
+    assert {p: p.read_bytes() for p in (tmp_path / "kitti").rglob("*") if p.is_file()} == kitti_files
+    assert not (tmp_path / "sim.json").exists()
+    # --gt-out equal to or containing -o
+    for gt in (tmp_path / "same.json", tmp_path):
+        result = simulate("-o", str(tmp_path / "same.json"), "--gt-out", str(gt))
+        assert result.exit_code == 2 and "contains the annotation file" in result.output
+    # Its own earlier ground truth is replaced, stale label files of that run removed.
+    assert simulate("-o", str(tmp_path / "sim.json")).exit_code == 0
+    (tmp_path / "sim_gt" / "label_2" / "999999.txt").write_text("")
+    assert simulate("-o", str(tmp_path / "sim.json")).exit_code == 0
+    assert sorted(p.name for p in (tmp_path / "sim_gt" / "label_2").iterdir()) == ["000001.txt"]

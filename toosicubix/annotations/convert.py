@@ -55,24 +55,26 @@ def camera_from_schema(cam: schemas.CameraModel, size: tuple[int, int] | None) -
 
 def images_from_schema(doc: schemas.AnnotationFile) -> list[Image]:
     """Convert a validated annotation file into :class:`Image` objects."""
-    images = []
-    for i, im in enumerate(doc.images):
-        ip = f"$.images[{i}]"
-        vehicles = tuple(
-            Vehicle(
-                id=v.id, prototype=v.prototype,
-                box2d=None if v.box2d is None else np.array(v.box2d, dtype=float),
-                parts=tuple(part_from_schema(p, f"{ip}.vehicles[{j}].parts[{k}]") for k, p in enumerate(v.parts)),
-                json_path=f"{ip}.vehicles[{j}]",
-                known_dimensions={axis: (k.metres, k.sigma) for axis, k in (v.known_dimensions or {}).items()},
-            )
-            for j, v in enumerate(im.vehicles)
+    return [image_from_schema(im, i) for i, im in enumerate(doc.images)]
+
+
+def image_from_schema(im: schemas.ImageAnnotation, index: int) -> Image:
+    """Convert one validated image, the ``index``-th of its file, into an :class:`Image`."""
+    ip = f"$.images[{index}]"
+    vehicles = tuple(
+        Vehicle(
+            id=v.id, prototype=v.prototype,
+            box2d=None if v.box2d is None else np.array(v.box2d, dtype=float),
+            parts=tuple(part_from_schema(p, f"{ip}.vehicles[{j}].parts[{k}]") for k, p in enumerate(v.parts)),
+            json_path=f"{ip}.vehicles[{j}]",
+            known_dimensions={axis: (k.metres, k.sigma) for axis, k in (v.known_dimensions or {}).items()},
         )
-        images.append(Image(id=im.id, file=im.file, camera=camera_from_schema(im.camera, im.size),
-                            vehicles=vehicles, json_path=ip,
-                            ground=None if im.ground is None else ground_from_schema(im.ground),
-                            ground_block=None if im.ground is None else im.ground.model_dump()))
-    return images
+        for j, v in enumerate(im.vehicles)
+    )
+    return Image(id=im.id, file=im.file, camera=camera_from_schema(im.camera, im.size),
+                 vehicles=vehicles, json_path=ip,
+                 ground=None if im.ground is None else ground_from_schema(im.ground),
+                 ground_block=None if im.ground is None else im.ground.model_dump())
 
 
 def load_images(path: str | Path) -> list[Image]:

@@ -35,6 +35,10 @@ DIRECTION_AXES = vocabulary.names("direction")
 #: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
 LENGTH_FEATURES = {name: vocabulary.entry("length", name).get("description") for name in vocabulary.names("length")}
 DIMENSION_AXES = ("dx", "dy", "dz")
+#: The most clicked points one vehicle may have (a point part is one, a pair or an arrow two). The flat keypoint
+#: vocabulary of the labelling tools has 65 and ApolloCar3D's 66; the solver's work grows with the square of
+#: the clicks and more, so a vehicle past this is refused rather than left to run for minutes.
+MAX_CLICKS_PER_VEHICLE = 128
 
 #: The largest pixel coordinate (and image side) a file may hold. The largest camera images are some 10^5
 #: pixels across; a click a million pixels off is a typo, and the solver's squared pixel costs of larger
@@ -290,6 +294,15 @@ class VehicleAnnotation(_Model):
         if box is not None and not (box[2] > box[0] and box[3] > box[1]):
             raise ValueError(f"expected x1 < x2 and y1 < y2, got {list(box)}")
         return box
+
+    @field_validator("parts")
+    @classmethod
+    def _ensure_few_clicks(cls, parts: list[PartAnnotation]) -> list[PartAnnotation]:
+        clicks = sum(1 if isinstance(part, PointAnnotation) else 2 for part in parts)
+        if clicks > MAX_CLICKS_PER_VEHICLE:
+            raise ValueError(f"expected at most {MAX_CLICKS_PER_VEHICLE} clicked points per vehicle "
+                             f"(MAX_CLICKS_PER_VEHICLE), found {clicks} in {len(parts)} parts")
+        return parts
 
 
 class ImageAnnotation(_Model):

@@ -63,6 +63,6 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)
         for image_id, vehicle_id, reason in summary.failed[:20]:
             click.echo(f"  failed: image {image_id} vehicle {vehicle_id}: {reason}", err=True)
-        if len(summary.failed) > 20:
-            click.echo(f"  ... and {len(summary.failed) - 20} more failed vehicles (see results.json)", err=True)
-    sys.exit(EXIT_SOME_FAILED if summary.failed else EXIT_OK)
+        if summary.n_failed > 20:
+            click.echo(f"  ... and {summary.n_failed - 20} more failed vehicles (see results.json)", err=True)
+    sys.exit(EXIT_SOME_FAILED if summary.n_failed else EXIT_OK)

@@ -218,7 +218,20 @@ def evaluate_folder(out_dir: str | Path, gt_kind: str, gt_dir: str | Path,
     Raises
     ------
     EvaluationInputError, FormatError
-        See :func:`load_predictions`, :func:`open_ground_truth` and :func:`evaluate`.
+        See :func:`load_predictions`, :func:`open_ground_truth` and :func:`evaluate`; also when the
+        predictions folder is the ground-truth folder, or one is inside the other (a folder scored against
+        itself).
     """
+    _ensure_not_self(Path(out_dir), Path(gt_dir))
     predictions = load_predictions(out_dir)
     return evaluate(predictions, open_ground_truth(gt_kind, gt_dir), options)
+
+
+def _ensure_not_self(out_dir: Path, gt_dir: Path) -> None:
+    """Refuse to score a folder against itself: predictions and ground truth the same folder or nested."""
+    pred, truth = out_dir.resolve(), gt_dir.resolve()
+    if pred == truth or pred.is_relative_to(truth) or truth.is_relative_to(pred):
+        relation = ("is" if pred == truth else "is inside" if pred.is_relative_to(truth) else "contains")
+        raise EvaluationInputError(
+            f"{out_dir}: the predictions folder {relation} the ground-truth folder {gt_dir}; it would be scored "
+            f"against itself. Give the fit output folder and a separate ground-truth folder.")

@@ -42,16 +42,14 @@ def json_nesting(text: str) -> tuple[int, int]:
     return int(depth[deepest]), int(np.count_nonzero(codes[:deepest] == ord("\n"))) + 1
 
 
-def read_json(path: str | Path) -> Any:
-    """The parsed contents of a JSON file: the one JSON reader of every input file (a UTF-8 byte order mark is
-    skipped).
+def read_json_text(path: str | Path) -> str:
+    """The text of a JSON file, checked before any parsing: readable, UTF-8 (a byte order mark is skipped),
+    nested at most ``MAX_JSON_DEPTH`` deep.
 
     Raises
     ------
     FormatError
-        The file cannot be read, is not UTF-8, is nested deeper than ``MAX_JSON_DEPTH``, or is not valid JSON
-        (``line`` set, the message says the line and column too). Readers that report JSON paths
-        (:mod:`toosicubix.annotations.schema`) pass the message on at ``$``.
+        The file cannot be read, is not UTF-8 (the byte named), or is nested too deep (the line named).
     """
     path = Path(path)
     try:
@@ -64,6 +62,21 @@ def read_json(path: str | Path) -> Any:
     if depth > MAX_JSON_DEPTH:
         raise FormatError(path, f"arrays and objects nested {depth} deep (first at line {line}); at most "
                                 f"{MAX_JSON_DEPTH} allowed", line)
+    return text
+
+
+def read_json(path: str | Path) -> Any:
+    """The parsed contents of a JSON file: the one JSON reader of every input file (checked first by
+    :func:`read_json_text`).
+
+    Raises
+    ------
+    FormatError
+        As :func:`read_json_text`, or the text is not valid JSON (``line`` set, the message says the line and
+        column too). Readers that report JSON paths (:mod:`toosicubix.annotations.schema`) pass the message on
+        at ``$``.
+    """
+    text = read_json_text(path)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

@@ -14,9 +14,10 @@ Layout (keys may be added; these keep their names and meanings)::
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -358,23 +359,53 @@ def vehicle_to_json(v: VehicleResult) -> dict[str, Any]:
     return v.to_json()
 
 
+def image_to_json(im: ImageResult) -> dict[str, Any]:
+    """The JSON object of one image."""
+    return {
+        "id": im.id,
+        "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
+                   "image_size": list(im.image_size) if im.image_size else None},
+        **({"ground": im.ground} if im.ground is not None else {}),
+        "vehicles": [vehicle_to_json(v) for v in im.vehicles],
+    }
+
+
 def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = None) -> dict[str, Any]:
     """The whole document: ``header`` keys, then ``images`` and a ``summary`` of counts."""
     n_ok = sum(v.ok for im in images for v in im.vehicles)
     n_all = sum(len(im.vehicles) for im in images)
     doc: dict[str, Any] = {"toosicubix_results": RESULTS_VERSION, **(header or {})}
-    doc["images"] = [
-        {
-            "id": im.id,
-            "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
-                       "image_size": list(im.image_size) if im.image_size else None},
-            **({"ground": im.ground} if im.ground is not None else {}),
-            "vehicles": [vehicle_to_json(v) for v in im.vehicles],
-        }
-        for im in images
-    ]
+    doc["images"] = [image_to_json(im) for im in images]
     doc["summary"] = {"images": len(images), "vehicles": n_all, "ok": n_ok, "failed": n_all - n_ok}
     return doc
+
+
+def write_results_stream(handle: IO[str], images: Iterable[ImageResult], header: dict[str, Any] | None = None,
+                         on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
+    """Write the document of :func:`results_to_json` to ``handle`` one image at a time, byte for byte as
+    :func:`dumps` would (so a batch never holds every image's results); return its summary.
+    ``on_image`` is called with each image after it is written.
+
+    Raises
+    ------
+    ValueError
+        A NaN or an infinity (not JSON); what was written is then incomplete.
+    """
+    head = json.dumps({"toosicubix_results": RESULTS_VERSION, **(header or {})}, indent=1, allow_nan=False)
+    handle.write(head[:-2] + ',\n "images": [')
+    summary = {"images": 0, "vehicles": 0, "ok": 0, "failed": 0}
+    for im in images:
+        text = json.dumps(image_to_json(im), indent=1, allow_nan=False)  # strings hold no raw newline
+        handle.write(("\n  " if summary["images"] == 0 else ",\n  ") + text.replace("\n", "\n  "))
+        summary["images"] += 1
+        summary["vehicles"] += len(im.vehicles)
+        summary["ok"] += sum(v.ok for v in im.vehicles)
+        if on_image is not None:
+            on_image(im)
+    summary["failed"] = summary["vehicles"] - summary["ok"]
+    handle.write(("\n ]" if summary["images"] else "]") + ',\n "summary": '
+                 + json.dumps(summary, indent=1).replace("\n", "\n ") + "\n}\n")
+    return summary
 
 
 def dumps(doc: dict[str, Any]) -> str:

@@ -6,16 +6,22 @@ Outputs in the output folder:
   image, vehicles that failed left out. KITTI stores yaw only: pitch and roll are dropped there.
 - ``results.json``: every vehicle, with its full rotation, or its status "failed" and the reason.
 
-Every file is written atomically; ``results.json`` last. One vehicle that fails, even by an unexpected
-error, never stops the batch.
+The folder is written as a whole (:mod:`toosicubix.pipeline.output_folder`): a staging folder beside it
+takes every file, with a marker that makes it ours, and then replaces it in one rename; a killed run
+leaves the previous output. The annotation file is read one image at a time and each image's results
+are written as soon as it is done, so memory does not grow with the batch. One vehicle that fails, even
+by an unexpected error, never stops the batch.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
+import os
 import traceback
-from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -24,12 +30,11 @@ import cv2
 import numpy as np
 
 from toosicubix import __version__
-from toosicubix.annotations.convert import load_images, with_ground
+from toosicubix.annotations.convert import image_from_schema, with_ground
 from toosicubix.annotations.schema import InputFileError
+from toosicubix.annotations.stream import AnnotationIndex, index_annotations, iter_image_annotations
 from toosicubix.camera import Camera
-from toosicubix.errors import InputError
 from toosicubix.formats import kitti
-from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.results import (
     RESULTS_FILENAME,
     Alternative,
@@ -40,12 +45,18 @@ from toosicubix.formats.results import (
     SolverStats,
     VehicleResult,
     non_finite_path,
-    read_results,
-    results_to_json,
+    write_results_stream,
 )
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.pipeline.output_folder import (
+    LABEL_DIR,
+    OutputFolderError,
+    check_output_dir,
+    pause_after_file,
+    staged_output,
+)
 from toosicubix.priors.table import Priors, SizePrior, load_priors
 from toosicubix.solver import (
     FitResult,
@@ -60,14 +71,11 @@ from toosicubix.solver import (
 )
 from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 
-LABEL_DIR = "label_2"
+__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fit_images", "fit_one"]
 
 
-class OutputFolderError(InputError):
-    """The output folder cannot be used (for instance, it holds label files toosicubix did not write)."""
-
-    def __init__(self, message: str, folder: str | Path | None = None):
-        super().__init__(folder, [(None, message)])
+#: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
+FAILED_KEPT = 1000
 
 
 @dataclass(frozen=True)
@@ -77,9 +85,15 @@ class BatchSummary:
     images: int
     vehicles: int
     ok: int
-    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason)
+    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason), the first FAILED_KEPT in file order
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
+
+    @property
+    def n_failed(self) -> int:
+        """How many vehicles failed (``failed`` lists only the first :data:`FAILED_KEPT`; all are in
+        results.json)."""
+        return self.vehicles - self.ok
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -282,31 +296,69 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
         ground block); the camera height may be unknown
     next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
     """
-    tasks = [(v, im.camera, priors[v.prototype], options, im.ground, next_clicks)
-             for im in images for v in im.vehicles]
-    fitted: list[VehicleResult] = []
-    if jobs > 1 and len(tasks) > 1:
-        chunk = max(1, min(64, len(tasks) // (4 * jobs)))
-        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
-            for result in pool.map(_fit_task, tasks, chunksize=chunk):
-                fitted.append(result)
-                if progress is not None:
-                    progress(1)
-    else:
+    n = sum(len(im.vehicles) for im in images)
+    return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks))
+
+
+def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, options: SolverOptions,
+                    progress: Callable[[int], None] | None = None, jobs: int = 1,
+                    joint_ground: bool = False, next_clicks: int = 0) -> Iterator[ImageResult]:
+    """:func:`fit_images` one image at a time, in input order: the images are read from ``images`` only as
+    the workers need them, and each result is handed on as soon as its image is done, so memory does not
+    grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
+    """
+    pending: deque[Image] = deque()
+    done: list[VehicleResult] = []
+
+    def tasks() -> Iterator[tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]]:
+        for im in images:
+            pending.append(im)
+            for v in im.vehicles:
+                yield v, im.camera, priors[v.prototype], options, im.ground, next_clicks
+
+    def finished_images() -> Iterator[ImageResult]:
+        while pending and len(done) >= len(pending[0].vehicles):
+            im = pending.popleft()
+            vehicles = done[:len(im.vehicles)]
+            del done[:len(im.vehicles)]
+            ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
+            if joint_ground and im.ground is not None:
+                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
+            yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
+                              image_size=im.camera.image_size, vehicles=vehicles, ground=ground)
+
+    chunk = max(1, min(64, n_vehicles // (4 * jobs)))
+    for result in _ordered_map(tasks(), jobs if n_vehicles > 1 else 1, chunk):
+        done.append(result)
+        if progress is not None:
+            progress(1)
+        yield from finished_images()
+    yield from finished_images()  # images without vehicles at the end
+
+
+def _fit_chunk(tasks: list[tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]]
+               ) -> list[VehicleResult]:
+    return [fit_one(*task) for task in tasks]
+
+
+def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int) -> Iterator[VehicleResult]:
+    """``fit_one`` over ``tasks`` in order, in ``jobs`` processes, with a bounded number of chunks of
+    ``chunk`` tasks in flight (the pool's own ``map`` would take every task at once)."""
+    if jobs <= 1:
         for task in tasks:
-            fitted.append(_fit_task(task))
-            if progress is not None:
-                progress(1)
-    results, start = [], 0
-    for im in images:
-        vehicles = fitted[start:start + len(im.vehicles)]
-        start += len(im.vehicles)
-        ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
-        if joint_ground and im.ground is not None:
-            vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
-        results.append(ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
-                                   image_size=im.camera.image_size, vehicles=vehicles, ground=ground))
-    return results
+            yield _fit_task(task)
+        return
+    in_flight: deque[Future[list[VehicleResult]]] = deque()
+    with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+        while True:
+            while len(in_flight) < 4 * jobs:
+                batch = list(itertools.islice(tasks, chunk))
+                if not batch:
+                    break
+                in_flight.append(pool.submit(_fit_chunk, batch))
+            if not in_flight:
+                return
+            yield from in_flight.popleft().result()
 
 
 def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | None = None,
@@ -367,46 +419,52 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
                  "joint_iterations": result.iterations, "vehicles": len(fitted)}
 
 
-def prepare_output_dir(out_dir: Path) -> set[str]:
-    """Create the output folder; return the label files an earlier run of toosicubix wrote there.
+def prepare_output_dir(out_dir: Path) -> None:
+    """Check that ``out_dir`` may be replaced by this run's output; write nothing.
 
     Raises
     ------
     OutputFolderError
-        ``label_2`` holds label files but no ``results.json`` says toosicubix wrote them: they may be
-        someone's ground truth, and are never overwritten.
+        See :func:`toosicubix.pipeline.output_folder.check_output_dir`: a dataset, ground truth, any folder
+        with files toosicubix did not write (the marker file decides, not ``results.json``).
     """
-    label_dir = out_dir / LABEL_DIR
-    existing = sorted(p.name for p in label_dir.glob("*.txt")) if label_dir.is_dir() else []
-    results_path = out_dir / RESULTS_FILENAME
-    if existing and not results_path.is_file():
-        raise OutputFolderError(
-            f"{label_dir} holds {len(existing)} label files that toosicubix did not write (no {RESULTS_FILENAME} "
-            f"beside it); they may be ground truth. Choose another output folder."
-        )
-    previous: set[str] = set()
-    if results_path.is_file():
-        try:
-            previous = {f"{im.id}.txt" for im in read_results(results_path)}
-        except ValueError:
-            previous = set()
-    label_dir.mkdir(parents=True, exist_ok=True)
-    return previous
+    check_output_dir(out_dir)
 
 
-def write_outputs(out_dir: Path, images: list[Image], results: list[ImageResult], header: dict[str, Any]) -> None:
-    """Write the KITTI label files, then results.json, each atomically; remove label files of an earlier
-    run that this run did not write."""
-    previous = prepare_output_dir(out_dir)
-    label_dir = out_dir / LABEL_DIR
-    written = set()
-    for im, res in zip(images, results, strict=True):
-        lines = kitti_lines(res, im.camera)
-        atomic_write_text(label_dir / f"{im.id}.txt", "".join(f"{ln}\n" for ln in lines))
-        written.add(f"{im.id}.txt")
-    atomic_write_json(out_dir / RESULTS_FILENAME, results_to_json(results, header))
-    for stale in sorted(previous - written):
-        (label_dir / stale).unlink(missing_ok=True)
+def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[ImageResult],
+                  header: dict[str, Any], on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
+    """Write the KITTI label files and results.json into a staging folder, one image at a time as the
+    results come, then swap it in for ``out_dir`` as a whole (:mod:`.output_folder`); return the summary.
+    ``images`` and ``results`` are consumed together, in step."""
+
+    def write_label(path: Path, text: str) -> None:
+        with open(path, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        pause_after_file()
+
+    try:
+        with staged_output(out_dir, {"generator": header.get("generator")}) as staging:
+            label_dir = staging / LABEL_DIR
+            label_dir.mkdir()
+
+            def labelled() -> Iterator[ImageResult]:
+                for im, res in zip(images, results, strict=True):
+                    lines = "".join(f"{ln}\n" for ln in kitti_lines(res, im.camera))
+                    write_label(label_dir / f"{im.id}.txt", lines)
+                    yield res
+
+            with open(staging / RESULTS_FILENAME, "w", encoding="utf-8", newline="\n") as handle:
+                summary = write_results_stream(handle, labelled(), header, on_image)
+                handle.flush()
+                os.fsync(handle.fileno())
+            pause_after_file()
+    except OSError as exc:  # a full disk, a name the file system refuses: nothing of this run is left
+        where = Path(exc.filename).name if exc.filename else out_dir
+        raise OutputFolderError(f"{out_dir}: cannot write {where}: {exc.strerror or exc}; the folder is "
+                                f"unchanged") from None
+    return summary
 
 
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
@@ -439,17 +497,15 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     """
     annotations, out_dir = Path(annotations), Path(out_dir)
     options = options or SolverOptions()
-    images = with_ground(load_images(annotations), ground or {})
     priors = load_priors(priors_path)
-    check_prototypes(images, priors, annotations)
+    index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     if on_start is not None:
-        on_start(sum(len(im.vehicles) for im in images))
-    results = fit_images(images, priors, options, progress, jobs, joint_ground, next_clicks)
+        on_start(index.vehicles)
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
-        "annotations_sha256": hashlib.sha256(annotations.read_bytes()).hexdigest(),
+        "annotations_sha256": _sha256(annotations),
         "priors": priors.source if priors_path is not None else "bundled",
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
@@ -457,13 +513,34 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
-    write_outputs(out_dir, images, results, header)
-    failed = [(im.id, v.id, v.error or "") for im in results for v in im.vehicles if not v.ok]
-    n = sum(len(im.vehicles) for im in results)
+    failed: list[tuple[str, str, str]] = []
     scale_from: dict[str, int] = {}
-    for im in results:
+
+    def tally(im: ImageResult) -> None:
         for v in im.vehicles:
-            if v.ok and v.scale_from:
+            if not v.ok:
+                if len(failed) < FAILED_KEPT:
+                    failed.append((im.id, v.id, v.error or ""))
+            elif v.scale_from:
                 scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
-    return BatchSummary(images=len(results), vehicles=n, ok=n - len(failed), failed=failed, out_dir=out_dir,
-                        scale_from=scale_from)
+
+    # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
+    images, for_labels = itertools.tee(_stream_images(index, ground))
+    results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
+    summary = write_outputs(out_dir, for_labels, results, header, tally)
+    return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
+                        out_dir=out_dir, scale_from=scale_from)
+
+
+def _stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
+    """The images of an indexed annotation file, one at a time, with the options' ground block applied."""
+    for i, annotation in iter_image_annotations(index):
+        yield from with_ground([image_from_schema(annotation, i)], ground or {})
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

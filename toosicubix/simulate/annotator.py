@@ -46,6 +46,7 @@ vocabulary's (:mod:`toosicubix.parts.vocabulary`); the annotation file is writte
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +56,7 @@ import numpy as np
 
 from toosicubix.annotations.convert import vehicle_json
 from toosicubix.camera import Camera
+from toosicubix.errors import InputError
 from toosicubix.formats import FormatError
 from toosicubix.formats.datasets import (
     DEFAULT_IMAGE_SIZE,
@@ -485,20 +487,71 @@ def _calib_text(camera: Camera) -> str:
     return "\n".join(rows) + "\n"
 
 
+#: The file that makes a ground-truth folder one that ``simulate`` wrote (and may write again).
+SIMULATION_MARKER = ".toosicubix-simulated.json"
+
+
+class SimulationOutputError(InputError):
+    """``simulate`` was asked to write where it must not: into a dataset or over its own annotation file."""
+
+    def __init__(self, message: str):
+        super().__init__(None, [(None, message)])
+
+
+def check_simulation_targets(annotations: str | Path, gt_dir: str | Path) -> None:
+    """Refuse targets that would destroy data; write nothing.
+
+    Raises
+    ------
+    SimulationOutputError
+        ``gt_dir`` is or contains the annotation file, ``gt_dir`` is an existing folder with files that
+        ``simulate`` did not write (a dataset: its ground truth would be overwritten), or the annotation
+        file is a folder.
+    """
+    annotations, gt_dir = Path(annotations), Path(gt_dir)
+    ann, gt = annotations.resolve(), gt_dir.resolve()
+    if ann == gt or ann.is_relative_to(gt):
+        raise SimulationOutputError(
+            f"--gt-out {gt_dir} is or contains the annotation file {annotations}: they must be apart (one would "
+            f"overwrite the other); give them separate places")
+    if annotations.is_dir():
+        raise SimulationOutputError(f"{annotations}: is a folder; the annotation file must be a file")
+    if gt_dir.exists() and not gt_dir.is_dir():
+        raise SimulationOutputError(f"--gt-out {gt_dir}: exists and is not a folder")
+    if gt_dir.is_dir() and any(gt_dir.iterdir()) and not (gt_dir / SIMULATION_MARKER).is_file():
+        entries = sorted(e.name for e in gt_dir.iterdir())
+        raise SimulationOutputError(
+            f"--gt-out {gt_dir}: an existing folder that toosicubix simulate did not write ({', '.join(entries[:5])}"
+            f"{' ...' if len(entries) > 5 else ''}; no {SIMULATION_MARKER}); its files, perhaps a dataset's "
+            f"ground truth, are never overwritten. Choose another folder.")
+
+
 def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path, gt_dir: str | Path,
                      ground: dict[str, Any] | None = None) -> None:
     """Write the annotation file and, in ``gt_dir``, the simulated vehicles' ground truth as a KITTI object
     folder (``label_2/<image id>.txt``, ``calib/<image id>.txt`` with ``P2`` in every ``P`` line) that
-    ``toosicubix eval --kitti`` reads. Files are written atomically."""
+    ``toosicubix eval --kitti`` reads. Files are written atomically; the marker :data:`SIMULATION_MARKER`
+    first, and label and calib files of an earlier simulation into the same folder that this one did not
+    write are removed.
+
+    Raises
+    ------
+    SimulationOutputError
+        See :func:`check_simulation_targets`; nothing is written then.
+    """
     from toosicubix.formats.atomic import atomic_write_text
     from toosicubix.formats.kitti import format_label_line
     from toosicubix.formats.results import dumps
 
     gt_dir = Path(gt_dir)
-    _check_output_names(simulated, Path(annotations), gt_dir)
+    _check_output_names(simulated, Path(annotations), gt_dir)  # first: a name too long fails every call
+    check_simulation_targets(annotations, gt_dir)
     try:
-        (gt_dir / "label_2").mkdir(parents=True, exist_ok=True)
-        (gt_dir / "calib").mkdir(parents=True, exist_ok=True)
+        gt_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(gt_dir / SIMULATION_MARKER, json.dumps(
+            {"toosicubix_simulated": 1, "annotations": str(annotations)}, indent=1) + "\n")
+        (gt_dir / "label_2").mkdir(exist_ok=True)
+        (gt_dir / "calib").mkdir(exist_ok=True)
         by_image: dict[str, list[SimulatedVehicle]] = {}
         for sv in simulated:
             by_image.setdefault(sv.source.image_id, []).append(sv)
@@ -506,24 +559,25 @@ def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path,
             lines = [format_label_line(_without_tracking(sv.source.label)) for sv in vehicles]
             atomic_write_text(gt_dir / "label_2" / f"{image_id}.txt", "".join(f"{ln}\n" for ln in lines))
             atomic_write_text(gt_dir / "calib" / f"{image_id}.txt", _calib_text(vehicles[0].source.camera))
+        written = {f"{image_id}.txt" for image_id in by_image}
+        for folder in ("label_2", "calib"):
+            for stale in (gt_dir / folder).glob("*.txt"):
+                if stale.name not in written:
+                    stale.unlink()
         atomic_write_text(Path(annotations), dumps(annotation_document(simulated, ground)))
     except OSError as exc:
         raise FormatError(exc.filename or gt_dir, f"cannot write: {exc.strerror or exc}") from None
 
 
 def _check_output_names(simulated: list[SimulatedVehicle], annotations: Path, gt_dir: Path) -> None:
-    """Refuse, before anything is written, output paths that would collide or that no file system takes.
+    """Refuse, before anything is written, file names that no file system takes (where the two outputs may go
+    is :func:`check_simulation_targets`'s).
 
     Raises
     ------
     FormatError
-        Naming the path: the annotation file and the ground-truth folder are the same or nested, or a file
-        name is longer than ``MAX_NAME_BYTES``.
+        Naming the path: a file name is longer than ``MAX_NAME_BYTES``.
     """
-    ann, gt = annotations.resolve(), gt_dir.resolve()
-    if ann == gt or gt in ann.parents or ann in gt.parents:
-        raise FormatError(annotations, f"the annotation file and the ground-truth folder (--gt-out) {gt_dir} must "
-                                       f"be apart: one would overwrite the other")
     names = [(annotations, annotations.name), (gt_dir, gt_dir.name)]
     if simulated:
         names.append((gt_dir / "label_2", max((f"{sv.source.image_id}.txt" for sv in simulated), key=len)))

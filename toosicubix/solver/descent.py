@@ -55,24 +55,26 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     A, u = problem.A, problem.u
     N, _, P = A.shape
     S = len(R_cam_vehicle)
-    RA = np.einsum("sij,njk->snik", R_cam_vehicle, A)  # (S, N, 3, P): R A_i
-    # M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t.
-    B = RA[:, :, :2, :] - u[None, :, :2, None] * RA[:, :, 2:3, :]  # (S, N, 2, P)
-    design = np.empty((S, N, 2, P + 3))
-    design[..., :P] = B
-    design[..., P:] = _translation_block(u)[None]
-    design = design.reshape(S, 2 * N, P + 3)
     # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
     w = np.sqrt(problem.lambda_3d)
     prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
     prior_rhs = w * problem.b
-    # Normal equations: (P + 3) unknowns, a few dozen rows. A ridge of 1e-12 of the mean diagonal keeps an
-    # auxiliary unknown that no click constrains at zero instead of making the system singular.
-    normal = np.matmul(design.transpose(0, 2, 1), design) + prior_rows.T @ prior_rows
-    ridge = 1e-12 * np.trace(normal, axis1=1, axis2=2) / (P + 3)
-    normal[:, np.arange(P + 3), np.arange(P + 3)] += ridge[:, None]
-    rhs = np.broadcast_to(prior_rows.T @ prior_rhs, (S, P + 3))
-    x = np.linalg.solve(normal, rhs[..., None])[..., 0]
+    prior_normal = prior_rows.T @ prior_rows
+    M = _translation_block(u)  # (N, 2, 3): M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t
+    design = np.empty((N, 2, P + 3))
+    design[..., P:] = M
+    x = np.empty((S, P + 3))
+    # One start at a time: the design matrix of all starts at once, (S, 2N, P + 3), grows with the starts
+    # times the square of the clicks (each symmetric pair or arrow adds two clicks and two unknowns).
+    for s in range(S):
+        MR = M @ R_cam_vehicle[s]  # (N, 2, 3)
+        np.matmul(MR, A, out=design[..., :P])  # (N, 2, P): M_i R A_i
+        rows = design.reshape(2 * N, P + 3)
+        # Normal equations: (P + 3) unknowns. A ridge of 1e-12 of the mean diagonal keeps an auxiliary
+        # unknown that no click constrains at zero instead of making the system singular.
+        normal = rows.T @ rows + prior_normal
+        normal[np.diag_indices(P + 3)] += 1e-12 * np.trace(normal) / (P + 3)
+        x[s] = np.linalg.solve(normal, prior_rows.T @ prior_rhs)
     return x[:, :P], x[:, P:]
 
 
