@@ -695,6 +695,7 @@ def eval_command(out: Path, kitti_dir: Path | None, tracking_dir: Path | None, c
             click.echo(f"wrote {' and '.join(written)}", err=True)
 # --- end of eval -----------------------------------------------------------------------------------------
 
+main.add_command(__import__("toosicubix.cli.annotate", fromlist=["annotate_command"]).annotate_command)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
