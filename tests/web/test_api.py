@@ -12,7 +12,10 @@ from tests.web.conftest import make_session
 from tests.web.synthetic import DIMENSIONS, NAMED, R_CAM_VEHICLE, T_CAM_VEHICLE, UNNAMED, clicks
 from toosicubix.annotations.convert import load_images
 from toosicubix.geometry import geodesic_angle
+from toosicubix.model import KITTI_GROUND
+from toosicubix.priors.table import load_priors
 from toosicubix.web.server import serve_in_thread
+from toosicubix.web.session import Session, load_cameras
 
 
 def _add_vehicle(client) -> str:
@@ -273,3 +276,21 @@ def test_binds_loopback_by_default(scene, tmp_path):
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_ground_block_for_new_images_is_used_and_saved(scene, tmp_path):
+    """With KITTI's ground the vehicle stands on the road: the contact fixes its scale, so the depth sigma
+    falls below the size prior's alone, and the block goes into the file for `fit`."""
+    image, cameras = scene
+    views = {}
+    for name, ground in (("prior", None), ("ground", dict(KITTI_GROUND))):
+        session = Session([image], tmp_path / f"{name}.json", load_cameras(cameras, ["car"]), load_priors(),
+                          ground=ground)
+        session.edit(0, {"revision": 0, "op": "add_vehicle"})
+        for c in clicks(NAMED):
+            views[name] = session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1",
+                                           "kind": c.kind, "name": c.name, "uv": c.uv})["vehicles"][0]["fit"]
+    assert views["ground"]["sigma"]["depth_rel"] < 0.5 * views["prior"]["sigma"]["depth_rel"]
+    saved = load_images(tmp_path / "ground.json")[0]
+    assert saved.ground is not None and saved.ground.camera_height == 1.65
+    assert load_images(tmp_path / "prior.json")[0].ground is None

@@ -30,11 +30,15 @@ class _BadInput(click.ClickException):
 @click.option("--prototype", default="Car", show_default=True, help="Prototype (size prior) of a new vehicle.")
 @click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Size priors file; default: the bundled table.")
+@click.option("--kitti-ground", is_flag=True,
+              help="Give images the file does not have yet KITTI's ground block (camera 1.65 +- 0.1 m above a road "
+                   "whose normal is -y): vehicles stand on the road, which fixes their scale far better than the "
+                   "size prior alone. It is written to the file, so `fit` uses it too.")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
 def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
-                     priors_path: Path | None, host: str, port: int) -> None:
+                     priors_path: Path | None, kitti_ground: bool, host: str, port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
     After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
@@ -47,6 +51,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
       toosicubix annotate image_2/*.png --cameras cameras.json -o annotations.json
     """
     from toosicubix.annotations.schema import InputFileError
+    from toosicubix.model import KITTI_GROUND
     from toosicubix.priors.table import load_priors
     from toosicubix.web.server import serve
     from toosicubix.web.session import ApiError, Session, load_cameras
@@ -60,7 +65,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids) if cameras_path is not None else {}
-        session = Session(list(images), out, cameras, priors, prototype)
+        ground = dict(KITTI_GROUND) if kitti_ground else None
+        session = Session(list(images), out, cameras, priors, prototype, ground=ground)
     except (InputFileError, ApiError) as exc:
         raise _BadInput(str(exc)) from None
     try:

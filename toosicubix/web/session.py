@@ -33,13 +33,19 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.annotations.convert import camera_from_schema, image_json, load_images, part_from_schema
-from toosicubix.annotations.schema import InputFileError, parse_annotations, read_json
+from toosicubix.annotations.convert import (
+    camera_from_schema,
+    ground_from_schema,
+    image_json,
+    load_images,
+    part_from_schema,
+)
+from toosicubix.annotations.schema import InputFileError, parse_annotations, parse_ground_block, read_json
 from toosicubix.camera import Camera
 from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
-from toosicubix.model import Image, Part, Vehicle
+from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
 from toosicubix.pipeline.batch import fit_one
 from toosicubix.pipeline.validation import Thresholds, judge
@@ -114,6 +120,7 @@ class ImageState:
     file: str
     camera: Camera
     ground_block: dict | None
+    ground: GroundPlane | None
     vehicles: list[VehicleState] = field(default_factory=list)
     undo: list[list[VehicleState]] = field(default_factory=list)
 
@@ -182,12 +189,16 @@ class Session:
     cameras : camera per image id, for images the file does not have
     priors : size priors (the prototypes a vehicle may take)
     prototype : the prototype of a new vehicle
+    ground : the ground block (annotation file fields, e.g. :data:`toosicubix.model.KITTI_GROUND`) given to
+        images the file does not have yet; the file's own blocks are kept
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
-                 thresholds: Thresholds | None = None):
+                 thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None):
         self.out = Path(out)
+        self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
+        self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
         self.priors = priors
         if prototype not in priors:
             raise ApiError(f"unknown prototype {prototype!r}; known: {', '.join(sorted(priors))}")
@@ -225,14 +236,14 @@ class Session:
                 camera = Camera(K=known.camera.K, distortion=known.camera.distortion,
                                 t_cam_rect=known.camera.t_cam_rect, image_size=size)
                 vehicles = [self._vehicle_state(v) for v in known.vehicles]
-                file, ground = known.file or self._relative(path), known.ground_block
+                file, block, ground = known.file or self._relative(path), known.ground_block, known.ground
             else:
                 if image_id not in self._cameras:
                     raise InputFileError(path, [("$", "no camera for this image: give --cameras")])
                 c = self._cameras[image_id]
                 camera = Camera(K=c.K, distortion=c.distortion, t_cam_rect=c.t_cam_rect, image_size=size)
-                vehicles, file, ground = [], self._relative(path), None
-            self.images.append(ImageState(index, image_id, path, file, camera, ground, vehicles))
+                vehicles, file, block, ground = [], self._relative(path), self._ground_block, self._ground
+            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles))
 
     def _relative(self, path: Path) -> str:
         import os
@@ -296,7 +307,7 @@ class Session:
         cached = self._fits.get(key)
         if cached is None:
             cached = self._fits[key] = {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                          self.options, None, next_clicks=1000)}
+                                                          self.options, image.ground, next_clicks=1000)}
             if len(self._fits) > 2000:
                 self._fits.pop(next(iter(self._fits)))
         return cached["result"]

@@ -353,6 +353,7 @@ function drawVehicle(v, selected) {
   }
   if (selected) {
     v.targets.forEach((t, k) => {
+      if (t.uv.length === 2) line(t.uv[0], t.uv[1], "#ffd479", 1.5, [6, 4]);  // a pair or an arrow, tail to head
       t.uv.forEach((p) => {
         const [x, y] = toScreen(p);
         ctx.strokeStyle = "#ffd479";
