@@ -64,6 +64,7 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
     left = list(parts)
     clicks = naming = auto_right = auto_wrong = 0
     confusions: list[tuple[str, str]] = []  # (true part, auto-given name)
+    outcomes: list[tuple[int, bool]] = []  # (points clicked before, auto-given name right)
     v = _state(client, image, vehicle)
     while left and not v["fit"].get("well_determined"):
         fitted = v["fit"]["status"] == "ok"
@@ -79,6 +80,8 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
             status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": uv}, image=image)
             assert status == 200, doc
             auto = [a for a in doc["auto_named"] if a["vehicle"] == vehicle]
+            if auto:
+                outcomes.append((clicks - len(uv), auto[0]["name"] == part.name))
             if not auto:  # no visible part left to name it: name it by hand
                 index = len(next(x for x in doc["vehicles"] if x["id"] == vehicle)["parts"]) - 1
                 _rename(client, image, vehicle, index, part)
@@ -102,7 +105,8 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
     client.edit({"op": "delete_vehicle", "vehicle": vehicle}, image=image)
     problems = v["fit"].get("problems", [f"failed: {v['fit'].get('error')}"]) if not done else []
     return {"well_determined": done, "clicks": clicks, "naming": naming, "actions": clicks + naming,
-            "auto_right": auto_right, "auto_wrong": auto_wrong, "confusions": confusions, "problems": problems}
+            "auto_right": auto_right, "auto_wrong": auto_wrong, "confusions": confusions, "outcomes": outcomes,
+            "problems": problems}
 
 
 def _rename(client: Client, image: int, vehicle: str, index: int, part) -> None:
@@ -186,6 +190,13 @@ def summarise(rows: list[dict]) -> dict:
     out["named_not_reached_because"] = dict(problems.most_common())
     confusions = Counter(f"{a} -> {b}" for r in rows for s in ("auto", "guided") for a, b in r[s]["confusions"])
     out["auto_naming_confusions"] = dict(confusions.most_common(8))
+    by_k: dict[str, list[bool]] = {}
+    for r in rows:
+        for k, right in r["auto"]["outcomes"]:
+            by_k.setdefault("6-7" if k < 8 else "8-9" if k < 10 else "10-11" if k < 12 else "12+", []).append(right)
+    out["auto_naming_accuracy_by_points_before"] = {
+        k: {"n": len(v), "accuracy": round(sum(v) / len(v), 3)} for k, v in sorted(by_k.items(), key=lambda kv:
+                                                                                   int(kv[0].rstrip("+").split("-")[0]))}
     both = [r for r in rows if all(r[s]["well_determined"] for s in STRATEGIES)]
     out["reached_by_all"] = len(both)
     for strategy in STRATEGIES:

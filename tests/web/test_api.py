@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import http.client
 import json
 import threading
 
@@ -294,3 +295,21 @@ def test_ground_block_for_new_images_is_used_and_saved(scene, tmp_path):
     saved = load_images(tmp_path / "ground.json")[0]
     assert saved.ground is not None and saved.ground.camera_height == 1.65
     assert load_images(tmp_path / "prior.json")[0].ground is None
+
+
+def test_cross_site_requests_are_refused(served):
+    """Another site's page can make the browser send a text/plain POST or use a name that points at 127.0.0.1;
+    neither gets through."""
+    client, _ = served
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    connection.request("POST", "/api/images/0/edit", body=b'{"revision": 0, "op": "add_vehicle"}',
+                       headers={"Content-Type": "text/plain"})
+    response = connection.getresponse()
+    assert response.status == 415 and "application/json" in json.loads(response.read())["error"]
+    connection.close()
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    connection.request("GET", "/api/session", headers={"Host": "evil.example:8017"})
+    response = connection.getresponse()
+    assert response.status == 403 and "evil.example" in json.loads(response.read())["error"]
+    connection.close()
+    assert client.request("GET", "/api/images/0")[1]["vehicles"] == []

@@ -53,6 +53,7 @@ class AnnotateServer(ThreadingHTTPServer):
     def __init__(self, address: tuple[str, int], session: Session):
         self.session = session
         self.static = static_files()
+        self.loopback = address[0] in ("127.0.0.1", "localhost", "::1")
         super().__init__(address, Handler)
 
     @property
@@ -82,6 +83,9 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Length", str(len(body)))
         self.send_header("Cache-Control", "no-store")
         self.send_header("X-Content-Type-Options", "nosniff")
+        if status >= 400:  # a refused request's body may be unread: never read the next request from it
+            self.send_header("Connection", "close")
+            self.close_connection = True
         self.end_headers()
         if self.command != "HEAD":
             self.wfile.write(body)
@@ -93,6 +97,12 @@ class Handler(BaseHTTPRequestHandler):
         self._json(status, {"error": message, "status": status})
 
     def _body(self) -> Any:
+        kind = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+        if kind != "application/json":
+            # A web page of another site can send a form or text/plain POST here without asking; it cannot send
+            # application/json without a CORS preflight, which this server never grants.
+            raise ApiError(f"expected Content-Type application/json, got {kind or 'none'!r}",
+                           HTTPStatus.UNSUPPORTED_MEDIA_TYPE)
         length = self.headers.get("Content-Length")
         if length is None or not length.isdigit():
             raise ApiError("expected a JSON body with a Content-Length", HTTPStatus.LENGTH_REQUIRED)
@@ -105,8 +115,18 @@ class Handler(BaseHTTPRequestHandler):
             where = f" at line {exc.lineno} column {exc.colno}" if isinstance(exc, json.JSONDecodeError) else ""
             raise ApiError(f"request body is not JSON{where}: {getattr(exc, 'msg', exc)}") from None
 
+    def _check_host(self) -> None:
+        """On a loopback address, only requests addressed to a loopback name: a site that points its own name
+        at 127.0.0.1 (DNS rebinding) is refused."""
+        if not self.server.loopback:
+            return
+        host = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]").lower()
+        if host not in ("127.0.0.1", "localhost", "::1"):
+            raise ApiError(f"requests must be addressed to 127.0.0.1 or localhost, not {host!r}", HTTPStatus.FORBIDDEN)
+
     def _handle(self, route) -> None:
         try:
+            self._check_host()
             route()
         except ApiError as exc:
             self._error(exc.status, str(exc))
