@@ -56,6 +56,17 @@ def _state(client: Client, image: int, vehicle: str) -> dict:
     return next(v for v in view["vehicles"] if v["id"] == vehicle)
 
 
+#: Seconds per ``add_click`` request (the refit, auto-naming, suggestions and the atomic save included).
+LATENCIES: list[float] = []
+
+
+def _timed_edit(client: Client, change: dict, image: int) -> tuple[int, dict]:
+    t0 = time.perf_counter()
+    out = client.edit(change, image=image)
+    LATENCIES.append(time.perf_counter() - t0)
+    return out
+
+
 def replay(client: Client, image: int, parts: list, prototype: str, strategy: str) -> dict:
     """Annotate one vehicle with ``strategy``; the counts and auto-naming outcomes."""
     status, doc = client.edit({"op": "add_vehicle", "prototype": prototype}, image=image)
@@ -77,7 +88,7 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
         uv = part.uv.tolist()
         clicks += len(uv)
         if strategy != "named" and fitted and part.kind == "point":
-            status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": uv}, image=image)
+            status, doc = _timed_edit(client, {"op": "add_click", "vehicle": vehicle, "uv": uv}, image)
             assert status == 200, doc
             auto = [a for a in doc["auto_named"] if a["vehicle"] == vehicle]
             if auto:
@@ -95,7 +106,7 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
                 _rename(client, image, vehicle, auto[0]["part"], part)
         else:
             change = {"op": "add_click", "vehicle": vehicle, "kind": part.kind, "name": part.name, "uv": uv}
-            status, doc = client.edit(change, image=image)
+            status, doc = _timed_edit(client, change, image)
             if status != 200:  # e.g. a part the annotator clicked twice: skip it
                 clicks -= len(uv)
                 continue
@@ -161,6 +172,8 @@ def main() -> None:
             server.server_close()
     seconds = time.perf_counter() - t0
     summary = summarise(rows)
+    summary["add_click_seconds"] = {"n": len(LATENCIES), "median": round(float(np.median(LATENCIES)), 3),
+                                    "p90": round(float(np.percentile(LATENCIES, 90)), 3)}
     report = {"benchmark": "annotate", "vehicles": len(rows), "seconds": round(seconds, 1), "machine": machine(),
               "selection": "KITTI tracking test sequences 0010-0020, one frame per track, seeded sample",
               "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": args.kitti_ground,

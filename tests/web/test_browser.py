@@ -98,3 +98,31 @@ def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
+    """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    other = page.context.browser.new_page(viewport={"width": 1700, "height": 700})
+    try:
+        for p in (page, other):
+            p.goto(server.url)
+            p.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        a, b = clicks(NAMED)[:2]
+        page.keyboard.press(KEYS[a.name])
+        page.mouse.click(*_screen(page, a.uv[0]))
+        _wait_revision(page, 2)  # vehicle added, click added
+        other.keyboard.press(KEYS[b.name])  # page B still shows revision 0 and no vehicle
+        other.mouse.click(*_screen(other, b.uv[0]))
+        # B's click first adds a vehicle (it sees none): refused as stale, B reloads, now sees A's vehicle and
+        # adds its click to it.
+        _wait_revision(other, 3)
+        names = [[p.name for p in v.parts] for v in load_images(out)[0].vehicles]
+        assert names == [[a.name, b.name]]
+        assert f"{b.name} added" in other.locator("#message").inner_text()
+    finally:
+        other.close()
+        server.shutdown()
+        server.server_close()
