@@ -12,6 +12,7 @@ import pytest
 from tests.web.conftest import make_session
 from tests.web.synthetic import DIMENSIONS, NAMED, R_CAM_VEHICLE, T_CAM_VEHICLE, UNNAMED, clicks
 from toosicubix.annotations.convert import load_images
+from toosicubix.annotations.schema import InputFileError
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import KITTI_GROUND
 from toosicubix.priors.table import load_priors
@@ -313,3 +314,27 @@ def test_cross_site_requests_are_refused(served):
     assert response.status == 403 and "evil.example" in json.loads(response.read())["error"]
     connection.close()
     assert client.request("GET", "/api/images/0")[1]["vehicles"] == []
+
+
+def test_unnamed_clicks_and_done_marks_survive_a_restart(served, scene, tmp_path):
+    """The annotation file v1 holds named parts only; the rest goes to the file beside it and comes back."""
+    client, session = served
+    vehicle = _add_vehicle(client)
+    waiting = clicks(UNNAMED)[0].uv
+    client.edit({"op": "add_click", "vehicle": vehicle, "uv": waiting})
+    client.edit({"op": "set_vehicle", "vehicle": vehicle, "done": True})
+    assert session.extras_path.exists()
+    assert load_images(tmp_path / "annotations.json")[0].vehicles[0].parts == ()
+    resumed = make_session(scene, tmp_path / "annotations.json").image_view(0)["vehicles"][0]
+    assert resumed["done"] and resumed["unnamed"] == 1 and resumed["parts"][0]["uv"] == waiting
+    client.edit({"op": "delete_click", "vehicle": vehicle, "part": 0})
+    client.edit({"op": "set_vehicle", "vehicle": vehicle, "done": False})
+    assert not session.extras_path.exists()  # nothing left that the annotation file cannot hold
+
+
+def test_broken_session_file_names_itself(served, scene, tmp_path):
+    client, session = served
+    _add_vehicle(client)
+    session.extras_path.write_text('{"toosicubix_annotate": 2}')
+    with pytest.raises(InputFileError, match=r"annotations.json.annotate.json: \$.toosicubix_annotate: expected 1"):
+        make_session(scene, tmp_path / "annotations.json")

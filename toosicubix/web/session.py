@@ -10,8 +10,9 @@ the person is told to reload. So no click is ever silently overwritten: the one 
 and said so.
 
 What the file cannot hold: the annotation file v1 names every part, so a click not named yet (waiting for
-the cuboid to be fixed, see below) and the *done* mark of a vehicle live in the session only; a named click
-is in the file as soon as it is made.
+the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a second file beside it,
+``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
+(unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
 
 Auto-naming: a click made without a name is named as soon as the vehicle's named clicks fix a cuboid (its fit
 succeeds): it takes the name of the point part whose predicted position is nearest, among the parts not yet
@@ -42,7 +43,7 @@ from toosicubix.annotations.convert import (
 )
 from toosicubix.annotations.schema import InputFileError, parse_annotations, parse_ground_block, read_json
 from toosicubix.camera import Camera
-from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
@@ -244,6 +245,7 @@ class Session:
                 camera = Camera(K=c.K, distortion=c.distortion, t_cam_rect=c.t_cam_rect, image_size=size)
                 vehicles, file, block, ground = [], self._relative(path), self._ground_block, self._ground
             self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles))
+        self._restore_extras()
 
     def _relative(self, path: Path) -> str:
         import os
@@ -287,8 +289,44 @@ class Session:
                                    "from the file as it is now.")
                 atomic_write_text(self.out, text)
                 self._disk_digest = _digest(text.encode("utf-8"))
+                self._save_extras()
             finally:
                 fcntl.flock(lock, fcntl.LOCK_UN)
+
+    @property
+    def extras_path(self) -> Path:
+        """The file beside the annotation file that keeps what v1 cannot: unnamed clicks and done marks."""
+        return self.out.with_name(f"{self.out.name}.annotate.json")
+
+    def _save_extras(self) -> None:
+        images = {}
+        for im in self.images:
+            vehicles = {v.id: {"done": v.done, "unnamed": [p.uv[0] for p in v.parts if not p.named]}
+                        for v in im.vehicles if v.done or any(not p.named for p in v.parts)}
+            if vehicles:
+                images[im.id] = vehicles
+        if images:
+            atomic_write_json(self.extras_path, {"toosicubix_annotate": 1, "images": images})
+        else:
+            self.extras_path.unlink(missing_ok=True)
+
+    def _restore_extras(self) -> None:
+        """Unnamed clicks (appended to their vehicle) and done marks of vehicles that still exist."""
+        if not self.extras_path.exists():
+            return
+        data = read_json(self.extras_path)
+        if not isinstance(data, dict) or data.get("toosicubix_annotate") != 1:
+            raise InputFileError(self.extras_path, [("$.toosicubix_annotate", "expected 1 (an annotate session file)")])
+        try:
+            by_id = {im.id: im for im in self.images}
+            for image_id, vehicles in data["images"].items():
+                for v in by_id[image_id].vehicles if image_id in by_id else []:
+                    extra = vehicles.get(v.id)
+                    if extra is not None:
+                        v.done = bool(extra["done"])
+                        v.parts.extend(ClickedPart(None, None, _pixels([uv], 1, "uv")) for uv in extra["unnamed"])
+        except (KeyError, TypeError, AttributeError, ApiError) as exc:
+            raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
 
     # -- the model and the fit --------------------------------------------------------------------------------
 

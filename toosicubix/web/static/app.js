@@ -213,8 +213,8 @@ function panels() {
   list.textContent = "";
   for (const v of state.view ? state.view.vehicles : []) {
     const li = document.createElement("li");
-    li.textContent = `${v.id} ${v.prototype}: ${v.parts.length} clicks, ${v.fit.status}` +
-      (v.fit.well_determined ? ", well determined" : "");
+    li.textContent = `${v.id} ${v.prototype}: ${v.parts.length} clicks` + (v.unnamed ? ` (${v.unnamed} unnamed)` : "") +
+      (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.well_determined ? ", well determined" : ", fitted");
     if (v.id === state.vehicle) li.classList.add("selected");
     if (v.done) li.classList.add("done");
     li.onclick = () => { state.vehicle = v.id; state.selectedPart = null; buildPalette(); render(); };
