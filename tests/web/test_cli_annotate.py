@@ -82,3 +82,20 @@ def test_serves_on_loopback_and_prints_the_address(scene, tmp_path):
             process.wait(timeout=30)
     assert not (tmp_path / "a.json").exists()  # nothing changed, nothing written
     assert Path(image).exists()
+
+
+def test_image_name_that_is_no_image_id(tmp_path):
+    image = tmp_path / "my car.png"
+    image.write_bytes(b"")
+    result = _run(str(image), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2 and "must make valid image ids" in result.output and "my car.png" in result.output
+
+
+def test_unknown_prototype_in_the_file(scene, tmp_path):
+    image, _ = scene
+    out = tmp_path / "a.json"
+    out.write_text(json.dumps({"toosicubix": 1, "images": [{"id": "car", "camera": {"K": K.tolist()}, "vehicles": [
+        {"id": "1", "prototype": "Boat", "parts": []}]}]}))
+    result = _run(str(image), "-o", str(out))
+    assert result.exit_code == 2
+    assert f"{out}: $.images[0].vehicles[0].prototype: unknown prototype 'Boat'" in result.output

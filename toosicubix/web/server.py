@@ -132,6 +132,10 @@ class Handler(BaseHTTPRequestHandler):
             self._error(exc.status, str(exc))
         except InputFileError as exc:
             self._error(HTTPStatus.BAD_REQUEST, str(exc))
+        except (BrokenPipeError, ConnectionResetError):
+            self.close_connection = True
+        except Exception as exc:  # a bug: say so to the page rather than drop the connection
+            self._error(HTTPStatus.INTERNAL_SERVER_ERROR, f"internal error: {type(exc).__name__}: {exc}")
 
     # -- routes -----------------------------------------------------------------------------------------------
 

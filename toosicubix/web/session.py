@@ -27,6 +27,8 @@ import fcntl
 import hashlib
 import json
 import math
+import os
+import re
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +50,7 @@ from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
-from toosicubix.pipeline.batch import fit_one
+from toosicubix.pipeline.batch import check_prototypes, fit_one
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.priors.table import Priors
 from toosicubix.solver import SolverOptions
@@ -57,6 +59,8 @@ from toosicubix.solver import SolverOptions
 UNDO_DEPTH = 500
 #: How many parts to suggest as targets on the image.
 TARGETS = 5
+#: What an image id may be (the annotation file's pattern): the file stem of each image.
+_IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 #: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
 FRONT_FACE = (0, 3, 7, 4)
 
@@ -209,6 +213,10 @@ class Session:
         self._lock = threading.RLock()
         self._fits: dict[str, dict[str, Any]] = {}
         ids = [Path(p).stem for p in image_paths]
+        bad = [str(p) for p in image_paths if not _IMAGE_ID.match(Path(p).stem)]
+        if bad:
+            raise ApiError(f"image file names must make valid image ids (letters, digits, '_', '.', '-', the first a "
+                           f"letter or digit; the id is the file stem): {', '.join(bad)}")
         duplicates = sorted({i for i in ids if ids.count(i) > 1})
         if duplicates:
             raise ApiError(f"images with the same file stem (the image id): {', '.join(duplicates)}")
@@ -224,6 +232,7 @@ class Session:
         data = _read_bytes(self.out)
         self._disk_digest = _digest(data)
         loaded: list[Image] = load_images(self.out) if data is not None else []
+        check_prototypes(loaded, self.priors, self.out)
         by_id = {im.id: im for im in loaded}
         served_ids = {p.stem for p in self._paths}
         self._others = [image_json(im) for im in loaded if im.id not in served_ids]
@@ -248,8 +257,6 @@ class Session:
         self._restore_extras()
 
     def _relative(self, path: Path) -> str:
-        import os
-
         return Path(os.path.relpath(path.resolve(), self.out.resolve().parent)).as_posix()
 
     @staticmethod
