@@ -178,10 +178,17 @@ def main() -> None:
               "selection": "KITTI tracking test sequences 0010-0020, one frame per track, seeded sample",
               "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": args.kitti_ground,
               "summary": summary, "rows": rows}
-    text = json.dumps(report, indent=1)
+    text = _compact(report)
     if args.out:
         args.out.write_text(text + "\n")
     print(json.dumps({"vehicles": len(rows), "seconds": round(seconds, 1), "summary": summary}, indent=1))
+
+
+def _compact(report: dict) -> str:
+    """The report as JSON, one line per vehicle row."""
+    head = json.dumps({k: v for k, v in report.items() if k != "rows"}, indent=1)
+    rows = ",\n  ".join(json.dumps(r, separators=(",", ":")) for r in report["rows"])
+    return head[:-2] + ',\n "rows": [\n  ' + rows + "\n ]\n}"
 
 
 def summarise(rows: list[dict]) -> dict:

@@ -73,6 +73,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         server = serve(session, host, port)
     except OSError as exc:
         raise _BadInput(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    if not server.loopback:
+        click.echo(f"warning: listening on {host}: other machines can read the images and change {out}", err=True)
     click.echo(f"annotating {len(images)} image(s) into {out}: open {server.url}  (Ctrl-C stops)")
     try:
         server.serve_forever()
