@@ -95,6 +95,16 @@ def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
         page.keyboard.press("u")
         _wait_revision(page, revision + 1)
         assert len(load_images(out)[0].vehicles[0].parts) == len(NAMED) + len(UNNAMED) - 1
+        # Drag the first click 12 screen pixels right: at zoom 3 it moves 4 image pixels, in the file too.
+        x, y = _screen(page, named[0].uv[0])
+        page.mouse.move(x, y)
+        page.mouse.down()
+        page.mouse.move(x + 6, y, steps=3)
+        page.mouse.move(x + 12, y, steps=3)
+        page.mouse.up()
+        _wait_revision(page, revision + 2)
+        moved = load_images(out)[0].vehicles[0].parts[0].uv[0]
+        assert abs(moved[0] - named[0].uv[0][0] - 4.0) < 0.5 and abs(moved[1] - named[0].uv[0][1]) < 0.5
     finally:
         server.shutdown()
         server.server_close()
