@@ -17,6 +17,7 @@ import click
 
 from toosicubix import __version__
 from toosicubix.cli import (
+    annotate,
     evaluate,
     export,
     fit,
@@ -55,9 +56,9 @@ main.add_command(template.template_command)
 main.add_command(import_tools.import_group)
 main.add_command(export.export_group)
 main.add_command(render.render_command)
+main.add_command(annotate.annotate_command)
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "BadInput", "main"]
-
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -1,0 +1,232 @@
+"""How many actions a person needs per vehicle with ``toosicubix annotate``: simulated annotators replayed through
+the page's HTTP JSON API.
+
+KITTI has no human part clicks, so the clicks are the simulated annotator's (:mod:`toosicubix.simulate.annotator`:
+real ground-truth cuboids of the KITTI tracking *test* sequences 0010-0020, realistic part placement, 1 px noise,
+every visible part available). Each vehicle is annotated three ways, each until validate's "well determined"
+(yaw sigma <= 5 deg, depth sigma <= 10 %, not ambiguous), counting clicks and naming actions (choosing a name by
+hotkey or palette, or correcting an auto-given one):
+
+- ``named``: the annotator's parts in its order of preference, every one named (one naming action each);
+- ``auto``: the same order; a point part is clicked unnamed once the fit exists and the auto-given name is
+  corrected when wrong (one action); pairs and arrows, and points before the fit exists, are named;
+- ``guided``: as ``auto``, but once the fit exists the next part is the best of the page's targets the
+  annotator can see (falling back to its own order when none of the five is visible to it).
+
+Auto-naming accuracy is how often the name given to an unnamed click is the true one. ApolloCar3D's real
+keypoints are not used: no ApolloCar3D importer exists in this tree (issue 10) to map its 66 keypoints to parts.
+
+    python benchmarks/annotate.py --vehicles 60 -o benchmarks/results/annotate.json
+    python benchmarks/annotate.py --vehicles 60 --kitti-ground -o benchmarks/results/annotate-kitti-ground.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import SPLITS, default_data_dir, machine
+
+from toosicubix.model import KITTI_GROUND
+from toosicubix.priors.table import load_priors
+from toosicubix.simulate.annotator import (
+    AnnotatorOptions,
+    SelectionOptions,
+    select_kitti_tracking,
+    simulate_vehicle,
+)
+from toosicubix.web.client import Client
+from toosicubix.web.server import serve_in_thread
+from toosicubix.web.session import Session
+
+STRATEGIES = ("named", "auto", "guided")
+
+
+def _state(client: Client, image: int, vehicle: str) -> dict:
+    view = client.request("GET", f"/api/images/{image}")[1]
+    return next(v for v in view["vehicles"] if v["id"] == vehicle)
+
+
+#: Seconds per ``add_click`` request (the refit, auto-naming, suggestions and the atomic save included).
+LATENCIES: list[float] = []
+
+
+def _timed_edit(client: Client, change: dict, image: int) -> tuple[int, dict]:
+    t0 = time.perf_counter()
+    out = client.edit(change, image=image)
+    LATENCIES.append(time.perf_counter() - t0)
+    return out
+
+
+def replay(client: Client, image: int, parts: list, prototype: str, strategy: str) -> dict:
+    """Annotate one vehicle with ``strategy``; the counts and auto-naming outcomes."""
+    status, doc = client.edit({"op": "add_vehicle", "prototype": prototype}, image=image)
+    assert status == 200, doc
+    vehicle = doc["vehicle"]
+    left = list(parts)
+    clicks = naming = auto_right = auto_wrong = 0
+    confusions: list[tuple[str, str]] = []  # (true part, auto-given name)
+    outcomes: list[tuple[int, bool]] = []  # (points clicked before, auto-given name right)
+    v = _state(client, image, vehicle)
+    while left and not v["fit"].get("well_determined"):
+        fitted = v["fit"]["status"] == "ok"
+        part = left[0]
+        if strategy == "guided" and fitted:
+            available = {(p.kind, p.name): p for p in left}
+            part = next((available[(t["kind"], t["name"])] for t in v["targets"]
+                         if (t["kind"], t["name"]) in available), left[0])
+        left.remove(part)
+        uv = part.uv.tolist()
+        clicks += len(uv)
+        if strategy != "named" and fitted and part.kind == "point":
+            status, doc = _timed_edit(client, {"op": "add_click", "vehicle": vehicle, "uv": uv}, image)
+            assert status == 200, doc
+            auto = [a for a in doc["auto_named"] if a["vehicle"] == vehicle]
+            if auto:
+                outcomes.append((clicks - len(uv), auto[0]["name"] == part.name))
+            if not auto:  # no visible part left to name it: name it by hand
+                index = len(next(x for x in doc["vehicles"] if x["id"] == vehicle)["parts"]) - 1
+                _rename(client, image, vehicle, index, part)
+                naming += 1
+            elif auto[0]["name"] == part.name:
+                auto_right += 1
+            else:
+                auto_wrong += 1
+                confusions.append((part.name, auto[0]["name"]))
+                naming += 1
+                _rename(client, image, vehicle, auto[0]["part"], part)
+        else:
+            change = {"op": "add_click", "vehicle": vehicle, "kind": part.kind, "name": part.name, "uv": uv}
+            status, doc = _timed_edit(client, change, image)
+            if status != 200:  # e.g. a part the annotator clicked twice: skip it
+                clicks -= len(uv)
+                continue
+            naming += 1
+        v = _state(client, image, vehicle)
+    done = bool(v["fit"].get("well_determined"))
+    client.edit({"op": "delete_vehicle", "vehicle": vehicle}, image=image)
+    problems = v["fit"].get("problems", [f"failed: {v['fit'].get('error')}"]) if not done else []
+    return {"well_determined": done, "clicks": clicks, "naming": naming, "actions": clicks + naming,
+            "auto_right": auto_right, "auto_wrong": auto_wrong, "confusions": confusions, "outcomes": outcomes,
+            "problems": problems}
+
+
+def _rename(client: Client, image: int, vehicle: str, index: int, part) -> None:
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": index, "kind": part.kind,
+                               "name": part.name}, image=image)
+    assert status == 200, doc
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=default_data_dir())
+    parser.add_argument("--vehicles", type=int, default=40)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--kitti-ground", action="store_true",
+                        help="give the images KITTI's ground block (as annotate --kitti-ground)")
+    parser.add_argument("-o", "--out", type=Path, default=None)
+    args = parser.parse_args()
+
+    chosen = select_kitti_tracking(args.data / "kitti_tracking",
+                                   SelectionOptions(sequences=SPLITS["test"], frames_per_track=1))
+    rng = np.random.default_rng(args.seed)
+    chosen = [chosen[i] for i in sorted(rng.choice(len(chosen), min(args.vehicles, len(chosen)), replace=False))]
+    options = AnnotatorOptions(noise_px=1.0, max_clicks=40, seed=args.seed)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        cameras, images = {}, []
+        for gt in chosen:
+            if gt.image_id in cameras:
+                continue
+            w, h = gt.camera.image_size or (1242, 375)
+            path = folder / f"{gt.image_id}.png"
+            cv2.imwrite(str(path), np.zeros((h, w), np.uint8))
+            cameras[gt.image_id] = gt.camera
+            images.append(path)
+        ground = dict(KITTI_GROUND) if args.kitti_ground else None
+        session = Session(images, folder / "annotations.json", cameras, load_priors(), ground=ground)
+        server = serve_in_thread(session)
+        client = Client(*server.server_address[:2])
+        index = {p.stem: i for i, p in enumerate(images)}
+        rows = []
+        try:
+            for gt in chosen:
+                sim = simulate_vehicle(gt, options)
+                row = {"image": gt.image_id, "vehicle": gt.vehicle_id, "type": gt.label.type,
+                       "available_parts": len(sim.parts)}
+                for strategy in STRATEGIES:
+                    row[strategy] = replay(client, index[gt.image_id], sim.parts, gt.label.type, strategy)
+                rows.append(row)
+        finally:
+            server.shutdown()
+            server.server_close()
+    seconds = time.perf_counter() - t0
+    summary = summarise(rows)
+    summary["add_click_seconds"] = {"n": len(LATENCIES), "median": round(float(np.median(LATENCIES)), 3),
+                                    "p90": round(float(np.percentile(LATENCIES, 90)), 3)}
+    report = {"benchmark": "annotate", "vehicles": len(rows), "seconds": round(seconds, 1), "machine": machine(),
+              "selection": "KITTI tracking test sequences 0010-0020, one frame per track, seeded sample",
+              "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": args.kitti_ground,
+              "summary": summary, "rows": rows}
+    text = _compact(report)
+    if args.out:
+        args.out.write_text(text + "\n")
+    print(json.dumps({"vehicles": len(rows), "seconds": round(seconds, 1), "summary": summary}, indent=1))
+
+
+def _compact(report: dict) -> str:
+    """The report as JSON, one line per vehicle row."""
+    head = json.dumps({k: v for k, v in report.items() if k != "rows"}, indent=1)
+    rows = ",\n  ".join(json.dumps(r, separators=(",", ":")) for r in report["rows"])
+    return head[:-2] + ',\n "rows": [\n  ' + rows + "\n ]\n}"
+
+
+def summarise(rows: list[dict]) -> dict:
+    out = {}
+    for strategy in STRATEGIES:
+        reached = [r[strategy] for r in rows if r[strategy]["well_determined"]]
+        right = sum(r[strategy]["auto_right"] for r in rows)
+        wrong = sum(r[strategy]["auto_wrong"] for r in rows)
+        out[strategy] = {
+            "well_determined": len(reached),
+            "mean_clicks": _mean([r["clicks"] for r in reached]),
+            "mean_naming_actions": _mean([r["naming"] for r in reached]),
+            "mean_actions": _mean([r["actions"] for r in reached]),
+            "median_actions": float(np.median([r["actions"] for r in reached])) if reached else None,
+            "auto_named": right + wrong,
+            "auto_naming_accuracy": round(right / (right + wrong), 3) if right + wrong else None,
+        }
+    problems = Counter(p.split(" sigma")[0].split(":")[0] for r in rows for p in r["named"]["problems"])
+    out["named_not_reached_because"] = dict(problems.most_common())
+    confusions = Counter(f"{a} -> {b}" for r in rows for s in ("auto", "guided") for a, b in r[s]["confusions"])
+    out["auto_naming_confusions"] = dict(confusions.most_common(8))
+    by_k: dict[str, list[bool]] = {}
+    for r in rows:
+        for k, right in r["auto"]["outcomes"]:
+            by_k.setdefault("6-7" if k < 8 else "8-9" if k < 10 else "10-11" if k < 12 else "12+", []).append(right)
+    out["auto_naming_accuracy_by_points_before"] = {
+        k: {"n": len(v), "accuracy": round(sum(v) / len(v), 3)} for k, v in sorted(by_k.items(), key=lambda kv:
+                                                                                   int(kv[0].rstrip("+").split("-")[0]))}
+    both = [r for r in rows if all(r[s]["well_determined"] for s in STRATEGIES)]
+    out["reached_by_all"] = len(both)
+    for strategy in STRATEGIES:
+        out[f"{strategy}_mean_actions_on_common"] = _mean([r[strategy]["actions"] for r in both])
+    return out
+
+
+def _mean(values: list[float]) -> float | None:
+    return round(float(np.mean(values)), 2) if values else None
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,340 @@
+"""The JSON API of ``toosicubix annotate`` against a real server on an ephemeral 127.0.0.1 port."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from tests.web.conftest import make_session
+from tests.web.synthetic import DIMENSIONS, NAMED, R_CAM_VEHICLE, T_CAM_VEHICLE, UNNAMED, clicks
+from toosicubix.annotations.convert import load_images
+from toosicubix.annotations.schema import InputFileError
+from toosicubix.geometry import geodesic_angle
+from toosicubix.model import KITTI_GROUND
+from toosicubix.priors.table import load_priors
+from toosicubix.web.server import serve_in_thread
+from toosicubix.web.session import Session, load_cameras
+
+
+def _add_vehicle(client) -> str:
+    status, doc = client.edit({"op": "add_vehicle"})
+    assert status == 200, doc
+    return doc["vehicle"]
+
+
+def _click_named(client, vehicle: str) -> dict:
+    for c in clicks(NAMED):
+        status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "kind": c.kind, "name": c.name, "uv": c.uv})
+        assert status == 200, doc
+    return doc
+
+
+def test_session_lists_images_without_paths(served):
+    client, _ = served
+    status, doc = client.request("GET", "/api/session")
+    assert status == 200
+    assert doc["images"] == [{"index": 0, "id": "car", "size": [1240, 375], "vehicles": 0, "done": 0}]
+    assert "Car" in doc["prototypes"] and doc["revision"] == 0
+    assert "path" not in json.dumps(doc)
+
+
+def test_clicks_refit_and_draw_the_true_cuboid(served, tmp_path):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    doc = _click_named(client, vehicle)
+    v = doc["vehicles"][0]
+    fit = v["fit"]
+    assert fit["status"] == "ok", fit
+    # Exact clicks on parts at their modelled places: the pose comes back up to the prior's pull on the scale
+    # (6 constraints: the clicks fix the shape only partly), so rotation within 1 degree, depth within 10 %.
+    assert np.rad2deg(geodesic_angle(np.array(fit["R_cam_vehicle"]), R_CAM_VEHICLE)) < 1.0
+    assert abs(fit["t_cam_vehicle"][2] / T_CAM_VEHICLE[2] - 1) < 0.10
+    assert len(fit["corners_uv"]) == 8 and fit["front_face"] == [0, 3, 7, 4]
+    assert fit["sigma"]["yaw_deg"] > 0 and fit["sigma"]["depth_rel"] > 0
+    assert all(p["residuals_px"] is not None for p in v["parts"])
+    assert max(abs(r) for p in v["parts"] for row in p["residuals_px"] for r in row) < 1.0
+    assert v["targets"], "the page shows the next best parts"
+    assert all(t["visible"] and t["inside_image"] for t in v["targets"])
+    # The file is written after every change and `fit` reads it.
+    images = load_images(tmp_path / "annotations.json")
+    assert [p.name for p in images[0].vehicles[0].parts] == [s.name for s in NAMED]
+
+
+def test_unnamed_click_waits_then_is_auto_named(served):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    first = clicks(UNNAMED)[0]
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": first.uv})
+    assert status == 200 and doc["auto_named"] == []
+    assert doc["vehicles"][0]["unnamed"] == 1  # no cuboid yet: the click waits for a name
+    doc = _click_named(client, vehicle)
+    assert [a["name"] for a in doc["auto_named"]] == [first.name]
+    # The later unnamed clicks are named as they come, each with a runner-up.
+    for c in clicks(UNNAMED)[1:]:
+        status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": c.uv})
+        assert status == 200
+        (auto,) = doc["auto_named"]
+        assert auto["name"] == c.name and auto["distance_px"] < 10
+        assert auto["runner_up"] != c.name
+    parts = doc["vehicles"][0]["parts"]
+    assert all(p["name"] is not None for p in parts)
+    assert doc["vehicles"][0]["fit"]["well_determined"]
+
+
+def test_auto_name_changed_to_runner_up(served):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    _click_named(client, vehicle)
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": clicks(UNNAMED)[0].uv})
+    (auto,) = doc["auto_named"]
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": auto["part"], "kind": "point",
+                               "name": auto["runner_up"]})
+    assert status == 200
+    part = doc["vehicles"][0]["parts"][auto["part"]]
+    assert part["name"] == auto["runner_up"] and part["auto"] is None
+
+
+def test_undo_move_delete_and_done(served, tmp_path):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    doc = _click_named(client, vehicle)
+    n = len(doc["vehicles"][0]["parts"])
+    status, doc = client.edit({"op": "undo"})
+    assert status == 200 and len(doc["vehicles"][0]["parts"]) == n - 1
+    status, doc = client.edit({"op": "move_click", "vehicle": vehicle, "part": 0, "click": 0, "uv": [600.5, 300.25]})
+    assert status == 200 and doc["vehicles"][0]["parts"][0]["uv"] == [[600.5, 300.25]]
+    status, doc = client.edit({"op": "delete_click", "vehicle": vehicle, "part": 0})
+    assert status == 200 and len(doc["vehicles"][0]["parts"]) == n - 2
+    status, doc = client.edit({"op": "set_vehicle", "vehicle": vehicle, "done": True, "box2d": [500, 150, 900, 330]})
+    assert status == 200 and doc["vehicles"][0]["done"] and doc["vehicles"][0]["box2d"] == [500, 150, 900, 330]
+    saved = load_images(tmp_path / "annotations.json")[0].vehicles[0]
+    assert len(saved.parts) == n - 2 and saved.box2d.tolist() == [500, 150, 900, 330]
+    first = clicks(NAMED)[0].uv
+    for _ in range(3):  # takes back the box and done, the delete, the move (an undo is not itself undone)
+        status, doc = client.edit({"op": "undo"})
+        assert status == 200
+    v = doc["vehicles"][0]
+    assert len(v["parts"]) == n - 1 and v["parts"][0]["uv"] == first and not v["done"] and v["box2d"] is None
+
+
+def test_resume_an_existing_file(served, scene, tmp_path):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    _click_named(client, vehicle)
+    before = (tmp_path / "annotations.json").read_text()
+    resumed = make_session(scene, tmp_path / "annotations.json")
+    view = resumed.image_view(0)
+    assert [p["name"] for p in view["vehicles"][0]["parts"]] == [s.name for s in NAMED]
+    assert view["vehicles"][0]["fit"]["status"] == "ok"
+    resumed.edit(0, {"revision": 0, "op": "add_click", "vehicle": vehicle, "uv": clicks(UNNAMED)[0].uv})
+    after = load_images(tmp_path / "annotations.json")[0].vehicles[0]
+    assert len(after.parts) == len(NAMED) + 1 and before != (tmp_path / "annotations.json").read_text()
+
+
+def test_stale_revision_is_refused_and_nothing_is_lost(served, tmp_path):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    revision = client.request("GET", "/api/session")[1]["revision"]
+    a, b = clicks(NAMED)[:2]
+    status, _ = client.edit({"op": "add_click", "vehicle": vehicle, "kind": a.kind, "name": a.name, "uv": a.uv},
+                            revision)
+    assert status == 200
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "kind": b.kind, "name": b.name, "uv": b.uv},
+                              revision)
+    assert status == 409 and "stale revision" in doc["error"]
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "kind": b.kind, "name": b.name, "uv": b.uv})
+    assert status == 200
+    saved = load_images(tmp_path / "annotations.json")[0].vehicles[0]
+    assert [p.name for p in saved.parts] == [a.name, b.name]
+
+
+def test_concurrent_pages_never_lose_a_click(served, tmp_path):
+    """Eight pages add a click each at once, re-applying it after a 409 as the page does."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    rng = np.random.default_rng(0)
+    points = rng.uniform([100, 100], [1100, 300], (8, 2)).round(2).tolist()
+    errors = []
+
+    def page(uv):
+        for _ in range(50):
+            status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": [uv]})
+            if status == 200:
+                return
+            if status != 409:
+                errors.append(doc)
+                return
+        errors.append("gave up")
+
+    threads = [threading.Thread(target=page, args=(uv,)) for uv in points]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    view = client.request("GET", "/api/images/0")[1]
+    assert sorted(p["uv"][0] for p in view["vehicles"][0]["parts"]) == sorted(points)
+
+
+def test_file_changed_by_another_program_is_refused(served, scene, tmp_path):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    other = make_session(scene, tmp_path / "annotations.json")  # a second `toosicubix annotate` on the file
+    c = clicks(NAMED)[0]
+    other.edit(0, {"revision": 0, "op": "add_click", "vehicle": vehicle, "kind": c.kind, "name": c.name,
+                   "uv": c.uv})
+    status, doc = client.edit({"op": "add_vehicle"})
+    assert status == 409 and "changed on disk by another program" in doc["error"]
+    assert len(load_images(tmp_path / "annotations.json")[0].vehicles[0].parts) == 1  # the other's click kept
+    status, doc = client.request("POST", "/api/reload", {})
+    assert status == 200
+    view = client.request("GET", "/api/images/0")[1]
+    assert [p["name"] for p in view["vehicles"][0]["parts"]] == [c.name]
+
+
+def test_fit_endpoint_fits_without_storing(served):
+    client, _ = served
+    parts = [{"kind": "point", "part": c.name, "xy": c.uv[0]} if c.kind == "point" else
+             {"kind": "symmetry", "face": c.name, "left": c.uv[0], "right": c.uv[1]} for c in clicks(NAMED)]
+    status, doc = client.request("POST", "/api/fit", {"image": 0, "vehicle": {"id": "9", "prototype": "Car",
+                                                                            "parts": parts}})
+    assert status == 200 and doc["fit"]["status"] == "ok"
+    assert np.allclose(doc["fit"]["dimensions"], DIMENSIONS, rtol=0.1)
+    assert client.request("GET", "/api/images/0")[1]["vehicles"] == []
+    status, doc = client.request("POST", "/api/fit", {"image": 0, "vehicle": {"id": "9", "prototype": "Car",
+                                                                            "parts": [{"kind": "point"}]}})
+    assert status == 400 and "vehicle.parts[0]" in doc["error"]
+
+
+def test_save_endpoint(served, tmp_path):
+    client, _ = served
+    status, doc = client.request("POST", "/api/save", {"revision": 0})
+    assert status == 200 and doc["saved"]
+    assert load_images(tmp_path / "annotations.json")[0].id == "car"
+
+
+@pytest.mark.parametrize(("change", "status", "message"), [
+    ({"op": "fly"}, 400, "op: expected one of"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[1, 2]], "kind": "point", "name": "wheel-middle"}, 400,
+     "name: expected a point name"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[1, "a"]]}, 400, "uv[0][1]: expected a finite number"),
+    ({"op": "add_click", "vehicle": "1", "kind": "symmetry", "name": "rear", "uv": [[1, 2]]}, 400,
+     "uv: expected 2 pixels"),
+    ({"op": "add_click", "vehicle": "7", "uv": [[1, 2]]}, 400, "vehicle: no vehicle '7'"),
+    ({"op": "add_vehicle", "prototype": "Spaceship"}, 400, "prototype: unknown 'Spaceship'"),
+    ({"op": "add_vehicle", "box2d": [10, 10, 5, 20]}, 400, "box2d: expected x1 < x2"),
+    ({"op": "delete_click", "vehicle": "1", "part": 3}, 400, "part: expected an index"),
+])
+def test_bad_changes_get_400_with_a_message(served, change, status, message):
+    client, _ = served
+    _add_vehicle(client)
+    got, doc = client.edit(change)
+    assert got == status and message in doc["error"], doc
+
+
+def test_bad_requests(served):
+    client, _ = served
+    status, doc = client.request("POST", "/api/images/0/edit", raw=b"{not json")
+    assert status == 400 and "not JSON at line 1 column 2" in doc["error"]
+    status, doc = client.request("POST", "/api/images/0/edit", {"op": "undo"})
+    assert status == 400 and "revision" in doc["error"]
+    status, doc = client.request("POST", "/api/images/5/edit", {"revision": 0, "op": "undo"})
+    assert status == 404 and "no image 5" in doc["error"]
+    status, doc = client.request("POST", "/api/images/0/edit", {"revision": 0, "op": "undo"})
+    assert status == 400 and "nothing to undo" in doc["error"]
+    status, doc = client.request("POST", "/api/nothing", {})
+    assert status == 404
+
+
+@pytest.mark.parametrize("path", [
+    "/images/../annotations.json", "/images/0/../../etc/passwd", "/static/../session.py", "/static/..%2fserver.py",
+    "/%2e%2e/%2e%2e/etc/passwd", "/images/%2e%2e%2fcars.json", "/images/1", "/images/-1", "/static/app.js.map",
+    "//etc/passwd",
+])
+def test_paths_outside_the_images_are_refused(served, path):
+    client, _ = served
+    status, doc = client.request("GET", path)
+    assert status == 404 and "error" in doc
+
+
+def test_serves_the_page_its_files_and_the_image(served, scene):
+    client, _ = served
+    status, body = client.request("GET", "/")
+    assert status == 200 and b"<canvas" in body
+    for name in ("app.js", "style.css"):
+        assert client.request("GET", f"/static/{name}")[0] == 200
+    status, body = client.request("GET", "/images/0")
+    assert status == 200 and body == scene[0].read_bytes()
+
+
+def test_binds_loopback_by_default(scene, tmp_path):
+    server = serve_in_thread(make_session(scene, tmp_path / "a.json"))
+    try:
+        assert server.server_address[0] == "127.0.0.1"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_ground_block_for_new_images_is_used_and_saved(scene, tmp_path):
+    """With KITTI's ground the vehicle stands on the road: the contact fixes its scale, so the depth sigma
+    falls below the size prior's alone, and the block goes into the file for `fit`."""
+    image, cameras = scene
+    views = {}
+    for name, ground in (("prior", None), ("ground", dict(KITTI_GROUND))):
+        session = Session([image], tmp_path / f"{name}.json", load_cameras(cameras, ["car"]), load_priors(),
+                          ground=ground)
+        session.edit(0, {"revision": 0, "op": "add_vehicle"})
+        for c in clicks(NAMED):
+            views[name] = session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1",
+                                           "kind": c.kind, "name": c.name, "uv": c.uv})["vehicles"][0]["fit"]
+    assert views["ground"]["sigma"]["depth_rel"] < 0.5 * views["prior"]["sigma"]["depth_rel"]
+    saved = load_images(tmp_path / "ground.json")[0]
+    assert saved.ground is not None and saved.ground.camera_height == 1.65
+    assert load_images(tmp_path / "prior.json")[0].ground is None
+
+
+def test_cross_site_requests_are_refused(served):
+    """Another site's page can make the browser send a text/plain POST or use a name that points at 127.0.0.1;
+    neither gets through."""
+    client, _ = served
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    connection.request("POST", "/api/images/0/edit", body=b'{"revision": 0, "op": "add_vehicle"}',
+                       headers={"Content-Type": "text/plain"})
+    response = connection.getresponse()
+    assert response.status == 415 and "application/json" in json.loads(response.read())["error"]
+    connection.close()
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    connection.request("GET", "/api/session", headers={"Host": "evil.example:8017"})
+    response = connection.getresponse()
+    assert response.status == 403 and "evil.example" in json.loads(response.read())["error"]
+    connection.close()
+    assert client.request("GET", "/api/images/0")[1]["vehicles"] == []
+
+
+def test_unnamed_clicks_and_done_marks_survive_a_restart(served, scene, tmp_path):
+    """The annotation file v1 holds named parts only; the rest goes to the file beside it and comes back."""
+    client, session = served
+    vehicle = _add_vehicle(client)
+    waiting = clicks(UNNAMED)[0].uv
+    client.edit({"op": "add_click", "vehicle": vehicle, "uv": waiting})
+    client.edit({"op": "set_vehicle", "vehicle": vehicle, "done": True})
+    assert session.extras_path.exists()
+    assert load_images(tmp_path / "annotations.json")[0].vehicles[0].parts == ()
+    resumed = make_session(scene, tmp_path / "annotations.json").image_view(0)["vehicles"][0]
+    assert resumed["done"] and resumed["unnamed"] == 1 and resumed["parts"][0]["uv"] == waiting
+    client.edit({"op": "delete_click", "vehicle": vehicle, "part": 0})
+    client.edit({"op": "set_vehicle", "vehicle": vehicle, "done": False})
+    assert not session.extras_path.exists()  # nothing left that the annotation file cannot hold
+
+
+def test_broken_session_file_names_itself(served, scene, tmp_path):
+    client, session = served
+    _add_vehicle(client)
+    session.extras_path.write_text('{"toosicubix_annotate": 2}')
+    with pytest.raises(InputFileError, match=r"annotations.json.annotate.json: \$.toosicubix_annotate: expected 1"):
+        make_session(scene, tmp_path / "annotations.json")

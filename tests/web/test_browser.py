@@ -1,0 +1,138 @@
+"""A real browser on the annotate page: headless Chromium from the system's packages, driven by playwright.
+
+It clicks the synthetic vehicle's parts where they appear on its rendered image (named ones by hotkey, then
+unnamed ones left to auto-naming), and checks the cuboid and the saved file. Skipped, saying why, where
+playwright or the browser is missing (``pip install '.[browser]'`` and ``apt-get install chromium``).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.web.conftest import make_session
+from tests.web.synthetic import NAMED, R_CAM_VEHICLE, UNNAMED, clicks
+from toosicubix.annotations.convert import load_images
+from toosicubix.geometry import geodesic_angle
+from toosicubix.web.server import serve_in_thread
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+        "--disable-sync", "--no-first-run"]
+#: The hotkey the page gives each part the test names (app.js HOTKEYS).
+KEYS = {"wheel-front-left": "1", "wheel-rear-left": "3", "front": "l", "edge-front-left": "5", "front-center": "c",
+        "wheel-front-right": "2"}
+
+
+@pytest.fixture
+def page():
+    playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed "
+                                         "(pip install '.[browser]'): the browser test is skipped")
+    if CHROMIUM is None:
+        pytest.skip("no chromium on PATH (apt-get install chromium): the browser test is skipped")
+    with playwright_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        page = browser.new_page(viewport={"width": 1700, "height": 700})
+        try:
+            yield page
+        finally:
+            browser.close()
+
+
+def _screen(page, uv: list[float]) -> tuple[float, float]:
+    """Page coordinates of an image pixel, from the page's own zoom and pan."""
+    zoom, pan_x, pan_y = page.evaluate("[state.zoom, state.panX, state.panY]")
+    box = page.locator("#canvas").bounding_box()
+    return box["x"] + pan_x + uv[0] * zoom, box["y"] + pan_y + uv[1] * zoom
+
+
+def _wait_revision(page, revision: int) -> None:
+    page.wait_for_function(f"state.revision >= {revision}", timeout=20000)
+
+
+def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        # Zoom in on the vehicle (the page's mouse wheel does this; set here exactly): mouse positions are whole
+        # CSS pixels, so at zoom 3 a click lands within 0.17 image pixels of the part.
+        page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 3; "
+                      "state.panX = r.width / 2 - 3 * 700; state.panY = r.height / 2 - 3 * 270; render(); }")
+        # Six named parts: with the minimal five (six constraints) clicks half a pixel off leave the fit degenerate.
+        named, unnamed = clicks(NAMED) + clicks(UNNAMED)[:1], clicks(UNNAMED)[1:]
+        revision = 0
+        for c in named:
+            page.keyboard.press(KEYS[c.name])
+            for uv in c.uv:
+                page.mouse.click(*_screen(page, uv))
+            revision += 1 + (revision == 0)  # the first click also adds the vehicle
+            _wait_revision(page, revision)
+        assert "yaw" in page.locator("#fit").inner_text(), page.locator("#fit").inner_text()
+        for c in unnamed:
+            page.keyboard.press("Escape")
+            page.mouse.click(*_screen(page, c.uv[0]))
+            revision += 1
+            _wait_revision(page, revision)
+            assert f"named {c.name}" in page.locator("#message").inner_text()
+        page.wait_for_timeout(200)
+        page.screenshot(path=str(tmp_path / "annotate.png"))
+        if os.environ.get("TOOSICUBIX_SCREENSHOT"):  # to look at: where to copy the screenshot
+            shutil.copy(tmp_path / "annotate.png", os.environ["TOOSICUBIX_SCREENSHOT"])
+        assert "well determined" in page.locator("#fit").inner_text()
+        # The file the page saved: every part named as clicked, and `fit` reads it.
+        vehicle = load_images(out)[0].vehicles[0]
+        assert [p.name for p in vehicle.parts] == [c.name for c in named + unnamed]
+        view = session.image_view(0)["vehicles"][0]["fit"]
+        assert np.rad2deg(geodesic_angle(np.array(view["R_cam_vehicle"]), R_CAM_VEHICLE)) < 1.0
+        # Undo by key takes the last click back, in the file too.
+        page.keyboard.press("u")
+        _wait_revision(page, revision + 1)
+        assert len(load_images(out)[0].vehicles[0].parts) == len(NAMED) + len(UNNAMED) - 1
+        # Drag the first click 12 screen pixels right: at zoom 3 it moves 4 image pixels, in the file too.
+        x, y = _screen(page, named[0].uv[0])
+        page.mouse.move(x, y)
+        page.mouse.down()
+        page.mouse.move(x + 6, y, steps=3)
+        page.mouse.move(x + 12, y, steps=3)
+        page.mouse.up()
+        _wait_revision(page, revision + 2)
+        moved = load_images(out)[0].vehicles[0].parts[0].uv[0]
+        assert abs(moved[0] - named[0].uv[0][0] - 4.0) < 0.5 and abs(moved[1] - named[0].uv[0][1]) < 0.5
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
+    """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    other = page.context.browser.new_page(viewport={"width": 1700, "height": 700})
+    try:
+        for p in (page, other):
+            p.goto(server.url)
+            p.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        a, b = clicks(NAMED)[:2]
+        page.keyboard.press(KEYS[a.name])
+        page.mouse.click(*_screen(page, a.uv[0]))
+        _wait_revision(page, 2)  # vehicle added, click added
+        other.keyboard.press(KEYS[b.name])  # page B still shows revision 0 and no vehicle
+        other.mouse.click(*_screen(other, b.uv[0]))
+        # B's click first adds a vehicle (it sees none): refused as stale, B reloads, now sees A's vehicle and
+        # adds its click to it.
+        _wait_revision(other, 3)
+        names = [[p.name for p in v.parts] for v in load_images(out)[0].vehicles]
+        assert names == [[a.name, b.name]]
+        assert f"{b.name} added" in other.locator("#message").inner_text()
+    finally:
+        other.close()
+        server.shutdown()
+        server.server_close()

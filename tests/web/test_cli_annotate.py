@@ -1,0 +1,101 @@
+"""``toosicubix annotate`` on the command line: bad input exits 2 naming the file and JSON path; good input serves
+the page on 127.0.0.1 and prints its address."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from tests.conftest import REPO
+from tests.web.synthetic import K
+from toosicubix.cli import main
+from toosicubix.web.client import Client
+
+
+def _run(*args: str):
+    return CliRunner().invoke(main, ["annotate", *args])
+
+
+def test_missing_image(tmp_path):
+    result = _run(str(tmp_path / "nothing.png"), "--cameras", str(tmp_path / "c.json"))
+    assert result.exit_code == 2
+    assert "no such image:" in result.output and "nothing.png" in result.output
+
+
+def test_bad_cameras_file_names_the_json_path(scene, tmp_path):
+    image, _ = scene
+    cameras = tmp_path / "bad.json"
+    cameras.write_text(json.dumps({"car": {"K": [[720, 0, 620], [0, 720, 180], [0, 0, 2]]}}))
+    result = _run(str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2
+    assert f"{cameras}: $[\"car\"].K" in result.output
+
+
+def test_camera_missing_for_an_image(scene, tmp_path):
+    image, _ = scene
+    cameras = tmp_path / "other.json"
+    cameras.write_text(json.dumps({"elsewhere.png": {"K": K.tolist()}}))
+    result = _run(str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2 and "no camera for image 'car'" in result.output
+
+
+def test_no_cameras_for_a_new_image(scene, tmp_path):
+    image, _ = scene
+    result = _run(str(image), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2 and "no camera for this image: give --cameras" in result.output
+
+
+def test_broken_annotation_file_is_refused(scene, tmp_path):
+    image, cameras = scene
+    out = tmp_path / "a.json"
+    out.write_text('{"toosicubix": 1, "images": [{"id": "car", "camera": {"K": 3}}]}')
+    result = _run(str(image), "--cameras", str(cameras), "-o", str(out))
+    assert result.exit_code == 2 and f"{out}: $.images[0].camera.K" in result.output
+
+
+def test_unknown_prototype(scene, tmp_path):
+    image, cameras = scene
+    result = _run(str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"), "--prototype", "Boat")
+    assert result.exit_code == 2 and "unknown prototype 'Boat'" in result.output
+
+
+def test_serves_on_loopback_and_prints_the_address(scene, tmp_path):
+    image, cameras = scene
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    command = [sys.executable, "-m", "toosicubix", "annotate", str(image), "--cameras", str(cameras),
+               "-o", str(tmp_path / "a.json"), "--port", "0"]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env) as process:
+        try:
+            line = process.stdout.readline()
+            match = re.search(r"open http://(127\.0\.0\.1):(\d+)/", line)
+            assert match, line
+            status, doc = Client(match.group(1), int(match.group(2))).request("GET", "/api/session")
+            assert status == 200 and doc["images"][0]["id"] == "car"
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+    assert not (tmp_path / "a.json").exists()  # nothing changed, nothing written
+    assert Path(image).exists()
+
+
+def test_image_name_that_is_no_image_id(tmp_path):
+    image = tmp_path / "my car.png"
+    image.write_bytes(b"")
+    result = _run(str(image), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2 and "must make valid image ids" in result.output and "my car.png" in result.output
+
+
+def test_unknown_prototype_in_the_file(scene, tmp_path):
+    image, _ = scene
+    out = tmp_path / "a.json"
+    out.write_text(json.dumps({"toosicubix": 1, "images": [{"id": "car", "camera": {"K": K.tolist()}, "vehicles": [
+        {"id": "1", "prototype": "Boat", "parts": []}]}]}))
+    result = _run(str(image), "-o", str(out))
+    assert result.exit_code == 2
+    assert f"{out}: $.images[0].vehicles[0].prototype: unknown prototype 'Boat'" in result.output

@@ -1,0 +1,75 @@
+"""``toosicubix annotate``: serve the annotation page (thin: parses options, builds the session, serves)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from toosicubix.cli.options import BadInput
+
+
+@click.command("annotate")
+@click.argument("images", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Cameras file: one camera block ({\"K\": ...} or {\"P\": ...}, as in the annotation file) for "
+                   "every image, or {\"<image id or file name>\": block}. Needed for images the output file does "
+                   "not have yet.")
+@click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("annotations.json"),
+              show_default=True, help="Annotation file (v1): read and continued when it exists, written "
+                                      "atomically after every change.")
+@click.option("--prototype", default="Car", show_default=True, help="Prototype (size prior) of a new vehicle.")
+@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Size priors file; default: the bundled table.")
+@click.option("--kitti-ground", is_flag=True,
+              help="Give images the file does not have yet KITTI's ground block (camera 1.65 +- 0.1 m above a road "
+                   "whose normal is -y): vehicles stand on the road, which fixes their scale far better than the "
+                   "size prior alone. It is written to the file, so `fit` uses it too.")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
+@click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
+def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
+                     priors_path: Path | None, kitti_ground: bool, host: str, port: int) -> None:
+    """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
+
+    After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
+    yaw and depth sigmas and the parts to click next. A click left unnamed takes the name of the nearest
+    predicted part once the named clicks fix a cuboid. The file is written after every change; two pages on
+    one file never lose a click (a change made on a stale page is refused and re-applied after a reload).
+
+    \b
+    Example:
+      toosicubix annotate image_2/*.png --cameras cameras.json -o annotations.json
+    """
+    from toosicubix.annotations.schema import InputFileError
+    from toosicubix.model import KITTI_GROUND
+    from toosicubix.priors.table import load_priors
+    from toosicubix.web.server import serve
+    from toosicubix.web.session import ApiError, Session, load_cameras
+
+    missing = [str(p) for p in images if not p.is_file()]
+    if missing:
+        raise BadInput(f"no such image: {', '.join(missing)}")
+    if not out.parent.is_dir():
+        raise BadInput(f"{out}: the folder {out.parent} does not exist")
+    try:
+        priors = load_priors(priors_path)
+        ids = [p.stem for p in images]
+        cameras = load_cameras(cameras_path, ids) if cameras_path is not None else {}
+        ground = dict(KITTI_GROUND) if kitti_ground else None
+        session = Session(list(images), out, cameras, priors, prototype, ground=ground)
+    except (InputFileError, ApiError) as exc:
+        raise BadInput(str(exc)) from None
+    try:
+        server = serve(session, host, port)
+    except OSError as exc:
+        raise BadInput(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    if not server.loopback:
+        click.echo(f"warning: listening on {host}: other machines can read the images and change {out}", err=True)
+    click.echo(f"annotating {len(images)} image(s) into {out}: open {server.url}  (Ctrl-C stops)")
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        click.echo("stopped", err=True)
+    finally:
+        server.server_close()

@@ -1,0 +1,694 @@
+"""The state behind ``toosicubix annotate``: the images being annotated, their vehicles and clicks, undo, the
+fits, auto-naming, and the annotation file (v1) written atomically after every change.
+
+Concurrency (two pages on one file): **refuse, never merge.** Every change carries the ``revision`` the page
+last saw; a change made on an older revision is refused (:class:`Conflict`, HTTP 409) and the page gets the
+current state, re-applies a click it was adding and tells the person. A change is also refused when the file
+on disk was changed by another program since this session read or wrote it (a second ``toosicubix annotate``
+on the same file, an editor): its content hash is checked under a lock file beside it before each write, and
+the person is told to reload. So no click is ever silently overwritten: the one that would be lost is refused
+and said so.
+
+What the file cannot hold: the annotation file v1 names every part, so a click not named yet (waiting for
+the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a second file beside it,
+``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
+(unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
+
+Auto-naming: a click made without a name is named as soon as the vehicle's named clicks fix a cuboid (its fit
+succeeds): it takes the name of the point part whose predicted position is nearest, among the parts not yet
+clicked on a face turned to the camera (:func:`toosicubix.solver.guidance.suggest_clicks` places each at its
+typical position on the fitted cuboid). The response names the choice and the runner-up.
+"""
+
+from __future__ import annotations
+
+import copy
+import fcntl
+import hashlib
+import json
+import math
+import os
+import re
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from toosicubix.annotations.convert import (
+    camera_from_schema,
+    ground_from_schema,
+    image_json,
+    load_images,
+    part_from_schema,
+)
+from toosicubix.annotations.schema import InputFileError, parse_annotations, parse_ground_block, read_json
+from toosicubix.camera import Camera
+from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
+from toosicubix.formats.results import VehicleResult
+from toosicubix.geometry import cuboid_corners_cam
+from toosicubix.model import GroundPlane, Image, Part, Vehicle
+from toosicubix.parts import vocabulary
+from toosicubix.pipeline.batch import check_prototypes, fit_one
+from toosicubix.pipeline.validation import Thresholds, judge
+from toosicubix.priors.table import Priors
+from toosicubix.solver import SolverOptions
+
+#: How many changes per image ``undo`` can take back.
+UNDO_DEPTH = 500
+#: How many parts to suggest as targets on the image.
+TARGETS = 5
+#: What an image id may be (the annotation file's pattern): the file stem of each image.
+_IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+#: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
+FRONT_FACE = (0, 3, 7, 4)
+
+
+class ApiError(Exception):
+    """A request the session refuses: ``status`` is the HTTP status, the message says why."""
+
+    status = 400
+
+    def __init__(self, message: str, status: int | None = None):
+        super().__init__(message)
+        if status is not None:
+            self.status = status
+
+
+class Conflict(ApiError):
+    """A change made on a stale revision, or over a file changed on disk by someone else (HTTP 409)."""
+
+    status = 409
+
+
+@dataclass
+class ClickedPart:
+    """One annotation as the page edits it.
+
+    Attributes
+    ----------
+    kind, name : as in the annotation file; both None for a click waiting for a name
+    uv : (k, 2) pixels as clicked
+    known : ``(metres, sigma)`` of a length annotation
+    auto : how the session named it: ``{"name", "runner_up", "distance_px", "runner_up_distance_px"}``
+    """
+
+    kind: str | None
+    name: str | None
+    uv: list[list[float]]
+    known: tuple[float, float] | None = None
+    auto: dict[str, Any] | None = None
+
+    @property
+    def named(self) -> bool:
+        return self.name is not None
+
+
+@dataclass
+class VehicleState:
+    id: str
+    prototype: str
+    box2d: list[float] | None = None
+    done: bool = False
+    parts: list[ClickedPart] = field(default_factory=list)
+    known_dimensions: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass
+class ImageState:
+    """One image given on the command line; ``path`` is never sent to or taken from a page."""
+
+    index: int
+    id: str
+    path: Path
+    file: str
+    camera: Camera
+    ground_block: dict | None
+    ground: GroundPlane | None
+    vehicles: list[VehicleState] = field(default_factory=list)
+    undo: list[list[VehicleState]] = field(default_factory=list)
+
+
+def load_cameras(path: Path, image_ids: list[str]) -> dict[str, Camera]:
+    """Cameras per image id from a cameras file: one camera block as the annotation file has it (``{"K": ...}``
+    or ``{"P": ...}``, optional ``distortion``) for every image, or ``{"<image id or file name>": block, ...}``.
+
+    Raises
+    ------
+    InputFileError
+        Naming the file and the JSON path of each problem, or the images without a camera.
+    """
+    data = read_json(path)
+    if not isinstance(data, dict):
+        raise InputFileError(path, [("$", "expected an object: a camera block or image id -> camera block")])
+    if "K" in data or "P" in data:
+        blocks = {image_id: ("$", data) for image_id in image_ids}
+    else:
+        blocks = {key.rsplit(".", 1)[0] if key not in image_ids else key: (f"$[{json.dumps(key)}]", block)
+                  for key, block in data.items()}
+    missing = [i for i in image_ids if i not in blocks]
+    if missing:
+        raise InputFileError(path, [("$", f"no camera for image {m!r} (keys: image ids or file names)")
+                                    for m in missing])
+    cameras = {}
+    for image_id in image_ids:
+        where, block = blocks[image_id]
+        try:
+            doc = parse_annotations({"toosicubix": 1, "images": [{"id": "x", "camera": block}]}, path)
+        except InputFileError as exc:
+            prefix = "$.images[0].camera"
+            raise InputFileError(path, [(where + p.removeprefix(prefix) if p.startswith(prefix) else where, m)
+                                        for p, m in exc.problems]) from None
+        cameras[image_id] = camera_from_schema(doc.images[0].camera, None)
+    return cameras
+
+
+def _image_size(path: Path) -> tuple[int, int]:
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise InputFileError(path, [("$", "cannot read the image (missing or not a format OpenCV reads)")])
+    return int(image.shape[1]), int(image.shape[0])
+
+
+def _digest(data: bytes | None) -> str | None:
+    return None if data is None else hashlib.sha256(data).hexdigest()
+
+
+def _read_bytes(path: Path) -> bytes | None:
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        return None
+
+
+class Session:
+    """The annotation state of one ``toosicubix annotate`` run; every public method is thread-safe.
+
+    Parameters
+    ----------
+    image_paths : the images to serve, in order (their file stems are the image ids)
+    out : the annotation file; read when it exists, written after every change
+    cameras : camera per image id, for images the file does not have
+    priors : size priors (the prototypes a vehicle may take)
+    prototype : the prototype of a new vehicle
+    ground : the ground block (annotation file fields, e.g. :data:`toosicubix.model.KITTI_GROUND`) given to
+        images the file does not have yet; the file's own blocks are kept
+    """
+
+    def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
+                 prototype: str = "Car", options: SolverOptions | None = None,
+                 thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None):
+        self.out = Path(out)
+        self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
+        self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
+        self.priors = priors
+        if prototype not in priors:
+            raise ApiError(f"unknown prototype {prototype!r}; known: {', '.join(sorted(priors))}")
+        self.prototype = prototype
+        self.options = options or SolverOptions()
+        self.thresholds = thresholds or Thresholds()
+        self._lock = threading.RLock()
+        self._fits: dict[str, dict[str, Any]] = {}
+        ids = [Path(p).stem for p in image_paths]
+        bad = [str(p) for p in image_paths if not _IMAGE_ID.match(Path(p).stem)]
+        if bad:
+            raise ApiError(f"image file names must make valid image ids (letters, digits, '_', '.', '-', the first a "
+                           f"letter or digit; the id is the file stem): {', '.join(bad)}")
+        duplicates = sorted({i for i in ids if ids.count(i) > 1})
+        if duplicates:
+            raise ApiError(f"images with the same file stem (the image id): {', '.join(duplicates)}")
+        self._paths = [Path(p) for p in image_paths]
+        self._cameras = cameras
+        self.revision = 0
+        self._load()
+
+    # -- loading and saving ------------------------------------------------------------------------------------
+
+    def _load(self) -> None:
+        """(Re)read the annotation file, if any, and build the state of every given image."""
+        data = _read_bytes(self.out)
+        self._disk_digest = _digest(data)
+        loaded: list[Image] = load_images(self.out) if data is not None else []
+        check_prototypes(loaded, self.priors, self.out)
+        by_id = {im.id: im for im in loaded}
+        served_ids = {p.stem for p in self._paths}
+        self._others = [image_json(im) for im in loaded if im.id not in served_ids]
+        self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
+        self.images: list[ImageState] = []
+        for index, path in enumerate(self._paths):
+            image_id = path.stem
+            size = _image_size(path)
+            known = by_id.get(image_id)
+            if known is not None:
+                camera = Camera(K=known.camera.K, distortion=known.camera.distortion,
+                                t_cam_rect=known.camera.t_cam_rect, image_size=size)
+                vehicles = [self._vehicle_state(v) for v in known.vehicles]
+                file, block, ground = known.file or self._relative(path), known.ground_block, known.ground
+            else:
+                if image_id not in self._cameras:
+                    raise InputFileError(path, [("$", "no camera for this image: give --cameras")])
+                c = self._cameras[image_id]
+                camera = Camera(K=c.K, distortion=c.distortion, t_cam_rect=c.t_cam_rect, image_size=size)
+                vehicles, file, block, ground = [], self._relative(path), self._ground_block, self._ground
+            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles))
+        self._restore_extras()
+
+    def _relative(self, path: Path) -> str:
+        return Path(os.path.relpath(path.resolve(), self.out.resolve().parent)).as_posix()
+
+    @staticmethod
+    def _vehicle_state(v: Vehicle) -> VehicleState:
+        return VehicleState(
+            id=v.id, prototype=v.prototype, box2d=None if v.box2d is None else [float(x) for x in v.box2d],
+            parts=[ClickedPart(p.kind, p.name, p.uv.tolist(), p.known) for p in v.parts],
+            known_dimensions=dict(v.known_dimensions))
+
+    def document(self) -> dict[str, Any]:
+        """The annotation file (v1) of the current state: named clicks only, images in the file's order."""
+        served = {im.id: im for im in self.images}
+        others = {d["id"]: d for d in self._others}
+        images = []
+        for image_id in self._order:
+            if image_id in served:
+                im = served[image_id]
+                model = Image(im.id, im.file, im.camera, tuple(self._model_vehicle(im, j, v)
+                                                               for j, v in enumerate(im.vehicles)),
+                              f"$.images[{len(images)}]", ground_block=im.ground_block)
+                images.append(image_json(model))
+            else:
+                images.append(others[image_id])
+        return {"toosicubix": 1, "images": images}
+
+    def _save(self) -> None:
+        """Write the file atomically, unless someone else changed it since we read or wrote it (Conflict)."""
+        text = json.dumps(self.document(), indent=1, allow_nan=False) + "\n"
+        lock_path = self.out.with_name(f".{self.out.name}.lock")
+        with open(lock_path, "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                now = _digest(_read_bytes(self.out))
+                if now != self._disk_digest:
+                    raise Conflict(f"{self.out} was changed on disk by another program since this session read "
+                                   "or wrote it; the change was not saved. Reload (POST /api/reload) to continue "
+                                   "from the file as it is now.")
+                atomic_write_text(self.out, text)
+                self._disk_digest = _digest(text.encode("utf-8"))
+                self._save_extras()
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+    @property
+    def extras_path(self) -> Path:
+        """The file beside the annotation file that keeps what v1 cannot: unnamed clicks and done marks."""
+        return self.out.with_name(f"{self.out.name}.annotate.json")
+
+    def _save_extras(self) -> None:
+        images = {}
+        for im in self.images:
+            vehicles = {v.id: {"done": v.done, "unnamed": [p.uv[0] for p in v.parts if not p.named]}
+                        for v in im.vehicles if v.done or any(not p.named for p in v.parts)}
+            if vehicles:
+                images[im.id] = vehicles
+        if images:
+            atomic_write_json(self.extras_path, {"toosicubix_annotate": 1, "images": images})
+        else:
+            self.extras_path.unlink(missing_ok=True)
+
+    def _restore_extras(self) -> None:
+        """Unnamed clicks (appended to their vehicle) and done marks of vehicles that still exist."""
+        if not self.extras_path.exists():
+            return
+        data = read_json(self.extras_path)
+        if not isinstance(data, dict) or data.get("toosicubix_annotate") != 1:
+            raise InputFileError(self.extras_path, [("$.toosicubix_annotate", "expected 1 (an annotate session file)")])
+        try:
+            by_id = {im.id: im for im in self.images}
+            for image_id, vehicles in data["images"].items():
+                for v in by_id[image_id].vehicles if image_id in by_id else []:
+                    extra = vehicles.get(v.id)
+                    if extra is not None:
+                        v.done = bool(extra["done"])
+                        v.parts.extend(ClickedPart(None, None, _pixels([uv], 1, "uv")) for uv in extra["unnamed"])
+        except (KeyError, TypeError, AttributeError, ApiError) as exc:
+            raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
+
+    # -- the model and the fit --------------------------------------------------------------------------------
+
+    def _model_vehicle(self, image: ImageState, j: int, v: VehicleState) -> Vehicle:
+        """The vehicle with its named clicks, as :mod:`toosicubix.model` has it."""
+        parts = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"{image.id}.vehicles[{j}].parts[{k}]",
+                           p.known) for k, p in enumerate(v.parts) if p.named)
+        box = None if v.box2d is None else np.asarray(v.box2d, dtype=float)
+        return Vehicle(v.id, v.prototype, box, parts, f"vehicles[{j}]", dict(v.known_dimensions))
+
+    def _fit(self, image: ImageState, j: int, v: VehicleState) -> VehicleResult:
+        """The vehicle fitted as ``toosicubix fit`` fits it, with every suggestion (cached by its clicks)."""
+        vehicle = self._model_vehicle(image, j, v)
+        key = json.dumps([image.index, v.prototype, [(p.kind, p.name, p.uv.tolist()) for p in vehicle.parts],
+                          sorted(v.known_dimensions.items())])
+        cached = self._fits.get(key)
+        if cached is None:
+            cached = self._fits[key] = {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
+                                                          self.options, image.ground, next_clicks=1000)}
+            if len(self._fits) > 2000:
+                self._fits.pop(next(iter(self._fits)))
+        return cached["result"]
+
+    def _auto_name(self, image: ImageState, j: int, v: VehicleState) -> list[dict[str, Any]]:
+        """Name the vehicle's unnamed clicks, oldest first, while its fit succeeds; what was named."""
+        named = []
+        for part in v.parts:
+            if part.named:
+                continue
+            result = self._fit(image, j, v)
+            if not result.ok:
+                break
+            choice = nearest_parts(part.uv[0], result.next_clicks or [])
+            if not choice:
+                break
+            best = choice[0]
+            runner = choice[1] if len(choice) > 1 else None
+            part.kind, part.name = "point", best["name"]
+            part.auto = {"name": best["name"], "distance_px": best["distance_px"],
+                         "runner_up": None if runner is None else runner["name"],
+                         "runner_up_distance_px": None if runner is None else runner["distance_px"]}
+            named.append({"vehicle": v.id, "part": v.parts.index(part), **part.auto})
+        return named
+
+    # -- views ------------------------------------------------------------------------------------------------
+
+    def summary(self) -> dict[str, Any]:
+        """What the page needs first: the images (no paths), the prototypes, the vocabulary, the thresholds."""
+        with self._lock:
+            return {
+                "revision": self.revision, "file": self.out.name, "prototype": self.prototype,
+                "prototypes": sorted(self.priors),
+                "images": [{"index": im.index, "id": im.id, "size": list(im.camera.image_size),
+                            "vehicles": len(im.vehicles),
+                            "done": sum(v.done for v in im.vehicles)} for im in self.images],
+                "vocabulary": {k.kind: {"clicks": list(k.clicks), "names": list(k.names)}
+                               for k in vocabulary.KINDS.values() if not k.known},
+                "thresholds": self.thresholds.to_json(),
+            }
+
+    def image_view(self, index: int) -> dict[str, Any]:
+        """One image: its vehicles, each with its clicks, fit, cuboid, sigmas and targets."""
+        with self._lock:
+            image = self.image(index)
+            return {"revision": self.revision, "index": index, "id": image.id, "size": list(image.camera.image_size),
+                    "vehicles": [self._vehicle_view(image, j, v) for j, v in enumerate(image.vehicles)]}
+
+    def _vehicle_view(self, image: ImageState, j: int, v: VehicleState) -> dict[str, Any]:
+        result = self._fit(image, j, v)
+        parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None}
+                 for k, p in enumerate(v.parts)]
+        fit: dict[str, Any] = {"status": result.status, "error": result.error}
+        if result.ok:
+            residuals = np.asarray(result.residuals_px).tolist()
+            row = 0
+            for view, p in zip(parts, v.parts, strict=True):
+                if p.named:
+                    view["residuals_px"] = residuals[row:row + len(p.uv)]
+                    row += len(p.uv)
+            corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
+            sigma = result.sigma
+            problems = judge(result, self.thresholds)
+            fit.update({
+                "corners_uv": (image.camera.project(corners_cam).round(2).tolist()
+                               if np.all(corners_cam[:, 2] > 0.1) else None),
+                "front_face": list(FRONT_FACE),
+                "yaw_pitch_roll_deg": [round(a, 2) for a in result.yaw_pitch_roll_deg],
+                "depth_m": round(float(result.t_cam_vehicle[2]), 3),
+                "dimensions": [round(float(x), 3) for x in result.dimensions],
+                "rms_px": result.rms_px,
+                "sigma": {"yaw_deg": _finite(sigma.yaw_deg), "depth_rel": _finite(sigma.depth_rel),
+                          "depth_m": _finite(sigma.depth_m)} if sigma is not None else None,
+                "confidence": result.confidence, "ambiguous": result.ambiguous,
+                "well_determined": not problems, "problems": list(problems),
+                "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
+                "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
+            })
+        targets = [s for s in (result.next_clicks or []) if s["visible"] and s["inside_image"]][:TARGETS]
+        return {"id": v.id, "prototype": v.prototype, "box2d": v.box2d, "done": v.done, "parts": parts,
+                "unnamed": sum(not p.named for p in v.parts), "fit": fit, "targets": targets}
+
+    # -- changes ----------------------------------------------------------------------------------------------
+
+    def image(self, index: int) -> ImageState:
+        """The image with that index on the command line (ApiError 404 otherwise)."""
+        if not 0 <= index < len(self.images):
+            raise ApiError(f"no image {index}: there are {len(self.images)} (0 to {len(self.images) - 1})", 404)
+        return self.images[index]
+
+    def edit(self, index: int, request: Any) -> dict[str, Any]:
+        """Apply one change to an image and save; the image view with what the change did.
+
+        ``request``: ``{"revision": int, "op": str, ...}`` with ``op`` one of ``add_vehicle`` (``prototype``,
+        ``box2d``), ``set_vehicle`` (``vehicle``; ``prototype``, ``box2d``, ``done``), ``delete_vehicle``
+        (``vehicle``), ``add_click`` (``vehicle``, ``uv`` [[x, y], ...]; ``kind`` and ``name``, or neither for a
+        point to be auto-named), ``move_click`` (``vehicle``, ``part``, ``click``, ``uv`` [x, y]), ``rename``
+        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``), ``undo``.
+
+        Raises
+        ------
+        ApiError
+            A bad request (400; 404 for an unknown image), the message naming the field.
+        Conflict
+            ``revision`` is not the current one, or the file changed on disk (409); nothing changed.
+        """
+        if not isinstance(request, dict):
+            raise ApiError("expected a JSON object {\"revision\": ..., \"op\": ...}")
+        with self._lock:
+            image = self.image(index)
+            revision = request.get("revision")
+            if not isinstance(revision, int) or isinstance(revision, bool):
+                raise ApiError(f"revision: expected the integer revision the page last saw, got {revision!r}")
+            if revision != self.revision:
+                raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision} "
+                               "(another page changed them); nothing was changed, reload and apply it again")
+            op = request.get("op")
+            handler = _OPS.get(op) if isinstance(op, str) else None
+            if handler is None:
+                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r}")
+            before = copy.deepcopy(image.vehicles)
+            try:
+                outcome = handler(self, image, request) or {}
+                auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
+                self._save()
+            except BaseException:
+                image.vehicles = before
+                raise
+            if op == "undo":
+                image.undo.pop()
+            else:
+                image.undo.append(before)
+                del image.undo[:-UNDO_DEPTH]
+            self.revision += 1
+            return {**self.image_view(index), "op": op, **outcome, "auto_named": auto}
+
+    def save(self, request: Any) -> dict[str, Any]:
+        """Write the file now (it is written after every change anyway)."""
+        with self._lock:
+            revision = request.get("revision") if isinstance(request, dict) else None
+            if revision is not None and revision != self.revision:
+                raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision}")
+            self._save()
+            return {"revision": self.revision, "file": self.out.name, "saved": True}
+
+    def preview(self, body: Any) -> dict[str, Any]:
+        """``POST /api/fit``: the view of a vehicle given in the request, ``{"image": index, "vehicle": {...}}``
+        (a vehicle of the annotation file v1), fitted on that image's camera; nothing is stored."""
+        if not isinstance(body, dict) or set(body) != {"image", "vehicle"}:
+            raise ApiError('expected {"image": index, "vehicle": {...a vehicle of the annotation file v1...}}')
+        index = body["image"]
+        if not isinstance(index, int) or isinstance(index, bool):
+            raise ApiError(f"image: expected an index, got {index!r}")
+        doc = {"toosicubix": 1, "images": [{"id": "request", "camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+                                            "vehicles": [body["vehicle"]]}]}
+        try:
+            v = parse_annotations(doc, "request body").images[0].vehicles[0]
+        except InputFileError as exc:
+            prefix = "$.images[0].vehicles[0]"
+            raise ApiError("; ".join(f"{'vehicle' + p.removeprefix(prefix)}: {m}" for p, m in exc.problems)) from None
+        self._check_prototype(v.prototype)
+        parts = [part_from_schema(p, "") for p in v.parts]
+        state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
+                             parts=[ClickedPart(p.kind, p.name, p.uv.tolist(), p.known) for p in parts])
+        with self._lock:
+            return {"revision": self.revision, **self._vehicle_view(self.image(index), 0, state)}
+
+    def reload(self) -> dict[str, Any]:
+        """Read the file again (after another program changed it); undo history is dropped."""
+        with self._lock:
+            self._load()
+            self._fits.clear()
+            self.revision += 1
+            return self.summary()
+
+    # -- the operations (under the lock; they may raise ApiError before changing anything) ----------------------
+
+    def _op_add_vehicle(self, image: ImageState, r: dict) -> dict[str, Any]:
+        prototype = r.get("prototype", self.prototype)
+        self._check_prototype(prototype)
+        box = _box(r.get("box2d"))
+        used = {int(v.id) for v in image.vehicles if v.id.isdigit()}
+        vehicle_id = str(max(used, default=0) + 1)
+        image.vehicles.append(VehicleState(vehicle_id, prototype, box))
+        return {"vehicle": vehicle_id}
+
+    def _op_set_vehicle(self, image: ImageState, r: dict) -> None:
+        v = self._vehicle(image, r)
+        if "prototype" in r:
+            self._check_prototype(r["prototype"])
+            v.prototype = r["prototype"]
+        if "box2d" in r:
+            v.box2d = _box(r["box2d"])
+        if "done" in r:
+            if not isinstance(r["done"], bool):
+                raise ApiError(f"done: expected true or false, got {r['done']!r}")
+            v.done = r["done"]
+
+    def _op_delete_vehicle(self, image: ImageState, r: dict) -> None:
+        image.vehicles.remove(self._vehicle(image, r))
+
+    def _op_add_click(self, image: ImageState, r: dict) -> dict[str, Any]:
+        v = self._vehicle(image, r)
+        kind, name = r.get("kind"), r.get("name")
+        if kind is None and name is None:
+            uv = _pixels(r.get("uv"), 1, "uv")
+            v.parts.append(ClickedPart(None, None, uv))
+        else:
+            kind, name = _kind_name(kind, name)
+            uv = _pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
+            self._check_not_clicked(v, kind, name)
+            known = None
+            if vocabulary.KINDS[kind].known:
+                known = _known(r.get("known"))
+            v.parts.append(ClickedPart(kind, name, uv, known))
+        return {"part": len(v.parts) - 1}
+
+    def _op_move_click(self, image: ImageState, r: dict) -> None:
+        v = self._vehicle(image, r)
+        part = self._part(v, r)
+        click = r.get("click", 0)
+        if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
+            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r}")
+        part.uv[click] = _pixels([r.get("uv")], 1, "uv")[0]
+
+    def _op_rename(self, image: ImageState, r: dict) -> None:
+        v = self._vehicle(image, r)
+        part = self._part(v, r)
+        kind, name = _kind_name(r.get("kind"), r.get("name"))
+        if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
+            raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
+                           f"{len(part.uv)}")
+        if vocabulary.KINDS[kind].known and part.known is None:
+            raise ApiError(f"kind: a {kind} annotation needs its known size; delete it and add it again")
+        self._check_not_clicked(v, kind, name, part)
+        part.kind, part.name, part.auto = kind, name, None
+
+    def _op_delete_click(self, image: ImageState, r: dict) -> None:
+        v = self._vehicle(image, r)
+        v.parts.remove(self._part(v, r))
+
+    def _op_undo(self, image: ImageState, r: dict) -> dict[str, Any]:
+        if not image.undo:
+            raise ApiError("nothing to undo on this image")
+        image.vehicles = copy.deepcopy(image.undo[-1])  # popped once the change is saved
+        return {}
+
+    # -- checks -----------------------------------------------------------------------------------------------
+
+    def _check_prototype(self, prototype: Any) -> None:
+        if prototype not in self.priors:
+            raise ApiError(f"prototype: unknown {prototype!r}; known: {', '.join(sorted(self.priors))}")
+
+    @staticmethod
+    def _vehicle(image: ImageState, r: dict) -> VehicleState:
+        vehicle_id = r.get("vehicle")
+        for v in image.vehicles:
+            if v.id == vehicle_id:
+                return v
+        raise ApiError(f"vehicle: no vehicle {vehicle_id!r} on image {image.id} "
+                       f"(it has {', '.join(v.id for v in image.vehicles) or 'none'})")
+
+    @staticmethod
+    def _part(v: VehicleState, r: dict) -> ClickedPart:
+        k = r.get("part")
+        if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < len(v.parts):
+            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r}")
+        return v.parts[k]
+
+    @staticmethod
+    def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None) -> None:
+        for p in v.parts:
+            if p is not this and p.kind == kind and p.name == name:
+                raise ApiError(f"name: vehicle {v.id} has a {kind} {name!r} already (move or delete that one)")
+
+
+_OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
+
+
+def nearest_parts(uv: list[float], suggestions: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The point parts among ``suggestions`` (``next_clicks`` of a fit: kind, name, uv, visible) on a face
+    turned to the camera, nearest to the pixel ``uv`` first, each with its ``distance_px``."""
+    out = []
+    for s in suggestions:
+        if s["kind"] != "point" or not s["visible"]:
+            continue
+        distance = math.dist(uv, s["uv"][0])
+        out.append({"name": s["name"], "distance_px": round(distance, 2), "uv": s["uv"][0]})
+    return sorted(out, key=lambda s: s["distance_px"])
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ApiError(f"{what}: expected a finite number, got {json.dumps(value)}")
+    return float(value)
+
+
+def _pixels(value: Any, count: int, what: str) -> list[list[float]]:
+    if not isinstance(value, list) or len(value) != count:
+        raise ApiError(f"{what}: expected {count} pixel{'s' if count > 1 else ''} [[x, y], ...], got "
+                       f"{json.dumps(value)[:60]}")
+    out = []
+    for k, row in enumerate(value):
+        if not isinstance(row, list) or len(row) != 2:
+            raise ApiError(f"{what}[{k}]: expected [x, y], got {json.dumps(row)[:60]}")
+        out.append([_number(row[0], f"{what}[{k}][0]"), _number(row[1], f"{what}[{k}][1]")])
+    return out
+
+
+def _box(value: Any) -> list[float] | None:
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != 4:
+        raise ApiError(f"box2d: expected [x1, y1, x2, y2] or null, got {json.dumps(value)[:60]}")
+    box = [_number(x, f"box2d[{k}]") for k, x in enumerate(value)]
+    if not (box[2] > box[0] and box[3] > box[1]):
+        raise ApiError(f"box2d: expected x1 < x2 and y1 < y2, got {box}")
+    return box
+
+
+def _known(value: Any) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise ApiError(f"known: expected [metres, sigma] for a length, got {json.dumps(value)[:60]}")
+    metres, sigma = _number(value[0], "known[0]"), _number(value[1], "known[1]")
+    if metres <= 0 or sigma <= 0:
+        raise ApiError(f"known: expected positive metres and sigma, got {[metres, sigma]}")
+    return metres, sigma
+
+
+def _kind_name(kind: Any, name: Any) -> tuple[str, str]:
+    if kind not in vocabulary.KINDS:
+        raise ApiError(f"kind: expected one of {', '.join(vocabulary.KINDS)}, got {kind!r}")
+    if name not in vocabulary.KINDS[kind].names:
+        raise ApiError(f"name: expected a {kind} name ({', '.join(vocabulary.KINDS[kind].names)}), got {name!r}")
+    return kind, name

@@ -1,0 +1,506 @@
+// ToosiCubix annotate: the page. Plain JavaScript, no build step; every change goes through the JSON API
+// (POST /api/images/<i>/edit) and the server answers with the image's vehicles, fits, cuboids and targets.
+"use strict";
+
+const HOTKEYS = {
+  "1": ["point", "wheel-front-left"], "2": ["point", "wheel-front-right"],
+  "3": ["point", "wheel-rear-left"], "4": ["point", "wheel-rear-right"],
+  "5": ["point", "edge-front-left"], "6": ["point", "edge-front-right"],
+  "7": ["point", "edge-rear-left"], "8": ["point", "edge-rear-right"],
+  "c": ["point", "front-center"], "v": ["point", "rear-center"], "t": ["point", "top-center"],
+  "l": ["symmetry", "front"], "k": ["symmetry", "rear"], "o": ["symmetry", "roof"],
+  "a": ["direction", "forward"], "s": ["direction", "leftward"],
+};
+const CLICK_NAMES = { symmetry: ["left light", "right light"], direction: ["tail", "head"] };
+
+const state = {
+  session: null, index: 0, view: null, revision: 0, vehicle: null, armed: null, pending: [],
+  selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0, mode: "click",
+  drag: null,
+};
+const $ = (id) => document.getElementById(id);
+const canvas = $("canvas");
+const ctx = canvas.getContext("2d");
+
+function say(text, error = false) {
+  $("message").textContent = text;
+  $("message").className = error ? "error" : "";
+}
+
+async function api(method, path, body) {
+  const options = { method, headers: {} };
+  if (body !== undefined) {
+    options.body = JSON.stringify(body);
+    options.headers["Content-Type"] = "application/json";
+  }
+  const response = await fetch(path, options);
+  const doc = await response.json();
+  return { status: response.status, doc };
+}
+
+// -- loading -----------------------------------------------------------------------------------------------
+
+async function start() {
+  const { doc } = await api("GET", "/api/session");
+  state.session = doc;
+  state.revision = doc.revision;
+  const select = $("prototype");
+  for (const p of doc.prototypes) {
+    const option = document.createElement("option");
+    option.value = option.textContent = p;
+    select.appendChild(option);
+  }
+  select.value = doc.prototype;
+  buildPalette();
+  await showImage(0);
+}
+
+async function showImage(index) {
+  const n = state.session.images.length;
+  state.index = (index + n) % n;
+  state.vehicle = null;
+  state.pending = [];
+  state.selectedPart = null;
+  await loadView();
+  await new Promise((resolve) => {
+    state.image.onload = resolve;
+    state.image.onerror = resolve;
+    state.image.src = `/images/${state.index}`;
+  });
+  fitToView();
+}
+
+async function loadView() {
+  const { status, doc } = await api("GET", `/api/images/${state.index}`);
+  if (status !== 200) { say(doc.error, true); return; }
+  applyView(doc);
+}
+
+function applyView(doc) {
+  state.view = doc;
+  state.revision = doc.revision;
+  const ids = doc.vehicles.map((v) => v.id);
+  if (!ids.includes(state.vehicle)) state.vehicle = ids.length ? ids[ids.length - 1] : null;
+  const im = state.session.images[state.index];
+  $("image-name").textContent = `${im.id}  (${state.index + 1} / ${state.session.images.length})`;
+  render();
+}
+
+// -- changes -----------------------------------------------------------------------------------------------
+
+async function edit(change, retryable = false) {
+  for (let attempt = 0; attempt < 5; attempt++) {
+    const { status, doc } = await api("POST", `/api/images/${state.index}/edit`,
+      { revision: state.revision, ...change });
+    if (status === 200) {
+      applyView(doc);
+      return doc;
+    }
+    if (status === 409 && retryable && doc.error.startsWith("stale revision")) {
+      await loadView();  // another page changed the file: take its state, then add this click again
+      say("another page changed the annotations: reloaded, your click was added again");
+      continue;
+    }
+    if (status === 409) await loadView();
+    say(doc.error, true);
+    return null;
+  }
+  say("the annotations keep changing under this page; the click was not added", true);
+  return null;
+}
+
+function currentVehicle() {
+  return state.view && state.view.vehicles.find((v) => v.id === state.vehicle);
+}
+
+async function newVehicle(box2d) {
+  const change = { op: "add_vehicle", prototype: $("prototype").value };
+  if (box2d) change.box2d = box2d;
+  const doc = await edit(change);
+  if (doc) { state.vehicle = doc.vehicle; say(`vehicle ${doc.vehicle} added`); render(); }
+}
+
+async function addClick(uv) {
+  if (!currentVehicle()) await newVehicle();
+  if (!currentVehicle()) return;
+  if (state.armed && state.armed[0] !== "point") {
+    state.pending.push(uv);
+    if (state.pending.length < 2) {
+      say(`${state.armed[0]} ${state.armed[1]}: now click the ${CLICK_NAMES[state.armed[0]][1]}`);
+      render();
+      return;
+    }
+  }
+  const change = { op: "add_click", vehicle: state.vehicle };
+  if (state.armed) {
+    change.kind = state.armed[0];
+    change.name = state.armed[1];
+    change.uv = state.armed[0] === "point" ? [uv] : state.pending;
+  } else {
+    change.uv = [uv];
+  }
+  state.pending = [];
+  const armed = state.armed;
+  state.armed = null;
+  const doc = await edit(change, true);
+  buildPalette();
+  if (!doc) return;
+  state.selectedPart = doc.part;
+  const auto = doc.auto_named.filter((a) => a.vehicle === state.vehicle);
+  if (auto.length) {
+    state.lastAuto = auto[auto.length - 1];
+    const a = state.lastAuto;
+    say(`named ${a.name} (${a.distance_px.toFixed(0)} px from its predicted place)` +
+        (a.runner_up ? `; runner-up ${a.runner_up}: press x to take it` : ""));
+  } else if (!armed) {
+    const v = currentVehicle();
+    say(`unnamed click kept: it is named once the named clicks fix a cuboid (${v.fit.error || "no fit"})`);
+  } else {
+    say(`${armed[1]} added`);
+  }
+}
+
+async function takeRunnerUp() {
+  const a = state.lastAuto;
+  if (!a || !a.runner_up) { say("no auto-named click to change", true); return; }
+  const doc = await edit({ op: "rename", vehicle: a.vehicle, part: a.part, kind: "point", name: a.runner_up });
+  if (doc) { say(`renamed to ${a.runner_up}`); state.lastAuto = null; }
+}
+
+// -- palette and panels ----------------------------------------------------------------------------------------
+
+function buildPalette() {
+  const palette = $("palette");
+  palette.textContent = "";
+  const keys = {};
+  for (const [key, [kind, name]] of Object.entries(HOTKEYS)) keys[`${kind} ${name}`] = key;
+  const v = currentVehicle();
+  const clicked = new Set(v ? v.parts.map((p) => `${p.kind} ${p.name}`) : []);
+  for (const [kind, entry] of Object.entries(state.session.vocabulary)) {
+    for (const name of entry.names) {
+      const button = document.createElement("button");
+      const key = keys[`${kind} ${name}`];
+      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + (kind === "point" ? name : `${kind} ${name}`);
+      button.dataset.kind = kind;
+      button.dataset.name = name;
+      if (state.armed && state.armed[0] === kind && state.armed[1] === name) button.classList.add("armed");
+      if (clicked.has(`${kind} ${name}`)) button.classList.add("clicked");
+      button.onclick = () => arm([kind, name]);
+      palette.appendChild(button);
+    }
+  }
+}
+
+function arm(choice) {
+  state.armed = choice;
+  state.pending = [];
+  if (choice) {
+    const first = choice[0] === "point" ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
+    say(`next click: ${choice[0]} ${choice[1]}: click ${first}`);
+  } else {
+    say("next click: unnamed (auto-named once the cuboid is fixed)");
+  }
+  buildPalette();
+  render();
+}
+
+function fmt(value, digits = 1, scale = 1) {
+  return value === null || value === undefined ? "∞" : (value * scale).toFixed(digits);
+}
+
+function panels() {
+  const list = $("vehicles");
+  list.textContent = "";
+  for (const v of state.view ? state.view.vehicles : []) {
+    const li = document.createElement("li");
+    li.textContent = `${v.id} ${v.prototype}: ${v.parts.length} clicks` + (v.unnamed ? ` (${v.unnamed} unnamed)` : "") +
+      (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.well_determined ? ", well determined" : ", fitted");
+    if (v.id === state.vehicle) li.classList.add("selected");
+    if (v.done) li.classList.add("done");
+    li.onclick = () => { state.vehicle = v.id; state.selectedPart = null; buildPalette(); render(); };
+    list.appendChild(li);
+  }
+  const v = currentVehicle();
+  const fit = $("fit");
+  const clicks = $("clicks");
+  clicks.textContent = "";
+  if (!v) { fit.textContent = "no vehicle: click the image or press n"; return; }
+  $("prototype").value = v.prototype;
+  const f = v.fit;
+  if (f.status !== "ok") {
+    fit.innerHTML = `<span class="bad">not fitted</span>: ${escapeHtml(f.error || "")}`;
+  } else {
+    const verdict = f.well_determined ? '<span class="ok">well determined</span>'
+      : `<span class="bad">not well determined</span>: ${escapeHtml(f.problems.join("; "))}`;
+    fit.innerHTML = `${verdict}<table>
+      <tr><td>yaw</td><td>${f.yaw_pitch_roll_deg[0].toFixed(1)}°</td><td>σ ${fmt(f.sigma.yaw_deg)}°</td></tr>
+      <tr><td>depth</td><td>${f.depth_m.toFixed(2)} m</td><td>σ ${fmt(f.sigma.depth_rel, 1, 100)} %</td></tr>
+      <tr><td>size</td><td colspan="2">${f.dimensions.map((d) => d.toFixed(2)).join(" × ")} m</td></tr>
+      <tr><td>rms</td><td colspan="2">${fmt(f.rms_px, 2)} px</td></tr></table>`;
+  }
+  v.parts.forEach((p) => {
+    const li = document.createElement("li");
+    const name = p.name ? `${p.kind === "point" ? "" : p.kind + " "}${p.name}` : "(unnamed)";
+    const res = p.residuals_px ? Math.max(...p.residuals_px.map(([a, b]) => Math.hypot(a, b))).toFixed(1) + " px" : "";
+    li.innerHTML = `${escapeHtml(name)} ${p.auto ? '<span class="auto">auto</span>' : ""} <span class="res">${res}</span>`;
+    if (p.index === state.selectedPart) li.classList.add("selected");
+    li.onclick = () => { state.selectedPart = p.index; render(); };
+    clicks.appendChild(li);
+  });
+}
+
+function escapeHtml(text) {
+  return String(text).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+}
+
+// -- drawing ---------------------------------------------------------------------------------------------------
+
+function fitToView() {
+  const rect = canvas.getBoundingClientRect();
+  const [w, h] = state.session.images[state.index].size;
+  state.zoom = Math.min(rect.width / w, rect.height / h);
+  state.panX = (rect.width - w * state.zoom) / 2;
+  state.panY = (rect.height - h * state.zoom) / 2;
+  render();
+}
+
+const toScreen = ([u, v]) => [u * state.zoom + state.panX, v * state.zoom + state.panY];
+const toImage = (x, y) => [(x - state.panX) / state.zoom, (y - state.panY) / state.zoom];
+
+function line(a, b, colour, width = 1.5, dash = []) {
+  ctx.strokeStyle = colour;
+  ctx.lineWidth = width;
+  ctx.setLineDash(dash);
+  ctx.beginPath();
+  ctx.moveTo(...toScreen(a));
+  ctx.lineTo(...toScreen(b));
+  ctx.stroke();
+  ctx.setLineDash([]);
+}
+
+function dot(p, colour, radius = 4, outline = "#000") {
+  const [x, y] = toScreen(p);
+  ctx.fillStyle = colour;
+  ctx.strokeStyle = outline;
+  ctx.lineWidth = 1;
+  ctx.beginPath();
+  ctx.arc(x, y, radius, 0, 2 * Math.PI);
+  ctx.fill();
+  ctx.stroke();
+}
+
+function label(p, text, colour) {
+  const [x, y] = toScreen(p);
+  ctx.font = "12px system-ui, sans-serif";
+  ctx.lineWidth = 3;
+  ctx.strokeStyle = "rgba(0,0,0,0.7)";
+  ctx.strokeText(text, x + 6, y - 6);
+  ctx.fillStyle = colour;
+  ctx.fillText(text, x + 6, y - 6);
+}
+
+const EDGES = [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]];
+
+function render() {
+  const rect = canvas.getBoundingClientRect();
+  if (canvas.width !== Math.round(rect.width) || canvas.height !== Math.round(rect.height)) {
+    canvas.width = Math.round(rect.width);
+    canvas.height = Math.round(rect.height);
+  }
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (state.image.complete && state.image.naturalWidth) {
+    ctx.imageSmoothingEnabled = state.zoom < 2;
+    ctx.drawImage(state.image, state.panX, state.panY, state.image.naturalWidth * state.zoom,
+      state.image.naturalHeight * state.zoom);
+  }
+  if (state.view) {
+    for (const v of state.view.vehicles) drawVehicle(v, v.id === state.vehicle);
+  }
+  for (const p of state.pending) dot(p, "#ffd479", 4);
+  if (state.drag && state.drag.kind === "box") {
+    const [x0, y0] = toScreen(state.drag.from);
+    const [x1, y1] = toScreen(state.drag.to);
+    ctx.strokeStyle = "#ffd479";
+    ctx.setLineDash([4, 3]);
+    ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+    ctx.setLineDash([]);
+  }
+  panels();
+}
+
+function drawVehicle(v, selected) {
+  const f = v.fit;
+  const alpha = selected ? 1 : 0.45;
+  ctx.globalAlpha = alpha;
+  if (v.box2d) {
+    const [x0, y0] = toScreen([v.box2d[0], v.box2d[1]]);
+    const [x1, y1] = toScreen([v.box2d[2], v.box2d[3]]);
+    ctx.strokeStyle = "#9ecbff";
+    ctx.lineWidth = 1;
+    ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+  }
+  if (f.status === "ok" && f.corners_uv) {
+    const c = f.corners_uv;
+    ctx.fillStyle = "rgba(255, 80, 80, 0.25)";
+    ctx.beginPath();
+    f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
+    ctx.closePath();
+    ctx.fill();
+    for (const [i, j] of EDGES) {
+      const front = f.front_face.includes(i) && f.front_face.includes(j);
+      line(c[i], c[j], front ? "#ff5050" : "#38d9ff", front ? 2.5 : 1.5);
+    }
+  }
+  if (selected) {
+    v.targets.forEach((t, k) => {
+      if (t.uv.length === 2) line(t.uv[0], t.uv[1], "#ffd479", 1.5, [6, 4]);  // a pair or an arrow, tail to head
+      t.uv.forEach((p) => {
+        const [x, y] = toScreen(p);
+        ctx.strokeStyle = "#ffd479";
+        ctx.lineWidth = 1.5;
+        ctx.setLineDash([3, 3]);
+        ctx.beginPath();
+        ctx.arc(x, y, 9, 0, 2 * Math.PI);
+        ctx.stroke();
+        ctx.setLineDash([]);
+      });
+      label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479");
+    });
+  }
+  for (const p of v.parts) {
+    p.uv.forEach((uv, k) => {
+      if (p.residuals_px) {  // residual: projected minus clicked, drawn 5 times longer
+        const r = p.residuals_px[k];
+        line(uv, [uv[0] + 5 * r[0], uv[1] + 5 * r[1]], "#ff00ff", 1.5);
+      }
+      const colour = !p.name ? "#ff9800" : p.auto ? "#ffeb3b" : "#4caf50";
+      dot(uv, colour, p.index === state.selectedPart && selected ? 6 : 4, selected ? "#000" : "#444");
+    });
+    if (selected) {
+      const text = p.name ? (p.kind === "point" ? p.name : `${p.name} ${p.kind}`) : "?";
+      label(p.uv[0], text, p.name ? "#fff" : "#ff9800");
+    }
+  }
+  ctx.globalAlpha = 1;
+}
+
+// -- mouse and keys ------------------------------------------------------------------------------------------
+
+function nearestClick(x, y) {
+  const v = currentVehicle();
+  if (!v) return null;
+  let best = null;
+  for (const p of v.parts) {
+    p.uv.forEach((uv, k) => {
+      const [sx, sy] = toScreen(uv);
+      const d = Math.hypot(sx - x, sy - y);
+      if (d <= 7 && (!best || d < best.d)) best = { part: p.index, click: k, d };
+    });
+  }
+  return best;
+}
+
+canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+canvas.addEventListener("mousedown", (e) => {
+  const x = e.offsetX, y = e.offsetY;
+  if (e.button === 2 || e.shiftKey) {
+    state.drag = { kind: "pan", x, y, panX: state.panX, panY: state.panY };
+  } else if (state.mode === "box") {
+    state.drag = { kind: "box", from: toImage(x, y), to: toImage(x, y) };
+  } else {
+    const hit = nearestClick(x, y);
+    state.drag = hit ? { kind: "move", ...hit, x, y, moved: false } : { kind: "click", x, y };
+  }
+});
+canvas.addEventListener("mousemove", (e) => {
+  const d = state.drag;
+  if (!d) return;
+  if (d.kind === "pan") {
+    state.panX = d.panX + e.offsetX - d.x;
+    state.panY = d.panY + e.offsetY - d.y;
+    render();
+  } else if (d.kind === "box") {
+    d.to = toImage(e.offsetX, e.offsetY);
+    render();
+  } else if (d.kind === "move" && Math.hypot(e.offsetX - d.x, e.offsetY - d.y) > 2) {
+    d.moved = true;
+    const v = currentVehicle();
+    v.parts[d.part].uv[d.click] = toImage(e.offsetX, e.offsetY);
+    render();
+  }
+});
+canvas.addEventListener("mouseup", async (e) => {
+  const d = state.drag;
+  state.drag = null;
+  if (!d) return;
+  if (d.kind === "box") {
+    state.mode = "click";
+    const [u0, v0] = d.from, [u1, v1] = toImage(e.offsetX, e.offsetY);
+    const box = [Math.min(u0, u1), Math.min(v0, v1), Math.max(u0, u1), Math.max(v0, v1)];
+    if (box[2] - box[0] < 2 || box[3] - box[1] < 2) { say("box too small", true); render(); return; }
+    if (currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d) {
+      await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box });
+    } else {
+      await newVehicle(box);
+    }
+  } else if (d.kind === "move") {
+    state.selectedPart = d.part;
+    if (d.moved) {
+      await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click,
+        uv: toImage(e.offsetX, e.offsetY) });
+    } else {
+      render();
+    }
+  } else if (d.kind === "click") {
+    await addClick(toImage(e.offsetX, e.offsetY));
+  }
+});
+canvas.addEventListener("wheel", (e) => {
+  e.preventDefault();
+  const factor = Math.exp(-e.deltaY * 0.0015);
+  const [u, v] = toImage(e.offsetX, e.offsetY);
+  state.zoom = Math.min(Math.max(state.zoom * factor, 0.05), 40);
+  state.panX = e.offsetX - u * state.zoom;
+  state.panY = e.offsetY - v * state.zoom;
+  render();
+}, { passive: false });
+
+document.addEventListener("keydown", async (e) => {
+  if (e.target.tagName === "SELECT" || e.target.tagName === "INPUT") return;
+  const key = e.key;
+  if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  if (HOTKEYS[key]) arm(HOTKEYS[key]);
+  else if (key === "Escape") { state.mode = "click"; arm(null); }
+  else if (key === "u") await edit({ op: "undo" });
+  else if (key === "x") await takeRunnerUp();
+  else if (key === "n") await newVehicle();
+  else if (key === "b") { state.mode = "box"; say("drag the vehicle's box"); }
+  else if (key === "d") await toggleDone();
+  else if (key === "]" || key === "PageDown") await showImage(state.index + 1);
+  else if (key === "[" || key === "PageUp") await showImage(state.index - 1);
+  else if (key === "0") fitToView();
+  else if ((key === "Delete" || key === "Backspace") && state.selectedPart !== null && currentVehicle()) {
+    await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
+    state.selectedPart = null;
+    render();
+  }
+});
+
+async function toggleDone() {
+  const v = currentVehicle();
+  if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
+}
+
+$("prev").onclick = () => showImage(state.index - 1);
+$("next").onclick = () => showImage(state.index + 1);
+$("new-vehicle").onclick = () => newVehicle();
+$("draw-box").onclick = () => { state.mode = "box"; say("drag the vehicle's box"); };
+$("done").onclick = toggleDone;
+$("undo").onclick = () => edit({ op: "undo" });
+$("prototype").onchange = async () => {
+  const v = currentVehicle();
+  if (v) await edit({ op: "set_vehicle", vehicle: v.id, prototype: $("prototype").value });
+};
+window.addEventListener("resize", render);
+start();
