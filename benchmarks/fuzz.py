@@ -19,7 +19,8 @@ Each finding's input is kept under ``--keep`` for reproduction. Run from the rep
 
     python benchmarks/fuzz.py [--files 10000] [--workers 1] [--seed 0] [--json benchmarks/results/fuzz.json]
 
-The kill -9 trials in the write phase (``kill_trials``) are the second half of item 7.
+Then ``--kill-trials N`` (default 20) kill -9 runs of ``fit`` in its write phase (:mod:`fuzz_kill`), counting folders
+left mixed or refused by the next run (the second half of item 7).
 """
 
 from __future__ import annotations
@@ -371,9 +372,12 @@ def run_chunk(job: tuple[list[int], int, float, str]) -> dict[str, Any]:
 
 def kill_trials(args: argparse.Namespace) -> dict[str, Any]:
     """kill -9 in the write phase of ``fit``, then check the folder is the previous complete output or one the
-    next run takes as its own ("folders left mixed"). Not part of this file yet: the output-folder work of
-    issue 13 (items 4 and 5) adds it here."""
-    return {"trials": 0, "folders_left_mixed": None, "note": "kill -9 trials not implemented yet"}
+    next run takes as its own ("folders left mixed": ``mixed``, target 0); :mod:`fuzz_kill` runs them."""
+    if args.kill_trials == 0:
+        return {"trials": 0}
+    from fuzz_kill import kill_trials as run_kill_trials
+
+    return run_kill_trials(args.kill_trials, seed=args.seed)
 
 
 def merge(parts: list[dict[str, Any]]) -> dict[str, Any]:
@@ -402,6 +406,7 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=20.0, help="seconds per command before it counts as a hang")
     parser.add_argument("--keep", type=Path, default=Path(tempfile.gettempdir()) / "toosicubix-fuzz-findings",
                         help="where the inputs of findings are kept")
+    parser.add_argument("--kill-trials", type=int, default=20, help="kill -9 trials in fit's write phase (0: none)")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args(argv)
     args.keep.mkdir(parents=True, exist_ok=True)
@@ -434,7 +439,8 @@ def main_(argv: list[str] | None = None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=1) + "\n")
     bad = (figures["tracebacks"] + figures["non_finite_written"] + figures["files_outside_output"]
-           + figures["hangs_over_timeout"] + figures["bad_exit_codes"] + figures["exit_2_without_message"])
+           + figures["hangs_over_timeout"] + figures["bad_exit_codes"] + figures["exit_2_without_message"]
+           + kills.get("mixed", 0) + kills.get("rerun_failed", 0))
     return 1 if bad else 0
 
 
