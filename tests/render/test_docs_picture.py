@@ -15,7 +15,7 @@ def test_readme_shows_the_sample_overlay_and_the_command_that_makes_it():
     assert "![" in text and "](docs/sample-overlay.png)" in text
     assert text.index("docs/sample-overlay.png") < text.index("## Use")  # near the top
     assert ("toosicubix fit samples/annotations.json && toosicubix render --png-compression 9 && "
-            "cp toosicubix-out/render/000002.png docs/sample-overlay.png") in text
+            "cp toosicubix-out-render/000002.png docs/sample-overlay.png") in text
     data = PICTURE.read_bytes()
     assert len(data) < 200_000
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)

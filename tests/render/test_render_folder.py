@@ -19,6 +19,8 @@ from toosicubix.pipeline.batch import fit_file
 from toosicubix.render.folder import _fitted_uv, selected
 from toosicubix.render.overlay import BLANK_BGR
 
+SAMPLE_FILE = REPO / "samples" / "annotations.json"
+
 SAMPLE = REPO / "samples" / "annotations.json"
 PHOTO_BGR = (10, 200, 30)
 
@@ -79,7 +81,16 @@ def test_annotation_file_found_from_results_json_and_default_output(fitted, tmp_
     monkeypatch.chdir(root)  # results.json names the annotation file as fit was given it (absolute here)
     result = run(out, "-q")
     assert result.exit_code == 0, result.output
-    assert len(list((out / "render").glob("*.png"))) == 3
+    assert len(list((tmp_path / "out-render").glob("*.png"))) == 3
+    assert not (out / "render").exists()  # never inside OUT: a later fit into OUT must not find foreign files
+
+
+def test_fit_again_after_render(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    fit_file(SAMPLE_FILE, tmp_path / "toosicubix-out")
+    assert run(tmp_path / "toosicubix-out", "-q").exit_code == 0
+    summary = fit_file(SAMPLE_FILE, tmp_path / "toosicubix-out")  # refused before: render/ inside OUT
+    assert summary.ok == 6 and len(list((tmp_path / "toosicubix-out-render").glob("*.png"))) == 3
 
 
 def test_bad_inputs_exit_2_with_the_file_named(fitted, tmp_path):

@@ -14,7 +14,8 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.command("render")
 @click.argument("out", required=False, default=DEFAULT_OUTPUT_DIR, type=click.Path(file_okay=False, path_type=Path))
 @click.option("-o", "--out", "render_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for the PNG files, one per image: <image id>.png [default: OUT/render].")
+              help="Folder for the PNG files, one per image: <image id>.png [default: OUT-render beside OUT, "
+                   "never inside OUT, which fit replaces as a whole].")
 @click.option("--annotations", "annotations", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="The annotation file [default: the one OUT/results.json names].")
 @click.option("--images", "images_dir", type=click.Path(file_okay=False, path_type=Path), default=None,

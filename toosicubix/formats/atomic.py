@@ -58,18 +58,24 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def atomic_write(path: str | Path, write: Callable[[IO[str]], None]) -> None:
-    """Let ``write`` fill a temporary file (UTF-8, ``\\n`` line ends) in the folder of ``path``, then rename
-    it to ``path``.
+def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: bool = False,
+                 clean: bool = True) -> None:
+    """Let ``write`` fill a temporary file in the folder of ``path`` (text: UTF-8, ``\\n`` line ends; or
+    ``binary``), then rename it to ``path``.
 
-    The folder must exist. On any error the temporary file is removed and ``path`` is untouched.
+    The folder must exist. On any error the temporary file is removed and ``path`` is untouched. ``clean``
+    first removes the folder's stale temporaries (:func:`remove_stale_temporaries`); a caller writing many files
+    into one folder does that once and passes False.
     """
     path = Path(path)
-    remove_stale_temporaries(path.parent)
+    if clean:
+        remove_stale_temporaries(path.parent)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     try:
         os.fchmod(fd, 0o666 & ~current_umask())
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+        handle_of = (lambda: os.fdopen(fd, "wb")) if binary else (
+            lambda: os.fdopen(fd, "w", encoding="utf-8", newline="\n"))
+        with handle_of() as handle:
             write(handle)
             handle.flush()
             os.fsync(handle.fileno())
@@ -80,6 +86,11 @@ def atomic_write(path: str | Path, write: Callable[[IO[str]], None]) -> None:
         except FileNotFoundError:
             pass
         raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes, clean: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_write`)."""
+    atomic_write(path, lambda handle: handle.write(data), binary=True, clean=clean)
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:

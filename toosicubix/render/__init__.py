@@ -4,7 +4,7 @@ matplotlib on its Agg backend (:mod:`.plots`, imported only when asked for).
 Example
 -------
 >>> from toosicubix.render.folder import render_folder
->>> summary = render_folder("toosicubix-out")  # doctest: +SKIP  (writes toosicubix-out/render/<image id>.png)
+>>> summary = render_folder("toosicubix-out")  # doctest: +SKIP  (writes toosicubix-out-render/<image id>.png)
 """
 
 from __future__ import annotations

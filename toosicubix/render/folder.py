@@ -11,9 +11,7 @@ Every PNG is written atomically (temporary file, then rename); the same inputs g
 from __future__ import annotations
 
 import hashlib
-import os
 import re
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +23,7 @@ import numpy as np
 from toosicubix.annotations.convert import load_images
 from toosicubix.camera import Camera
 from toosicubix.errors import InputError
+from toosicubix.formats.atomic import atomic_write_bytes, remove_stale_temporaries
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
 from toosicubix.model import Image
 from toosicubix.render.overlay import (
@@ -44,7 +43,9 @@ from toosicubix.render.overlay import (
 #: (yaw or depth sigma beyond ``toosicubix validate``'s default thresholds).
 ONLY_CHOICES = ("failed", "ambiguous", "uncertain")
 #: Where ``render`` writes inside the fit folder unless told otherwise.
-DEFAULT_RENDER_SUBDIR = "render"
+#: The default picture folder is OUT's sibling ``<OUT>-render``: never inside OUT, which ``fit`` replaces as a
+#: whole and which holds only what ``fit`` wrote.
+DEFAULT_RENDER_SUFFIX = "-render"
 #: PNG compression: 1 is fast and still about half the raw size; the README picture uses 9.
 PNG_COMPRESSION = 1
 
@@ -90,28 +91,6 @@ class RenderSummary:
     skipped: int = 0
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
-
-    (The binary sibling of :func:`toosicubix.formats.atomic.atomic_write`.) The file gets the permissions
-    ``open`` would give it (0666 less the umask), not ``mkstemp``'s private 0600.
-    """
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def encode_png(image_bgr: np.ndarray, compression: int = PNG_COMPRESSION) -> bytes:
@@ -377,8 +356,9 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
     images_dir = None if images_dir is None else Path(images_dir)
     if images_dir is not None and not images_dir.is_dir():
         raise RenderInputError(f"{images_dir}: image folder not found")
-    out = Path(out_dir) if out_dir is not None else fit_dir / DEFAULT_RENDER_SUBDIR
+    out = Path(out_dir) if out_dir is not None else fit_dir.with_name(fit_dir.name + DEFAULT_RENDER_SUFFIX)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out)  # once here; each picture is then written without scanning the folder again
     summary.out_dir = out
     chosen = [r for r in results if selected(r, options.only)]
     summary.skipped = len(results) - len(chosen)
@@ -411,7 +391,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
         gt = ground_truth_cuboids(source, result, summary.warnings) if source is not None else []
         picture = render_image(result, image, background, gt, options.overlay, note)
         target = out / f"{result.id}.png"
-        atomic_write_bytes(target, encode_png(picture, options.png_compression))
+        atomic_write_bytes(target, encode_png(picture, options.png_compression), clean=False)
         summary.written.append(target)
         if progress is not None:
             progress(1)

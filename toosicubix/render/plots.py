@@ -25,7 +25,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject
-from toosicubix.render.folder import atomic_write_bytes
+from toosicubix.formats.atomic import atomic_write_bytes
 
 DPI = 100
 #: Depth bins of ``errors-by-depth.png``, metres (the last is open).
