@@ -1,7 +1,8 @@
 """The one part vocabulary: every kind of annotation, every name it may carry, and what each one means.
 
 The table is the data file ``vocabulary.json`` beside this module; this module loads it once and answers
-questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``length``):
+questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``length``, and for real clicks
+``keypoint`` and ``plate``):
 
 - ``name_field``: the annotation-file key that names it (``part``, ``face``, ``axis``, ``feature``);
 - ``clicks``: the keys of its clicked pixels, in click order (``xy``; ``left``, ``right``; ...);
