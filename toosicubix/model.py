@@ -20,13 +20,16 @@ class Part:
 
     Attributes
     ----------
-    kind : 'point', 'symmetry', 'direction' or 'length'
+    kind : 'point', 'symmetry', 'direction', 'length', 'keypoint' or 'plate'
     name : the point's part name ('wheel-front-left', ...), the symmetry face ('front', 'rear', 'roof'),
         the direction axis ('forward', ...) or the length feature ('plate-rear', ...)
     uv : (k, 2) pixels as clicked: one row for a point, (left, right) for a symmetry,
         (tail, head) for a direction, (a, b) for a length
     json_path : where it stands in the annotation file
-    known : ``(metres, sigma)`` of a length annotation's feature, else None
+    known : ``(metres, sigma)`` of a length (or plate) annotation's feature, else None
+    at, spread : (3,) a keypoint's (or a plate centre's) typical position and its spread, fractions of
+        ``(dx, dy, dz)``; else None
+    visible : False for a keypoint labelled but hidden
     """
 
     kind: str
@@ -34,6 +37,9 @@ class Part:
     uv: np.ndarray
     json_path: str
     known: tuple[float, float] | None = None
+    at: np.ndarray | None = None
+    spread: np.ndarray | None = None
+    visible: bool = True
 
     @property
     def click_labels(self) -> tuple[str, ...]:

@@ -24,11 +24,14 @@ from toosicubix.parts import vocabulary
 def _every_part(rng: np.random.Generator) -> list[dict]:
     """One annotation of every kind and name the vocabulary knows, with random pixels (and known sizes)."""
     out = []
+    extra = {"row3": lambda: rng.uniform(-0.5, 0.5, 3).tolist(),
+             "positive_row3": lambda: rng.uniform(0.01, 0.2, 3).tolist(), "bool_default_true": lambda: False}
     for kind in vocabulary.KINDS.values():
-        for name in kind.names:
+        for name in kind.names or (["top_left_c_rear_glass"] if kind.open_names else []):
             part = {"kind": kind.kind, kind.name_field: name}
             part.update({key: rng.uniform(0.0, 1000.0, 2).tolist() for key in kind.clicks})
             part.update({key: float(rng.uniform(0.01, 3.0)) for key in kind.known})
+            part.update({key: extra[type_name]() for key, type_name in kind.fields_extra})
             out.append(part)
     return out
 

@@ -58,7 +58,23 @@ def test_every_part_name_and_axis_is_accepted():
               for f in ("front", "rear", "roof")]
     parts += [{"kind": "direction", "axis": a, "tail": [1.0, 2.0], "head": [9.0, 9.0]} for a in DIRECTION_AXES]
     doc["images"][0]["vehicles"][0]["parts"] = parts
-    assert len(parse_annotations(doc).images[0].vehicles[0].parts) == 19 + 3 + 6
+    assert len(parse_annotations(doc).images[0].vehicles[0].parts) == 19 + 4 + 3 + 6  # 4 wheel hubs
+
+
+def test_keypoint_and_plate_parts_are_typed():
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    keypoint = {"kind": "keypoint", "name": "door_handle", "xy": [10.0, 20.0], "at": [0.1, 0.45, 0.5],
+                "spread": [0.05, 0.02, 0.04]}
+    plate = {"kind": "plate", "face": "rear", "a": [1.0, 2.0], "b": [9.0, 2.0], "at": [-0.5, 0.0, 0.4],
+             "spread": [0.01, 0.01, 0.05], "metres": 0.44, "sigma": 0.01}
+    doc["images"][0]["vehicles"][0]["parts"] = [keypoint, plate]
+    parts = parse_annotations(doc).images[0].vehicles[0].parts
+    assert parts[0].visible and parts[1].metres == 0.44
+    for bad, where in (({**keypoint, "name": ""}, "name"), ({**keypoint, "spread": [0.1, 0.0, 0.1]}, "spread"),
+                       ({**plate, "face": "roof"}, "face"), ({**plate, "metres": 1000.0}, "metres")):
+        doc["images"][0]["vehicles"][0]["parts"] = [bad]
+        with pytest.raises(InputFileError, match=rf"parts\[0\]\.{where}"):
+            parse_annotations(doc)
 
 
 def test_camera_K_with_distortion():

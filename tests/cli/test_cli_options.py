@@ -59,5 +59,8 @@ def test_the_ground_truth_options_are_declared_once():
         for param in main.commands[name].params:
             if param.name.startswith("ground_truth_"):
                 helps.setdefault(param.name, set()).add(param.help)
-    assert set(helps) == {"ground_truth_kitti", "ground_truth_kitti_tracking", "ground_truth_cityscapes"}
+    assert set(helps) == {"ground_truth_kitti", "ground_truth_kitti_tracking", "ground_truth_cityscapes",
+                          "ground_truth_apollocar3d"}  # ApolloCar3D's keypoint file: eval (and render) only
     assert all(len(texts) == 1 for texts in helps.values())
+    assert not any(p.name == "ground_truth_apollocar3d" for name in ("priors", "tune", "simulate")
+                   for p in main.commands[name].params)

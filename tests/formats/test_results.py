@@ -114,3 +114,16 @@ def test_a_malformed_vehicle_names_its_json_path(tmp_path):
            "t_cam_vehicle": [0, 0, 10], "dimensions": [4, 2, 1.5], "box2d": None, "sigma": {"yaw_deg": 1.0}}
     with pytest.raises(FormatError, match=r"\$\.images\[0\]\.vehicles\[3\]"):
         VehicleResult.from_json(doc, tmp_path / "results.json", "$.images[0].vehicles[3]")
+
+
+def test_click_weights_and_downweighted_are_written_only_when_set_and_round_trip():
+    plain = VehicleResult(id="1", status="failed", error="x", prototype="Car")
+    assert "click_weights" not in plain.to_json() and "downweighted" not in plain.to_json()
+    weighted = VehicleResult(id="1", status="ok", error=None, prototype="Car", R_cam_vehicle=np.eye(3),
+                             t_cam_vehicle=np.array([0.0, 1.0, 10.0]), dimensions=np.array([4.0, 1.8, 1.5]),
+                             click_labels=("a", "b"), click_weights=np.array([1.0, 0.25]), downweighted=("b",))
+    doc = json.loads(json.dumps(weighted.to_json()))
+    assert doc["click_weights"] == [1.0, 0.25] and doc["downweighted"] == ["b"]
+    back = VehicleResult.from_json(doc)
+    np.testing.assert_array_equal(back.click_weights, [1.0, 0.25])
+    assert back.downweighted == ("b",) and back.extra == {}

@@ -9,6 +9,7 @@ from toosicubix.annotations.schema import DIRECTION_AXES, LENGTH_FEATURES, POINT
 from toosicubix.parts.keypoints import (
     KEYPOINTS,
     SLOTS,
+    TOOL_POINT_PARTS,
     KeypointProblem,
     keypoints_from_parts,
     lengths_of_parts,
@@ -23,8 +24,9 @@ def _canonical(parts):
 
 
 def test_vocabulary_names_every_click_once():
-    # 19 point parts, 3 faces x 3 pairs x 2, 6 arrows x 2, 8 length features x 2.
-    assert len(POINT_PARTS) == 19
+    # 19 point parts (the 4 wheel hubs of real clicks left out), 3 faces x 3 pairs x 2, 6 arrows x 2, 8 length
+    # features x 2.
+    assert len(POINT_PARTS) == 23 and len(TOOL_POINT_PARTS) == 19
     assert len(KEYPOINTS) == 19 + 18 + 2 * len(DIRECTION_AXES) + 2 * len(LENGTH_FEATURES) == 65
     assert len(set(KEYPOINTS)) == len(KEYPOINTS)
     for name in ("wheel-front-left", "rear-center", "edge-rear-left", "corner-top-rear-left", "rear-pair1-left",

@@ -19,7 +19,9 @@ def test_the_schema_admits_exactly_the_vocabulary_s_names():
     assert schema.DIRECTION_AXES == vocabulary.names("direction")
     assert tuple(schema.LENGTH_FEATURES) == vocabulary.names("length")
     assert all(isinstance(d, str) and d for d in schema.LENGTH_FEATURES.values())
-    assert len(schema.POINT_PARTS) == 19
+    assert len(schema.POINT_PARTS) == 23  # with the four wheel hubs
+    assert vocabulary.names("keypoint") == () and vocabulary.KINDS["keypoint"].open_names
+    assert vocabulary.names("plate") == ("front", "rear")
 
 
 @pytest.mark.parametrize("kind", list(vocabulary.KINDS))
@@ -28,7 +30,8 @@ def test_every_name_builds_its_clicks_with_the_vocabulary_s_labels(kind):
     for name, entry in k.names.items():
         uv = np.zeros((len(k.clicks), 2))
         known = (1.0, 0.1) if k.known else None
-        model = build_parts_model([Part(kind, name, uv, "$", known)])
+        soft = {"at": np.array([0.5, 0.0, 0.4]), "spread": np.full(3, 0.05)} if k.fields_extra else {}
+        model = build_parts_model([Part(kind, name, uv, "$", known, **soft)])
         assert model.click_labels == vocabulary.click_labels(kind, name)
         for index, label in enumerate(model.click_labels):
             assert vocabulary.click(label) == vocabulary.Click(kind, name, index, label)
@@ -86,4 +89,16 @@ def test_the_schema_has_a_class_per_kind_with_the_vocabulary_s_file_keys():
     for kind, cls in schema.PART_ANNOTATIONS.items():
         k = vocabulary.KINDS[kind]
         assert cls.__name__ == k.schema["class"]
-        assert list(cls.model_fields) == ["kind", k.name_field, *k.clicks, *k.known]
+        assert list(cls.model_fields) == ["kind", k.name_field, *k.clicks, *k.known, *(f for f, _ in k.fields_extra)]
+
+
+def test_an_open_kind_takes_any_name_and_its_labels_read_back():
+    assert vocabulary.click("keypoint-top_left_c_rear_glass") == vocabulary.Click(
+        "keypoint", "top_left_c_rear_glass", 0, "keypoint-top_left_c_rear_glass")
+    assert vocabulary.faces_of_click("keypoint-x") is None and vocabulary.soft("keypoint-x")
+    assert vocabulary.soft("plate-rear/a") and not vocabulary.soft("wheel-front-left")
+    with pytest.raises(KeyError):
+        vocabulary.click("keypoint-")
+    model = build_parts_model([Part("keypoint", "lamp", np.zeros((1, 2)), "$", None, np.array([-0.45, 0.4, 0.6]),
+                                    np.full(3, 0.05))])
+    assert model.click_faces == (("rear", "left"),)

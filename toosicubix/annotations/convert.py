@@ -28,7 +28,10 @@ def part_from_schema(p: Any, json_path: str) -> Part:
     kind = KINDS[p.kind]
     uv = np.array([getattr(p, key) for key in kind.clicks], dtype=float)
     known = tuple(float(getattr(p, key)) for key in kind.known) if kind.known else None
-    return Part(p.kind, getattr(p, kind.name_field), uv, json_path, known)  # type: ignore[arg-type]
+    extra = {key: getattr(p, key) for key, _ in kind.fields_extra}
+    rows = {key: np.array(extra[key], dtype=float) for key in ("at", "spread") if key in extra}
+    return Part(p.kind, getattr(p, kind.name_field), uv, json_path, known,  # type: ignore[arg-type]
+                visible=bool(extra.get("visible", True)), **rows)
 
 
 def ground_from_schema(g: schemas.GroundModel) -> GroundPlane:
@@ -134,6 +137,15 @@ def part_json(part: Part, decimals: int | None = None) -> dict[str, Any]:
         if part.known is None:
             raise ValueError(f"{part.json_path}: a {part.kind} annotation needs its known size")
         out.update({key: float(value) for key, value in zip(kind.known, part.known, strict=True)})
+    for key, _ in kind.fields_extra:  # a keypoint's or plate's typical position; ``visible`` only when False
+        if key == "visible":
+            if not part.visible:
+                out[key] = False
+            continue
+        row = getattr(part, key)
+        if row is None:
+            raise ValueError(f"{part.json_path}: a {part.kind} annotation needs its {key!r}")
+        out[key] = [float(v) for v in row]
     return out
 
 

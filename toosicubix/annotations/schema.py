@@ -124,20 +124,40 @@ _M = TypeVar("_M", bound=_Model)
 _KNOWN_SIZE_TYPES = {"metres": Metres, "sigma": SigmaMetres}
 
 
+def _ensure_positive_row(row: Row3) -> Row3:
+    if min(row) <= 0:
+        raise ValueError(f"expected positive spreads, got {list(row)}")
+    return row
+
+
+#: The pydantic type and default of each ``fields_extra`` type name of the vocabulary.
+_EXTRA_FIELD_TYPES: dict[str, tuple[Any, Any]] = {
+    "row3": (Row3, ...),
+    "positive_row3": (Annotated[Row3, AfterValidator(_ensure_positive_row)], ...),
+    "bool_default_true": (bool, True),
+}
+
+
 def _part_annotation(kind: vocabulary.Kind) -> type[_Model]:
     """The pydantic class of one part kind, from its vocabulary entry: ``kind``, the name (one of the kind's
-    names), the clicked pixels, and the known size's positive numbers when the kind states one."""
+    names; any non-empty string for an open kind), the clicked pixels, the known size's positive numbers when
+    the kind states one, and its extra typed fields (``fields_extra``)."""
     described = kind.schema.get("fields", {})
 
     def field(key: str, **extra: Any) -> Any:
         return Field(description=described[key], **extra) if key in described else (Field(**extra) if extra else ...)
 
+    name_type: Any = (str if kind.open_names else Literal[tuple(kind.names)])  # type: ignore[valid-type]
+    name_extra = {"min_length": 1, "max_length": MAX_ID_LENGTH} if kind.open_names else {}
     fields: dict[str, Any] = {
         "kind": (Literal[kind.kind], ...),
-        kind.name_field: (Literal[tuple(kind.names)], field(kind.name_field)),  # type: ignore[valid-type]
+        kind.name_field: (name_type, field(kind.name_field, **name_extra)),
         **{key: (Pixel, field(key)) for key in kind.clicks},
         **{key: (_KNOWN_SIZE_TYPES[key], field(key)) for key in kind.known},
     }
+    for key, type_name in kind.fields_extra:
+        annotation, default = _EXTRA_FIELD_TYPES[type_name]
+        fields[key] = (annotation, field(key, default=default) if default is not ... else field(key))
     return create_model(kind.schema["class"], __base__=_Model, __doc__=kind.schema["description"],
                         __module__=__name__, **fields)
 
@@ -148,6 +168,8 @@ PointAnnotation = PART_ANNOTATIONS["point"]
 SymmetryAnnotation = PART_ANNOTATIONS["symmetry"]
 DirectionAnnotation = PART_ANNOTATIONS["direction"]
 LengthAnnotation = PART_ANNOTATIONS["length"]
+KeypointAnnotation = PART_ANNOTATIONS["keypoint"]
+PlateAnnotation = PART_ANNOTATIONS["plate"]
 
 PartAnnotation = Annotated[Union[tuple(PART_ANNOTATIONS.values())], Field(discriminator="kind")]  # noqa: UP007
 
@@ -298,7 +320,7 @@ class VehicleAnnotation(_Model):
     @field_validator("parts")
     @classmethod
     def _ensure_few_clicks(cls, parts: list[PartAnnotation]) -> list[PartAnnotation]:
-        clicks = sum(1 if isinstance(part, PointAnnotation) else 2 for part in parts)
+        clicks = sum(len(vocabulary.KINDS[part.kind].clicks) for part in parts)
         if clicks > MAX_CLICKS_PER_VEHICLE:
             raise ValueError(f"expected at most {MAX_CLICKS_PER_VEHICLE} clicked points per vehicle "
                              f"(MAX_CLICKS_PER_VEHICLE), found {clicks} in {len(parts)} parts")
@@ -359,7 +381,7 @@ def json_schema() -> dict[str, Any]:
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
 
 
-_UNION_TAGS = {"point", "symmetry", "direction", "length"}
+_UNION_TAGS = set(vocabulary.KINDS)
 
 
 def _json_path(loc: tuple[int | str, ...]) -> str:

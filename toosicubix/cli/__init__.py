@@ -22,6 +22,7 @@ from toosicubix.cli import (
     export,
     fit,
     import_tools,
+    learn,
     priors,
     render,
     schema,
@@ -57,6 +58,7 @@ main.add_command(import_tools.import_group)
 main.add_command(export.export_group)
 main.add_command(render.render_command)
 main.add_command(annotate.annotate_command)
+main.add_command(learn.learn_parts_command)
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "BadInput", "main"]
 

@@ -12,7 +12,9 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 @click.command("eval")
 @click.argument("out", required=False, default=DEFAULT_OUTPUT_DIR, type=click.Path(file_okay=False, path_type=Path))
-@ground_truth_options()
+@ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d")
+@click.option("--car-models", "car_models_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="With --apollocar3d: ApolloCar3D's car_models.json [default: beside the keypoint file].")
 @click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
 @click.option("--classes", default=None,
@@ -27,9 +29,11 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
               help="Also write PNG plots into this folder: errors against depth, each metric's distribution, and "
                    "the calibration of the predicted sigmas. Example: --plots eval-plots")
 @click.option("-q", "--quiet", is_flag=True, help="No warnings or notes on stderr; the table still goes to stdout.")
-def eval_command(out: Path, ground_truth: GroundTruth, min_iou: float, classes: str | None, json_path: Path | None,
-                 csv_path: Path | None, plots_dir: Path | None, quiet: bool) -> None:
-    """Score fitted cuboids against KITTI or Cityscapes 3D ground truth, as the paper's Evaluation does.
+def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | None, min_iou: float,
+                 classes: str | None, json_path: Path | None, csv_path: Path | None, plots_dir: Path | None,
+                 quiet: bool) -> None:
+    """Score fitted cuboids against KITTI, Cityscapes 3D or ApolloCar3D ground truth, as the paper's Evaluation
+    does.
 
     Reads OUT (a `toosicubix fit` output folder, default toosicubix-out): results.json with full rotations,
     else label_2/*.txt read as yaw only. Pairs each predicted image with its ground truth by id (file stem),
@@ -44,11 +48,15 @@ def eval_command(out: Path, ground_truth: GroundTruth, min_iou: float, classes: 
     Example:
       toosicubix eval --kitti data/kitti
       toosicubix eval runs/kitti-out --kitti data/kitti --json eval.json --csv eval.csv
+      toosicubix eval apollo-out --apollocar3d apollo_val.json --car-models car_models.json
     """
     from toosicubix.evaluation import EvalOptions, evaluate_folder, format_report, write_csv, write_json
 
     options = EvalOptions(min_iou=min_iou, classes=parse_classes(classes))
-    result = evaluate_folder(out, ground_truth.kind, ground_truth.root, options)
+    if car_models_path is not None and ground_truth.kind != "apollocar3d":
+        raise click.UsageError("--car-models goes with --apollocar3d only")
+    source_options = {"car_models": car_models_path} if car_models_path is not None else {}
+    result = evaluate_folder(out, ground_truth.kind, ground_truth.root, options, **source_options)
     if not quiet:
         for warning in result.warnings:
             click.echo(f"warning: {warning}", err=True)

@@ -1,4 +1,4 @@
-"""``toosicubix import cvat|label-studio``: labelling-tool exports -> annotation file v1.
+"""``toosicubix import coco|cvat|label-studio``: keypoint files and labelling-tool exports -> annotation file v1.
 
 The commands are plain click commands; :data:`COMMANDS` lists them for the ``import`` group.
 """
@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from toosicubix.cli.options import BadInput
+from toosicubix.errors import InputError
 
 
 def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:
@@ -125,8 +126,61 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
          export_json, cameras_path, out_path, strict, quiet)
 
 
+@click.command("coco")
+@click.argument("keypoints", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--mapping", "mapping_name", required=True,
+              help="A bundled mapping (apollocar3d-66, apollocar3d-66-paper, toosicubix) or a mapping file (JSON, "
+                   "schema in schemas/mapping.schema.json): which keypoints make which parts.")
+@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help='Cameras file: {"cameras": [{"match": GLOB on file_name, "K": 3x3, "distortion": [...]}]}, the '
+                   "first match wins; else every image needs its own K (images[].K).")
+@click.option("--option", "options", multiple=True,
+              help="Use the mapping's optional parts with this option, e.g. --option plates (licence-plate "
+                   "corners as a known-width feature). Repeatable.")
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The annotation file to write.")
+@click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
+def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, options: tuple[str, ...],
+                        out_path: Path, quiet: bool) -> None:
+    """Turn a COCO keypoint file into an annotation file v1.
+
+    Image id = the file name's stem, vehicle id = the COCO annotation id, box2d from bbox. Keypoints with
+    v = 0 are skipped, v = 1 (labelled, not visible) kept. The summary on stderr counts every labelled
+    keypoint the mapping left unused, per name.
+
+    Exit code 0 on success, 2 for a malformed file (named with its JSON path), an image without a camera or a
+    keypoint the mapping does not know.
+
+    \b
+    Example:
+      toosicubix import coco apollo_val.json --mapping apollocar3d-66 --cameras cameras.json -o ann.json
+    """
+    from toosicubix.formats.atomic import atomic_write_json
+    from toosicubix.formats.cameras import load_cameras
+    from toosicubix.formats.coco import coco_to_annotations, load_mapping
+
+    try:
+        mapping, _ = load_mapping(mapping_name)
+        unknown = set(options) - {p.option for p in mapping.parts if p.option is not None}
+        if unknown:
+            raise click.BadParameter(f"the mapping {mapping.name!r} has no parts with option "
+                                     f"{', '.join(sorted(unknown))}", param_hint="--option")
+        cameras = load_cameras(cameras_path) if cameras_path is not None else None
+        document, summary = coco_to_annotations(keypoints, mapping, cameras, options)
+    except InputError as exc:
+        raise BadInput(str(exc)) from None
+    try:
+        atomic_write_json(out_path, document)
+    except OSError as exc:
+        raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
+    if not quiet:
+        for line in summary.lines():
+            click.echo(line, err=True)
+        click.echo(f"wrote {out_path}", err=True)
+
+
 #: The commands of the ``import`` group this module contributes.
-COMMANDS = (cvat_command, label_studio_command)
+COMMANDS = (coco_command, cvat_command, label_studio_command)
 
 
 @click.group("import")
@@ -135,6 +189,7 @@ def import_group() -> None:
 
     \b
     Example:
+      toosicubix import coco keypoints.json --mapping apollocar3d-66 --cameras cameras.json -o annotations.json
       toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
       toosicubix import label-studio export.json --cameras cameras.json -o annotations.json
     """

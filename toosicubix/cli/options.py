@@ -91,12 +91,18 @@ GROUND_TRUTH_HELP = {
                       "are <seq>_<frame as 6 digits>. Example: --kitti-tracking data/kitti_tracking",
     "cityscapes": "Cityscapes 3D ground truth: a folder searched recursively for *_gtBbox3d.json; image id = file "
                   "stem without _gtBbox3d. Example: --cityscapes gtBbox3d/val",
+    "apollocar3d": "ApolloCar3D ground truth: a keypoint file (COCO with a 6-DoF pose per car), its car models in "
+                   "car_models.json beside it (eval: or --car-models); image id = file name stem. "
+                   "Example: --apollocar3d apollo_val.json",
 }
+#: The ground truths that are folders (the commands that walk a dataset take only these by default).
+FOLDER_GROUND_TRUTHS = ("kitti", "kitti-tracking", "cityscapes")
 
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """The one ground-truth folder given: ``kind`` ('kitti', 'kitti-tracking', 'cityscapes') and ``root``."""
+    """The one ground truth given: ``kind`` ('kitti', 'kitti-tracking', 'cityscapes', 'apollocar3d') and ``root``
+    (a folder; ApolloCar3D's keypoint file)."""
 
     kind: str
     root: Path
@@ -112,14 +118,14 @@ def _parameter(kind: str) -> str:
 
 
 def ground_truth_options(*kinds: str, required: bool = True) -> Callable:
-    """Add ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` (or only ``kinds``); exactly one must be given
-    (at most one when not ``required``).
+    """Add ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` (or only ``kinds``, e.g. ``apollocar3d`` too);
+    exactly one must be given (at most one when not ``required``).
 
     The command receives ``ground_truth: GroundTruth`` (or None when none is given and none is required) instead
     of the options.
     """
-    kinds = kinds or tuple(GROUND_TRUTH_HELP)
-    flags = [f"--{kind} DIR" for kind in kinds]
+    kinds = kinds or FOLDER_GROUND_TRUTHS
+    flags = [f"--{kind} {'FILE' if kind == 'apollocar3d' else 'DIR'}" for kind in kinds]
     quantity = "exactly one" if required else "at most one"
     if len(flags) == 2:
         usage = f"give {quantity} of {flags[0]} and {flags[1]}"
@@ -163,6 +169,10 @@ _FITTING_OPTIONS = [
     click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
+    click.option("--robust-loss", type=click.Choice(["auto", "cauchy", "none"]), default=SolverOptions.robust_loss,
+                 show_default=True,
+                 help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
+                      " auto: for vehicles with keypoint or plate clicks only."),
     click.option("--kitti-ground", is_flag=True,
                  help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
                       "deg, vehicles upright within 2 deg. The options below then change single fields."),
@@ -183,7 +193,8 @@ _FITTING_OPTIONS = [
     click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
                  help="Worker processes; the output is the same for any number."),
 ]
-_FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "kitti_ground",
+_FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
+                  "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
                   "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "jobs")
 
@@ -227,7 +238,8 @@ def _fitting(values: dict[str, Any]) -> Fitting:
     explicit = {k: values[k] for k in ("lambda_3d", "lambda_px")
                 if ctx.get_parameter_source(k) is not click.core.ParameterSource.DEFAULT}
     options = replace(solver_options(values["config_path"], **explicit),
-                      click_sigma=values["click_sigma"], part_sigma=values["part_sigma"])
+                      click_sigma=values["click_sigma"], part_sigma=values["part_sigma"],
+                      robust_loss=values["robust_loss"])
     normal = _road_normal(values["road_normal"])
     given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
                                     "normal_sigma_deg", "upright_sigma_deg")}

@@ -25,7 +25,7 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.option("--only", type=click.Choice(["failed", "ambiguous", "uncertain"]), default=None,
               help="Render only images with a failed vehicle, an ambiguous one, or one whose yaw or depth sigma is "
                    "beyond `toosicubix validate`'s thresholds.")
-@ground_truth_options(required=False)
+@ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d", required=False)
 @click.option("--next-clicks", is_flag=True,
               help="Draw the parts suggested to click next (results.json of `fit --next-clicks N`) as targets.")
 @click.option("--no-birds-eye", is_flag=True, help="Leave out the bird's-eye view beside each overlay.")

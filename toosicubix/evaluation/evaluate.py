@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -205,15 +206,16 @@ def _frame_offsets(pred_image: PredImage, gt_image: GtImage, notes: _Notes) -> t
 
 
 def evaluate_folder(out_dir: str | Path, gt_kind: str, gt_dir: str | Path,
-                    options: EvalOptions | None = None) -> EvaluationResult:
+                    options: EvalOptions | None = None, **source_options: Any) -> EvaluationResult:
     """Read a fit output folder and a ground-truth folder, and score the one against the other.
 
     Parameters
     ----------
     out_dir : output folder of ``toosicubix fit`` (results.json, else label_2/)
-    gt_kind : 'kitti', 'kitti-tracking' or 'cityscapes'
-    gt_dir : the ground-truth folder
+    gt_kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
+    gt_dir : the ground-truth folder (ApolloCar3D: its keypoint file)
     options : threshold and class filter
+    source_options : further arguments of the ground-truth source (``car_models`` for 'apollocar3d')
 
     Raises
     ------
@@ -224,7 +226,7 @@ def evaluate_folder(out_dir: str | Path, gt_kind: str, gt_dir: str | Path,
     """
     _ensure_not_self(Path(out_dir), Path(gt_dir))
     predictions = load_predictions(out_dir)
-    return evaluate(predictions, open_ground_truth(gt_kind, gt_dir), options)
+    return evaluate(predictions, open_ground_truth(gt_kind, gt_dir, **source_options), options)
 
 
 def _ensure_not_self(out_dir: Path, gt_dir: Path) -> None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -289,21 +290,63 @@ class CityscapesGroundTruth(GroundTruthSource):
         return f"Cityscapes 3D gtBbox3d files under {self.root} ({len(self.folder.files)} images)"
 
 
-#: The ``--kitti``, ``--kitti-tracking`` and ``--cityscapes`` sources by kind.
+class ApolloCar3DGroundTruth(GroundTruthSource):
+    """ApolloCar3D: a keypoint file (COCO with a 6-DoF ``pose`` per car) and ``car_models.json`` (by default
+    beside it); image id = the file name's stem, every car of class 'Car', frames as
+    :mod:`toosicubix.formats.apollocar3d` says. Poses are in the camera frame of ``K`` (``t_cam_rect`` zero)."""
+
+    kind = "apollocar3d"
+    default_classes = ("Car",)
+
+    def __init__(self, root: str | Path, car_models: str | Path | None = None):
+        from toosicubix.annotations.schema import InputFileError
+        from toosicubix.formats import FormatError
+        from toosicubix.formats.apollocar3d import read_apollocar3d, read_car_models
+
+        self.root = Path(root)
+        if not self.root.is_file():
+            raise EvaluationInputError(f"{self.root}: ApolloCar3D keypoint file not found")
+        self.car_models = Path(car_models) if car_models is not None else self.root.parent / "car_models.json"
+        try:
+            images = read_apollocar3d(self.root, read_car_models(self.car_models))
+        except InputFileError as exc:
+            raise FormatError(exc.file, "; ".join(f"{p}: {m}" for p, m in exc.problems)) from None
+        self._images = {im.id: im for im in images}
+
+    def image_ids(self) -> list[str]:
+        return sorted(self._images)
+
+    def load(self, image_id: str) -> GtImage:
+        im = self._images.get(image_id)
+        if im is None:
+            raise EvaluationInputError(f"no ground truth for image {image_id!r}: not in {self.root}")
+        objects = tuple(GtObject(
+            index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
+            box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None, track_id=int(car.id)
+            if car.id.isdigit() else None, source=car.source, subtype=car.model.type) for k, car in enumerate(im.cars))
+        return GtImage(id=image_id, objects=objects, t_cam_rect=np.zeros(3), K=None, source=str(self.root))
+
+    def describe(self) -> str:
+        return f"ApolloCar3D keypoints {self.root} with car models {self.car_models} ({len(self._images)} images)"
+
+
+#: The ``--kitti``, ``--kitti-tracking``, ``--cityscapes`` and ``--apollocar3d`` sources by kind.
 SOURCES: dict[str, type[GroundTruthSource]] = {
     "kitti": KittiObjectGroundTruth,
     "kitti-tracking": KittiTrackingGroundTruth,
     "cityscapes": CityscapesGroundTruth,
+    "apollocar3d": ApolloCar3DGroundTruth,
 }
 
 
-def open_ground_truth(kind: str, root: str | Path) -> GroundTruthSource:
-    """Open a ground-truth folder.
+def open_ground_truth(kind: str, root: str | Path, **source_options: Any) -> GroundTruthSource:
+    """Open a ground-truth folder (or ApolloCar3D's keypoint file).
 
     Parameters
     ----------
-    kind : 'kitti', 'kitti-tracking' or 'cityscapes'
-    root : the folder
+    kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
+    root : the folder, or the file
+    source_options : further arguments of the source (``car_models`` for 'apollocar3d')
 
     Raises
     ------
@@ -312,4 +355,4 @@ def open_ground_truth(kind: str, root: str | Path) -> GroundTruthSource:
     """
     if kind not in SOURCES:
         raise EvaluationInputError(f"unknown ground-truth kind {kind!r}; expected one of {', '.join(SOURCES)}")
-    return SOURCES[kind](root)
+    return SOURCES[kind](root, **source_options)

@@ -197,6 +197,9 @@ class VehicleResult:
     box2d_source : 'annotated' or 'projected'; truncated : share of the projected box outside the image
     yaw_pitch_roll_deg : (3,) KITTI yaw, pitch, roll
     rms_px, residuals_px : (N, 2) projected minus clicked, undistorted pixels; click_labels : (N,)
+    click_weights : (N,) each click's weight in the pixel cost (keypoints' soft term times the robust loss's
+        factor), or None when every click weighs 1 (written only when set)
+    downweighted : the labels of the clicks the robust loss down-weighted (written only when any)
     cost : final pixel cost; prior_mahalanobis2 : the size prior's squared Mahalanobis distance
     parameters : the wheel positions and other auxiliary unknowns by name, metres
     scale_from, scale_shares : the cue that sets the scale, and every cue's share of it
@@ -226,6 +229,8 @@ class VehicleResult:
     rms_px: float | None = None
     residuals_px: np.ndarray | None = None
     click_labels: tuple[str, ...] = ()
+    click_weights: np.ndarray | None = None
+    downweighted: tuple[str, ...] = ()
     cost: float | None = None
     prior_mahalanobis2: float | None = None
     parameters: dict[str, float] = field(default_factory=dict)
@@ -271,6 +276,10 @@ class VehicleResult:
                 "ambiguous": self.ambiguous, "alternatives": [a.to_json() for a in self.alternatives],
                 "warnings": list(self.warnings),
             })
+            if self.click_weights is not None:
+                out["click_weights"] = _array(self.click_weights)
+            if self.downweighted:
+                out["downweighted"] = list(self.downweighted)
         if self.solver is not None:
             out["solver"] = self.solver.to_json()
         if self.next_clicks is not None:
@@ -311,7 +320,9 @@ class VehicleResult:
                 box2d_source=v.get("box2d_source"), truncated=v.get("truncated"),
                 yaw_pitch_roll_deg=get("yaw_pitch_roll_deg", tuple), rms_px=v.get("rms_px"),
                 residuals_px=get("residuals_px", lambda r: np.array(r, dtype=float).reshape(-1, 2)),
-                click_labels=tuple(v.get("click_labels") or ()), cost=v.get("cost"),
+                click_labels=tuple(v.get("click_labels") or ()),
+                click_weights=get("click_weights", lambda w: np.array(w, dtype=float).reshape(-1)),
+                downweighted=tuple(str(label) for label in v.get("downweighted") or ()), cost=v.get("cost"),
                 prior_mahalanobis2=v.get("prior_mahalanobis2"), parameters=dict(v.get("parameters") or {}),
                 scale_from=v.get("scale_from"), scale_shares=dict(v.get("scale_shares") or {}),
                 sigma=get("sigma", Sigma.from_json), confidence=v.get("confidence"),

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from toosicubix.annotations.schema import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS, SYMMETRY_FACES
+from toosicubix.parts import vocabulary
 
 #: How many symmetric pairs a face may carry (``rear-pair1-left`` .. ``rear-pair3-right``).
 PAIRS_PER_FACE = 3
@@ -55,8 +56,13 @@ class PartSlot:
         return tuple(keypoint for _, keypoint in self.fields)
 
 
+#: The point parts of the flat vocabulary: every one but the wheel hubs (ApolloCar3D's wheel centres, reached
+#: through its own mappings; the labelling tools' 65 keypoints stay as they were).
+TOOL_POINT_PARTS = tuple(part for part in POINT_PARTS if vocabulary.entry("point", part).get("shape") != "hub")
+
+
 def _slots() -> tuple[PartSlot, ...]:
-    slots = [PartSlot("point", part, (("xy", part),)) for part in POINT_PARTS]
+    slots = [PartSlot("point", part, (("xy", part),)) for part in TOOL_POINT_PARTS]
     slots += [PartSlot("symmetry", face, (("left", f"{face}-pair{k}-left"), ("right", f"{face}-pair{k}-right")))
               for face in SYMMETRY_FACES for k in range(1, PAIRS_PER_FACE + 1)]
     slots += [PartSlot("direction", axis, (("tail", f"arrow-{axis}-tail"), ("head", f"arrow-{axis}-head")))

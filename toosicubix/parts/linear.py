@@ -19,6 +19,13 @@ frame: origin at the bottom-face centre, X forward, Y left, Z up.
 | length plate-{front,rear}          | (+-dx/2, +Y, Z), (+-dx/2, -Y, Z)         | Y, Z           |
 | length wheelbase-{left,right}      | (Xwf, +-dy/2, 0), (Xwr, +-dy/2, 0)       | Xwf, Xwr       |
 | length tyre-{front,rear}-{lr}      | (Xw, +-dy/2, 0), (Xw, +-dy/2, Zt)        | Xw, Zt         |
+| hub-{front,rear}-{left,right}      | (Xwf or Xwr, +-dy/2, Zh)                 | Xwf / Xwr, Zh  |
+| keypoint (name, at, spread)        | (at_x dx, at_y dy, at_z dz)              | none           |
+| plate front / rear (at, width)     | (at_x dx, +-W/2, at_z dz)                | W (measured)   |
+
+Wheel hubs share the axle unknowns with the tyre contacts and one hub height ``Zh`` among the four. A keypoint
+sits at learned fractions ``at`` of the dimensions; ``spread`` (same fractions) says how far real vehicles put it
+from there, and enters the pixel cost as a per-click weight (:attr:`PartsModel.click_spread`).
 
 A ``length`` annotation also gives a *measurement*, a linear equation on ``p`` with a known value in metres:
 the plate's width ``2 Y``, the wheelbase ``Xwf - Xwr``, the tyre's diameter ``Zt``. Known dimensions of the
@@ -36,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from toosicubix.model import Part
-from toosicubix.parts.vocabulary import KINDS, click, click_labels, entry
+from toosicubix.parts.vocabulary import KINDS, click, click_labels, entry, faces_of_click
 
 DX, DY, DZ = 0, 1, 2
 #: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.
@@ -89,6 +96,8 @@ class PartsModel:
     param_names : (P,) 'dx', 'dy', 'dz', 'Xwf', 'Xwr', then 'parts[k].X' etc.
     lines : pairs of clicks along a known vehicle axis
     measurements : known sizes (length annotations, known dimensions)
+    click_spread : (N, 3) for keypoint and plate clicks the spread of their position, fractions of
+        ``(dx, dy, dz)``; zeros for every other click; None when the vehicle has none
     """
 
     A: np.ndarray
@@ -98,6 +107,7 @@ class PartsModel:
     param_names: tuple[str, ...]
     lines: tuple[Line, ...]
     measurements: tuple[Measurement, ...] = ()
+    click_spread: np.ndarray | None = None
 
     @property
     def n_clicks(self) -> int:
@@ -121,6 +131,23 @@ class PartsModel:
     def arrow_tails(self) -> tuple[int, ...]:
         """The click index of each direction arrow's tail; its head is the next click."""
         return tuple(i for i, label in enumerate(self.click_labels) if _is_arrow_tail(label))
+
+    @property
+    def click_faces(self) -> tuple[tuple[str, ...] | None, ...]:
+        """The faces each click can be seen on, for the plausibility check: the vocabulary's, and for a keypoint
+        (an open kind's name) the faces its typical position ``at`` sits near: beyond 0.3 of the length or width
+        from the centre, or above 0.85 of the height; None (no check) when near none, and for arrows."""
+        out: list[tuple[str, ...] | None] = []
+        for i, label in enumerate(self.click_labels):
+            if not KINDS[click(label).kind].open_names:
+                out.append(faces_of_click(label))
+                continue
+            at = (self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])
+            faces = tuple(face for face, near in (("front", at[0] > 0.3), ("rear", at[0] < -0.3),
+                                                  ("left", at[1] > 0.3), ("right", at[1] < -0.3),
+                                                  ("top", at[2] > 0.85)) if near)
+            out.append(faces or None)
+        return tuple(out)
 
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
@@ -149,6 +176,9 @@ class _Builder:
         self.measurements: list[tuple[dict[int, float], float, float, str]] = []
         self.wheel_clicks: dict[tuple[str, str], list[int]] = {}  # (axle, side) -> clicks on that tyre's contact
         self.corner_clicks: dict[tuple[str, str, str], list[int]] = {}  # (height, end, side) -> clicks
+        self.hub_clicks: dict[tuple[str, str], list[int]] = {}  # (axle, side) -> clicks on that wheel's hub
+        self.hub_height: int | None = None  # the index of Zh, shared by all hubs
+        self.spread: dict[int, np.ndarray] = {}  # keypoint and plate clicks: their spread (3,)
 
     def aux(self, k: int, what: str) -> int:
         self.names.append(f"parts[{k}].{what}")
@@ -174,8 +204,14 @@ class _Builder:
             for param, coefficient in form.items():
                 c[param] += coefficient
             measurements.append(Measurement(c, metres, sigma, label))
+        spread = None
+        if self.spread:
+            spread = np.zeros((len(self.coeffs), 3))
+            for i, row in self.spread.items():
+                spread[i] = row
         return PartsModel(A=A, uv=uv, click_labels=tuple(self.labels), click_part=np.array(self.owner, dtype=int),
-                          param_names=tuple(self.names), lines=tuple(self.lines), measurements=tuple(measurements))
+                          param_names=tuple(self.names), lines=tuple(self.lines), measurements=tuple(measurements),
+                          click_spread=spread)
 
 
 def _axles(part: Part) -> tuple[str, ...]:
@@ -184,7 +220,7 @@ def _axles(part: Part) -> tuple[str, ...]:
     shape = e.get("shape")
     if shape == "wheelbase":
         return ("front", "rear")
-    if shape in ("wheel", "tyre"):
+    if shape in ("wheel", "tyre", "hub"):
         return (e.get("axle"),)
     return ()
 
@@ -223,7 +259,8 @@ def build_parts_model(parts: tuple[Part, ...] | list[Part],
         LINEAR_FORMS[part.kind](b, k, part)
     for axis, (metres, sigma) in (known_dimensions or {}).items():
         b.measurements.append(({DIM_INDEX[axis]: 1.0}, metres, sigma, f"known {axis}"))
-    _wheel_lines(b)
+    _wheel_lines(b, b.wheel_clicks)
+    _wheel_lines(b, b.hub_clicks)
     _corner_lines(b)
     uv = np.concatenate(uv_rows, axis=0) if uv_rows else np.zeros((0, 2))
     return b.build(uv)
@@ -238,6 +275,13 @@ def _add_point(b: _Builder, k: int, part: Part) -> None:
         axle, side = e.get("axle"), e.get("side")
         i = b.point(k, name, {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}, {})
         b.wheel_clicks.setdefault((axle, side), []).append(i)
+    elif shape == "hub":  # on its axle (the tyre contacts' Xwf / Xwr), at the hub height Zh shared by all four
+        axle, side = e.get("axle"), e.get("side")
+        if b.hub_height is None:
+            b.hub_height = len(b.names)
+            b.names.append("Zh")
+        i = b.point(k, name, {b.wheel[axle]: 1.0}, {DY: 0.5 * _SIDE[side]}, {b.hub_height: 1.0})
+        b.hub_clicks.setdefault((axle, side), []).append(i)
     elif shape == "end-center":
         b.point(k, name, {DX: 0.5 * _SIDE[e.get("end")]}, {}, {b.aux(k, "Z"): 1.0})
     elif shape == "top-center":
@@ -319,8 +363,7 @@ def _add_direction(b: _Builder, k: int, part: Part) -> None:
         b.lines.append(Line(i, j, axis=axis))
 
 
-def _wheel_lines(b: _Builder) -> None:
-    wheels = b.wheel_clicks
+def _wheel_lines(b: _Builder, wheels: dict[tuple[str, str], list[int]]) -> None:
     for side in ("left", "right"):  # same side: front to rear wheel runs along X
         for i in wheels.get(("front", side), []):
             for j in wheels.get(("rear", side), []):
@@ -342,3 +385,27 @@ def _corner_lines(b: _Builder) -> None:
             for i in clicks:
                 for j in corners.get((height, end, "right"), []):
                     b.lines.append(Line(i, j, axis=1))
+
+
+@linear_form("keypoint")
+def _add_keypoint(b: _Builder, k: int, part: Part) -> None:
+    """A keypoint at fractions ``at`` of the dimensions: ``(at_x dx, at_y dy, at_z dz)``, no new unknowns; its
+    ``spread`` weighs its click (:mod:`toosicubix.solver.robust`)."""
+    at = part.at  # type: ignore[union-attr]
+    (label,) = click_labels("keypoint", part.name)
+    i = b.point(k, label, {DX: float(at[0])}, {DY: float(at[1])}, {DZ: float(at[2])})
+    b.spread[i] = np.asarray(part.spread, dtype=float)
+
+
+@linear_form("plate")
+def _add_plate(b: _Builder, k: int, part: Part) -> None:
+    """A licence plate's ends: a centreline point at fractions ``at`` and a measured width ``W``."""
+    at, (metres, sigma) = part.at, part.known  # type: ignore[misc]
+    w = b.aux(k, "W")
+    x_form, z_form = {DX: float(at[0])}, {DZ: float(at[2])}  # type: ignore[index]
+    a, b_label = click_labels("plate", part.name)
+    i = b.point(k, a, x_form, {w: 0.5}, z_form)
+    j = b.point(k, b_label, x_form, {w: -0.5}, z_form)
+    b.spread[i] = b.spread[j] = np.asarray(part.spread, dtype=float)
+    b.lines.append(Line(i, j, axis=1))
+    b.measurements.append(({w: 1.0}, metres, sigma, f"plate {part.name}"))

@@ -1,7 +1,8 @@
 """The one part vocabulary: every kind of annotation, every name it may carry, and what each one means.
 
 The table is the data file ``vocabulary.json`` beside this module; this module loads it once and answers
-questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``length``):
+questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``length``, and for real clicks
+``keypoint`` and ``plate``):
 
 - ``name_field``: the annotation-file key that names it (``part``, ``face``, ``axis``, ``feature``);
 - ``clicks``: the keys of its clicked pixels, in click order (``xy``; ``left``, ``right``; ...);
@@ -12,7 +13,12 @@ questions about it. Per **kind** (``point``, ``symmetry``, ``direction``, ``leng
 - ``suggest_once``: suggest none of the kind once one of it is clicked (direction arrows);
 - ``schema``: its pydantic class in :mod:`toosicubix.annotations.schema` (``class``, ``description``, and
   ``fields``: descriptions of its file keys, where a click's differs from the generic pixel's);
-- ``names``: every name, in the order the schema lists them.
+- ``soft``: its clicks sit at typical fractions of the dimensions within a spread (keypoints, plates): the
+  spread enters as per-click weights (:mod:`toosicubix.solver.robust`), not as the uncertainty's part sigma;
+- ``fields_extra``: further typed keys of its annotations, by type name (``row3``: three numbers,
+  ``positive_row3``: three positive numbers, ``bool_default_true``), see :data:`EXTRA_FIELD_TYPES`;
+- ``names``: every name, in the order the schema lists them; ``null`` for an open kind (``keypoint``), whose
+  names are any non-empty string, with no faces and no typical position.
 
 Per **name**:
 
@@ -47,6 +53,8 @@ from typing import Any
 
 #: Faces of the cuboid a click can be seen on (the bottom never is).
 FACES = ("front", "rear", "left", "right", "top")
+#: The type names ``fields_extra`` may use.
+EXTRA_FIELD_TYPES = ("row3", "positive_row3", "bool_default_true")
 #: The terms a typical position's linear forms may use.
 TYPICAL_TERMS = ("dx", "dy", "dz", "Xwf", "Xwr", "side", "side*dy", "one")
 
@@ -90,6 +98,9 @@ class Kind:
     hint: str
     schema: dict[str, Any]
     names: dict[str, Name]
+    open_names: bool = False
+    soft: bool = False
+    fields_extra: tuple[tuple[str, str], ...] = ()
 
     def click_labels(self, name: str) -> tuple[str, ...]:
         """A label per click of the annotation ``name``, e.g. ('symmetry-rear/left', 'symmetry-rear/right')."""
@@ -112,7 +123,7 @@ def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
     kinds = {}
     for kind, k in doc["kinds"].items():
         names = {}
-        for name, entry in k["names"].items():
+        for name, entry in (k["names"] or {}).items():
             faces = entry.get("faces")
             typical = entry.get("typical")
             attributes = {key: value for key, value in entry.items() if key not in ("faces", "typical", "suits")}
@@ -124,7 +135,8 @@ def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
         kinds[kind] = Kind(kind=kind, name_field=k["name_field"], clicks=tuple(k["clicks"]),
                            known=tuple(k.get("known", ())), labels=tuple(k["labels"]), on_body=bool(k["on_body"]),
                            suggest_once=bool(k.get("suggest_once", False)), hint=k.get("hint", "{name}"),
-                           schema=dict(k["schema"]), names=names)
+                           schema=dict(k["schema"]), names=names, open_names=k["names"] is None,
+                           soft=bool(k.get("soft", False)), fields_extra=tuple(k.get("fields_extra", {}).items()))
     groups = {group: frozenset(members) for group, members in doc["prototype_groups"].items()}
     return kinds, groups
 
@@ -134,19 +146,25 @@ KINDS, PROTOTYPE_GROUPS = _load()
 
 
 def names(kind: str) -> tuple[str, ...]:
-    """Every name a ``kind`` annotation may carry, in the schema's order."""
+    """Every name a ``kind`` annotation may carry, in the schema's order (empty for an open kind)."""
     return tuple(KINDS[kind].names)
 
 
 def entry(kind: str, name: str) -> Name:
     """The vocabulary entry of one annotation.
 
+    An open kind's (``keypoint``) names have no entry of their own: any non-empty name gets one with no faces
+    and no typical position.
+
     Raises
     ------
     KeyError
         An unknown kind or name (the schema admits none).
     """
-    return KINDS[kind].names[name]
+    k = KINDS[kind]
+    if k.open_names and name:
+        return k.names.get(name) or Name(kind=kind, name=name, faces=None, typical=None, suits="all", attributes={})
+    return k.names[name]
 
 
 def click_labels(kind: str, name: str) -> tuple[str, ...]:
@@ -172,11 +190,22 @@ def click(label: str) -> Click:
     KeyError
         A label no annotation gives.
     """
-    return _clicks_by_label()[label]
+    found = _clicks_by_label().get(label)
+    if found is not None:
+        return found
+    for kind in KINDS.values():  # an open kind's label: its template with any non-empty name
+        if not kind.open_names:
+            continue
+        for index, template in enumerate(kind.labels):
+            head, _, tail = template.partition("{name}")
+            if label.startswith(head) and label.endswith(tail) and len(label) > len(head) + len(tail):
+                return Click(kind.kind, label[len(head):len(label) - len(tail)], index, label)
+    raise KeyError(label)
 
 
 def faces_of_click(label: str) -> tuple[str, ...] | None:
-    """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included)."""
+    """The faces a clicked part can be seen on; None for arrows (drawn anywhere, the ground included) and for
+    an open kind's names (a keypoint's faces follow from its position: :attr:`PartsModel.click_faces`)."""
     c = click(label)
     return entry(c.kind, c.name).faces
 
@@ -184,6 +213,11 @@ def faces_of_click(label: str) -> tuple[str, ...] | None:
 def on_body(label: str) -> bool:
     """Whether a click lies on the vehicle's body (a direction arrow may be drawn on the ground)."""
     return KINDS[click(label).kind].on_body
+
+
+def soft(label: str) -> bool:
+    """Whether a click sits at a typical place within a spread that its weight carries (keypoints, plates)."""
+    return KINDS[click(label).kind].soft
 
 
 def suits(name: Name, prototypes: tuple[str, ...] | list[str]) -> bool:

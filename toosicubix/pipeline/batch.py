@@ -203,6 +203,8 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
         rms_px=fit.rms_px,
         residuals_px=fit.residuals_px,
         click_labels=tuple(parts.click_labels),
+        click_weights=fit.click_weights,
+        downweighted=fit.downweighted,
         cost=fit.cost,
         prior_mahalanobis2=fit.cost_prior,
         parameters={name: float(v) for name, v in zip(parts.param_names[3:], fit.p[3:], strict=True)},

@@ -153,7 +153,7 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera) -> 
             id=v.id, ok=v.ok and v.R_cam_vehicle is not None, R_cam_vehicle=v.R_cam_vehicle,
             t_cam_vehicle=v.t_cam_vehicle, dimensions=v.dimensions, clicks_uv=clicks,
             fitted_uv=_fitted_uv(camera, clicks, v.residuals_px) if v.ok and len(clicks) else None,
-            downweighted=tuple(int(k) for k in v.extra.get("downweighted") or ()), box2d=box,
+            downweighted=_click_indices(v.click_labels, v.downweighted), box2d=box,
             label=vehicle_label(v) if v.ok and v.dimensions is not None else "", error=v.error,
             sigma_yaw=np.deg2rad(sigma.yaw_deg) if sigma is not None and sigma.yaw_deg is not None else None,
             sigma_depth=sigma.depth_m if sigma is not None else None,
@@ -396,3 +396,9 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
         if progress is not None:
             progress(1)
     return summary
+
+
+def _click_indices(click_labels: tuple[str, ...], labels: tuple[str, ...]) -> tuple[int, ...]:
+    """The indices of the clicks named by ``labels`` (results.json's ``downweighted``) among ``click_labels``."""
+    wanted = set(labels)
+    return tuple(i for i, label in enumerate(click_labels) if label in wanted)

@@ -46,23 +46,27 @@ def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
 
 
 def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
-                  dimensions: np.ndarray) -> list[str]:
-    """The clicked parts that would lie on faces turned away from the camera."""
+                  dimensions: np.ndarray, click_faces: tuple[tuple[str, ...] | None, ...] | None = None) -> list[str]:
+    """The clicked parts that would lie on faces turned away from the camera. ``click_faces``: the faces of each
+    click (:attr:`PartsModel.click_faces`, which places keypoints by their position); default the vocabulary's."""
     visible = faces_turned_to_camera(R_cam_vehicle, t_cam_vehicle, dimensions)
+    if click_faces is None:
+        click_faces = tuple(faces_of_click(label) for label in click_labels)
     out = []
-    for label in click_labels:
-        faces = faces_of_click(label)
+    for label, faces in zip(click_labels, click_faces, strict=True):
         if faces is not None and not any(visible[f] for f in faces):
             out.append(label)
     return out
 
 
 def implausibility(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
-                   dimensions: np.ndarray, max_tilt: float | None, up: np.ndarray | None = None) -> str | None:
-    """Why a pose is implausible, or None when it passes both checks. ``up``: the road normal when known."""
+                   dimensions: np.ndarray, max_tilt: float | None, up: np.ndarray | None = None,
+                   click_faces: tuple[tuple[str, ...] | None, ...] | None = None) -> str | None:
+    """Why a pose is implausible, or None when it passes both checks. ``up``: the road normal when known;
+    ``click_faces`` as :func:`unseen_clicks` takes them."""
     if max_tilt is not None and tilt(R_cam_vehicle, up) > max_tilt:
         return f"tilted {np.rad2deg(tilt(R_cam_vehicle, up)):.0f} degrees from upright"
-    unseen = unseen_clicks(click_labels, R_cam_vehicle, t_cam_vehicle, dimensions)
+    unseen = unseen_clicks(click_labels, R_cam_vehicle, t_cam_vehicle, dimensions, click_faces)
     if unseen:
         return f"clicked parts on faces turned away from the camera: {', '.join(sorted(set(unseen)))}"
     return None

@@ -62,6 +62,8 @@ class Problem:
     A_rows : (3N, P) ``A`` stacked; A_mean : (3, P) the clicked points' centroid is ``A_mean @ p``
     arrow_mid, arrow_low, arrow_high : (3 n_arrows, P) each arrow's midpoint coordinates and the zone's
         bounds on them, linear in ``p`` (empty without arrows)
+    click_weights : (N,) weights of each click's two pixel rows (keypoints' soft term, robust loss; see
+        :mod:`.robust`), or None for all ones
     """
 
     parts: PartsModel
@@ -81,6 +83,7 @@ class Problem:
     arrow_mid: np.ndarray
     arrow_low: np.ndarray
     arrow_high: np.ndarray
+    click_weights: np.ndarray | None = None
 
     @classmethod
     def build(cls, parts: PartsModel, camera: Camera, prior: SizePrior, lambda_3d: float,
@@ -199,6 +202,8 @@ class Problem:
     def cost_px(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
         """The pixel-domain cost: px^2 plus lambda_px times the cues' squared standardized residuals."""
         e = self.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)
+        if self.click_weights is not None:
+            e = e * self.click_weights[:, None]
         a, b = self.scale_terms(t_cam_vehicle, p)
         cues = float(np.sum((a - b) ** 2))
         if self.upright_sigma is not None:

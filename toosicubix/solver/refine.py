@@ -87,6 +87,9 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         w_arrow = w / ARROW_ZONE_SIGMA
         outside, arrow_gradient = problem.arrow_zone_residuals(p)
         r[:, 2 * N + m + n_up:] = w_arrow * outside
+    row_weights = None if problem.click_weights is None else np.repeat(problem.click_weights, 2)
+    if row_weights is not None:  # per-click weights (:mod:`.robust`) on the pixel rows
+        r[:, 0:2 * N] *= row_weights
     if not with_jacobian:
         return r, None
     # D = d(pixel)/dY = [[fx/z, skew/z, -(fx x + skew y)/z], [0, fy/z, -fy y/z]], x, y normalized: (B, N, 2, 3),
@@ -106,6 +109,8 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     J_rot[..., 1] = Xc[..., 2] * DR[..., 0] - Xc[..., 0] * DR[..., 2]
     J_rot[..., 2] = Xc[..., 0] * DR[..., 1] - Xc[..., 1] * DR[..., 0]
     J[:, : 2 * N, 6:] = (DR @ problem.A).reshape(B, 2 * N, P)
+    if row_weights is not None:
+        J[:, : 2 * N] *= row_weights[:, None]
     # Scale rows: a = G_t t + G_p p; turning about the pivot moves t by R [c]x delta.
     Ga = np.zeros((B, m, 6 + P))
     Gt = problem.G[:, :3]

@@ -109,7 +109,10 @@ def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, cl
         return np.full(2 * problem.parts.n_clicks, float(click_sigma))
     z = np.maximum(problem.points_cam(R, t, p)[:, 2], 0.5)
     f = 0.5 * (problem.K[0, 0] + problem.K[1, 1])
-    on_body = np.array([vocabulary.on_body(label) for label in problem.parts.click_labels])
+    # Keypoints and plates carry their own spread in their weights (:mod:`.robust`): their weighted rows have the
+    # click noise alone.
+    on_body = np.array([vocabulary.on_body(label) and not vocabulary.soft(label)
+                        for label in problem.parts.click_labels])
     return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
 
 

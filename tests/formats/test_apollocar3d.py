@@ -1,0 +1,96 @@
+"""ApolloCar3D poses into the vehicle frame, the ground-truth source, and learn-parts on a hand-made file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.conftest import shared_data_dir
+from toosicubix.annotations.schema import InputFileError
+from toosicubix.cli import main
+from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
+from toosicubix.formats.apollocar3d import pose_to_vehicle, read_apollocar3d, read_car_models
+
+MODELS = {"0": {"name": "a", "type": "3x", "length": 4.8, "width_body": 1.8, "width_with_mirrors": 2.0,
+                "height": 1.5}}
+
+
+def test_pose_to_vehicle_follows_the_readme_frames():
+    # roll = pi: model +y (up) turns to camera -y (up), model +z (front) to camera -z: the car faces the camera.
+    d = np.array([4.8, 1.8, 1.5])
+    R, t = pose_to_vehicle(np.array([np.pi, 0.0, 0.0, 1.0, 2.0, 20.0]), d)
+    # Columns: forward = R e_z = -z (toward the camera), left = R e_x = +x (a car facing the camera has its left
+    # on the camera's right), up = R e_y = -y.
+    np.testing.assert_allclose(R, [[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(t, [1.0, 2.0 + 0.75, 20.0], atol=1e-12)  # the box centre 0.75 m above the bottom
+
+
+def write_dataset(tmp_path, pose=(np.pi, 0.0, 0.0, 1.0, 2.0, 20.0)):
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [],
+            "annotations": [{"id": 9, "image_id": 1, "category_id": 0, "bbox": [10, 20, 30, 40],
+                             "keypoints": [0, 0, 0] * 66, "pose": list(pose)}]}
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    return tmp_path / "kp.json"
+
+
+def test_ground_truth_source(tmp_path):
+    source = ApolloCar3DGroundTruth(write_dataset(tmp_path))
+    assert source.image_ids() == ["x_Camera_5"]
+    gt = source.load("x_Camera_5")
+    (obj,) = gt.objects
+    assert obj.cls == "Car" and obj.subtype == "3x"
+    np.testing.assert_allclose(obj.box2d, [10, 20, 40, 60])
+    np.testing.assert_allclose(obj.cuboid_rect.dimensions, [4.8, 1.8, 1.5])
+
+
+def test_bad_pose_names_the_json_path(tmp_path):
+    path = write_dataset(tmp_path, pose=(0.0, 0.0, 0.0))
+    with pytest.raises(InputFileError, match=r"kp.json: \$.annotations\[0\].pose: expected 6 numbers"):
+        read_apollocar3d(path, read_car_models(tmp_path / "car_models.json"))
+
+
+def test_eval_and_learn_parts_on_the_real_folder(tmp_path):
+    folder = shared_data_dir() / "apollocar3d"
+    if not (folder / "apollocar3d_val_dev.json").is_file():
+        pytest.skip(f"ApolloCar3D data not found at {folder}")
+    kp, models, cams = (str(folder / n) for n in ("apollocar3d_val_dev.json", "car_models.json", "cameras.json"))
+    runner = CliRunner()
+    learned = tmp_path / "learned.json"
+    result = runner.invoke(main, ["learn-parts", kp, "--car-models", models, "--cameras", cams, "--images", "even",
+                                  "-o", str(learned)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(learned.read_text())
+    lamp = next(p for p in doc["parts"] if p.get("keypoint") == "top_left_c_left_rear_car_light")
+    # The left rear lamp: at the rear (x < -0.3), on the car's left (y > 0.2), at about 60 % of the height.
+    at = lamp["position"]["at"]
+    assert at[0] < -0.3 and at[1] > 0.2 and 0.5 < at[2] < 0.8
+    ann = tmp_path / "ann.json"
+    result = runner.invoke(main, ["import", "coco", kp, "--mapping", str(learned), "--cameras", cams, "-o", str(ann)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(ann.read_text())
+    data["images"] = data["images"][:2]
+    ann.write_text(json.dumps(data))
+    out = tmp_path / "out"
+    result = runner.invoke(main, ["fit", str(ann), "-o", str(out), "-q"])
+    assert result.exit_code in (0, 1), result.output
+    result = runner.invoke(main, ["eval", str(out), "--apollocar3d", kp, "--car-models", models])
+    assert result.exit_code == 0, result.output
+    assert "mean" in result.output and "ApolloCar3D" in result.output
+    result = runner.invoke(main, ["eval", str(out), "--kitti", str(tmp_path), "--car-models", models])
+    assert result.exit_code == 2 and "--car-models goes with --apollocar3d only" in result.output
+    # The robust loss names the clicks it down-weighted; render reads them, with ApolloCar3D's poses drawn.
+    robust = tmp_path / "robust"
+    result = runner.invoke(main, ["fit", str(ann), "-o", str(robust), "-q", "--robust-loss", "cauchy"])
+    assert result.exit_code in (0, 1), result.output
+    fitted = [v for im in json.loads((robust / "results.json").read_text())["images"] for v in im["vehicles"]
+              if v["status"] == "ok"]
+    assert fitted and all(len(v["click_weights"]) == v["clicks"] for v in fitted)
+    assert all(set(v.get("downweighted", [])) <= set(v["click_labels"]) for v in fitted)
+    result = runner.invoke(main, ["render", str(robust), "--annotations", str(ann), "--apollocar3d", kp, "-o",
+                                  str(tmp_path / "render")])
+    assert result.exit_code == 0, result.output
+    assert list((tmp_path / "render").glob("*.png"))

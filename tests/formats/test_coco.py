@@ -1,0 +1,171 @@
+"""COCO keypoint import: names and index mappings, v flags, cameras, and errors naming file and JSON path."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from toosicubix.annotations.schema import InputFileError, parse_annotations
+from toosicubix.cli import main
+from toosicubix.formats.cameras import load_cameras as read_cameras
+from toosicubix.formats.coco import coco_to_annotations, load_mapping, mapping_json_schema
+
+REPO = Path(__file__).resolve().parents[2]
+K = [[1000.0, 0.0, 640.0], [0.0, 1000.0, 360.0], [0.0, 0.0, 1.0]]
+
+
+def mapping_doc() -> dict:
+    at = {"at": [0.0, 0.0, 0.5], "spread": [0.05, 0.05, 0.05]}
+    return {"toosicubix_mapping": 1, "name": "tiny", "keypoints": ["lamp-l", "lamp-r", "hub", "handle", "aerial"],
+            "unused": ["aerial"], "prototypes": {"7": "SUV"},
+            "parts": [{"kind": "symmetry", "face": "rear", "left": "lamp-l", "right": "lamp-r"},
+                      {"kind": "point", "part": "hub-rear-left", "xy": "hub"},
+                      {"kind": "keypoint", "keypoint": "handle", "position": at},
+                      {"kind": "keypoint", "keypoint": "lamp-l", "position": at}]}
+
+
+def coco_doc(named: bool = True) -> dict:
+    names = ["lamp-l", "lamp-r", "hub", "handle", "aerial"]
+    return {"images": [{"id": 5, "file_name": "dir/frame_Camera_5.jpg", "width": 1280, "height": 720}],
+            "categories": [{"id": 7, "name": "car", "keypoints": names if named else [""] * 5}],
+            "annotations": [{"id": 42, "image_id": 5, "category_id": 7, "bbox": [10, 20, 100, 50],
+                             "keypoints": [100, 200, 2, 140, 201, 2, 90, 230, 1, 120, 180, 0, 130, 150, 2]}]}
+
+
+def write(tmp_path: Path, name: str, doc: dict) -> Path:
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.fixture
+def files(tmp_path):
+    mapping = write(tmp_path, "mapping.json", mapping_doc())
+    cameras = write(tmp_path, "cameras.json", {"cameras": [{"match": "*Camera_6*", "K": K},
+                                                           {"match": "*Camera_5*", "K": K}]})
+    return tmp_path, mapping, cameras
+
+
+@pytest.mark.parametrize("named", [True, False])
+def test_import_by_names_and_by_index(files, named):
+    tmp_path, mapping_path, cameras_path = files
+    coco = write(tmp_path, "coco.json", coco_doc(named))
+    mapping, _ = load_mapping(mapping_path)
+    doc, summary = coco_to_annotations(coco, mapping, read_cameras(cameras_path))
+    parse_annotations(doc)  # a valid annotation file v1
+    image = doc["images"][0]
+    assert image["id"] == "frame_Camera_5" and image["camera"] == {"K": K} and image["size"] == [1280, 720]
+    vehicle = image["vehicles"][0]
+    assert vehicle["id"] == "42" and vehicle["prototype"] == "SUV" and vehicle["box2d"] == [10, 20, 110, 70]
+    # The symmetry took lamp-l first, so the keypoint part of lamp-l is not made; handle has v = 0.
+    assert vehicle["parts"] == [
+        {"kind": "symmetry", "face": "rear", "left": [100.0, 200.0], "right": [140.0, 201.0]},
+        {"kind": "point", "part": "hub-rear-left", "xy": [90.0, 230.0]}]
+    assert summary.hidden_kept == 1 and summary.unlabelled == 1
+    assert dict(summary.unused) == {"aerial": 1}
+    assert summary.clicks == 3
+
+
+def test_hidden_keypoint_part_says_so(files):
+    tmp_path, mapping_path, cameras_path = files
+    coco = coco_doc()
+    coco["annotations"][0]["keypoints"][11] = 1  # handle: labelled, not visible
+    mapping, _ = load_mapping(mapping_path)
+    doc, _ = coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, read_cameras(cameras_path))
+    handle = [p for p in doc["images"][0]["vehicles"][0]["parts"] if p["kind"] == "keypoint"]
+    assert handle == [{"kind": "keypoint", "name": "handle", "xy": [120.0, 180.0], "at": [0.0, 0.0, 0.5],
+                       "spread": [0.05, 0.05, 0.05], "visible": False}]
+
+
+def test_per_image_K_needs_no_cameras_file(files):
+    tmp_path, mapping_path, _ = files
+    coco = coco_doc()
+    coco["images"][0]["K"] = K
+    mapping, _ = load_mapping(mapping_path)
+    doc, _ = coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, None)
+    assert doc["images"][0]["camera"] == {"K": K}
+
+
+def test_image_without_camera_is_named(files):
+    tmp_path, mapping_path, _ = files
+    cameras = write(tmp_path, "cams.json", {"cameras": [{"match": "*Camera_6*", "K": K}]})
+    mapping, _ = load_mapping(mapping_path)
+    with pytest.raises(InputFileError, match=r"coco.json: \$.images\[0\]: image 'dir/frame_Camera_5.jpg' has no "
+                                             r"camera"):
+        coco_to_annotations(write(tmp_path, "coco.json", coco_doc()), mapping, read_cameras(cameras))
+
+
+def test_unknown_keypoint_name_is_named(files):
+    tmp_path, mapping_path, cameras_path = files
+    coco = coco_doc()
+    coco["categories"][0]["keypoints"][3] = "wing-mirror"
+    mapping, _ = load_mapping(mapping_path)
+    with pytest.raises(InputFileError, match=r"\$.categories\[0\].keypoints\[3\]: keypoint 'wing-mirror' is not "
+                                             r"known to the mapping 'tiny'"):
+        coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, read_cameras(cameras_path))
+
+
+@pytest.mark.parametrize(("keypoints", "where"), [
+    ([100, 200, 2] * 4, r"\$.annotations\[0\].keypoints: expected 15 numbers"),
+    ([100, 200, 2, 140, 201, 3, 90, 230, 1, 120, 180, 0, 130, 150, 2], r"\$.annotations\[0\].keypoints\[3:6\]: "
+                                                                        r"keypoint 1 \(lamp-r\)"),
+    ([100, 200, 2, 140, None, 2, 90, 230, 1, 120, 180, 0, 130, 150, 2], r"\$.annotations\[0\].keypoints\[3:6\]"),
+])
+def test_bad_triplets_are_named(files, keypoints, where):
+    tmp_path, mapping_path, cameras_path = files
+    coco = coco_doc()
+    coco["annotations"][0]["keypoints"] = keypoints
+    mapping, _ = load_mapping(mapping_path)
+    with pytest.raises(InputFileError, match=where):
+        coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, read_cameras(cameras_path))
+
+
+def test_cli_import_exit_codes_and_summary(files):
+    tmp_path, mapping_path, cameras_path = files
+    coco = write(tmp_path, "coco.json", coco_doc())
+    out = tmp_path / "ann.json"
+    result = CliRunner().invoke(main, ["import", "coco", str(coco), "--mapping", str(mapping_path), "--cameras",
+                                       str(cameras_path), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "1 labelled keypoints no part used, by name: aerial 1" in result.output
+    assert json.loads(out.read_text())["images"][0]["vehicles"][0]["id"] == "42"
+    result = CliRunner().invoke(main, ["import", "coco", str(coco), "--mapping", str(mapping_path), "-o",
+                                       str(tmp_path / "b.json")])
+    assert result.exit_code == 2
+    assert "has no camera" in result.output and not (tmp_path / "b.json").exists()
+    result = CliRunner().invoke(main, ["import", "coco", str(coco), "--mapping", "no-such-mapping", "-o", str(out)])
+    assert result.exit_code == 2 and "not a bundled mapping" in result.output
+
+
+def test_bundled_mappings_load_and_schema_is_committed():
+    for name in ("apollocar3d-66", "apollocar3d-66-paper", "toosicubix"):
+        mapping, source = load_mapping(name)
+        assert mapping.name == name and source == f"bundled mapping {name}"
+    apollo, _ = load_mapping("apollocar3d-66")
+    assert len(apollo.keypoints) == 66 and sum(p.kind == "keypoint" for p in apollo.parts) == 66
+    committed = json.loads((REPO / "schemas" / "mapping.schema.json").read_text())
+    assert committed == mapping_json_schema(), "regenerate schemas/mapping.schema.json"
+
+
+def test_toosicubix_mapping_names_our_parts(tmp_path):
+    mapping, _ = load_mapping("toosicubix")
+    names = ["wheel-front-left", "rear-pair1-left", "rear-pair1-right", "arrow-forward-tail", "arrow-forward-head"]
+    coco = {"images": [{"id": 1, "file_name": "a.png", "K": K}],
+            "categories": [{"id": 1, "name": "car", "keypoints": names}],
+            "annotations": [{"id": 3, "image_id": 1, "category_id": 1,
+                             "keypoints": [1, 2, 2, 3, 4, 2, 5, 6, 2, 7, 8, 2, 9, 10, 2]}]}
+    doc, summary = coco_to_annotations(write(tmp_path, "c.json", coco), mapping)
+    kinds = [p["kind"] for p in doc["images"][0]["vehicles"][0]["parts"]]
+    assert sorted(kinds) == ["direction", "point", "symmetry"] and not summary.unused
+
+
+def test_toosicubix_mapping_is_the_tool_vocabulary():
+    from toosicubix.parts.keypoints import KEYPOINTS, mapping_document
+
+    mapping, _ = load_mapping("toosicubix")
+    assert mapping.keypoints == list(KEYPOINTS)
+    assert mapping.model_dump(mode="json", exclude_none=True, exclude_defaults=True)["parts"] == [
+        {k: v for k, v in p.items()} for p in mapping_document()["parts"]]

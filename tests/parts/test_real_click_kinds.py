@@ -1,0 +1,139 @@
+"""The parts people click on real cars: wheel hubs, licence plates, keypoints at learned positions; and learned
+positions from a synthetic fleet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.scenes import CAMERA
+from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle
+from toosicubix.model import Part
+from toosicubix.parts.learned import KeypointSample, learn_positions
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.priors.table import SizePrior
+from toosicubix.solver import SolverOptions, fit_vehicle
+
+#: Keypoints on the rear and the left side of a car (fractions of dx, dy, dz), as real ones sit.
+REAR_LEFT = {"lamp-rear-left": (-0.45, 0.38, 0.62), "lamp-rear-right": (-0.45, -0.38, 0.62),
+             "glass-rear-left": (-0.25, 0.3, 0.92), "glass-rear-right": (-0.25, -0.3, 0.92),
+             "bumper-left": (-0.48, 0.35, 0.25), "handle-front": (0.05, 0.47, 0.56), "handle-rear": (-0.2, 0.47, 0.58),
+             "door-bottom": (0.2, 0.48, 0.18), "mirror": (0.18, 0.5, 0.65)}
+
+
+def project(X_vehicle: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    Y = X_vehicle @ R.T + t
+    return Y[:, :2] / Y[:, 2:] @ CAMERA.K[:2, :2].T + CAMERA.K[:2, 2]
+
+
+def scene(rng: np.random.Generator):
+    d = np.array([4.6, 1.8, 1.5])
+    R = R_cam_vehicle_from_ypr(np.deg2rad(rng.uniform(-140, -100)), 0.0, 0.0)  # rear and left side in view
+    t = np.array([rng.uniform(-3, 3), 1.6, rng.uniform(12, 25)])
+    return d, R, t
+
+
+def keypoint_parts(d, R, t, names=REAR_LEFT):
+    parts = []
+    for k, (name, at) in enumerate(names.items()):
+        uv = project((np.array(at) * d)[None], R, t)
+        parts.append(Part("keypoint", name, uv, f"parts[{k}]", None, np.array(at), np.full(3, 0.02)))
+    return parts
+
+
+def exact_prior(d):
+    return SizePrior.from_mean_cov("test", d, np.diag([0.3, 0.1, 0.1]) ** 2)
+
+
+def test_keypoints_recover_a_known_cuboid_noise_free(rng):
+    for _ in range(3):
+        d, R, t = scene(rng)
+        fit = fit_vehicle(build_parts_model(keypoint_parts(d, R, t)), CAMERA, exact_prior(d))
+        assert fit.ok, fit.reason
+        # Noise-free clicks at the true fractions and a prior centred on the truth: exact up to the solver's
+        # tolerance (1e-6 noiseless tier).
+        assert geodesic_angle(fit.R_cam_vehicle, R) < 1e-6
+        np.testing.assert_allclose(fit.t_cam_vehicle, t, atol=1e-5)
+        np.testing.assert_allclose(fit.dimensions, d, atol=1e-5)
+
+
+def test_hubs_share_the_axles_and_one_height(rng):
+    d, R, t = scene(rng)
+    wheel_x, hub_z = (1.4, -1.3), 0.33
+    parts = keypoint_parts(d, R, t, {k: v for k, v in REAR_LEFT.items() if "handle" not in k})
+    for k, (fr, x) in enumerate(zip(("front", "rear"), wheel_x, strict=True)):
+        uv = project(np.array([[x, 0.5 * d[1], hub_z]]), R, t)
+        parts.append(Part("point", f"hub-{fr}-left", uv, f"hub[{k}]"))
+    model = build_parts_model(parts)
+    assert model.param_names[3:] == ("Xwf", "Xwr", "Zh")
+    fit = fit_vehicle(model, CAMERA, exact_prior(d))
+    assert fit.ok, fit.reason
+    np.testing.assert_allclose(fit.p[3:], [*wheel_x, hub_z], atol=1e-5)
+    assert geodesic_angle(fit.R_cam_vehicle, R) < 1e-6
+
+
+def test_plate_width_fixes_the_scale(rng):
+    d, R, t = scene(rng)
+    parts = keypoint_parts(d, R, t)
+    at = np.array([-0.47, 0.0, 0.4])
+    ends = project(np.array([[at[0] * d[0], 0.22, at[2] * d[2]], [at[0] * d[0], -0.22, at[2] * d[2]]]), R, t)
+    parts.append(Part("plate", "rear", ends, "plate", (0.44, 0.001), at, np.full(3, 0.02)))
+    # A prior 10 % too small, the truth within about one of its sigmas: alone it puts the car about 10 % too
+    # close. The plate's clicks pull the scale back; how far depends on the plate's size in pixels (about 30 px
+    # here) against the prior's weight lambda_px: at the default (10 px^2, clicks worth about 3 px) a little,
+    # with exact clicks trusted (lambda_px = 1e-4) nearly all the way.
+    prior = SizePrior.from_mean_cov("small", 0.9 * d, np.diag([0.45, 0.18, 0.15]) ** 2)
+    without = fit_vehicle(build_parts_model(parts[:-1]), CAMERA, prior)
+    with_plate = fit_vehicle(build_parts_model(parts), CAMERA, prior)
+    trusted = fit_vehicle(build_parts_model(parts), CAMERA, prior, SolverOptions(lambda_px=1e-4))
+    assert without.ok and with_plate.ok and trusted.ok
+    error = lambda fit: abs(np.linalg.norm(fit.t_cam_vehicle) / np.linalg.norm(t) - 1.0)  # noqa: E731
+    assert error(without) > 0.05
+    assert error(with_plate) < error(without) - 0.002
+    assert error(trusted) < 1e-3
+    assert with_plate.scale_from == "plate rear"
+
+
+def test_learned_positions_of_a_synthetic_fleet_come_back():
+    rng = np.random.default_rng(0)
+    truth = {"lamp": np.array([-0.45, 0.38, 0.62]), "handle": np.array([0.05, 0.47, 0.56])}
+    spread = 0.01
+    samples = []
+    for v in range(200):
+        d = np.array([4.6, 1.8, 1.5]) * rng.uniform(0.9, 1.1, 3)
+        R = R_cam_vehicle_from_ypr(rng.uniform(-np.pi, np.pi), 0.0, 0.0)
+        t = np.array([rng.uniform(-5, 5), 1.6, rng.uniform(10, 40)])
+        for name, at in truth.items():
+            X = (at + rng.normal(0.0, spread, 3)) * d
+            ray = R @ X + t  # an exact click's ray (camera frame), any length
+            samples.append(KeypointSample("Car", name, str(v), ray / ray[2], R, t, d))
+    learned = learn_positions(samples)["Car"]
+    for name, at in truth.items():
+        # 200 vehicles, 1 % spread per axis, each ray seeing two of three axes: about 0.01 / sqrt(130) ~ 0.001
+        # per axis; 0.004 is a 4-sigma bound
+        np.testing.assert_allclose(learned[name].at, at, atol=0.01)
+        assert learned[name].n == 200
+        assert np.all(learned[name].spread < 3 * spread) and np.all(learned[name].spread > 0.3 * spread)
+
+
+def test_second_pass_leaves_out_a_contradicting_pose():
+    rng = np.random.default_rng(1)
+    at = np.array([-0.45, 0.38, 0.62])
+    samples = []
+    for v in range(30):
+        d = np.array([4.6, 1.8, 1.5])
+        R = R_cam_vehicle_from_ypr(rng.uniform(-np.pi, np.pi), 0.0, 0.0)
+        t = np.array([rng.uniform(-5, 5), 1.6, rng.uniform(10, 40)])
+        ray = R @ (at * d) + t
+        R_gt = R @ R_cam_vehicle_from_ypr(np.pi, 0.0, 0.0) @ np.linalg.inv(R_cam_vehicle_from_ypr(0, 0, 0)) \
+            if v == 0 else R  # vehicle 0: its ground truth turned around
+        samples.append(KeypointSample("Car", "lamp", str(v), ray, R_gt, t, d))
+    one_pass = learn_positions(samples)["Car"]["lamp"].at
+    two_pass = learn_positions(samples, max_offset=0.5)["Car"]["lamp"].at
+    assert np.abs(one_pass - at).max() > 0.01
+    np.testing.assert_allclose(two_pass, at, atol=1e-9)  # the 29 exact vehicles alone: algebra tier
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)

@@ -1,0 +1,399 @@
+"""COCO keypoint files to annotation file v1, through a keypoint mapping.
+
+A COCO keypoint file has ``images[]`` (``id``, ``file_name``, optional per-image ``K`` as Omni3D writes it),
+``categories[]`` (``id``, ``name``, optional ``keypoints``: the names by index) and ``annotations[]``
+(``id``, ``image_id``, ``category_id``, ``keypoints``: x, y, v triplets, ``bbox``: x, y, w, h). The image id
+becomes the file name's stem, the vehicle id the annotation id (as a string), ``box2d`` the ``bbox``.
+``v = 0`` (not labelled) is skipped, ``v = 1`` (labelled, not visible) is kept and counted, ``v = 2`` kept.
+
+A *mapping* (:class:`MappingFile`, JSON Schema in ``schemas/mapping.schema.json``) says which keypoints make
+which parts, and which category gets which prototype. Its parts are tried in file order: a part is made when
+every keypoint it names is labelled and none was taken by an earlier part (each click is used once). Parts
+with an ``option`` are used only when the import asks for it (e.g. ``plates``: plate corners as a
+known-width feature rather than as keypoints). Labelled keypoints no part used are counted per name.
+
+Cameras: a cameras file (:mod:`toosicubix.formats.cameras`: the first glob on ``file_name`` that matches wins),
+or the image's own ``K``.
+
+The bundled ``toosicubix`` mapping is not a file: it is :func:`toosicubix.parts.keypoints.mapping_document`, the
+labelling tools' flat keypoint names, so the two cannot disagree. Its length features without a default size
+(wheelbases, tyres) are not made on a COCO import (no size to give them); their keypoints are counted unused.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import ConfigDict, Field, field_validator
+
+from toosicubix.annotations import schema as schemas
+from toosicubix.annotations.schema import InputFileError, _Model, _validate, read_json
+from toosicubix.formats.cameras import CameraTable
+from toosicubix.parts.vocabulary import KINDS
+
+Row3 = tuple[float, float, float]
+
+#: The mappings shipped with the package, by name.
+BUNDLED_MAPPINGS = ("apollocar3d-66", "apollocar3d-66-paper", "toosicubix")
+
+
+class _MappingPart(_Model):
+    option: str | None = Field(default=None, description="Used only when the import asks for this option.")
+
+
+class MappingPoint(_MappingPart):
+    """One keypoint as a ``point`` part (e.g. a wheel hub); ``xy`` names the keypoint that fills its click."""
+
+    kind: Literal["point"]
+    part: Literal[schemas.POINT_PARTS]  # type: ignore[valid-type]
+    xy: str = Field(min_length=1, description="The keypoint that is this point.")
+
+
+class MappingSymmetry(_MappingPart):
+    """Two mirror keypoints as a ``symmetry`` pair."""
+
+    kind: Literal["symmetry"]
+    face: Literal[schemas.SYMMETRY_FACES]  # type: ignore[valid-type]
+    left: str = Field(min_length=1, description="The keypoint on the vehicle's own left side.")
+    right: str = Field(min_length=1)
+
+
+class MappingDirection(_MappingPart):
+    """Two keypoints as a ``direction`` arrow."""
+
+    kind: Literal["direction"]
+    axis: Literal[schemas.DIRECTION_AXES]  # type: ignore[valid-type]
+    tail: str = Field(min_length=1)
+    head: str = Field(min_length=1)
+
+
+class MappingLength(_MappingPart):
+    """Two keypoints on a feature of known size (e.g. a licence plate's left and right ends)."""
+
+    kind: Literal["length"]
+    feature: Literal[tuple(schemas.LENGTH_FEATURES)]  # type: ignore[valid-type]
+    a: str = Field(min_length=1)
+    b: str = Field(min_length=1)
+    metres: float | None = Field(default=None, gt=0, description="Its size; none: the part is not made.")
+    sigma: float | None = Field(default=None, gt=0)
+
+
+class KeypointPosition(_Model):
+    """A keypoint's typical position, fractions of ``(dx, dy, dz)``, and its spread over vehicles."""
+
+    at: Row3
+    spread: Row3
+    n: int | None = Field(default=None, ge=0, description="How many labelled keypoints it was learned from.")
+
+    @field_validator("spread")
+    @classmethod
+    def _ensure_positive_spread(cls, spread: Row3) -> Row3:
+        if min(spread) <= 0:
+            raise ValueError(f"expected positive spreads, got {list(spread)}")
+        return spread
+
+
+class MappingKeypoint(_MappingPart):
+    """One keypoint at a typical place on the vehicle (``keypoint`` part), per prototype or for all."""
+
+    kind: Literal["keypoint"]
+    keypoint: str = Field(min_length=1)
+    position: KeypointPosition
+    by_prototype: dict[str, KeypointPosition] = Field(default_factory=dict)
+
+
+class MappingPlate(_MappingPart):
+    """A licence plate's two ends as a ``plate`` part: a centreline point and its known width."""
+
+    kind: Literal["plate"]
+    face: Literal["front", "rear"]
+    a: str = Field(min_length=1, description="The keypoint at the plate's end on the vehicle's own left.")
+    b: str = Field(min_length=1)
+    metres: float = Field(gt=0, description="The plate's width, metres (China 0.44, EU 0.52).")
+    sigma: float = Field(gt=0)
+    position: KeypointPosition
+    by_prototype: dict[str, KeypointPosition] = Field(default_factory=dict)
+
+
+MappingPart = Annotated[
+    MappingPoint | MappingSymmetry | MappingDirection | MappingLength | MappingKeypoint | MappingPlate,
+    Field(discriminator="kind")]
+
+
+class MappingFile(_Model):
+    """Which keypoints of another schema make which ToosiCubix parts."""
+
+    model_config = ConfigDict(title="ToosiCubix keypoint mapping v1")
+
+    toosicubix_mapping: Literal[1]
+    name: str = Field(min_length=1)
+    description: str = ""
+    keypoints: list[str] | None = Field(
+        default=None, description="Keypoint names by index, for COCO files whose categories do not name them.")
+    unused: list[str] = Field(default_factory=list, description="Known keypoints no part uses (counted on import).")
+    prototype: str = Field(default="Car", min_length=1, description="Prototype of a category not listed below.")
+    prototypes: dict[str, str] = Field(
+        default_factory=dict, description="Prototype per COCO category id (as a string) or category name.")
+    parts: list[MappingPart]
+
+    def known_keypoints(self) -> set[str]:
+        names = set(self.unused) | set(self.keypoints or ())
+        for part in self.parts:
+            names |= set(_keypoints_of(part))
+        return names
+
+
+def _keypoints_of(part: Any) -> tuple[str, ...]:
+    if isinstance(part, MappingPoint):
+        return (part.xy,)
+    if isinstance(part, MappingKeypoint):
+        return (part.keypoint,)
+    if isinstance(part, MappingSymmetry):
+        return (part.left, part.right)
+    if isinstance(part, MappingDirection):
+        return (part.tail, part.head)
+    return (part.a, part.b)
+
+
+def mapping_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a mapping file, as committed in ``schemas/mapping.schema.json``."""
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **MappingFile.model_json_schema()}
+
+
+def load_mapping(name_or_path: str | Path) -> tuple[MappingFile, str]:
+    """A bundled mapping by name, or a mapping file; returns it and where it was read.
+
+    Raises
+    ------
+    InputFileError
+    """
+    if str(name_or_path) == "toosicubix":
+        from toosicubix.parts.keypoints import mapping_document
+
+        source = "bundled mapping toosicubix"
+        return _validate(MappingFile, mapping_document(), source), source
+    if str(name_or_path) in BUNDLED_MAPPINGS:
+        source = f"bundled mapping {name_or_path}"
+        text = resources.files("toosicubix.parts").joinpath("mappings", f"{name_or_path}.json").read_text("utf-8")
+        return _validate(MappingFile, json.loads(text), source), source
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise InputFileError(path, [("$", f"no such mapping file, and not a bundled mapping "
+                                          f"({', '.join(BUNDLED_MAPPINGS)})")])
+    return _validate(MappingFile, read_json(path), path), str(path)
+
+
+@dataclass
+class ImportSummary:
+    """What an import made and what it left."""
+
+    images: int = 0
+    vehicles: int = 0
+    parts: Counter = field(default_factory=Counter)
+    clicks: int = 0
+    hidden_kept: int = 0
+    unlabelled: int = 0
+    unused: Counter = field(default_factory=Counter)
+    vehicles_without_parts: int = 0
+
+    def lines(self) -> list[str]:
+        kinds = ", ".join(f"{n} {k}" for k, n in sorted(self.parts.items())) or "none"
+        out = [f"{self.images} images, {self.vehicles} vehicles, {self.clicks} clicks in parts ({kinds})",
+               f"{self.hidden_kept} labelled keypoints marked not visible (v = 1) kept; "
+               f"{self.unlabelled} unlabelled (v = 0) skipped"]
+        if self.vehicles_without_parts:
+            out.append(f"{self.vehicles_without_parts} vehicles got no part (they will fail to fit)")
+        if self.unused:
+            out.append(f"{sum(self.unused.values())} labelled keypoints no part used, by name: "
+                       + ", ".join(f"{name} {n}" for name, n in sorted(self.unused.items())))
+        return out
+
+
+def _fail(path: str | Path, where: str, message: str) -> InputFileError:
+    return InputFileError(path, [(where, message)])
+
+
+def _field(obj: Any, key: str, kinds: type | tuple[type, ...], path: str | Path, where: str) -> Any:
+    if not isinstance(obj, dict) or key not in obj:
+        raise _fail(path, f"{where}.{key}", "missing required field")
+    value = obj[key]
+    if not isinstance(value, kinds) or isinstance(value, bool):
+        raise _fail(path, f"{where}.{key}", f"expected {getattr(kinds, '__name__', kinds)}, got {value!r:.60}")
+    return value
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: CameraTable | None = None,
+                        options: tuple[str, ...] = ()) -> tuple[dict[str, Any], ImportSummary]:
+    """Turn a COCO keypoint file into an annotation file v1 (a JSON document, already validated).
+
+    Parameters
+    ----------
+    coco_path : the COCO keypoint file
+    mapping : from :func:`load_mapping`
+    cameras : from :func:`toosicubix.formats.cameras.load_cameras`; None: every image must carry its own ``K``
+    options : the mapping's optional parts to use (e.g. ``("plates",)``)
+
+    Returns
+    -------
+    (document, summary)
+
+    Raises
+    ------
+    InputFileError
+        Naming the file and the JSON path: a malformed entry, an image without a camera, a keypoint the
+        mapping does not know, a bad triplet.
+    """
+    data = read_json(coco_path)
+    if not isinstance(data, dict):
+        raise _fail(coco_path, "$", "expected a COCO object with images, annotations and categories")
+    known = mapping.known_keypoints()
+    categories: dict[Any, tuple[str, list[str] | None]] = {}
+    for i, cat in enumerate(_field(data, "categories", list, coco_path, "$")):
+        where = f"$.categories[{i}]"
+        cat_id = _field(cat, "id", (int, str), coco_path, where)
+        names = cat.get("keypoints") if isinstance(cat, dict) else None
+        if isinstance(names, list) and all(n == "" for n in names):
+            names = None  # unnamed (ApolloCar3D's file): the mapping's names by index apply
+        if names is not None:
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise _fail(coco_path, f"{where}.keypoints", "expected a list of keypoint names")
+            for j, name in enumerate(names):
+                if name not in known:
+                    raise _fail(coco_path, f"{where}.keypoints[{j}]",
+                                f"keypoint {name!r} is not known to the mapping {mapping.name!r}")
+        categories[cat_id] = (str(cat.get("name", cat_id)), names)
+
+    images: dict[Any, dict[str, Any]] = {}
+    order: list[Any] = []
+    for i, im in enumerate(_field(data, "images", list, coco_path, "$")):
+        where = f"$.images[{i}]"
+        image_id = _field(im, "id", (int, str), coco_path, where)
+        file_name = _field(im, "file_name", str, coco_path, where)
+        camera = _camera_of(im, file_name, cameras, coco_path, where)
+        doc: dict[str, Any] = {"id": Path(file_name).stem, "file": file_name, "camera": camera, "vehicles": []}
+        if _number(im.get("width")) and _number(im.get("height")):
+            doc["size"] = [int(im["width"]), int(im["height"])]
+        if image_id in images:
+            raise _fail(coco_path, f"{where}.id", f"image id {image_id!r} appears twice")
+        images[image_id] = doc
+        order.append(image_id)
+
+    summary = ImportSummary(images=len(images))
+    enabled = [p for p in mapping.parts if p.option is None or p.option in options]
+    for i, ann in enumerate(_field(data, "annotations", list, coco_path, "$")):
+        where = f"$.annotations[{i}]"
+        ann_id = _field(ann, "id", (int, str), coco_path, where)
+        image_id = _field(ann, "image_id", (int, str), coco_path, where)
+        if image_id not in images:
+            raise _fail(coco_path, f"{where}.image_id", f"no image has id {image_id!r}")
+        category = ann.get("category_id")
+        cat_name, names = categories.get(category, (str(category), None))
+        if names is None:
+            names = mapping.keypoints
+        if names is None:
+            raise _fail(coco_path, f"{where}.category_id",
+                        f"category {category!r} does not name its keypoints, nor does the mapping {mapping.name!r}")
+        labelled = _triplets(ann, names, coco_path, where, summary)
+        prototype = mapping.prototypes.get(str(category), mapping.prototypes.get(cat_name, mapping.prototype))
+        parts, taken = _make_parts(enabled, labelled, prototype)
+        for name in labelled:
+            if name not in taken:
+                summary.unused[name] += 1
+        vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype, "parts": parts}
+        if "bbox" in ann:
+            box = ann["bbox"]
+            if not (isinstance(box, list) and len(box) == 4 and all(_number(v) for v in box)) or box[2] <= 0 \
+                    or box[3] <= 0:
+                raise _fail(coco_path, f"{where}.bbox", f"expected [x, y, w, h] with w, h > 0, got {box!r:.60}")
+            vehicle["box2d"] = [box[0], box[1], box[0] + box[2], box[1] + box[3]]
+        images[image_id]["vehicles"].append(vehicle)
+        summary.vehicles += 1
+        summary.vehicles_without_parts += not parts
+        for part in parts:
+            summary.parts[part["kind"]] += 1
+            summary.clicks += len(KINDS[part["kind"]].clicks)
+    document = {"toosicubix": schemas.SCHEMA_VERSION, "images": [images[k] for k in order]}
+    schemas.parse_annotations(document, f"{coco_path} (as imported)")
+    return document, summary
+
+
+def _camera_of(im: dict[str, Any], file_name: str, cameras: CameraTable | None, path: str | Path,
+               where: str) -> dict[str, Any]:
+    if "K" in im:
+        K = im["K"]
+        if not (isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3
+                                                             and all(_number(v) for v in r) for r in K)):
+            raise _fail(path, f"{where}.K", f"expected a 3x3 matrix of numbers, got {K!r:.60}")
+        return {"K": K}
+    camera = None if cameras is None else cameras.camera_for(file_name)
+    if camera is not None:
+        return dict(camera)
+    how = "no camera in the cameras file matches it" if cameras else "give --cameras CAMERAS.json"
+    raise _fail(path, where, f"image {file_name!r} has no camera: no 'K' in the image and {how}")
+
+
+def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: str,
+              summary: ImportSummary) -> dict[str, tuple[float, float, bool]]:
+    """The labelled keypoints of an annotation: name -> (x, y, visible)."""
+    kp = _field(ann, "keypoints", list, path, where)
+    if len(kp) != 3 * len(names):
+        raise _fail(path, f"{where}.keypoints",
+                    f"expected {3 * len(names)} numbers (x, y, v for {len(names)} keypoints), got {len(kp)}")
+    out = {}
+    for j, name in enumerate(names):
+        x, y, v = kp[3 * j: 3 * j + 3]
+        if not (_number(x) and _number(y) and v in (0, 1, 2)) or isinstance(v, bool):
+            raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
+                        f"keypoint {j} ({name}): expected x, y finite and v in 0, 1, 2, got {[x, y, v]!r:.60}")
+        if v == 0:
+            summary.unlabelled += 1
+            continue
+        summary.hidden_kept += v == 1
+        out[name] = (float(x), float(y), v == 2)
+    return out
+
+
+def _make_parts(parts: list[Any], labelled: dict[str, tuple[float, float, bool]],
+                prototype: str) -> tuple[list[dict[str, Any]], set[str]]:
+    """The annotation parts a vehicle's labelled keypoints make, and the keypoints they took."""
+    out: list[dict[str, Any]] = []
+    taken: set[str] = set()
+    for part in parts:
+        names = _keypoints_of(part)
+        if any(n not in labelled or n in taken for n in names):
+            continue
+        if isinstance(part, MappingLength) and part.metres is None:
+            continue  # no size to give it (the toosicubix mapping's wheelbases and tyres)
+        taken |= set(names)
+        xy = [list(labelled[n][:2]) for n in names]
+        if isinstance(part, MappingKeypoint):
+            pos = part.by_prototype.get(prototype, part.position)
+            entry: dict[str, Any] = {"kind": "keypoint", "name": part.keypoint, "xy": xy[0], "at": list(pos.at),
+                                     "spread": list(pos.spread)}
+            if not labelled[part.keypoint][2]:
+                entry["visible"] = False
+            out.append(entry)
+        elif isinstance(part, MappingPoint):
+            out.append({"kind": "point", "part": part.part, "xy": xy[0]})
+        elif isinstance(part, MappingSymmetry):
+            out.append({"kind": "symmetry", "face": part.face, "left": xy[0], "right": xy[1]})
+        elif isinstance(part, MappingDirection):
+            out.append({"kind": "direction", "axis": part.axis, "tail": xy[0], "head": xy[1]})
+        elif isinstance(part, MappingPlate):
+            pos = part.by_prototype.get(prototype, part.position)
+            out.append({"kind": "plate", "face": part.face, "a": xy[0], "b": xy[1], "at": list(pos.at),
+                        "spread": list(pos.spread), "metres": part.metres, "sigma": part.sigma})
+        else:
+            out.append({"kind": "length", "feature": part.feature, "a": xy[0], "b": xy[1], "metres": part.metres,
+                        "sigma": part.sigma})
+    return out, taken

@@ -1,0 +1,161 @@
+"""Typical keypoint positions learned from labelled keypoints on vehicles with ground-truth poses.
+
+A keypoint at fractions ``f`` (3,) of the dimensions sits at ``X_vehicle = diag(d) f`` on a vehicle of
+dimensions ``d``. One click gives one ray; the vehicles of a fleet see the keypoint from many directions, so
+``f`` is the least-squares point nearest to every ray, each moved into its vehicle's frame: with ``r_i`` the
+unit ray of the click (camera frame) and ``Q_i = I - r_i r_i^T``,
+
+    minimize  sum_i | Q_i (R_cam_vehicle_i diag(d_i) f + t_cam_vehicle_i) |^2     (metres^2)
+
+The spread per axis is the RMS of each vehicle's offset from its ray, ``R_i^T Q_i (...)`` divided by ``d_i``
+(fractions), times ``sqrt(3 / 2)``: an offset perpendicular to the ray misses the ray's own component, one of
+three on average.
+
+Ground-truth poses can contradict the clicks (a pose turned 180 degrees, a car model fitted at the wrong
+depth). With ``max_offset`` the positions are learned twice: the second pass leaves out every vehicle whose
+keypoints lie more than ``max_offset`` metres RMS from their rays at the first pass's positions.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+#: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
+MIN_SPREAD = 0.005
+
+
+@dataclass(frozen=True)
+class KeypointSample:
+    """One labelled keypoint on a vehicle with a known pose.
+
+    Attributes
+    ----------
+    prototype, name : which vehicle class and which keypoint
+    vehicle : which vehicle it was clicked on (any id unique in the sample set)
+    ray_cam : (3,) the click's ray ``K^-1 (x, y, 1)`` (undistorted), camera frame
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,); dimensions : (3,) the vehicle's ground truth
+    """
+
+    prototype: str
+    name: str
+    vehicle: str
+    ray_cam: np.ndarray
+    R_cam_vehicle: np.ndarray
+    t_cam_vehicle: np.ndarray
+    dimensions: np.ndarray
+
+
+@dataclass(frozen=True)
+class LearnedPosition:
+    """``at`` (3,) and ``spread`` (3,), fractions of ``(dx, dy, dz)``, from ``n`` samples."""
+
+    at: np.ndarray
+    spread: np.ndarray
+    n: int
+
+
+def learn_positions(samples: list[KeypointSample], min_samples: int = 3,
+                    max_offset: float | None = None) -> dict[str, dict[str, LearnedPosition]]:
+    """Per prototype and keypoint name, the typical position and spread (see the module's docstring).
+
+    Parameters
+    ----------
+    samples : labelled keypoints with their vehicles' ground truth
+    min_samples : keypoints seen on fewer vehicles of a prototype are left out (the rays need directions
+        that differ)
+    max_offset : metres; when given, a second pass leaves out the vehicles whose keypoints lie farther than
+        this (RMS) from their rays at the first pass's positions
+
+    Returns
+    -------
+    ``{prototype: {name: LearnedPosition}}``; a keypoint whose rays leave its position undetermined (all
+    parallel) is left out.
+    """
+    learned = _learn(samples, min_samples)
+    if max_offset is None:
+        return learned
+    squares: dict[str, list[float]] = defaultdict(list)
+    for s in samples:
+        position = learned.get(s.prototype, {}).get(s.name)
+        if position is not None:
+            squares[s.vehicle].append(float(np.sum(_offset_cam(s, position.at) ** 2)))
+    bad = {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
+    return _learn([s for s in samples if s.vehicle not in bad], min_samples)
+
+
+def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
+    """The keypoint's offset from its ray (3,), camera frame, metres, were it at fractions ``at``."""
+    r = s.ray_cam / np.linalg.norm(s.ray_cam)
+    Y = s.R_cam_vehicle @ (s.dimensions * at) + s.t_cam_vehicle
+    return Y - r * (r @ Y)
+
+
+def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[str, LearnedPosition]]:
+    groups: dict[tuple[str, str], list[KeypointSample]] = defaultdict(list)
+    for s in samples:
+        groups[(s.prototype, s.name)].append(s)
+    out: dict[str, dict[str, LearnedPosition]] = defaultdict(dict)
+    for (prototype, name), group in sorted(groups.items()):
+        if len(group) < min_samples:
+            continue
+        rays = np.array([s.ray_cam / np.linalg.norm(s.ray_cam) for s in group])  # (n, 3)
+        Q = np.eye(3) - rays[:, :, None] * rays[:, None, :]  # (n, 3, 3)
+        R = np.array([s.R_cam_vehicle for s in group])
+        d = np.array([s.dimensions for s in group])
+        t = np.array([s.t_cam_vehicle for s in group])
+        A = Q @ R * d[:, None, :]  # (n, 3, 3): Q R diag(d)
+        b = -np.einsum("nij,nj->ni", Q, t)
+        A_rows, b_rows = A.reshape(-1, 3), b.reshape(-1)
+        if np.linalg.matrix_rank(A_rows, tol=1e-9 * np.abs(A_rows).max()) < 3:
+            continue
+        f, *_ = np.linalg.lstsq(A_rows, b_rows, rcond=None)
+        offsets_cam = A @ f - b  # (n, 3) perpendicular to each ray
+        offsets = np.einsum("nji,nj->ni", R, offsets_cam) / d  # vehicle frame, fractions
+        spread = np.maximum(np.sqrt(1.5 * np.mean(offsets**2, axis=0)), MIN_SPREAD)
+        out[prototype][name] = LearnedPosition(at=f, spread=spread, n=len(group))
+    return dict(out)
+
+
+def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_offset: float | None = None) -> dict:
+    """The mapping document ``base`` with every keypoint part's position learned from ``samples``: pooled over
+    prototypes in ``position``, per prototype (with at least ``min_samples`` vehicles) in ``by_prototype``.
+    Keypoint parts without any sample are dropped (their keypoints are then counted as unused on import)."""
+    pooled = learn_positions([replace(s, prototype="*") for s in samples], max_offset=max_offset).get("*", {})
+    per = learn_positions(samples, min_samples=min_samples, max_offset=max_offset)
+
+    def entry(p) -> dict:
+        return {"at": [round(float(v), 4) for v in p.at], "spread": [round(float(v), 4) for v in p.spread], "n": p.n}
+
+    parts, unused = [], list(base.get("unused", []))
+    for part in base["parts"]:
+        if part["kind"] == "plate":  # the centre: the mean of its two ends, on the centreline
+            ends = [part["a"], part["b"]]
+            if all(e in pooled for e in ends):
+                part = {**part, "position": _centre([pooled[e] for e in ends]),
+                        "by_prototype": {proto: _centre([d[e] for e in ends]) for proto, d in sorted(per.items())
+                                         if all(e in d for e in ends)}}
+            parts.append(part)
+            continue
+        if part["kind"] != "keypoint":
+            parts.append(part)
+            continue
+        name = part["keypoint"]
+        if name not in pooled:
+            unused.append(name)
+            continue
+        parts.append({**part, "position": entry(pooled[name]),
+                      "by_prototype": {proto: entry(d[name]) for proto, d in sorted(per.items()) if name in d}})
+    described = base.get("description", "").split(" Positions: ")[0]
+    return {**base, "description": f"{described} Positions: {how}.".strip(), "unused": unused,
+            "parts": parts}
+
+
+def _centre(ends: list) -> dict:
+    at = np.mean([e.at for e in ends], axis=0)
+    at[1] = 0.0
+    spread = np.mean([e.spread for e in ends], axis=0)
+    return {"at": [round(float(v), 4) for v in at], "spread": [round(float(v), 4) for v in spread],
+            "n": min(e.n for e in ends)}
