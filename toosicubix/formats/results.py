@@ -22,6 +22,7 @@ from typing import IO, Any
 import numpy as np
 
 from toosicubix.formats import FormatError, json_field, json_numbers, read_json
+from toosicubix.solver import Alternative  # the solver's type: results.json's ``alternatives``
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"
@@ -88,42 +89,6 @@ class Observability:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Observability:
         return cls(dict(d["determined_by"]), dict(d["variance_ratios"]), tuple(d["sentences"]))
-
-
-@dataclass(frozen=True)
-class Alternative:
-    """Another minimum the refinement reached (results.json's ``alternatives``).
-
-    Attributes
-    ----------
-    cost : its pixel cost; rotation_deg : its rotation's angle from the answer's, degrees
-    turned_around : it faces the other way; implausible : why it was rejected, or None
-    close : its cost is within the ambiguity margin of the answer's
-    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,); dimensions : (3,)
-    """
-
-    cost: float
-    rotation_deg: float
-    turned_around: bool
-    implausible: str | None
-    close: bool
-    R_cam_vehicle: np.ndarray
-    t_cam_vehicle: np.ndarray
-    dimensions: np.ndarray
-
-    def to_json(self) -> dict[str, Any]:
-        return {"cost": self.cost, "rotation_deg": self.rotation_deg, "turned_around": self.turned_around,
-                "implausible": self.implausible, "close": self.close,
-                "R_cam_vehicle": self.R_cam_vehicle.tolist(), "t_cam_vehicle": self.t_cam_vehicle.tolist(),
-                "dimensions": self.dimensions.tolist()}
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> Alternative:
-        return cls(cost=d["cost"], rotation_deg=d["rotation_deg"], turned_around=d["turned_around"],
-                   implausible=d["implausible"], close=d["close"],
-                   R_cam_vehicle=np.array(d["R_cam_vehicle"], dtype=float),
-                   t_cam_vehicle=np.array(d["t_cam_vehicle"], dtype=float),
-                   dimensions=np.array(d["dimensions"], dtype=float))
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,6 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import (
     RESULTS_FILENAME,
-    Alternative,
     Cues,
     ImageResult,
     Observability,
@@ -214,7 +213,7 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
         confidence=confidence(fit.uncertainty) if fit.uncertainty is not None else None,
         observability=Observability.from_json(fit.observability.to_json()) if fit.observability is not None else None,
         ambiguous=fit.ambiguous,
-        alternatives=tuple(Alternative.from_json(a.to_json()) for a in fit.alternatives),
+        alternatives=tuple(fit.alternatives),
         warnings=tuple(fit.warnings),
         **suggestions,
     )

@@ -211,6 +211,15 @@ class Alternative:
                 "R_cam_vehicle": self.R_cam_vehicle.tolist(), "t_cam_vehicle": self.t_cam_vehicle.tolist(),
                 "dimensions": self.dimensions.tolist()}
 
+    @classmethod
+    def from_json(cls, d: dict) -> Alternative:
+        """The inverse of :meth:`to_json` (results.json's ``alternatives``)."""
+        return cls(cost=d["cost"], rotation_deg=d["rotation_deg"], turned_around=d["turned_around"],
+                   implausible=d["implausible"], close=d["close"],
+                   R_cam_vehicle=np.array(d["R_cam_vehicle"], dtype=float),
+                   t_cam_vehicle=np.array(d["t_cam_vehicle"], dtype=float),
+                   dimensions=np.array(d["dimensions"], dtype=float))
+
 
 @dataclass(frozen=True)
 class _Candidate:
