@@ -22,11 +22,13 @@ named and fitted as the page fits them (``fit_one`` with the page's options and 
 click of the car is named by the page's rule (:func:`toosicubix.web.session.naming_candidates` and
 :func:`~toosicubix.web.session.nearest_parts`) among every part of the mapping not in the first k, each
 keypoint at its learned ``at`` fractions of the fitted cuboid (the mapping's positions are learned on these
-same 100 images: in-sample for the positions).
+same 100 images: in-sample for the positions; ``--out-of-sample`` learns them on the even images, as
+``benchmarks/apollocar3d.py`` does, and scores the odd images' cars).
 
     python benchmarks/annotate.py --vehicles 60 -o benchmarks/results/annotate.json
     python benchmarks/annotate.py --vehicles 60 --kitti-ground -o benchmarks/results/annotate-kitti-ground.json
     python benchmarks/annotate.py --apollocar3d -o benchmarks/results/annotate-apollocar3d.json
+    python benchmarks/annotate.py --apollocar3d --out-of-sample -o benchmarks/results/annotate-apollocar3d-odd.json
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from apollocar3d import learned_on_even, sorted_images
 from common import SPLITS, default_data_dir, machine
 
 from toosicubix.annotations.convert import load_images
@@ -150,10 +153,12 @@ def main() -> None:
                         help="give the images KITTI's ground block (as annotate --kitti-ground)")
     parser.add_argument("--apollocar3d", action="store_true",
                         help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
+    parser.add_argument("--out-of-sample", action="store_true",
+                        help="with --apollocar3d: positions learned on the even images, the odd images scored")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
-        report = apollocar3d_naming(args.data / "apollocar3d", args.seed)
+        report = apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample)
         if args.out:
             args.out.write_text(json.dumps(report, indent=1) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -211,16 +216,26 @@ APOLLO_KS = (4, 6, 8)
 APOLLO_MIN_KEYPOINTS = 10
 
 
-def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS) -> dict:
+def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
+                       out_of_sample: bool = False) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
-    candidate is the true part, and how often the true part is among the nearest two."""
+    candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
+    keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
+    cars scored."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
-    mapping, _ = load_mapping("apollocar3d-66")
-    document, _ = coco_to_annotations(keypoints_path, mapping, load_cameras(folder / "cameras.json"))
+    cameras = load_cameras(folder / "cameras.json")
+    scored_images = None
+    if out_of_sample:
+        sorted_ = sorted_images(folder)
+        mapping = learned_on_even(sorted_, cameras)
+        scored_images = {im.id for im in sorted_[1::2]}
+    else:
+        mapping, _ = load_mapping("apollocar3d-66")
+    document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "annotations.json"
         path.write_text(json.dumps(document))
-        images = load_images(path)
+        images = [im for im in load_images(path) if scored_images is None or im.id in scored_images]
     priors, options = load_priors(), SolverOptions()  # as the page: Session's defaults
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -271,7 +286,8 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
             "true_in_top_2": round(c["top2"] / c["scored"], 3) if c["scored"] else None,
             "true_part_not_visible_on_fit": c["true_not_visible"]}
     return {"benchmark": "annotate --apollocar3d", "data": "ApolloCar3D apollocar3d_val_dev.json (100 images)",
-            "mapping": "apollocar3d-66 (bundled; positions learned on these images: in-sample)",
+            "mapping": ("apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
+                        if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",
