@@ -13,11 +13,22 @@ hotkey or palette, or correcting an auto-given one):
 - ``guided``: as ``auto``, but once the fit exists the next part is the best of the page's targets the
   annotator can see (falling back to its own order when none of the five is visible to it).
 
-Auto-naming accuracy is how often the name given to an unnamed click is the true one. ApolloCar3D's real
-keypoints are not used: no ApolloCar3D importer exists in this tree (issue 10) to map its 66 keypoints to parts.
+Auto-naming accuracy is how often the name given to an unnamed click is the true one.
+
+``--apollocar3d`` measures it on ApolloCar3D's real keypoints instead (no replay through the page): every car of
+``apollocar3d_val_dev.json`` with at least 10 labelled keypoints, imported with the bundled ``apollocar3d-66``
+mapping, its parts in a seeded order (one generator, seed 0, shuffling each car in file order); the first k
+named and fitted as the page fits them (``fit_one`` with the page's options and suggestions); then every other
+click of the car is named by the page's rule (:func:`toosicubix.web.session.naming_candidates` and
+:func:`~toosicubix.web.session.nearest_parts`) among every part of the mapping not in the first k, each
+keypoint at its learned ``at`` fractions of the fitted cuboid (the mapping's positions are learned on these
+same 100 images: in-sample for the positions; ``--out-of-sample`` learns them on the even images, as
+``benchmarks/apollocar3d.py`` does, and scores the odd images' cars).
 
     python benchmarks/annotate.py --vehicles 60 -o benchmarks/results/annotate.json
     python benchmarks/annotate.py --vehicles 60 --kitti-ground -o benchmarks/results/annotate-kitti-ground.json
+    python benchmarks/annotate.py --apollocar3d -o benchmarks/results/annotate-apollocar3d.json
+    python benchmarks/annotate.py --apollocar3d --out-of-sample -o benchmarks/results/annotate-apollocar3d-odd.json
 """
 
 from __future__ import annotations
@@ -28,15 +39,21 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from apollocar3d import learned_on_even, sorted_images
 from common import SPLITS, default_data_dir, machine
 
+from toosicubix.annotations.convert import load_images
+from toosicubix.formats.cameras import load_cameras
+from toosicubix.formats.coco import coco_to_annotations, load_mapping
 from toosicubix.model import KITTI_GROUND
+from toosicubix.pipeline.batch import fit_one
 from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
@@ -44,9 +61,10 @@ from toosicubix.simulate.annotator import (
     select_kitti_tracking,
     simulate_vehicle,
 )
+from toosicubix.solver import SolverOptions
 from toosicubix.web.client import Client
 from toosicubix.web.server import serve_in_thread
-from toosicubix.web.session import Session
+from toosicubix.web.session import Session, naming_candidates, nearest_parts
 
 STRATEGIES = ("named", "auto", "guided")
 
@@ -133,8 +151,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--kitti-ground", action="store_true",
                         help="give the images KITTI's ground block (as annotate --kitti-ground)")
+    parser.add_argument("--apollocar3d", action="store_true",
+                        help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
+    parser.add_argument("--out-of-sample", action="store_true",
+                        help="with --apollocar3d: positions learned on the even images, the odd images scored")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
+    if args.apollocar3d:
+        report = apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample)
+        if args.out:
+            args.out.write_text(json.dumps(report, indent=1) + "\n")
+        print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
+        return
 
     chosen = select_kitti_tracking(args.data / "kitti_tracking",
                                    SelectionOptions(sequences=SPLITS["test"], frames_per_track=1))
@@ -182,6 +210,88 @@ def main() -> None:
     if args.out:
         args.out.write_text(text + "\n")
     print(json.dumps({"vehicles": len(rows), "seconds": round(seconds, 1), "summary": summary}, indent=1))
+
+
+APOLLO_KS = (4, 6, 8)
+APOLLO_MIN_KEYPOINTS = 10
+
+
+def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
+                       out_of_sample: bool = False) -> dict:
+    """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
+    candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
+    keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
+    cars scored."""
+    keypoints_path = folder / "apollocar3d_val_dev.json"
+    cameras = load_cameras(folder / "cameras.json")
+    scored_images = None
+    if out_of_sample:
+        sorted_ = sorted_images(folder)
+        mapping = learned_on_even(sorted_, cameras)
+        scored_images = {im.id for im in sorted_[1::2]}
+    else:
+        mapping, _ = load_mapping("apollocar3d-66")
+    document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "annotations.json"
+        path.write_text(json.dumps(document))
+        images = [im for im in load_images(path) if scored_images is None or im.id in scored_images]
+    priors, options = load_priors(), SolverOptions()  # as the page: Session's defaults
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    per_k = {k: Counter() for k in ks}
+    cars = []
+    for image in images:
+        for vehicle in image.vehicles:
+            clicks = [p for p in vehicle.parts if p.kind in ("point", "keypoint")]
+            if len(clicks) < APOLLO_MIN_KEYPOINTS:
+                continue
+            order = [clicks[i] for i in rng.permutation(len(clicks))]
+            keypoints = {p.keypoint: list(p.by_prototype.get(vehicle.prototype, p.position).at)
+                         for p in mapping.parts if p.kind == "keypoint"}
+            points = {p.part for p in mapping.parts if p.kind == "point"}
+            row = {"image": image.id, "vehicle": vehicle.id, "keypoints": len(clicks)}
+            for k in ks:
+                named = tuple(order[:k])
+                result = fit_one(replace(vehicle, parts=named), image.camera, priors[vehicle.prototype], options,
+                                 image.ground, next_clicks=1000 if points else 0)
+                counts = per_k[k]
+                counts["cars"] += 1
+                if not result.ok:
+                    counts["not_fitted"] += 1
+                    counts["clicks_not_fitted"] += len(order) - k
+                    row[str(k)] = None
+                    continue
+                taken = {(p.kind, p.name) for p in named}
+                candidates = naming_candidates(
+                    result, image.camera, {n: at for n, at in keypoints.items() if ("keypoint", n) not in taken},
+                    {n for n in points if ("point", n) not in taken})
+                right = top2 = 0
+                for part in order[k:]:
+                    ranked = [(c["kind"], c["name"]) for c in nearest_parts(part.uv[0].tolist(), candidates)]
+                    counts["scored"] += 1
+                    counts["right"] += ranked[:1] == [(part.kind, part.name)]
+                    counts["top2"] += (part.kind, part.name) in ranked[:2]
+                    counts["true_not_visible"] += (part.kind, part.name) not in ranked
+                    right += ranked[:1] == [(part.kind, part.name)]
+                    top2 += (part.kind, part.name) in ranked[:2]
+                row[str(k)] = {"scored": len(order) - k, "right": right, "top2": top2}
+            cars.append(row)
+    summary = {}
+    for k, c in per_k.items():
+        summary[str(k)] = {
+            "cars": c["cars"], "not_fitted": c["not_fitted"], "clicks_scored": c["scored"],
+            "clicks_on_cars_not_fitted": c["clicks_not_fitted"],
+            "nearest_is_true": round(c["right"] / c["scored"], 3) if c["scored"] else None,
+            "true_in_top_2": round(c["top2"] / c["scored"], 3) if c["scored"] else None,
+            "true_part_not_visible_on_fit": c["true_not_visible"]}
+    return {"benchmark": "annotate --apollocar3d", "data": "ApolloCar3D apollocar3d_val_dev.json (100 images)",
+            "mapping": ("apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
+                        if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
+            "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
+            "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
+            "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",
+            "seconds": round(time.perf_counter() - t0, 1), "machine": machine(), "summary": summary, "cars": cars}
 
 
 def _compact(report: dict) -> str:

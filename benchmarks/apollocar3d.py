@@ -146,6 +146,22 @@ def format_row(r: dict) -> str:
             f" | {means} | {medians}")
 
 
+def sorted_images(folder: Path) -> list:
+    """The folder's images sorted by file name (the split's order: even learning, odd comparison)."""
+    return sorted(read_apollocar3d(folder / "apollocar3d_val_dev.json", read_car_models(folder / "car_models.json")),
+                  key=lambda im: im.file_name)
+
+
+def learned_on_even(images: list, cameras) -> MappingFile:
+    """``apollocar3d-66`` with its keypoint positions learned on the even images only (out of sample for the
+    odd ones); ``images`` from :func:`sorted_images`."""
+    bundled, _ = load_mapping("apollocar3d-66")
+    K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in images}
+    even = learned_mapping(bundled.model_dump(mode="json", exclude_none=True),
+                           keypoint_samples(images[0::2], bundled.keypoints, K_of), 5, "even images", 0.5)
+    return MappingFile.model_validate(even)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None, help="the shared data folder (default ../shared/data)")
@@ -162,16 +178,10 @@ def main() -> int:
     coco = json.loads(keypoints_path.read_text())
     counts = labelled_counts(coco)
     scored = {k for k, n in counts.items() if n >= MIN_KEYPOINTS}
-    images = sorted(read_apollocar3d(keypoints_path, read_car_models(folder / "car_models.json")),
-                    key=lambda im: im.file_name)
+    images = sorted_images(folder)
     halves = {"all": {im.id for im in images}, "odd": {im.id for im in images[1::2]}}
     cameras = load_cameras(folder / "cameras.json")
-    # Out of sample: the keypoint positions learned on the even images only.
-    bundled, _ = load_mapping("apollocar3d-66")
-    K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in images}
-    even = learned_mapping(bundled.model_dump(mode="json", exclude_none=True),
-                           keypoint_samples(images[0::2], bundled.keypoints, K_of), 5, "even images", 0.5)
-    learned_even = MappingFile.model_validate(even)
+    learned_even = learned_on_even(images, cameras)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for half in ("odd", "all"):

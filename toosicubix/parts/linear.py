@@ -142,16 +142,21 @@ class PartsModel:
             if not KINDS[click(label).kind].open_names:
                 out.append(faces_of_click(label))
                 continue
-            at = (self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])
-            faces = tuple(face for face, near in (("front", at[0] > 0.3), ("rear", at[0] < -0.3),
-                                                  ("left", at[1] > 0.3), ("right", at[1] < -0.3),
-                                                  ("top", at[2] > 0.85)) if near)
-            out.append(faces or None)
+            out.append(keypoint_faces((self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])))
         return tuple(out)
 
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
         return self.A @ p
+
+
+def keypoint_faces(at) -> tuple[str, ...] | None:
+    """The faces a keypoint at fractions ``at`` (3,) of the dimensions sits near: beyond 0.3 of the length or
+    width from the centre, or above 0.85 of the height; None when near none."""
+    faces = tuple(face for face, near in (("front", at[0] > 0.3), ("rear", at[0] < -0.3),
+                                          ("left", at[1] > 0.3), ("right", at[1] < -0.3),
+                                          ("top", at[2] > 0.85)) if near)
+    return faces or None
 
 
 def _is_arrow_tail(label: str) -> bool:

@@ -50,10 +50,12 @@ from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
+from toosicubix.parts.linear import keypoint_faces
 from toosicubix.pipeline.batch import check_prototypes, fit_one
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.priors.table import Priors
-from toosicubix.solver import SolverOptions
+from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
+from toosicubix.solver.guidance import VISIBLE_MIN_DEG
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -366,12 +368,12 @@ class Session:
             result = self._fit(image, j, v)
             if not result.ok:
                 break
-            choice = nearest_parts(part.uv[0], result.next_clicks or [])
+            choice = nearest_parts(part.uv[0], naming_candidates(result, image.camera))
             if not choice:
                 break
             best = choice[0]
             runner = choice[1] if len(choice) > 1 else None
-            part.kind, part.name = "point", best["name"]
+            part.kind, part.name = best["kind"], best["name"]
             part.auto = {"name": best["name"], "distance_px": best["distance_px"],
                          "runner_up": None if runner is None else runner["name"],
                          "runner_up_distance_px": None if runner is None else runner["distance_px"]}
@@ -632,15 +634,40 @@ class Session:
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
 
 
+def naming_candidates(result: VehicleResult, camera: Camera,
+                      keypoints: dict[str, Any] | None = None,
+                      points: set[str] | None = None) -> list[dict[str, Any]]:
+    """What an unnamed click on a fitted vehicle may be, each as ``next_clicks`` has it (kind, name, uv (1, 2),
+    visible): the vocabulary's point parts among the fit's ``next_clicks`` (at their typical positions; only
+    those named in ``points`` when given), then each keypoint of ``keypoints`` (name -> ``at``, fractions of the
+    dimensions) projected from that place on the fitted cuboid, visible when a face it sits near
+    (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera as a suggestion's must be, or
+    when it sits near none. A keypoint behind the camera is left out."""
+    out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
+    if not keypoints or not result.ok:
+        return out
+    R, t, d = (np.asarray(x, dtype=float) for x in (result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions))
+    facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
+    for name, at in keypoints.items():
+        at = np.asarray(at, dtype=float)
+        point_cam = R @ (d * at) + t
+        if point_cam[2] <= MIN_DEPTH:
+            continue
+        faces = keypoint_faces(at)
+        out.append({"kind": "keypoint", "name": name, "uv": camera.project(point_cam[None]).tolist(),
+                    "visible": faces is None or any(facing[f] for f in faces)})
+    return out
+
+
 def nearest_parts(uv: list[float], suggestions: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The point parts among ``suggestions`` (``next_clicks`` of a fit: kind, name, uv, visible) on a face
-    turned to the camera, nearest to the pixel ``uv`` first, each with its ``distance_px``."""
+    """The point parts and keypoints among ``suggestions`` (:func:`naming_candidates`: kind, name, uv, visible)
+    that are visible, nearest to the pixel ``uv`` first, each with its ``kind`` and ``distance_px``."""
     out = []
     for s in suggestions:
-        if s["kind"] != "point" or not s["visible"]:
+        if s["kind"] not in ("point", "keypoint") or not s["visible"]:
             continue
         distance = math.dist(uv, s["uv"][0])
-        out.append({"name": s["name"], "distance_px": round(distance, 2), "uv": s["uv"][0]})
+        out.append({"kind": s["kind"], "name": s["name"], "distance_px": round(distance, 2), "uv": s["uv"][0]})
     return sorted(out, key=lambda s: s["distance_px"])
 
 

@@ -1,0 +1,44 @@
+"""The candidates an unnamed click is named from (:func:`naming_candidates`), keypoints included."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tests.web.synthetic import CAMERA, DIMENSIONS, R_CAM_VEHICLE, T_CAM_VEHICLE
+from toosicubix.formats.results import VehicleResult
+from toosicubix.web.session import naming_candidates, nearest_parts
+
+FRONT_LEFT = [0.5, 0.4, 0.5]  # on the front and left faces, both turned to the camera
+REAR_RIGHT = [-0.5, -0.4, 0.5]  # on the faces turned away
+
+
+def _fit(next_clicks: list[dict]) -> VehicleResult:
+    return VehicleResult("1", "ok", None, "Car", R_CAM_VEHICLE, T_CAM_VEHICLE, DIMENSIONS,
+                         next_clicks=tuple(next_clicks))
+
+
+def _pixel(at: list[float]) -> list[float]:
+    return CAMERA.project((R_CAM_VEHICLE @ (DIMENSIONS * np.array(at)) + T_CAM_VEHICLE)[None])[0].tolist()
+
+
+def test_keypoints_projected_at_their_fractions_and_hidden_ones_not_chosen():
+    wheel = {"kind": "point", "name": "wheel-front-left", "uv": [[100.0, 300.0]], "visible": True}
+    arrow = {"kind": "direction", "name": "forward", "uv": [[1.0, 1.0], [2.0, 2.0]], "visible": True}
+    candidates = naming_candidates(_fit([wheel, arrow]), CAMERA, {"fl": FRONT_LEFT, "rr": REAR_RIGHT})
+    by_name = {c["name"]: c for c in candidates}
+    assert set(by_name) == {"wheel-front-left", "fl", "rr"}
+    assert np.allclose(by_name["fl"]["uv"][0], _pixel(FRONT_LEFT))
+    assert by_name["fl"]["visible"] and not by_name["rr"]["visible"]
+    near_rr = nearest_parts(_pixel(REAR_RIGHT), candidates)
+    assert "rr" not in [c["name"] for c in near_rr]
+    best = nearest_parts([p + 1.0 for p in _pixel(FRONT_LEFT)], candidates)[0]
+    assert (best["kind"], best["name"]) == ("keypoint", "fl")
+    assert best["distance_px"] == round(2 ** 0.5, 2)
+
+
+def test_point_parts_only_those_asked_for_and_no_keypoints_by_default():
+    wheel = {"kind": "point", "name": "wheel-front-left", "uv": [[100.0, 300.0]], "visible": True}
+    assert naming_candidates(_fit([wheel]), CAMERA) == [wheel]
+    assert naming_candidates(_fit([wheel]), CAMERA, {"fl": FRONT_LEFT}, points=set())[0]["name"] == "fl"
+    failed = VehicleResult("1", "failed", "degenerate clicks", "Car")
+    assert naming_candidates(failed, CAMERA, {"fl": FRONT_LEFT}) == []
