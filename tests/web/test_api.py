@@ -338,3 +338,16 @@ def test_broken_session_file_names_itself(served, scene, tmp_path):
     session.extras_path.write_text('{"toosicubix_annotate": 2}')
     with pytest.raises(InputFileError, match=r"annotations.json.annotate.json: \$.toosicubix_annotate: expected 1"):
         make_session(scene, tmp_path / "annotations.json")
+
+
+def test_cameras_file_of_the_importers_is_read_too(tmp_path):
+    # The same --cameras file as `import coco|cvat|label-studio`: the first glob on the file name wins.
+    K = [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0.0, 0.0, 1.0]]
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps({"cameras": [{"match": "*Camera_5*", "K": K}, {"match": "*", "K": [
+        [500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]}]}))
+    cameras = load_cameras(path, ["a", "b"], ["a_Camera_5.jpg", "b_Camera_6.jpg"])
+    assert cameras["a"].K[0, 0] == 700.0 and cameras["b"].K[0, 0] == 500.0
+    path.write_text(json.dumps({"cameras": [{"match": "*Camera_5*", "K": K}]}))
+    with pytest.raises(InputFileError, match="no camera for image 'b'"):
+        load_cameras(path, ["a", "b"], ["a_Camera_5.jpg", "b_Camera_6.jpg"])

@@ -55,7 +55,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     try:
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
-        cameras = load_cameras(cameras_path, ids) if cameras_path is not None else {}
+        cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
         ground = dict(KITTI_GROUND) if kitti_ground else None
         session = Session(list(images), out, cameras, priors, prototype, ground=ground)
     except (InputFileError, ApiError) as exc:

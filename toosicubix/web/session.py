@@ -45,7 +45,9 @@ from toosicubix.annotations.convert import (
 )
 from toosicubix.annotations.schema import InputFileError, parse_annotations, parse_ground_block, read_json
 from toosicubix.camera import Camera
+from toosicubix.formats import FormatError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
+from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
@@ -132,9 +134,11 @@ class ImageState:
     undo: list[list[VehicleState]] = field(default_factory=list)
 
 
-def load_cameras(path: Path, image_ids: list[str]) -> dict[str, Camera]:
-    """Cameras per image id from a cameras file: one camera block as the annotation file has it (``{"K": ...}``
-    or ``{"P": ...}``, optional ``distortion``) for every image, or ``{"<image id or file name>": block, ...}``.
+def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None = None) -> dict[str, Camera]:
+    """Cameras per image id from a cameras file: the cameras file of the importers
+    (``{"cameras": [{"match": GLOB, "K": ...}]}``, :mod:`toosicubix.formats.cameras`, matched on each image's file
+    name, ``file_names``, by default its id), one camera block as the annotation file has it (``{"K": ...}`` or
+    ``{"P": ...}``, optional ``distortion``) for every image, or ``{"<image id or file name>": block, ...}``.
 
     Raises
     ------
@@ -144,7 +148,15 @@ def load_cameras(path: Path, image_ids: list[str]) -> dict[str, Camera]:
     data = read_json(path)
     if not isinstance(data, dict):
         raise InputFileError(path, [("$", "expected an object: a camera block or image id -> camera block")])
-    if "K" in data or "P" in data:
+    if "cameras" in data:  # the importers' cameras file: one reader for every command's --cameras
+        try:
+            table = load_camera_table(path)
+        except FormatError as exc:
+            raise InputFileError(path, [("$", exc.message)]) from None
+        names = file_names if file_names is not None else image_ids
+        blocks = {image_id: ("$.cameras", camera) for image_id, name in zip(image_ids, names, strict=True)
+                  if (camera := table.camera_for(name)) is not None}
+    elif "K" in data or "P" in data:
         blocks = {image_id: ("$", data) for image_id in image_ids}
     else:
         blocks = {key.rsplit(".", 1)[0] if key not in image_ids else key: (f"$[{json.dumps(key)}]", block)
