@@ -5,7 +5,6 @@ The commands are plain click commands; :data:`COMMANDS` lists them for the ``imp
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -56,7 +55,6 @@ def _common(command):
 def _run(read, source: Path, cameras_path: Path | None, out_path: Path, strict: bool, quiet: bool) -> None:
     from toosicubix.annotations.schema import InputFileError, parse_annotations
     from toosicubix.formats import FormatError
-    from toosicubix.formats.atomic import atomic_write_text
     from toosicubix.formats.cameras import load_cameras
 
     try:
@@ -70,8 +68,15 @@ def _run(read, source: Path, cameras_path: Path | None, out_path: Path, strict: 
     if not quiet:
         for warning in summary.warnings:
             click.echo(f"warning: {warning}", err=True)
+    _write(doc, summary, out_path, quiet)
+
+
+def _write(doc: dict, summary, out_path: Path, quiet: bool) -> None:
+    """Write an imported annotation file atomically, then the import's summary on stderr."""
+    from toosicubix.formats.atomic import atomic_write_json
+
     try:
-        atomic_write_text(out_path, json.dumps(doc, indent=1) + "\n")
+        atomic_write_json(out_path, doc)
     except OSError as exc:
         raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
     if not quiet:
@@ -155,7 +160,6 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     Example:
       toosicubix import coco apollo_val.json --mapping apollocar3d-66 --cameras cameras.json -o ann.json
     """
-    from toosicubix.formats.atomic import atomic_write_json
     from toosicubix.formats.cameras import load_cameras
     from toosicubix.formats.coco import coco_to_annotations, load_mapping
 
@@ -169,14 +173,7 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
         document, summary = coco_to_annotations(keypoints, mapping, cameras, options)
     except InputError as exc:
         raise BadInput(str(exc)) from None
-    try:
-        atomic_write_json(out_path, document)
-    except OSError as exc:
-        raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
-    if not quiet:
-        for line in summary.lines():
-            click.echo(line, err=True)
-        click.echo(f"wrote {out_path}", err=True)
+    _write(document, summary, out_path, quiet)
 
 
 #: The commands of the ``import`` group this module contributes.
