@@ -104,20 +104,3 @@ def test_symmetry_pairs_alone_leave_the_distance_undetermined_and_say_so():
     assert not fit.ok
     assert "no start led to a cuboid in front of the camera" not in fit.reason
     assert "do not determine" in fit.reason
-
-
-def test_click_sigma_estimate_pools_redundant_vehicles():
-    from toosicubix.solver.robust import estimate_click_sigma
-
-    rng = np.random.default_rng(0)
-    vehicles = []
-    for _ in range(200):  # 12 keypoint clicks, no auxiliary unknown: 24 - 8 = 16 degrees of freedom each
-        vehicles.append({"status": "ok", "clicks": 12, "aux_unknowns": 0, "click_weights": [0.5] * 12,
-                         "residuals_px": (rng.normal(0.0, 3.0, (12, 2)) * np.sqrt(16 / 24)).tolist()})
-    vehicles.append({"status": "ok", "clicks": 4, "aux_unknowns": 0, "click_weights": None,
-                     "residuals_px": [[100.0, 0.0]] * 4})  # no redundancy: left out
-    vehicles.append({"status": "failed", "clicks": 12, "aux_unknowns": 0})
-    sigma, dof = estimate_click_sigma(vehicles)
-    assert dof == 200 * 16
-    # weights 0.5 on residuals of 3 px (scaled to the redundancy): 1.5 px; 3200 degrees of freedom, 2 % bound
-    assert abs(sigma - 1.5) < 0.03

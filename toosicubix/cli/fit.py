@@ -33,6 +33,10 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
     upright on the road; with the camera height, on it) or known sizes (plate widths, wheelbases, tyres,
     known dimensions); the summary says which cue set each vehicle's scale.
 
+    The click noise the uncertainty is computed for is estimated from the batch's own residuals (a pilot
+    fit of up to 400 vehicles spread over the file, before the real one) unless --click-sigma gives it; the
+    summary and results.json ("click_noise") say which, and on how many degrees of freedom.
+
     Exit code 0 when every vehicle was fitted, 1 when some failed (their reasons are in results.json
     and on stderr; the others are written), 2 for a bad input file or option.
 
@@ -48,7 +52,8 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
     try:
         summary = fit_file(annotations, out_dir, fitting.priors_path, fitting.options, progress=bar.update,
                            on_start=bar.start, jobs=fitting.jobs, ground=fitting.ground,
-                           joint_ground=fitting.joint_ground, next_clicks=next_clicks)
+                           joint_ground=fitting.joint_ground, next_clicks=next_clicks,
+                           estimate_click_sigma=not fitting.click_sigma_given)
     finally:
         bar.finish()
     if not quiet:
@@ -58,6 +63,8 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
             f"{summary.out_dir / 'results.json'} (full rotations)",
             err=True,
         )
+        if summary.click_noise is not None:
+            click.echo(summary.click_noise.describe(), err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)

@@ -163,9 +163,11 @@ _FITTING_OPTIONS = [
                       "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more."),
     click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
                  help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
-    click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=SolverOptions.click_sigma,
-                 show_default=True,
-                 help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) is for."),
+    click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                 help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) and the "
+                      "keypoints' soft term are for. fit: estimated from the batch's own residuals when not given "
+                      f"(a pilot fit of up to 400 vehicles; {SolverOptions.click_sigma:g} when their clicks are too "
+                      f"few to tell); validate: {SolverOptions.click_sigma:g} when not given."),
     click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
@@ -210,6 +212,8 @@ class Fitting:
     ground : ground-block fields (schema names) to set on every image
     joint_ground : refine each image's vehicles together with its ground plane
     jobs : worker processes
+    click_sigma_given : ``--click-sigma`` was given (else ``options.click_sigma`` is the default, and ``fit``
+        estimates the click noise from the batch)
     """
 
     priors_path: Path | None
@@ -217,6 +221,7 @@ class Fitting:
     ground: dict[str, object]
     joint_ground: bool
     jobs: int
+    click_sigma_given: bool = False
 
 
 def _road_normal(value: str | None) -> tuple[float, float, float] | None:
@@ -237,16 +242,18 @@ def _fitting(values: dict[str, Any]) -> Fitting:
     ctx = click.get_current_context()
     explicit = {k: values[k] for k in ("lambda_3d", "lambda_px")
                 if ctx.get_parameter_source(k) is not click.core.ParameterSource.DEFAULT}
+    given_sigma = values["click_sigma"]
     options = replace(solver_options(values["config_path"], **explicit),
-                      click_sigma=values["click_sigma"], part_sigma=values["part_sigma"],
-                      robust_loss=values["robust_loss"])
+                      click_sigma=SolverOptions.click_sigma if given_sigma is None else given_sigma,
+                      part_sigma=values["part_sigma"], robust_loss=values["robust_loss"])
     normal = _road_normal(values["road_normal"])
     given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
                                     "normal_sigma_deg", "upright_sigma_deg")}
     if (given["camera_pitch_deg"] is not None or given["camera_roll_deg"] is not None) and normal is not None:
         raise click.UsageError("give --road-normal or --camera-pitch-deg/--camera-roll-deg, not both")
     ground = ground_overrides(values["kitti_ground"], normal, **given)
-    return Fitting(values["priors_path"], options, ground, values["joint_ground"], values["jobs"])
+    return Fitting(values["priors_path"], options, ground, values["joint_ground"], values["jobs"],
+                   click_sigma_given=given_sigma is not None)
 
 
 def fitting_options(command: Callable) -> Callable:

@@ -130,6 +130,7 @@ class SolverStats:
     refine_iterations: int
     initial_cost: float | None
     joint_iterations: int | None = None
+    residual_dof: float | None = None  # the pixel residuals' effective degrees of freedom (click-noise estimate)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"starts": self.starts, "starts_from_lines": self.starts_from_lines,
@@ -137,12 +138,14 @@ class SolverStats:
                                "refine_iterations": self.refine_iterations, "initial_cost": self.initial_cost}
         if self.joint_iterations is not None:
             out["joint_iterations"] = self.joint_iterations
+        if self.residual_dof is not None:
+            out["residual_dof"] = self.residual_dof
         return out
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SolverStats:
         return cls(d["starts"], d["starts_from_lines"], d["descent_iterations"], d["refine_iterations"],
-                   d["initial_cost"], d.get("joint_iterations"))
+                   d["initial_cost"], d.get("joint_iterations"), d.get("residual_dof"))
 
 
 @dataclass(frozen=True)

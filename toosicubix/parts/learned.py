@@ -77,13 +77,20 @@ def learn_positions(samples: list[KeypointSample], min_samples: int = 3,
     learned = _learn(samples, min_samples)
     if max_offset is None:
         return learned
+    bad = contradicting(samples, learned, max_offset)
+    return _learn([s for s in samples if s.vehicle not in bad], min_samples)
+
+
+def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]],
+                  max_offset: float) -> set[str]:
+    """The vehicles whose ground truth contradicts their clicks: at their ground-truth pose their labelled
+    keypoints, put at the ``learned`` positions, lie more than ``max_offset`` metres RMS from their rays."""
     squares: dict[str, list[float]] = defaultdict(list)
     for s in samples:
         position = learned.get(s.prototype, {}).get(s.name)
         if position is not None:
             squares[s.vehicle].append(float(np.sum(_offset_cam(s, position.at) ** 2)))
-    bad = {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
-    return _learn([s for s in samples if s.vehicle not in bad], min_samples)
+    return {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
 
 
 def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:

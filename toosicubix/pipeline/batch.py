@@ -49,6 +49,7 @@ from toosicubix.formats.results import (
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, pilot_size
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     OutputFolderError,
@@ -87,6 +88,7 @@ class BatchSummary:
     failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason), the first FAILED_KEPT in file order
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
+    click_noise: ClickNoise | None = None  # the click noise the batch was fitted with, and where it came from
 
     @property
     def n_failed(self) -> int:
@@ -234,7 +236,7 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitRes
 def _solver_stats(fit: FitResult) -> SolverStats:
     return SolverStats(starts=fit.starts, starts_from_lines=fit.starts_from_lines,
                        descent_iterations=fit.descent_iterations, refine_iterations=fit.refine_iterations,
-                       initial_cost=fit.initial_cost)
+                       initial_cost=fit.initial_cost, residual_dof=fit.residual_dof)
 
 
 def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
@@ -473,7 +475,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
              progress: Callable[[int], None] | None = None,
              on_start: Callable[[int], None] | None = None, jobs: int = 1,
              ground: dict[str, object] | None = None, joint_ground: bool = False,
-             next_clicks: int = 0) -> BatchSummary:
+             next_clicks: int = 0, estimate_click_sigma: bool = False) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -488,6 +490,10 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     ground : ground-block fields (schema names) set for every image of the file
     joint_ground : refine each image's vehicles together with its ground plane
     next_clicks : per vehicle, how many suggestions of what to click next results.json gets (0: none)
+    estimate_click_sigma : first estimate the click noise from a pilot fit's residuals
+        (:mod:`toosicubix.pipeline.click_noise`) and fit with it; ``options.click_sigma`` is the pilot's
+        assumption and stays when the batch's clicks are too few to estimate it (``toosicubix fit`` does this
+        unless given ``--click-sigma``)
 
     Raises
     ------
@@ -501,8 +507,17 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
+    pilot = pilot_size(index.vehicles) if estimate_click_sigma else 0
     if on_start is not None:
-        on_start(index.vehicles)
+        on_start(index.vehicles + pilot)
+    if estimate_click_sigma:
+        noise = estimate_from_pilot(
+            iter_fit_images(pilot_images(_stream_images(index, ground), index.vehicles), pilot, priors,
+                            replace(options, robust_loss="none"), progress, jobs),
+            options.click_sigma)
+        options = replace(options, click_sigma=noise.sigma_px)
+    else:
+        noise = ClickNoise(options.click_sigma, "given")
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
@@ -511,6 +526,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
+        **({"click_noise": noise.to_json()} if estimate_click_sigma else {}),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
@@ -530,7 +546,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
-                        out_dir=out_dir, scale_from=scale_from)
+                        out_dir=out_dir, scale_from=scale_from, click_noise=noise)
 
 
 def _stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:

@@ -47,6 +47,7 @@ from toosicubix.solver.uncertainty import (
     analyse,
     confidence,
     finite_or_none,
+    residual_dof,
     uncertainties_with_added_clicks,
 )
 
@@ -130,6 +131,8 @@ class FitResult:
         'length plate-rear', 'known dx', ...), summing to 1
     click_weights : (N,) the weight of each click in the pixel cost (soft term times robust factor), or None
     downweighted : the labels of the clicks the robust loss down-weighted (factor below 0.5)
+    residual_dof : the pixel residuals' effective degrees of freedom (:func:`.uncertainty.residual_dof`): what
+        the batch's click-noise estimate pools
     """
 
     status: str
@@ -156,6 +159,7 @@ class FitResult:
     alternatives: tuple[Alternative, ...] = ()
     click_weights: np.ndarray | None = None
     downweighted: tuple[str, ...] = ()
+    residual_dof: float | None = None
 
     @property
     def ambiguous(self) -> bool:
@@ -351,7 +355,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
         cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, scale_shares=shares,
         uncertainty=u, observability=obs, alternatives=_alternatives(best, converged, options),
-        click_weights=problem.click_weights, downweighted=downweighted, **common,
+        click_weights=problem.click_weights, downweighted=downweighted,
+        residual_dof=residual_dof(J_best, 2 * parts.n_clicks), **common,
     )
 
 

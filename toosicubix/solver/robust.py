@@ -70,32 +70,3 @@ def robust_factors(residuals_px: np.ndarray, weights: np.ndarray | None, click_s
 def with_weights(problem: Problem, weights: np.ndarray | None) -> Problem:
     """The problem with its pixel rows weighted by ``weights`` (N,) (None: unweighted)."""
     return replace(problem, click_weights=None if weights is None else np.asarray(weights, dtype=float))
-
-
-def estimate_click_sigma(vehicles: list[dict]) -> tuple[float | None, int]:
-    """The click noise (pixels per coordinate) a batch's own residuals show, pooled over the vehicles with
-    redundant clicks: ``sqrt(sum_v sum_i |w_i r_i|^2 / sum_v (2 N_v - (5 + P_v)))``, with ``r_i`` a click's
-    residual, ``w_i`` its weight (soft term; 1 without), ``N_v`` the clicks and ``P_v`` the unknowns of p: the
-    clicks alone fix the pose and p up to scale (``6 + P - 1`` unknowns).
-
-    Parameters
-    ----------
-    vehicles : ``results.json`` entries of fitted vehicles (``residuals_px``, ``click_weights``, ``clicks``,
-        ``aux_unknowns``); others are skipped
-
-    Returns
-    -------
-    (sigma or None when no vehicle has redundant clicks, the degrees of freedom it rests on)
-    """
-    total, dof = 0.0, 0
-    for v in vehicles:
-        if v.get("status") != "ok" or not v.get("residuals_px"):
-            continue
-        r = np.asarray(v["residuals_px"], dtype=float)
-        w = np.ones(len(r)) if v.get("click_weights") is None else np.asarray(v["click_weights"], dtype=float)
-        redundancy = 2 * v["clicks"] - (5 + 3 + v["aux_unknowns"])
-        if redundancy <= 0:
-            continue
-        total += float(np.sum((w[:, None] * r) ** 2))
-        dof += redundancy
-    return (float(np.sqrt(total / dof)) if dof else None), dof

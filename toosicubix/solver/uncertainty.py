@@ -324,6 +324,17 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
     return Observability(ratios, status, scale_from)
 
 
+def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
+    """The effective degrees of freedom of a fit's pixel residuals: ``n - 2 tr(H) + tr(H^2)``, with ``H`` the
+    pixel rows' block of the hat matrix ``J (J^T J)^+ J^T`` at the optimum (``J`` (M, 6 + P), every row
+    weighted, the pixel rows first). Noise of variance ``sigma^2`` per row leaves ``E |r_px|^2 = sigma^2`` times
+    this (linearised). Without cues it is ``n`` minus the unknowns the clicks fix; where the prior or another
+    cue holds a direction the clicks barely see, that direction soaks up less noise, and it is larger."""
+    J_px = J[:n_pixel_rows]
+    H = J_px @ np.linalg.pinv(J.T @ J) @ J_px.T  # (n, n), symmetric
+    return float(n_pixel_rows - 2.0 * np.trace(H) + np.sum(H * H))
+
+
 def confidence(u: Uncertainty, yaw_within_deg: float = 10.0, depth_within_rel: float = 0.1) -> float:
     """The probability, under the Gaussian uncertainty, that the yaw is within ``yaw_within_deg`` and the depth
     within ``depth_within_rel`` of the truth (taken as independent): the KITTI score of a fit."""

@@ -1,0 +1,121 @@
+"""The click noise estimated from a batch's own residuals (what ``fit`` does unless given ``--click-sigma``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.parts.test_real_click_kinds import exact_prior, project, scene
+from tests.scenes import CAMERA
+from tests.solver.test_robust import TWELVE
+from toosicubix.formats.results import ImageResult, SolverStats, VehicleResult
+from toosicubix.model import Image, Part, Vehicle
+from toosicubix.pipeline.batch import fit_file, fit_one
+from toosicubix.pipeline.click_noise import (
+    MIN_DOF,
+    Redundancy,
+    estimate_from_pilot,
+    pilot_images,
+    pilot_size,
+    pooled_sigma,
+    redundancy,
+)
+from toosicubix.solver import SolverOptions
+
+SAMPLE = "samples/annotations.json"
+
+
+def test_pooled_sigma_solves_the_moment_equation_with_model_spread():
+    rng = np.random.default_rng(0)
+    sigma = 1.7
+    evidence = []
+    for _ in range(300):
+        s = rng.uniform(0.5, 4.0, 12)  # the keypoints' spread in pixels
+        dof = 24.0 - 9.0
+        coords = rng.normal(0.0, 1.0, (12, 2)) * np.sqrt((sigma**2 + s**2) * dof / 24.0)[:, None]
+        evidence.append(Redundancy(np.sum(coords**2, axis=1), s**2, dof))
+    estimate, dof, vehicles = pooled_sigma(evidence)
+    assert vehicles == 300 and dof == pytest.approx(4500.0)
+    # 4,500 degrees of freedom; the spread carries about two thirds of each residual's variance, which widens
+    # the estimate's error to about 3 % of sigma: 8 % is well past three standard errors.
+    assert abs(estimate - sigma) < 0.08 * sigma
+
+
+def test_pooled_sigma_stops_at_its_bounds_and_needs_redundancy():
+    assert pooled_sigma([]) == (None, 0, 0)
+    tiny = Redundancy(np.full(10, 1e-8), np.zeros(10), 5.0)
+    assert pooled_sigma([tiny])[0] == 0.1
+    huge = Redundancy(np.full(10, 1e8), np.zeros(10), 5.0)
+    assert pooled_sigma([huge])[0] == 50.0
+
+
+def _result(weights, dof, status="ok") -> VehicleResult:
+    n = 6 if weights is None else len(weights)
+    return VehicleResult(id="v", status=status, error=None, prototype="Car", t_cam_vehicle=np.array([0, 1, 20.0]),
+                         residuals_px=np.ones((n, 2)), clicks=n, aux_unknowns=0,
+                         click_weights=None if weights is None else np.asarray(weights, dtype=float),
+                         solver=SolverStats(1, False, 1, 1, 1.0, residual_dof=dof))
+
+
+def test_only_redundant_vehicles_of_keypoints_and_plates_enter():
+    assert redundancy(_result([0.5] * 6, 4.0), 1.5).dof == 4.0
+    assert redundancy(_result([0.5] * 6, 0.2), 1.5) is None  # not redundant
+    assert redundancy(_result(None, 4.0), 1.5) is None  # parts on the cuboid only
+    assert redundancy(_result([0.5] * 5 + [1.0], 4.0), 1.5) is None  # one part on the cuboid
+    assert redundancy(_result([0.5] * 6, 4.0, status="failed"), 1.5) is None
+    # The model's spread comes back from the weight: w = s0 / sqrt(s0^2 + s^2) with s0 = 1.5, w = 0.5: s^2 = 6.75
+    np.testing.assert_allclose(redundancy(_result([0.5] * 6, 4.0), 1.5).model_px2, 6.75)
+
+
+def test_pilot_takes_every_kth_vehicle_over_the_batch():
+    def image(i, n):
+        return Image(id=f"im{i}", file=None, camera=CAMERA, json_path=f"$.images[{i}]", vehicles=tuple(
+            Vehicle(id=f"{i}-{j}", prototype="Car", box2d=None, parts=(), json_path="") for j in range(n)))
+
+    images = [image(i, n) for i, n in enumerate([500, 3, 0, 497])]
+    chosen = [v.id for im in pilot_images(images, 1000) for v in im.vehicles]
+    assert len(chosen) == pilot_size(1000) == 334  # every 3rd of 1,000
+    assert chosen[:2] == ["0-0", "0-3"] and "1-1" in chosen and "3-0" not in chosen and "3-1" in chosen
+    assert [v.id for im in pilot_images(images[1:2], 3) for v in im.vehicles] == ["1-0", "1-1", "1-2"]
+
+
+def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int) -> tuple[Vehicle, np.ndarray]:
+    d, R, t = scene(rng)
+    parts = []
+    for n, (name, at) in enumerate(TWELVE.items()):
+        X = (np.array(at) + rng.normal(0.0, spread, 3)) * d  # where this car's keypoint really is
+        uv = project(X[None], R, t) + rng.normal(0.0, sigma_px, 2)
+        parts.append(Part("keypoint", name, uv, f"$.images[{k}].vehicles[0].parts[{n}]", None, np.array(at),
+                          np.full(3, spread)))
+    vehicle = Vehicle(id=str(k), prototype="test", box2d=None, parts=tuple(parts),
+                      json_path=f"$.images[{k}].vehicles[0]")
+    return vehicle, d
+
+
+@pytest.mark.parametrize("truth", [0.7, 4.0])
+def test_the_estimate_recovers_the_click_noise_of_simulated_keypoint_clicks(truth):
+    rng = np.random.default_rng(5)
+    results = []
+    for k in range(80):
+        vehicle, d = _keypoint_vehicle(rng, truth, 0.001, k)
+        fit = fit_one(vehicle, CAMERA, exact_prior(d), SolverOptions())  # the pilot assumes 1.5 px
+        results.append(ImageResult(id=str(k), K=CAMERA.K, t_cam_rect=np.zeros(3), image_size=None, vehicles=[fit]))
+    noise = estimate_from_pilot(results, 1.5)
+    assert noise.source == "estimated" and noise.dof >= MIN_DOF and noise.redundant_vehicles == 80
+    # 80 cars of 12 keypoints: about 1,370 effective degrees of freedom, a standard error of 1.9 %; keypoints
+    # sit within 0.1 % of the dimensions of their positions, so the click noise dominates: 6 % is three errors.
+    assert abs(noise.sigma_px - truth) < 0.06 * truth, noise
+
+
+def test_fit_says_where_its_click_noise_came_from(tmp_path):
+    fit_file(SAMPLE, tmp_path / "estimated", estimate_click_sigma=True)
+    header = json.loads((tmp_path / "estimated" / "results.json").read_text())
+    # The sample's clicks are parts on the cuboid: nothing to estimate from, the default stays and says so.
+    assert header["click_noise"]["source"] == "default" and header["click_noise"]["redundant_vehicles"] == 0
+    assert header["settings"]["click_sigma"] == SolverOptions.click_sigma
+    summary = fit_file(SAMPLE, tmp_path / "given", options=SolverOptions(click_sigma=0.7))
+    header = json.loads((tmp_path / "given" / "results.json").read_text())
+    assert "click_noise" not in header and header["settings"]["click_sigma"] == 0.7
+    assert summary.click_noise.source == "given"
