@@ -18,7 +18,6 @@ from toosicubix.pipeline.click_noise import (
     Redundancy,
     estimate_from_pilot,
     pilot_images,
-    pilot_size,
     pooled_sigma,
     redundancy,
 )
@@ -69,16 +68,21 @@ def test_only_redundant_vehicles_of_keypoints_and_plates_enter():
     np.testing.assert_allclose(redundancy(_result([0.5] * 6, 4.0), 1.5).model_px2, 6.75)
 
 
-def test_pilot_takes_every_kth_vehicle_over_the_batch():
-    def image(i, n):
-        return Image(id=f"im{i}", file=None, camera=CAMERA, json_path=f"$.images[{i}]", vehicles=tuple(
-            Vehicle(id=f"{i}-{j}", prototype="Car", box2d=None, parts=(), json_path="") for j in range(n)))
+def test_pilot_takes_every_kth_vehicle_that_can_tell_the_noise():
+    keypoint = Part("keypoint", "lamp-rear-left", np.zeros((1, 2)), "", None, np.zeros(3), np.full(3, 0.02))
+    wheel = Part("point", "wheel-front-left", np.zeros((1, 2)), "")
 
-    images = [image(i, n) for i, n in enumerate([500, 3, 0, 497])]
+    def image(i, n, parts=(keypoint,)):
+        return Image(id=f"im{i}", file=None, camera=CAMERA, json_path=f"$.images[{i}]", vehicles=tuple(
+            Vehicle(id=f"{i}-{j}", prototype="Car", box2d=None, parts=parts, json_path="") for j in range(n)))
+
+    images = [image(0, 500), image(1, 3), image(2, 0), image(3, 497)]
     chosen = [v.id for im in pilot_images(images, 1000) for v in im.vehicles]
-    assert len(chosen) == pilot_size(1000) == 334  # every 3rd of 1,000
+    assert len(chosen) == 334  # every 3rd of 1,000
     assert chosen[:2] == ["0-0", "0-3"] and "1-1" in chosen and "3-0" not in chosen and "3-1" in chosen
     assert [v.id for im in pilot_images(images[1:2], 3) for v in im.vehicles] == ["1-0", "1-1", "1-2"]
+    # Parts on the cuboid cannot tell the click noise from where real parts sit: no pilot for them.
+    assert not list(pilot_images([image(0, 5, (wheel,)), image(1, 5, (keypoint, wheel))], 10))
 
 
 def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int) -> tuple[Vehicle, np.ndarray]:

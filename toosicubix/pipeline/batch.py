@@ -49,7 +49,7 @@ from toosicubix.formats.results import (
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
-from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, pilot_size
+from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     OutputFolderError,
@@ -507,13 +507,14 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    pilot = pilot_size(index.vehicles) if estimate_click_sigma else 0
+    # The pilot's vehicles (at most PILOT_VEHICLES, held in memory) for the click-noise estimate.
+    pilot = list(pilot_images(_stream_images(index, ground), index.vehicles)) if estimate_click_sigma else []
+    n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
-        on_start(index.vehicles + pilot)
+        on_start(index.vehicles + n_pilot)
     if estimate_click_sigma:
         noise = estimate_from_pilot(
-            iter_fit_images(pilot_images(_stream_images(index, ground), index.vehicles), pilot, priors,
-                            replace(options, robust_loss="none"), progress, jobs),
+            iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"), progress, jobs),
             options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
     else:

@@ -35,7 +35,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from toosicubix.formats.results import ImageResult, VehicleResult
-from toosicubix.model import Image
+from toosicubix.model import Image, Vehicle
+from toosicubix.parts.vocabulary import KINDS
 
 #: Vehicles the pilot fit takes at most, every k-th of the batch.
 PILOT_VEHICLES = 400
@@ -89,8 +90,8 @@ class ClickNoise:
                     f"{self.redundant_vehicles} vehicles with redundant clicks ({self.dof:.0f} degrees of freedom; "
                     f"pilot fit of {self.pilot_vehicles}); --click-sigma sets it")
         if not self.redundant_vehicles:
-            return (f"click noise: {self.sigma_px:g} px (default: no vehicle of the pilot has redundant clicks that "
-                    f"are all keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
+            return (f"click noise: {self.sigma_px:g} px (default: no vehicle has redundant clicks that are all "
+                    f"keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
         return (f"click noise: {self.sigma_px:g} px (default: the batch's {self.dof:.0f} redundant degrees of freedom "
                 f"are too few to estimate it, {MIN_DOF} needed); --click-sigma sets it")
 
@@ -100,18 +101,20 @@ def pilot_stride(n_vehicles: int) -> int:
     return max(1, math.ceil(n_vehicles / PILOT_VEHICLES))
 
 
-def pilot_size(n_vehicles: int) -> int:
-    """How many vehicles the pilot fits (the ones :func:`pilot_images` yields)."""
-    return math.ceil(n_vehicles / pilot_stride(n_vehicles)) if n_vehicles else 0
+def telling(vehicle: Vehicle) -> bool:
+    """Whether a vehicle's residuals can tell the click noise: every part has a learned spread (keypoints,
+    plates; the module's docstring says why parts on the cuboid cannot)."""
+    return bool(vehicle.parts) and all(KINDS[part.kind].soft for part in vehicle.parts)
 
 
 def pilot_images(images: Iterable[Image], n_vehicles: int) -> Iterator[Image]:
-    """The images of a batch of ``n_vehicles`` with only the pilot's vehicles (every k-th, counted over the
-    whole batch in file order); images left without one are skipped."""
+    """The images of a batch of ``n_vehicles`` with only the pilot's vehicles: every k-th vehicle of the batch
+    (counted in file order) whose residuals can tell the noise (:func:`telling`); images left without one are
+    skipped. A batch of parts on the cuboid has no pilot."""
     k = pilot_stride(n_vehicles)
     seen = 0
     for im in images:
-        chosen = tuple(v for i, v in enumerate(im.vehicles, start=seen) if i % k == 0)
+        chosen = tuple(v for i, v in enumerate(im.vehicles, start=seen) if i % k == 0 and telling(v))
         seen += len(im.vehicles)
         if chosen:
             yield replace(im, vehicles=chosen)
