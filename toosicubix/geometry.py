@@ -30,6 +30,7 @@ _CORNER_SIGNS = np.array(
 
 #: Batches up to this many rotation vectors go through ``cv2.Rodrigues`` one by one (see :func:`so3_exp`).
 _RODRIGUES_LOOP_MAX = 8
+_IDENTITY = np.eye(3)
 
 
 def hat(omega: np.ndarray) -> np.ndarray:
@@ -72,7 +73,7 @@ def so3_exp(omega: np.ndarray) -> np.ndarray:
     """
     omega = np.asarray(omega, dtype=float)
     if omega.size <= 3 * _RODRIGUES_LOOP_MAX:
-        return np.array([cv2.Rodrigues(w)[0] for w in omega.reshape(-1, 3)]).reshape((*omega.shape, 3))
+        return _so3_exp_loop(omega.reshape(-1, 3)).reshape((*omega.shape, 3))
     x, y, z = omega[..., 0], omega[..., 1], omega[..., 2]
     theta = np.sqrt(x * x + y * y + z * z)
     tiny = theta < np.finfo(float).eps
@@ -90,6 +91,15 @@ def so3_exp(omega: np.ndarray) -> np.ndarray:
     diagonal = R.reshape((*omega.shape[:-1], 9))[..., ::4]
     diagonal += c[..., None]
     R[tiny] = np.eye(3)
+    return R
+
+
+def _so3_exp_loop(omega: np.ndarray) -> np.ndarray:
+    """``cv2.Rodrigues`` of each rotation vector of ``omega`` (K, 3): (K, 3, 3). A zero vector (a start of a
+    refinement that has stopped) gives the identity without the call, as ``cv2.Rodrigues`` would."""
+    R = np.empty((len(omega), 3, 3))
+    for k, w in enumerate(omega.tolist()):
+        R[k] = cv2.Rodrigues(omega[k])[0] if any(w) else _IDENTITY
     return R
 
 

@@ -1,6 +1,8 @@
 """A vehicle whose fit goes wrong anywhere is failed with a reason; the batch goes on (issue 13)."""
 
 import json
+import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -86,3 +88,51 @@ def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
     assert checked.error == failed.error and checked.kitti_type == "Car" and checked.solver is None
     with pytest.raises(ValueError, match=r"NaN or infinity \(not JSON\) at \$\.images\[0\]\.vehicles\[0\]\.solver"):
         dumps(results_to_json([batch.ImageResult("a", np.eye(3), np.zeros(3), None, [failed])]))
+
+
+@pytest.fixture(scope="module")
+def sample_results(tmp_path_factory):
+    """The sample's fitted vehicles, with their next clicks."""
+    out = tmp_path_factory.mktemp("guard") / "out"
+    batch.fit_file(SAMPLE, out, next_clicks=2)
+    return [v for im in read_results(out / "results.json") for v in im.vehicles]
+
+
+def _alternative(**changes):
+    from toosicubix.solver import Alternative
+
+    fields = dict(cost=1.0, rotation_deg=180.0, turned_around=True, implausible=None, close=True,
+                  R_cam_vehicle=np.eye(3), t_cam_vehicle=np.array([0.0, 1.5, 20.0]), dimensions=np.ones(3))
+    return Alternative(**{**fields, **changes})
+
+
+@pytest.mark.parametrize(("change", "path"), [
+    (lambda v: {"alternatives": (_alternative(), _alternative(t_cam_vehicle=np.array([0.0, np.nan, 20.0])))},
+     "$.alternatives[1].t_cam_vehicle[1]"),
+    (lambda v: {"alternatives": (_alternative(cost=float("inf")),)}, "$.alternatives[0].cost"),
+    (lambda v: {"sigma": replace(v.sigma, dimensions=(0.1, float("nan"), 0.1))}, "$.sigma.dimensions[1]"),
+    (lambda v: {"observability": replace(v.observability, variance_ratios={"yaw": np.float64(np.inf)})},
+     "$.observability.variance_ratios.yaw"),
+    (lambda v: {"parameters": {**v.parameters, "wheelbase": float("nan")}}, "$.parameters.wheelbase"),
+    (lambda v: {"residuals_px": np.array([[0.1, 0.2], [np.inf, 0.0]])}, "$.residuals_px[1][0]"),
+    (lambda v: {"click_weights": np.array([1.0, np.nan])}, "$.click_weights[1]"),
+    (lambda v: {"next_clicks": [*v.next_clicks[:1], {**v.next_clicks[1], "gain": [1.0, {"x": float("nan")}]}]},
+     "$.next_clicks[1].gain[1].x"),
+    (lambda v: {"extra": {"mine": {"deep": [np.float32("nan")]}}}, "$.mine.deep[0]"),
+    (lambda v: {"solver": replace(v.solver, initial_cost=float("-inf"))}, "$.solver.initial_cost"),
+])
+def test_a_nan_or_infinity_anywhere_in_a_fit_fails_it_with_its_path(sample_results, change, path):
+    result = next(v for v in sample_results if v.ok)
+    assert batch.checked_result(result) is result
+    with pytest.raises(batch.UnusableFit, match=f"non-finite value at {re.escape(path)}$"):
+        batch.checked_result(replace(result, **change(result)))
+
+
+def test_the_quick_finiteness_check_agrees_with_the_json_form(sample_results):
+    from toosicubix.formats.results import all_finite, non_finite_path
+
+    assert all(all_finite(v) and non_finite_path(v.to_json()) is None for v in sample_results)
+    assert not all_finite(np.array([1.0, np.nan], dtype=object))  # cannot tell: the JSON form decides
+    assert not all_finite(object())
+    nan_unwritten = replace(next(v for v in sample_results if v.ok), status="failed", cost=float("nan"))
+    assert not all_finite(nan_unwritten) and batch.checked_result(nan_unwritten) is nan_unwritten

@@ -4,12 +4,14 @@ import json
 import tracemalloc
 
 import numpy as np
+import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import images_from_schema
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.priors.table import load_priors
+from toosicubix.solver import descent
 from toosicubix.solver.descent import solve_shapes
 from toosicubix.solver.problem import Problem
 
@@ -62,3 +64,14 @@ def test_shape_step_one_start_at_a_time_equals_each_start_alone():
         p1, t1 = solve_shapes(problem, R[k:k + 1])
         np.testing.assert_allclose(p[k], p1[0], rtol=1e-12, atol=1e-12)  # the same arithmetic: algebra tier
         np.testing.assert_allclose(t[k], t1[0], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("pairs", [2, 8])
+def test_shape_step_chunks_of_starts_give_the_same_bits_as_one_start_at_a_time(monkeypatch, pairs):
+    problem = many_click_problem(pairs)
+    R = _rotations(48)
+    p, t = solve_shapes(problem, R)  # 2 pairs: the 48 starts in one chunk; 8 pairs: in chunks of 14
+    monkeypatch.setattr(descent, "_SHAPE_CHUNK_BYTES", 1)  # one start per chunk
+    p1, t1 = solve_shapes(problem, R)
+    np.testing.assert_array_equal(p, p1)
+    np.testing.assert_array_equal(t, t1)

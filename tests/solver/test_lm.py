@@ -227,6 +227,13 @@ def test_so3_exp_batch_is_rodrigues_bit_for_bit(rng, count):
     np.testing.assert_array_equal(so3_exp(omega.reshape(count, 1, 3))[:, 0], expected)
 
 
+def test_so3_exp_of_a_zero_vector_is_the_identity_rodrigues_gives(rng):
+    omega = rng.normal(size=(4, 3))
+    omega[1], omega[3] = 0.0, (-0.0, 0.0, -0.0)  # the steps of stopped starts
+    np.testing.assert_array_equal(so3_exp(omega), np.array([cv2.Rodrigues(w)[0] for w in omega]))
+    np.testing.assert_array_equal(so3_exp(omega)[[1, 3]], np.stack([np.eye(3)] * 2))
+
+
 def test_hat_batch(rng):
     a, b = rng.normal(size=(4, 2, 3)), rng.normal(size=(4, 2, 3))
     np.testing.assert_allclose((hat(a) @ b[..., None])[..., 0], np.cross(a, b), atol=1e-12)

@@ -14,6 +14,7 @@ Layout (keys may be added; these keep their names and meanings)::
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -420,6 +421,53 @@ def non_finite_path(value: Any, path: str = "$") -> str | None:
         if found is not None:
             return found
     return None
+
+
+def all_finite(value: Any) -> bool:
+    """Whether no number in ``value`` is a NaN or an infinity, read without building a JSON form: floats, numpy
+    scalars and arrays, inside dicts (their values), lists, tuples and dataclasses (every field, written or not).
+
+    The types of this module and :class:`toosicubix.solver.Alternative` write nothing but their fields
+    (``to_json``), so True means that :func:`non_finite_path` of their JSON form is None. False also when it
+    cannot tell: a value of any other type, or a numpy array neither numeric nor boolean.
+    """
+    kind = type(value)
+    if kind is float:
+        return math.isfinite(value)
+    if value is None or kind is str or kind is int or kind is bool:
+        return True
+    if kind is tuple or kind is list:
+        return _all_finite_items(value)
+    if kind is dict:
+        return _all_finite_items(value.values())
+    if kind is np.ndarray or isinstance(value, np.generic):
+        code = value.dtype.kind
+        return code in "biu" or (code in "fc" and bool(np.isfinite(value).all()))
+    names = _dataclass_fields.get(kind)
+    if names is None and hasattr(kind, "__dataclass_fields__"):
+        names = _dataclass_fields.setdefault(kind, tuple(f.name for f in fields(value)))
+    if names is not None:
+        return _all_finite_items([getattr(value, name) for name in names])
+    if isinstance(value, float):  # subclasses of the types above
+        return math.isfinite(value)
+    if isinstance(value, str | int):
+        return True
+    if isinstance(value, list | tuple):
+        return _all_finite_items(value)
+    if isinstance(value, dict):
+        return _all_finite_items(value.values())
+    return False
+
+
+def _all_finite_items(items: Iterable[Any]) -> bool:
+    for item in items:
+        if not all_finite(item):
+            return False
+    return True
+
+
+#: The field names of each dataclass :func:`all_finite` has met.
+_dataclass_fields: dict[type, tuple[str, ...]] = {}
 
 
 def read_results(path: str | Path) -> list[ImageResult]:

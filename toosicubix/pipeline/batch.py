@@ -43,6 +43,7 @@ from toosicubix.formats.results import (
     Sigma,
     SolverStats,
     VehicleResult,
+    all_finite,
     non_finite_path,
     write_results_stream,
 )
@@ -152,14 +153,16 @@ def checked_result(result: VehicleResult) -> VehicleResult:
     UnusableFit
         With the reason, e.g. "the fitted cuboid lies behind the camera (depth -3.2 m)".
     """
+    # Every number finite (the usual case) is seen from the fields; the JSON form, to find where one is not.
+    finite = all_finite(result)
     if not result.ok:  # keep the reason; drop diagnostics that could not be written
-        if non_finite_path(result.to_json()) is None:
+        if finite or non_finite_path(result.to_json()) is None:
             return result
         return VehicleResult(id=result.id, status=result.status, error=result.error, prototype=result.prototype,
                              kitti_type=result.kitti_type)
     for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
         value = getattr(result, name)
-        if value is None or not np.all(np.isfinite(value)):
+        if value is None or not (finite or np.all(np.isfinite(value))):
             raise UnusableFit(f"the fit has a non-finite or missing {name}: {value}")
     if np.any(result.dimensions <= 0):
         raise UnusableFit(f"the fit has non-positive dimensions {result.dimensions.tolist()}")
@@ -170,7 +173,7 @@ def checked_result(result: VehicleResult) -> VehicleResult:
     if result.t_cam_vehicle[2] <= 0.0:
         raise UnusableFit(f"the fitted cuboid's bottom centre lies behind the camera (depth "
                           f"{result.t_cam_vehicle[2]:.4g} m)")
-    bad = non_finite_path(result.to_json())
+    bad = None if finite else non_finite_path(result.to_json())
     if bad is not None:
         raise UnusableFit(f"the fit has a non-finite value at {bad}")
     return result

@@ -20,6 +20,9 @@ import numpy as np
 
 from toosicubix.solver.problem import Problem
 
+#: Memory for the normal matrices (and ``M_i R``) of the starts the shape step solves together, bytes.
+_SHAPE_CHUNK_BYTES = 65536
+
 
 @dataclass(frozen=True)
 class DescentResult:
@@ -63,19 +66,38 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     M = _translation_block(u)  # (N, 2, 3): M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t
     design = np.empty((N, 2, P + 3))
     design[..., P:] = M
+    rows = design.reshape(2 * N, P + 3)  # the design matrix of one start (a view: filled per start below)
+    rhs = prior_rows.T @ prior_rhs
     x = np.empty((S, P + 3))
-    # One start at a time: the design matrix of all starts at once, (S, 2N, P + 3), grows with the starts
-    # times the square of the clicks (each symmetric pair or arrow adds two clicks and two unknowns).
-    for s in range(S):
-        MR = M @ R_cam_vehicle[s]  # (N, 2, 3)
-        np.matmul(MR, A, out=design[..., :P])  # (N, 2, P): M_i R A_i
-        rows = design.reshape(2 * N, P + 3)
-        # Normal equations: (P + 3) unknowns. A ridge of 1e-12 of the mean diagonal keeps an auxiliary
-        # unknown that no click constrains at zero instead of making the system singular.
-        normal = rows.T @ rows + prior_normal
-        normal[np.diag_indices(P + 3)] += 1e-12 * np.trace(normal) / (P + 3)
-        x[s] = np.linalg.solve(normal, prior_rows.T @ prior_rhs)
+    # One design matrix at a time: that of every start at once, (S, 2N, P + 3), would grow with the starts
+    # times the square of the clicks (each symmetric pair or arrow adds two clicks and two unknowns). Their
+    # normal matrices, (P + 3, P + 3) each, are solved a chunk of starts at a time.
+    chunk = max(1, _SHAPE_CHUNK_BYTES // (8 * ((P + 3) ** 2 + 6 * N)))
+    for first in range(0, S, chunk):
+        x[first:first + chunk] = _solve_normal_equations(
+            M @ R_cam_vehicle[first:first + chunk, None], A, design, rows, prior_normal, rhs)
     return x[:, :P], x[:, P:]
+
+
+def _solve_normal_equations(MR: np.ndarray, A: np.ndarray, design: np.ndarray, rows: np.ndarray,
+                            prior_normal: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """The shape step's ``(p, t)``, (C, P + 3), of C starts: ``MR`` (C, N, 2, 3) is ``M_i R`` of each start;
+    ``design`` (N, 2, P + 3) holds ``M_i`` in its last 3 columns and ``rows`` is it as (2N, P + 3)."""
+    C, _, _, _ = MR.shape
+    n = rows.shape[1]
+    P = n - 3
+    normal = np.empty((C, n, n))
+    for s in range(C):
+        np.matmul(MR[s], A, out=design[..., :P])  # (N, 2, P): M_i R A_i
+        np.matmul(rows.T, rows, out=normal[s])
+    normal += prior_normal
+    # A ridge of 1e-12 of the mean diagonal keeps an auxiliary unknown that no click constrains at zero
+    # instead of making the system singular.
+    trace = normal.diagonal(axis1=1, axis2=2).sum(axis=1)  # (C,)
+    diagonal = np.arange(n)
+    normal[:, diagonal, diagonal] += (1e-12 * trace / n)[:, None]
+    # One LAPACK call per system, as one at a time, without the per-call overhead.
+    return np.linalg.solve(normal, np.broadcast_to(rhs, (C, n))[..., None])[..., 0]
 
 
 def _translation_block(u: np.ndarray) -> np.ndarray:

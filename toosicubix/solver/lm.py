@@ -15,6 +15,9 @@ first axis runs over ``B`` starts refined in lockstep (``B = 1`` for a single fi
 - ``step_is_small(delta, tolerance, starts)``: (k,) bool, whether each accepted step of the starts ``starts``
   (k,) is below ``tolerance`` (the problem knows which unknowns are angles and which are lengths).
 
+``update`` and ``settle`` return new arrays or arrays of the state they are given, never arrays the problem
+keeps: the loop writes into its state, and a trial all of whose starts are accepted becomes the state.
+
 A loss (:class:`Loss`) maps each squared residual ``s = r^2`` to ``rho(s)`` and gives the weight
 ``rho'(s)``. The cost is ``sum rho(r_j^2)``; each iteration solves the reweighted normal equations
 (iteratively reweighted least squares): with ``W = diag(rho'(r^2))``, ``g = J^T W r`` and ``H = J^T W J``,
@@ -159,6 +162,9 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
     Residuals, Jacobians and the damped normal equations of all starts are computed in one pass of batched
     array operations, each start keeping its own damping, acceptance and stopping. Starts that stopped ride
     along in every array (a few more rows cost less than the gathers to leave them out) but never move.
+    Every batched operation sees the same rows whichever shortcut the loop takes (a trial of every start is
+    used as it is, not gathered; an iterate all of whose starts moved is replaced, not overwritten): some of
+    them (matrix products) round differently for a different number of rows.
 
     Parameters
     ----------
@@ -173,83 +179,128 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
     """
     started = time.perf_counter()
     loss = TrivialLoss() if loss is None else loss
+    trivial = loss.trivial
     state = tuple(np.array(a) for a in state)
     r, J = problem.residuals(state, True)
     cost, rw, Jw = _weigh(loss, r, J)
     initial_cost = cost.copy()
     B, n = J.shape[0], J.shape[2]
-    diagonal = np.arange(n)
     mu = np.full(B, float(options.initial_damping))
     nu = np.full(B, 2.0)
     iterations = np.zeros(B, dtype=int)
     status = np.full(B, _RUNNING)
     abandon = options.abandon_factor is not None or options.abandon_above is not None
+    gradient_tolerance_sq = options.gradient_tolerance**2
 
-    for _ in range(options.max_iterations):
+    for iteration in range(options.max_iterations):
         running = status == _RUNNING
-        if abandon:
-            bar = np.inf if options.abandon_above is None else options.abandon_above
-            if options.abandon_factor is not None:
-                bar = min(bar, options.abandon_factor * float(cost.min()) + 1e-6)
-            gone = running & (iterations >= options.abandon_after) & (cost > bar)
-            status[gone] = _ABANDONED
-            running &= ~gone
-        if not running.any():
+        # No start has taken abandon_after steps before that many iterations.
+        if abandon and iteration >= options.abandon_after:
+            running &= ~_abandoned(options, cost, iterations, running, status)
+        if not np.count_nonzero(running):  # (count_nonzero: a fraction of any()'s overhead on a few starts)
             break
         g = np.einsum("kmi,km->ki", Jw, rw)
         column_sq = np.einsum("kmi,kmi->ki", Jw, Jw)  # squared column norms: the diagonal of H
-        rr = cost if loss.trivial else np.einsum("km,km->k", rw, rw)
+        rr = cost if trivial else np.einsum("km,km->k", rw, rw)
         # max_j |g_j| / |J_j| <= gtol |r|, squared
         cosines_sq = (g * g / np.maximum(column_sq, 1e-300)).max(axis=1)
-        done = running & ((rr == 0.0) | (cosines_sq <= options.gradient_tolerance**2 * rr))
-        status[done] = _GRADIENT
-        running &= ~done
-        if not running.any():
-            break
+        done = running & ((rr == 0.0) | (cosines_sq <= gradient_tolerance_sq * rr))
+        if np.count_nonzero(done):
+            status[done] = _GRADIENT
+            running &= ~done
+            if not np.count_nonzero(running):
+                break
         iterations += running
         H = Jw.transpose(0, 2, 1) @ Jw
         Dg = np.maximum(column_sq, 1e-12 * column_sq.max(axis=1, keepdims=True) + 1e-300)
-        H[:, diagonal, diagonal] += mu[:, None] * Dg
+        H.reshape(B, n * n)[:, :: n + 1] += mu[:, None] * Dg  # the diagonal, through a view
         step = _solve_batch(H, -g, running)
         solved = np.isfinite(step).all(axis=1)  # only running starts are solved
         step[~solved] = 0.0
         trial = problem.update(state, step)
         feasible = solved & problem.feasible(trial)
-        rho = np.full(B, -1.0)
-        if feasible.any():
-            # Evaluated with its Jacobian: most steps are accepted, and then it is the next iterate's.
-            trial = problem.settle(tuple(a[feasible] for a in trial))
+        n_feasible = np.count_nonzero(feasible)
+        # Evaluated with its Jacobian: most steps are accepted, and then it is the next iterate's.
+        if n_feasible == B:  # the trial as it is
+            trial = problem.settle(trial)
             r_try, J_try = problem.residuals(trial, True)
             new_cost = _cost(loss, r_try)
-            sf = step[feasible]
-            predicted = np.einsum("ki,ki->k", sf, mu[feasible, None] * Dg[feasible] * sf - g[feasible])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                rho[feasible] = np.where(predicted > 0, (cost[feasible] - new_cost) / predicted, -1.0)
+            rho = _gain_ratio(step, mu[:, None] * Dg * step - g, cost, new_cost)
+        else:
+            rho = np.full(B, -1.0)
+            if n_feasible:
+                trial = problem.settle(tuple(a[feasible] for a in trial))
+                r_try, J_try = problem.residuals(trial, True)
+                new_cost = _cost(loss, r_try)
+                rho[feasible] = _gain_ratio(step[feasible], (mu[:, None] * Dg * step - g)[feasible],
+                                            cost[feasible], new_cost)
         accept = rho > 0  # implies feasible, hence running
         rejected = running & ~accept
-        mu[rejected] *= nu[rejected]
-        nu[rejected] *= 2.0
-        status[rejected & (mu > 1e16)] = _DAMPING
-        if not accept.any():
-            continue
+        if np.count_nonzero(rejected):
+            np.multiply(mu, nu, out=mu, where=rejected)
+            np.multiply(nu, 2.0, out=nu, where=rejected)
+            status[rejected & (mu > 1e16)] = _DAMPING
         ka = accept.nonzero()[0]
-        taken = accept[feasible]  # the accepted among the evaluated trials
-        small = problem.step_is_small(step[accept], options.step_tolerance, ka)
-        for a, b in zip(state, trial, strict=True):
-            a[accept] = b[taken]
-        r[accept], J[accept] = r_try[taken], J_try[taken]
-        new_cost = new_cost[taken]
-        drop = cost[accept] - new_cost
-        cost[accept] = new_cost
-        if not loss.trivial:
+        if not len(ka):
+            continue
+        small = problem.step_is_small(step[ka], options.step_tolerance, ka)
+        if len(ka) == B:  # every start moved (hence every trial was evaluated): the trial is the iterate
+            state, r, J = trial, r_try, J_try
+            drop, cost = cost - new_cost, new_cost
+            mu = _damping_after_success(mu, rho)
+            nu = np.full(B, 2.0)
+            status = _status_after_success(small, drop, new_cost, options.cost_tolerance)
+        else:
+            taken = accept[feasible]  # the accepted among the evaluated trials
+            for a, b in zip(state, trial, strict=True):
+                a[ka] = b[taken]
+            r[ka], J[ka] = r_try[taken], J_try[taken]
+            new_cost = new_cost[taken]
+            drop = cost[ka] - new_cost
+            cost[ka] = new_cost
+            mu[ka] = _damping_after_success(mu[ka], rho[ka])
+            nu[ka] = 2.0
+            status[ka] = _status_after_success(small, drop, new_cost, options.cost_tolerance)
+        if trivial:
+            rw, Jw = r, J
+        else:
             _, rw, Jw = _weigh(loss, r, J)
-        mu[accept] = np.maximum(mu[accept] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho[accept] - 1.0) ** 3), 1e-15)
-        nu[accept] = 2.0
-        status[ka[(drop <= options.cost_tolerance * new_cost) & ~small]] = _COST
-        status[ka[small]] = _STEP
     status[status == _RUNNING] = _MAX_ITERATIONS
     return LMResult(state, cost, initial_cost, iterations, tuple(STATUS_NAMES[s] for s in status),
                     time.perf_counter() - started)
+
+
+def _gain_ratio(step: np.ndarray, damped_step_minus_g: np.ndarray, cost: np.ndarray,
+                new_cost: np.ndarray) -> np.ndarray:
+    """Nielsen's gain ratio of k steps (k, n): the drop of the cost (k,) over the drop the damped model
+    predicts, ``step . (mu D step - g)``, or -1 where that prediction is not positive: (k,)."""
+    predicted = np.einsum("ki,ki->k", step, damped_step_minus_g)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(predicted > 0, (cost - new_cost) / predicted, -1.0)
+
+
+def _damping_after_success(mu: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Nielsen's damping (k,) after accepted steps of gain ratios ``rho`` (k,)."""
+    return np.maximum(mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-15)
+
+
+def _status_after_success(small: np.ndarray, drop: np.ndarray, new_cost: np.ndarray,
+                          cost_tolerance: float) -> np.ndarray:
+    """The status (k,) of starts after accepted steps: 'step' where the step was small, else 'cost' where the
+    cost dropped by at most ``cost_tolerance`` of the new cost, else still running."""
+    return np.where(small, _STEP, np.where(drop <= cost_tolerance * new_cost, _COST, _RUNNING))
+
+
+def _abandoned(options: LMOptions, cost: np.ndarray, iterations: np.ndarray, running: np.ndarray,
+               status: np.ndarray) -> np.ndarray:
+    """Marks the running starts that are still far above the batch's best after ``abandon_after`` iterations
+    (see :class:`LMOptions`) as abandoned in ``status`` (B,) and returns them, (B,) bool."""
+    bar = np.inf if options.abandon_above is None else options.abandon_above
+    if options.abandon_factor is not None:
+        bar = min(bar, options.abandon_factor * float(cost.min()) + 1e-6)
+    gone = running & (iterations >= options.abandon_after) & (cost > bar)
+    status[gone] = _ABANDONED
+    return gone
 
 
 def _solve_batch(H: np.ndarray, b: np.ndarray, which: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ scale rows, change with the scale only through ``p``.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -132,6 +133,25 @@ class Problem:
     @property
     def n_arrow_rows(self) -> int:
         return len(self.arrow_mid)
+
+    @cached_property
+    def scale_rows_jacobian(self) -> np.ndarray:
+        """(m, 6 + P): the scale rows' Jacobian for the refinement's step ``(delta, dt, dp)`` when rotations
+        turn about the origin: zero, ``G``'s t columns, ``G``'s p columns."""
+        G = np.zeros((len(self.b), 6 + self.parts.n_params))
+        G[:, 3:6] = self.G[:, :3]
+        G[:, 6:] = self.G[:, 3:]
+        return G
+
+    @cached_property
+    def scale_rows_see_t(self) -> bool:
+        """Whether any scale row depends on ``t`` (the ground contact)."""
+        return bool(self.G[:, :3].any())
+
+    @cached_property
+    def pixel_row_weights(self) -> np.ndarray | None:
+        """(2N,) the click weights repeated for each click's two pixel rows, or None for all ones."""
+        return None if self.click_weights is None else np.repeat(self.click_weights, 2)
 
     def arrow_zone_residuals(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """How far each arrow midpoint coordinate lies outside its zone, metres (0 inside), and its gradient

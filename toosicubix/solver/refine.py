@@ -69,10 +69,12 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     inv_z = 1.0 / Y[..., 2]
     xn, yn = Y[..., 0] * inv_z, Y[..., 1] * inv_z
     fx, skew, cx, fy, cy = K_[0, 0], K_[0, 1], K_[0, 2], K_[1, 1], K_[1, 2]
+    u_px = fx * xn + skew * yn  # (B, N): the x pixel less cx; its derivative over Y_z is -u_px / z
+    v_px = fy * yn  # (B, N): the y pixel less cy; its derivative over Y_z is -v_px / z
     w = np.sqrt(problem.lambda_px)
     r = np.empty((B, 2 * N + m + n_up + n_arrow))
-    r[:, 0:2 * N:2] = fx * xn + skew * yn + cx - problem.uv[:, 0]
-    r[:, 1:2 * N:2] = fy * yn + cy - problem.uv[:, 1]
+    r[:, 0:2 * N:2] = u_px + cx - problem.uv[:, 0]
+    r[:, 1:2 * N:2] = v_px + cy - problem.uv[:, 1]
     a, b = problem.scale_terms(t, p)  # (B, m), (m,)
     if profile_scale:
         aa = np.einsum("ki,ki->k", a, a)
@@ -87,7 +89,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         w_arrow = w / ARROW_ZONE_SIGMA
         outside, arrow_gradient = problem.arrow_zone_residuals(p)
         r[:, 2 * N + m + n_up:] = w_arrow * outside
-    row_weights = None if problem.click_weights is None else np.repeat(problem.click_weights, 2)
+    row_weights = problem.pixel_row_weights
     if row_weights is not None:  # per-click weights (:mod:`.robust`) on the pixel rows
         r[:, 0:2 * N] *= row_weights
     if not with_jacobian:
@@ -98,26 +100,27 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     D = J[:, : 2 * N, 3:6].reshape(B, N, 2, 3)
     D[..., 0, 0] = fx * inv_z
     D[..., 0, 1] = skew * inv_z
-    D[..., 0, 2] = -(fx * xn + skew * yn) * inv_z
+    minus_inv_z = -inv_z
+    D[..., 0, 2] = u_px * minus_inv_z
     D[..., 1, 1] = fy * inv_z
-    D[..., 1, 2] = -fy * yn * inv_z
+    D[..., 1, 2] = v_px * minus_inv_z
     DR = D @ R[:, None, :, :]  # (B, N, 2, 3)
     # Rotation columns: each row b of D R against dY = -R [X - c]x delta gives the row (X - c) x b.
     Xc = (X if pivot is None else X - pivot[:, None, :])[:, :, None, :]
+    x0, x1, x2 = Xc[..., 0], Xc[..., 1], Xc[..., 2]
+    d0, d1, d2 = DR[..., 0], DR[..., 1], DR[..., 2]
     J_rot = J[:, : 2 * N, 0:3].reshape(B, N, 2, 3)
-    J_rot[..., 0] = Xc[..., 1] * DR[..., 2] - Xc[..., 2] * DR[..., 1]
-    J_rot[..., 1] = Xc[..., 2] * DR[..., 0] - Xc[..., 0] * DR[..., 2]
-    J_rot[..., 2] = Xc[..., 0] * DR[..., 1] - Xc[..., 1] * DR[..., 0]
+    J_rot[..., 0] = x1 * d2 - x2 * d1
+    J_rot[..., 1] = x2 * d0 - x0 * d2
+    J_rot[..., 2] = x0 * d1 - x1 * d0
     J[:, : 2 * N, 6:] = (DR @ problem.A).reshape(B, 2 * N, P)
     if row_weights is not None:
         J[:, : 2 * N] *= row_weights[:, None]
     # Scale rows: a = G_t t + G_p p; turning about the pivot moves t by R [c]x delta.
-    Ga = np.zeros((B, m, 6 + P))
-    Gt = problem.G[:, :3]
-    if pivot is not None and Gt.any():
-        Ga[:, :, 0:3] = Gt @ (R @ hat(pivot))
-    Ga[:, :, 3:6] = Gt
-    Ga[:, :, 6:] = problem.G[:, 3:]
+    Ga = np.empty((B, m, 6 + P))
+    Ga[:] = problem.scale_rows_jacobian
+    if pivot is not None and problem.scale_rows_see_t:
+        Ga[:, :, 0:3] = problem.G[:, :3] @ (R @ hat(pivot))
     if profile_scale:
         ds = np.einsum("kmi,km->ki", Ga, b - 2.0 * s_best[:, None] * a) / aa[:, None]  # (B, 6 + P)
         J[:, 2 * N:2 * N + m] = w * (s_best[:, None, None] * Ga + a[:, :, None] * ds[:, None, :])
@@ -152,8 +155,7 @@ def _at_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.
     """Move each (t, p) of a batch, (B, 3) and (B, P), to the scale the cues prefer (when positive)."""
     a, b = problem.scale_terms(t, p)
     s = (a @ b) / np.einsum("ki,ki->k", a, a)
-    s[~(s > 0)] = 1.0
-    s = s[:, None]
+    s = np.where(s > 0, s, 1.0)[:, None]
     return s * t, s * p
 
 
@@ -177,7 +179,7 @@ class RefineProblem:
         self.problem = problem
         self.up = problem.up
         self.min_up = -np.inf if max_tilt is None else np.cos(max_tilt)
-        self.keep_upright: np.ndarray | None = None
+        self.may_tilt: np.ndarray | None = None
         self.size: np.ndarray | None = None
 
     def start(self, R: np.ndarray, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -185,7 +187,7 @@ class RefineProblem:
         (for the step test) and which of them stay upright (``R e_z . up`` no smaller than ``cos(max_tilt)``)."""
         t, p = _at_prior_scale(self.problem, np.array(t, dtype=float), np.array(p, dtype=float))
         self.size = np.sqrt(np.einsum("ki,ki->k", t, t)) + np.sqrt(np.einsum("ki,ki->k", p, p)) + 1.0
-        self.keep_upright = R[:, :, 2] @ self.up >= self.min_up
+        self.may_tilt = ~(R[:, :, 2] @ self.up >= self.min_up)
         return R, t, p, _pivots(self.problem, p)
 
     def residuals(self, state: tuple[np.ndarray, ...], with_jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -203,7 +205,7 @@ class RefineProblem:
         depths = self.problem.points_vehicle_batch(p) @ R[:, 2, :, None]
         return ((p[:, :3] > 0.0).all(axis=1) & (t[:, 2] > MIN_DEPTH)
                 & (depths[..., 0].min(axis=1) + t[:, 2] > MIN_DEPTH)
-                & (~self.keep_upright | (R[:, :, 2] @ self.up >= self.min_up)))
+                & (self.may_tilt | (R[:, :, 2] @ self.up >= self.min_up)))
 
     def settle(self, state: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
         R, t, p, _ = state
