@@ -32,7 +32,6 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import brentq
 
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.model import Image, Vehicle
@@ -173,7 +172,10 @@ def pooled_sigma(evidence: Iterable[Redundancy]) -> tuple[float | None, float, i
         return SIGMA_BOUNDS[0], dof, len(items)
     if excess(hi) >= 0:
         return SIGMA_BOUNDS[1], dof, len(items)
-    return float(np.exp(brentq(excess, lo, hi, xtol=1e-10))), dof, len(items)
+    while hi - lo > 1e-10:  # bisection on log sigma (scipy.optimize would add 20 MB to every fit's process)
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess(mid) > 0 else (lo, mid)
+    return float(np.exp(0.5 * (lo + hi))), dof, len(items)
 
 
 def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> ClickNoise:
