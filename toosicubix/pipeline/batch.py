@@ -71,6 +71,7 @@ from toosicubix.solver import (
     scale_shares,
 )
 from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
+from toosicubix.solver.robust import with_weights
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fit_images", "fit_one"]
 
@@ -388,8 +389,9 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     joint_vehicles, models = [], []
     for k, v in fitted:
         parts = build_parts_model(v.parts, v.known_dimensions)
-        problem = Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d, options.lambda_px)
-        r = vehicles[k]
+        r = vehicles[k]  # its clicks keep the weights of its own fit (keypoints' soft term, robust factors)
+        problem = with_weights(Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d,
+                                             options.lambda_px), r.click_weights)
         p = np.concatenate([r.dimensions, [r.parameters[name] for name in parts.param_names[3:]]])
         joint_vehicles.append(JointVehicle(problem, r.R_cam_vehicle, r.t_cam_vehicle, p))
         models.append(parts)
@@ -402,8 +404,8 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     plane_fitted = replace(ground, normal=result.normal, camera_height=result.camera_height)
     out = list(vehicles)
     for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
-        own = Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
-                            plane_fitted, float(np.linalg.norm(t)))
+        own = with_weights(Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
+                                         plane_fitted, float(np.linalg.norm(t))), jv.problem.click_weights)
         shares = scale_shares(own, R, t, p)
         u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
                          options.part_sigma)
@@ -411,7 +413,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
             "ok", None, vehicles[k].constraints, parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
             t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
-            warnings=vehicles[k].warnings,
+            warnings=vehicles[k].warnings, click_weights=own.click_weights, downweighted=vehicles[k].downweighted,
         )
         try:
             updated = checked_result(
