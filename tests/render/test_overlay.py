@@ -13,9 +13,11 @@ from toosicubix.render.overlay import (
     DOWNWEIGHTED_BGR,
     DrawnVehicle,
     OverlayOptions,
+    birds_eye_side,
     blank_canvas,
     clip_segment_to_near_plane,
     colour_of,
+    compose,
     draw_birds_eye,
     draw_overlay,
 )
@@ -118,3 +120,16 @@ def test_dashes_of_many_straight_lines_at_once_match_one_by_one(rng):
     assert len(one_by_one) == len(at_once)
     for a, b in zip(one_by_one, at_once, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-9)  # the same arithmetic reordered: rounding only
+
+
+def test_a_tall_image_gets_a_bird_s_eye_panel_as_tall_as_itself():
+    K_tall = np.array([[2300.0, 0.0, 1690.0], [0.0, 2300.0, 1350.0], [0.0, 0.0, 1.0]])
+    camera = Camera(K=K_tall, image_size=(3384, 2710))
+    car = vehicle(np.eye(3), [0.0, 1.5, 30.0], [4.0, 1.7, 1.5])
+    side = birds_eye_side(2710)
+    panel = draw_birds_eye(side, camera, [car], image_width=3384, height=2710)
+    assert panel.shape == (2710, side, 3) and side == 1400
+    # Nothing left black: the grey panel reaches the bottom of the composed picture.
+    composed = compose(np.zeros((2710, 3384, 3), dtype=np.uint8), panel)
+    assert composed.shape == (2710, 3384 + 1400, 3)
+    assert composed[2000:, 3384:].max() > 0 and (composed[2000:, 3384:] > 0).mean() > 0.99

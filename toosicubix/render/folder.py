@@ -190,8 +190,8 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
         scale = text_scale(canvas.shape[0])
         cv2.putText(canvas, note, (6, canvas.shape[0] - int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX, scale,
                     (200, 200, 200), line_thickness(canvas.shape[0]), cv2.LINE_AA)
-    panel = draw_birds_eye(birds_eye_side(canvas.shape[0]), camera, vehicles, gt, canvas.shape[1]) \
-        if options.birds_eye else None
+    panel = draw_birds_eye(birds_eye_side(canvas.shape[0]), camera, vehicles, gt, canvas.shape[1],
+                           height=canvas.shape[0]) if options.birds_eye else None
     return compose(canvas, panel)
 
 

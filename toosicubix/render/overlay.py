@@ -484,7 +484,8 @@ def _nice_step(span: float) -> float:
 
 
 def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
-                   ground_truth: Sequence[DrawnCuboid] = (), image_width: int | None = None) -> np.ndarray:
+                   ground_truth: Sequence[DrawnCuboid] = (), image_width: int | None = None,
+                   height: int | None = None) -> np.ndarray:
     """A top view of the camera's x-z plane: each cuboid's footprint with its heading, depth and yaw sigmas.
 
     The footprint is the bottom face's corners with their camera y dropped (exact for a level camera).
@@ -493,14 +494,18 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
 
     Parameters
     ----------
-    side : the panel's width and height, pixels
+    side : the panel's width (and height unless ``height`` is given), pixels
     image_width : to draw the camera's field of view, or None
+    height : a taller panel's height, pixels (beside a tall image): the view then reaches farther forward at
+        the scale its width allows, instead of leaving the space below empty
 
     Returns
     -------
-    (side, side, 3) uint8 BGR panel
+    (height, side, 3) uint8 BGR panel
     """
-    panel = np.full((side, side, 3), PANEL_GREY, dtype=np.uint8)
+    width = side
+    height = side if height is None else max(int(height), side)
+    panel = np.full((height, width, 3), PANEL_GREY, dtype=np.uint8)
     footprints: list[tuple[int, np.ndarray, DrawnVehicle | None]] = []
     for i, v in enumerate(vehicles):
         if v.ok and v.R_cam_vehicle is not None:
@@ -511,29 +516,30 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     all_xz = np.concatenate([f[1] for f in footprints] + gt_prints + [np.zeros((1, 2))])
     z_max = max(20.0, float(np.max(all_xz[:, 1])) * 1.1)
     x_half = max(z_max / 2.0, float(np.max(np.abs(all_xz[:, 0]))) * 1.1)
-    scale = float(np.clip(side / 1000.0, 0.38, 1.2))
+    scale = float(np.clip(width / 1000.0, 0.38, 1.2))
     m = scale / 0.38  # everything grows with the text
     lw = max(1, round(m))
     margin_left, margin_bottom, margin_top = int(34 * m), int(34 * m), int(22 * m)
-    usable = side - margin_left - 8
-    s = min(usable / (2.0 * x_half), (side - margin_bottom - margin_top) / (z_max + 2.0))
-    frame = _BevFrame(s, margin_left + usable / 2.0, side - margin_bottom - 2.0 * s)
+    usable = width - margin_left - 8
+    s = min(usable / (2.0 * x_half), (height - margin_bottom - margin_top) / (z_max + 2.0))
+    z_max = max(z_max, (height - margin_bottom - margin_top) / s - 2.0)  # a tall panel shows farther ahead
+    frame = _BevFrame(s, margin_left + usable / 2.0, height - margin_bottom - 2.0 * s)
     step = _nice_step(max(z_max, 2.0 * x_half))
     grid = (70, 70, 70)
     for z in np.arange(0.0, z_max + 1e-9, step):
         a, b = frame.uv([[-x_half * 2, z], [x_half * 2, z]])
         cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), grid, 1, cv2.LINE_AA, SHIFT)
         y = frame.uv([[0.0, z]])[0, 1]
-        if margin_top <= y <= side - margin_bottom + 4:
+        if margin_top <= y <= height - margin_bottom + 4:
             cv2.putText(panel, f"{z:g}", (2, int(y + 4 * m)), _FONT, scale, TEXT_BGR, lw, cv2.LINE_AA)
     for x in np.arange(-np.floor(x_half / step) * step, x_half + 1e-9, step):
         a, b = frame.uv([[x, -2.0], [x, z_max * 2]])
         cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), grid, 1, cv2.LINE_AA, SHIFT)
         u = frame.uv([[x, 0.0]])[0, 0]
-        if margin_left <= u <= side - 10:
-            cv2.putText(panel, f"{x:g}", (int(u - 8 * m), int(side - margin_bottom + 16 * m)), _FONT, scale, TEXT_BGR,
+        if margin_left <= u <= width - 10:
+            cv2.putText(panel, f"{x:g}", (int(u - 8 * m), int(height - margin_bottom + 16 * m)), _FONT, scale, TEXT_BGR,
                         lw, cv2.LINE_AA)
-    cv2.putText(panel, "x (m, right)", (int(side / 2 - 40 * m), int(side - 4 * m)), _FONT, scale, TEXT_BGR, lw,
+    cv2.putText(panel, "x (m, right)", (int(width / 2 - 40 * m), int(height - 4 * m)), _FONT, scale, TEXT_BGR, lw,
                 cv2.LINE_AA)
     cv2.putText(panel, "z (m) forward, top view", (margin_left, int(15 * m)), _FONT, scale, TEXT_BGR, lw,
                 cv2.LINE_AA)
@@ -571,7 +577,7 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
                 _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, lw)
         label_uv = frame.uv(corners).max(axis=0)
         (tw, _), _ = cv2.getTextSize(v.id, _FONT, scale, lw)
-        x = int(min(label_uv[0] + 2 * m, side - tw - 2))  # kept inside the panel
+        x = int(min(label_uv[0] + 2 * m, width - tw - 2))  # kept inside the panel
         cv2.putText(panel, v.id, (x, int(label_uv[1])), _FONT, scale, colour, lw, cv2.LINE_AA)
     return panel
 
@@ -588,5 +594,6 @@ def compose(overlay: np.ndarray, panel: np.ndarray | None) -> np.ndarray:
 
 
 def birds_eye_side(image_height: int) -> int:
-    """The bird's-eye panel's side for an image: its height, kept within 360-1400 px."""
+    """The bird's-eye panel's width for an image: its height, kept within 360-1400 px (the panel is as tall as
+    the image, and at least this)."""
     return int(np.clip(image_height, 360, 1400))
