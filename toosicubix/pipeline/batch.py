@@ -513,7 +513,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     # The pilot's vehicles (at most PILOT_VEHICLES, held in memory) for the click-noise estimate.
-    pilot = list(pilot_images(_stream_images(index, ground), index.vehicles)) if estimate_click_sigma else []
+    pilot = list(pilot_images(stream_images(index, ground), index.vehicles)) if estimate_click_sigma else []
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
@@ -548,15 +548,16 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                 scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
 
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    images, for_labels = itertools.tee(_stream_images(index, ground))
+    images, for_labels = itertools.tee(stream_images(index, ground))
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, click_noise=noise)
 
 
-def _stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
-    """The images of an indexed annotation file, one at a time, with the options' ground block applied."""
+def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
+    """The images of an indexed annotation file (:func:`toosicubix.annotations.stream.index_annotations`), one
+    at a time, with the options' ground block applied."""
     for i, annotation in iter_image_annotations(index):
         yield from with_ground([image_from_schema(annotation, i)], ground or {})
 

@@ -10,15 +10,16 @@ parts to click next (:mod:`toosicubix.guidance`).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from toosicubix.annotations.convert import load_images, with_ground
+from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import check_prototypes, fit_images
+from toosicubix.pipeline.batch import iter_fit_images, stream_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
@@ -226,13 +227,14 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     annotations = Path(annotations)
     options = options or SolverOptions()
     thresholds = thresholds or Thresholds()
-    images = with_ground(load_images(annotations), ground or {})
     priors = load_priors(priors_path)
-    check_prototypes(images, priors, annotations)
+    index = index_annotations(annotations, known_prototypes=list(priors))
     if on_start is not None:
-        on_start(sum(len(im.vehicles) for im in images))
-    results = fit_images(images, priors, options, progress, jobs, joint_ground, next_clicks)
+        on_start(index.vehicles)
+    # Read image by image, as fit does: the fitter and the checks read the same stream.
+    images, for_checks = itertools.tee(stream_images(index, ground))
+    results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
-              for im, res in zip(images, results, strict=True)
+              for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
     return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks)
