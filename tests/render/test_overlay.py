@@ -133,3 +133,15 @@ def test_a_tall_image_gets_a_bird_s_eye_panel_as_tall_as_itself():
     composed = compose(np.zeros((2710, 3384, 3), dtype=np.uint8), panel)
     assert composed.shape == (2710, 3384 + 1400, 3)
     assert composed[2000:, 3384:].max() > 0 and (composed[2000:, 3384:] > 0).mean() > 0.99
+
+
+def test_labels_asked_for_the_same_place_are_moved_apart():
+    from toosicubix.render.overlay import _LabelPlacer
+
+    placer = _LabelPlacer(np.full((400, 400, 3), 40, dtype=np.uint8))
+    for text in ("12", "13", "14"):  # three vehicles side by side in the top view: one anchor
+        placer.put(text, (200.0, 200.0), (255, 255, 255), 0.5)
+    for k, a in enumerate(placer.placed):
+        for b in placer.placed[k + 1:]:
+            assert min(a[2], b[2]) <= max(a[0], b[0]) or min(a[3], b[3]) <= max(a[1], b[1]), (a, b)
+    assert (placer.canvas == 0).any()  # drawn on dark boxes

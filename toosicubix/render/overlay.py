@@ -553,6 +553,7 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     cv2.circle(panel, tuple(_fixed(cam)), int(3 * m) << SHIFT, TEXT_BGR, -1, cv2.LINE_AA, SHIFT)
     for corners in gt_prints:
         _polylines(panel, _dashed(np.vstack([frame.uv(corners), frame.uv(corners[:1])]), 5.0), GROUND_TRUTH_BGR, 1)
+    labels = _LabelPlacer(panel)
     for i, corners, v in footprints:
         colour = colour_of(i)
         _polylines(panel, [frame.uv(corners)], colour, lw + 1, closed=True)
@@ -575,10 +576,8 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
             normal = np.array([-ray[1], ray[0]]) * (3.0 * m / s)
             for end in (near, far):
                 _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, lw)
-        label_uv = frame.uv(corners).max(axis=0)
-        (tw, _), _ = cv2.getTextSize(v.id, _FONT, scale, lw)
-        x = int(min(label_uv[0] + 2 * m, width - tw - 2))  # kept inside the panel
-        cv2.putText(panel, v.id, (x, int(label_uv[1])), _FONT, scale, colour, lw, cv2.LINE_AA)
+        label_uv = frame.uv(corners).max(axis=0)  # beside the footprint, moved off earlier labels, in the panel
+        labels.put(v.id, (label_uv[0] + 2 * m, label_uv[1]), colour, scale)
     return panel
 
 
