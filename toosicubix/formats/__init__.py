@@ -28,18 +28,29 @@ MAX_JSON_DEPTH = 32
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 
 
+#: +1 for an opening bracket or brace, -1 for a closing one, by byte.
+_DEPTH_STEP = np.zeros(256, dtype=np.int8)
+_DEPTH_STEP[[ord("["), ord("{")]] = 1
+_DEPTH_STEP[[ord("]"), ord("}")]] = -1
+#: Bytes of the text's skeleton scanned at once: the scan's own memory stays a few MB for any file size.
+_NESTING_BLOCK = 1 << 20
+
+
 def json_nesting(text: str) -> tuple[int, int]:
     """The deepest nesting of arrays and objects in JSON ``text`` (strings ignored) and the 1-based line
-    where it is first reached; (0, 1) for a scalar. Linear in the text; no recursion."""
+    where it is first reached; (0, 1) for a scalar. Linear in the text; no recursion; scanned in blocks."""
     skeleton = _JSON_STRING.sub('""', text).encode("utf-8", "surrogatepass")
     codes = np.frombuffer(skeleton, dtype=np.uint8)
     if codes.size == 0:
         return 0, 1
-    step = (np.isin(codes, (ord("["), ord("{"))).astype(np.int32)
-            - np.isin(codes, (ord("]"), ord("}"))).astype(np.int32))
-    depth = np.cumsum(step)
-    deepest = int(np.argmax(depth))
-    return int(depth[deepest]), int(np.count_nonzero(codes[:deepest] == ord("\n"))) + 1
+    deepest, where, carry = None, 0, 0
+    for start in range(0, codes.size, _NESTING_BLOCK):
+        depth = np.cumsum(_DEPTH_STEP[codes[start:start + _NESTING_BLOCK]], dtype=np.int64) + carry
+        k = int(np.argmax(depth))
+        if deepest is None or depth[k] > deepest:  # the first place the maximum is reached
+            deepest, where = int(depth[k]), start + k
+        carry = int(depth[-1])
+    return deepest, skeleton.count(b"\n", 0, where) + 1
 
 
 def read_json_text(path: str | Path) -> str:
