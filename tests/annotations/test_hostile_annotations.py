@@ -152,3 +152,30 @@ def test_image_ids_differing_only_in_case_are_refused(tmp_path):
     problems = problems_of(tmp_path, doc)
     assert problems == [("$.images", "expected unique image (ignoring case: they name files) ids, got '000001a' "
                                      "at [1] and [2]")]
+
+
+def test_nesting_is_the_same_scanned_in_blocks(monkeypatch):
+    """The nesting check scans its text in blocks (its memory stays small for any file): any block size gives
+    the depth and the line that one pass over the whole text gives (the check as it was before the blocks)."""
+    import random
+
+    import numpy as np
+
+    import toosicubix.formats as formats
+
+    def whole(text: str) -> tuple[int, int]:
+        codes = np.frombuffer(formats._JSON_STRING.sub('""', text).encode("utf-8", "surrogatepass"), dtype=np.uint8)
+        if codes.size == 0:
+            return 0, 1
+        depth = np.cumsum(np.isin(codes, (ord("["), ord("{"))).astype(np.int64)
+                          - np.isin(codes, (ord("]"), ord("}"))).astype(np.int64))
+        deepest = int(np.argmax(depth))
+        return int(depth[deepest]), int(np.count_nonzero(codes[:deepest] == ord("\n"))) + 1
+
+    rng = random.Random(0)
+    texts = ['{"a": [[1, {"b": "[[[["}], 2]]}', '[\n[\n[\n]]]', "[]" * 50 + "[[[[]]]]", "7", "]]]", ""]
+    texts += ["".join(rng.choice('[]{}"\\\n ab,') for _ in range(rng.randint(1, 80))) for _ in range(300)]
+    for block in (1, 3, 7, 1 << 20):
+        monkeypatch.setattr(formats, "_NESTING_BLOCK", block)
+        for text in texts:
+            assert formats.json_nesting(text) == whole(text), (block, text)
