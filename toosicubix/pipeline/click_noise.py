@@ -57,7 +57,8 @@ class ClickNoise:
     sigma_px : pixels per coordinate, what every vehicle's uncertainty is computed for
     source : 'given' (``--click-sigma``), 'estimated' (from the pilot's residuals) or 'default' (too few
         redundant clicks to estimate it)
-    estimate_px : the pilot's estimate (None when it had no redundant click), possibly outside the bounds
+    estimate_px : the pilot's estimate (None when it had no redundant click), at a bound of SIGMA_BOUNDS when
+        the residuals lie beyond what it allows
     dof : the residuals' degrees of freedom it rests on (effective: a sum of fractional ones)
     pilot_vehicles, redundant_vehicles : vehicles fitted by the pilot; those of them whose clicks are redundant
     """
@@ -190,4 +191,4 @@ def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> C
     estimate, dof, redundant = pooled_sigma(evidence)
     if estimate is None or dof < MIN_DOF:
         return ClickNoise(pilot_sigma, "default", estimate, dof, pilot, redundant)
-    return ClickNoise(float(np.clip(estimate, *SIGMA_BOUNDS)), "estimated", estimate, dof, pilot, redundant)
+    return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant)  # pooled_sigma keeps it in bounds
