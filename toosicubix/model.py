@@ -77,6 +77,8 @@ class GroundPlane:
     camera_height : metres above the road, or None when unknown
     camera_height_sigma : metres
     upright_sigma : how far vehicles lean from the normal (their pitch and roll on the road), radians
+    from_batch : the normal was estimated from the batch's own fits (:mod:`toosicubix.pipeline.road_normal`),
+        not given
     """
 
     normal: np.ndarray
@@ -84,6 +86,7 @@ class GroundPlane:
     camera_height: float | None
     camera_height_sigma: float
     upright_sigma: float
+    from_batch: bool = False
 
 
 @dataclass(frozen=True)

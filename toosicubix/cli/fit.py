@@ -37,6 +37,12 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
     fit of up to 400 vehicles spread over the file, before the real one) unless --click-sigma gives it; the
     summary and results.json ("click_noise") say which, and on how many degrees of freedom.
 
+    Unless a ground is given (--road-normal, --kitti-ground, a camera height or pitch, --joint-ground, or the
+    file's ground blocks), the same pilot fit estimates each camera's road normal from its vehicles' up axes,
+    and vehicles are then fitted upright on it (within 2 deg; results.json "road_normal"). Far vehicles need
+    it: their clicks fit a pose tilted toward the camera about as well as the true one. --road-normal none
+    turns it off.
+
     Exit code 0 when every vehicle was fitted, 1 when some failed (their reasons are in results.json
     and on stderr; the others are written), 2 for a bad input file or option.
 
@@ -53,7 +59,8 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
         summary = fit_file(annotations, out_dir, fitting.priors_path, fitting.options, progress=bar.update,
                            on_start=bar.start, jobs=fitting.jobs, ground=fitting.ground,
                            joint_ground=fitting.joint_ground, next_clicks=next_clicks,
-                           estimate_click_sigma=not fitting.click_sigma_given)
+                           estimate_click_sigma=not fitting.click_sigma_given,
+                           estimate_road_normal=fitting.estimate_road_normal)
     finally:
         bar.finish()
     if not quiet:
@@ -65,6 +72,10 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
         )
         if summary.click_noise is not None:
             click.echo(summary.click_noise.describe(), err=True)
+        for normal in summary.road_normals[:5]:
+            click.echo(normal.describe(), err=True)
+        if len(summary.road_normals) > 5:
+            click.echo(f"  ... and {len(summary.road_normals) - 5} more cameras (results.json: road_normal)", err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)

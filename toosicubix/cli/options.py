@@ -182,7 +182,11 @@ _FITTING_OPTIONS = [
                  help="Camera height above the road, metres, for every image (enables the ground contact)."),
     click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
                  help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
-    click.option("--road-normal", default=None, help="Road normal in camera coordinates, x,y,z [default 0,-1,0]."),
+    click.option("--road-normal", default=None,
+                 help="Road normal in camera coordinates, x,y,z (vehicles upright on it); 'estimate': fit estimates it "
+                      "per camera from the batch's own fits (the default of fit when no ground is given); 'none': no "
+                      "road, vehicles only within 45 deg of the camera's up (the default of validate). With other "
+                      "ground options and no normal: 0,-1,0."),
     click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
     click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
     click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
@@ -214,6 +218,8 @@ class Fitting:
     jobs : worker processes
     click_sigma_given : ``--click-sigma`` was given (else ``options.click_sigma`` is the default, and ``fit``
         estimates the click noise from the batch)
+    estimate_road_normal : ``fit`` estimates each camera's road normal from the batch (no ground option given,
+        or ``--road-normal estimate``)
     """
 
     priors_path: Path | None
@@ -222,17 +228,19 @@ class Fitting:
     joint_ground: bool
     jobs: int
     click_sigma_given: bool = False
+    estimate_road_normal: bool = False
 
 
 def _road_normal(value: str | None) -> tuple[float, float, float] | None:
-    if value is None:
+    if value is None or value in ("estimate", "none"):
         return None
     try:
         normal = tuple(float(v) for v in value.split(","))
     except ValueError:
         normal = ()
     if len(normal) != 3:
-        raise click.BadParameter(f"expected three numbers x,y,z, got {value!r}", param_hint="--road-normal")
+        raise click.BadParameter(f"expected three numbers x,y,z, 'estimate' or 'none', got {value!r}",
+                                 param_hint="--road-normal")
     return normal  # type: ignore[return-value]
 
 
@@ -252,8 +260,13 @@ def _fitting(values: dict[str, Any]) -> Fitting:
     if (given["camera_pitch_deg"] is not None or given["camera_roll_deg"] is not None) and normal is not None:
         raise click.UsageError("give --road-normal or --camera-pitch-deg/--camera-roll-deg, not both")
     ground = ground_overrides(values["kitti_ground"], normal, **given)
+    if values["road_normal"] == "estimate" and (ground or values["joint_ground"]):
+        raise click.UsageError("--road-normal estimate goes without other ground options and --joint-ground "
+                               "(they say what the road is); give the normal as x,y,z instead")
+    estimate = values["road_normal"] == "estimate" or (
+        values["road_normal"] is None and not ground and not values["joint_ground"])
     return Fitting(values["priors_path"], options, ground, values["joint_ground"], values["jobs"],
-                   click_sigma_given=given_sigma is not None)
+                   click_sigma_given=given_sigma is not None, estimate_road_normal=estimate)
 
 
 def fitting_options(command: Callable) -> Callable:

@@ -319,7 +319,8 @@ class ImageResult:
     K : (3, 3)
     t_cam_rect : (3,) zero unless the camera came from a KITTI ``P``
     image_size : (width, height) or None
-    ground : the road plane used or estimated (``{"normal": [...], "camera_height": h, ...}``), or None
+    ground : the road plane used or estimated (``{"normal": [...], "camera_height": h, "estimated": bool}``;
+        estimated: refined with the vehicles (``--joint-ground``) or the batch's road normal), or None
     """
 
     id: str

@@ -19,7 +19,7 @@ import hashlib
 import itertools
 import os
 import traceback
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -50,7 +50,7 @@ from toosicubix.formats.results import (
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
-from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images
+from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     OutputFolderError,
@@ -58,6 +58,7 @@ from toosicubix.pipeline.output_folder import (
     pause_after_file,
     staged_output,
 )
+from toosicubix.pipeline.road_normal import RoadNormal, camera_key, estimate_road_normals, ground_block
 from toosicubix.priors.table import Priors, SizePrior, load_priors
 from toosicubix.solver import (
     FitResult,
@@ -91,6 +92,7 @@ class BatchSummary:
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     click_noise: ClickNoise | None = None  # the click noise the batch was fitted with, and where it came from
+    road_normals: tuple[RoadNormal, ...] = ()  # per camera, the road normal estimated from the batch (or why not)
 
     @property
     def n_failed(self) -> int:
@@ -328,7 +330,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
             im = pending.popleft()
             vehicles = done[:len(im.vehicles)]
             del done[:len(im.vehicles)]
-            ground = _ground_json(im.ground, estimated=False) if im.ground is not None else None
+            ground = _ground_json(im.ground, estimated=im.ground.from_batch) if im.ground is not None else None
             if joint_ground and im.ground is not None:
                 vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
             yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
@@ -480,7 +482,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
              progress: Callable[[int], None] | None = None,
              on_start: Callable[[int], None] | None = None, jobs: int = 1,
              ground: dict[str, object] | None = None, joint_ground: bool = False,
-             next_clicks: int = 0, estimate_click_sigma: bool = False) -> BatchSummary:
+             next_clicks: int = 0, estimate_click_sigma: bool = False,
+             estimate_road_normal: bool = False) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -499,6 +502,10 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         (:mod:`toosicubix.pipeline.click_noise`) and fit with it; ``options.click_sigma`` is the pilot's
         assumption and stays when the batch's clicks are too few to estimate it (``toosicubix fit`` does this
         unless given ``--click-sigma``)
+    estimate_road_normal : estimate each camera's road normal from the same pilot fit's vehicles
+        (:mod:`toosicubix.pipeline.road_normal`) and fit that camera's images without a ground block of their
+        own upright on it (``toosicubix fit`` does this unless given a ground); not with ``ground`` or
+        ``joint_ground``
 
     Raises
     ------
@@ -507,23 +514,38 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     OutputFolderError
         The output folder holds label files toosicubix did not write.
     """
+    if estimate_road_normal and (ground or joint_ground):
+        raise ValueError("estimate_road_normal goes without a ground or joint_ground: they say what the road is")
     annotations, out_dir = Path(annotations), Path(out_dir)
     options = options or SolverOptions()
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    # The pilot's vehicles (at most PILOT_VEHICLES, held in memory) for the click-noise estimate.
-    pilot = list(pilot_images(stream_images(index, ground), index.vehicles)) if estimate_click_sigma else []
+    # The pilot's vehicles (at most PILOT_VEHICLES, held in memory) for the click noise and the road normal;
+    # the road normal's also counts each camera's images.
+    cameras: Counter = Counter()
+
+    def counted(images: Iterable[Image]) -> Iterator[Image]:
+        for im in images:
+            if im.ground is None:
+                cameras[camera_key(im.camera)] += 1
+            yield im
+
+    pilot: list[Image] = []
+    if estimate_click_sigma or estimate_road_normal:
+        pilot = list(pilot_images(counted(stream_images(index, ground)), index.vehicles,
+                                  keep=None if estimate_road_normal else telling))
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
+    pilot_results = list(iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"),
+                                         progress, jobs)) if pilot else []
+    noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
-        noise = estimate_from_pilot(
-            iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"), progress, jobs),
-            options.click_sigma)
+        noise = estimate_from_pilot(pilot_results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
-    else:
-        noise = ClickNoise(options.click_sigma, "given")
+    normals = estimate_road_normals(pilot, pilot_results, cameras) if estimate_road_normal else {}
+    del pilot, pilot_results
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
@@ -533,6 +555,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                      "part_sigma": options.part_sigma,
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
         **({"click_noise": noise.to_json()} if estimate_click_sigma else {}),
+        **({"road_normal": [n.to_json() for n in normals.values()]} if estimate_road_normal else {}),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
@@ -548,11 +571,12 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                 scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
 
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    images, for_labels = itertools.tee(stream_images(index, ground))
+    images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), normals))
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
-                        out_dir=out_dir, scale_from=scale_from, click_noise=noise)
+                        out_dir=out_dir, scale_from=scale_from, click_noise=noise,
+                        road_normals=tuple(normals.values()))
 
 
 def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
@@ -560,6 +584,19 @@ def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> I
     at a time, with the options' ground block applied."""
     for i, annotation in iter_image_annotations(index):
         yield from with_ground([image_from_schema(annotation, i)], ground or {})
+
+
+def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal]) -> Iterator[Image]:
+    """The images, each without a ground block of its own given its camera's estimated road normal
+    (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
+    blocks = {key: ground_block(n) for key, n in normals.items() if n.normal is not None}
+    for im in images:
+        block = blocks.get(camera_key(im.camera)) if im.ground is None and blocks else None
+        if block is None:
+            yield im
+        else:
+            im = with_ground([im], block)[0]
+            yield replace(im, ground=replace(im.ground, from_batch=True))
 
 
 def _sha256(path: Path) -> str:

@@ -28,7 +28,7 @@ which they cannot tell from the click noise: on simulated KITTI clicks with real
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -107,14 +107,17 @@ def telling(vehicle: Vehicle) -> bool:
     return bool(vehicle.parts) and all(KINDS[part.kind].soft for part in vehicle.parts)
 
 
-def pilot_images(images: Iterable[Image], n_vehicles: int) -> Iterator[Image]:
+def pilot_images(images: Iterable[Image], n_vehicles: int,
+                 keep: Callable[[Vehicle], bool] | None = telling) -> Iterator[Image]:
     """The images of a batch of ``n_vehicles`` with only the pilot's vehicles: every k-th vehicle of the batch
-    (counted in file order) whose residuals can tell the noise (:func:`telling`); images left without one are
-    skipped. A batch of parts on the cuboid has no pilot."""
+    (counted in file order) that ``keep`` keeps (default: those whose residuals can tell the noise,
+    :func:`telling`, so that a batch of parts on the cuboid has no pilot; None: every k-th, as the road normal's
+    estimate wants); images left without one are skipped."""
     k = pilot_stride(n_vehicles)
     seen = 0
     for im in images:
-        chosen = tuple(v for i, v in enumerate(im.vehicles, start=seen) if i % k == 0 and telling(v))
+        chosen = tuple(v for i, v in enumerate(im.vehicles, start=seen)
+                       if i % k == 0 and (keep is None or keep(v)))
         seen += len(im.vehicles)
         if chosen:
             yield replace(im, vehicles=chosen)
