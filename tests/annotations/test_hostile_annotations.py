@@ -14,6 +14,7 @@ from toosicubix.annotations.schema import (
     check_intrinsics,
     load_annotations,
 )
+from toosicubix.annotations.stream import index_annotations
 from toosicubix.cli import main
 from toosicubix.formats import MAX_JSON_DEPTH, json_nesting
 
@@ -154,28 +155,72 @@ def test_image_ids_differing_only_in_case_are_refused(tmp_path):
                                      "at [1] and [2]")]
 
 
+def _nesting_by_hand(text: str) -> tuple[int, int]:
+    """The nesting check's definition, one character at a time: a quote opens or closes a string unless an odd
+    number of backslashes precedes it; brackets and braces outside strings count."""
+    deepest, line, depth, lines, inside, backslashes = None, 1, 0, 0, False, 0
+    for char in text:
+        if char == '"' and backslashes % 2 == 0:
+            inside = not inside
+        elif not inside and char in "[{":
+            depth += 1
+        elif not inside and char in "]}":
+            depth -= 1
+        if deepest is None or depth > deepest:
+            deepest, line = depth, lines + 1
+        lines += char == "\n"
+        backslashes = backslashes + 1 if char == "\\" else 0
+    return (0, 1) if deepest is None else (deepest, line)
+
+
 def test_nesting_is_the_same_scanned_in_blocks(monkeypatch):
     """The nesting check scans its text in blocks (its memory stays small for any file): any block size gives
-    the depth and the line that one pass over the whole text gives (the check as it was before the blocks)."""
+    the depth and the line of its definition, checked character by character, on valid and broken texts; on
+    valid JSON that is also what the check gave before, from the text with its strings cut out."""
     import random
-
-    import numpy as np
 
     import toosicubix.formats as formats
 
-    def whole(text: str) -> tuple[int, int]:
-        codes = np.frombuffer(formats._JSON_STRING.sub('""', text).encode("utf-8", "surrogatepass"), dtype=np.uint8)
-        if codes.size == 0:
-            return 0, 1
-        depth = np.cumsum(np.isin(codes, (ord("["), ord("{"))).astype(np.int64)
-                          - np.isin(codes, (ord("]"), ord("}"))).astype(np.int64))
-        deepest = int(np.argmax(depth))
-        return int(depth[deepest]), int(np.count_nonzero(codes[:deepest] == ord("\n"))) + 1
-
     rng = random.Random(0)
-    texts = ['{"a": [[1, {"b": "[[[["}], 2]]}', '[\n[\n[\n]]]', "[]" * 50 + "[[[[]]]]", "7", "]]]", ""]
-    texts += ["".join(rng.choice('[]{}"\\\n ab,') for _ in range(rng.randint(1, 80))) for _ in range(300)]
-    for block in (1, 3, 7, 1 << 20):
+    texts = ['{"a": [[1, {"b": "[[[["}], 2]]}', '[\n[\n[\n]]]', "[]" * 50 + "[[[[]]]]", "7", "]]]", "",
+             '"a\\\\"[[', '"\\"[["', '"é[[" [[ü]', "[\\\\\\]"]
+    texts += ["".join(rng.choice('[]{}"\\\n ab,é') for _ in range(rng.randint(1, 80))) for _ in range(400)]
+
+    def nested(level: int):
+        if level == 0 or rng.random() < 0.3:
+            return rng.choice(['[{"\\', "a\nb", "\"]]", 1.5, None, "ü[", ""])
+        if rng.random() < 0.5:
+            return [nested(level - 1) for _ in range(rng.randint(0, 3))]
+        return {rng.choice(["[", "}", "k\\"]) + str(i): nested(level - 1) for i in range(rng.randint(0, 3))}
+
+    valid = [json.dumps(nested(8), indent=rng.choice([None, 1]), ensure_ascii=rng.random() < 0.5) for _ in range(200)]
+
+    def skeleton_pass(text: str) -> tuple[int, int]:  # the check before this one (valid JSON only)
+        skeleton = formats._JSON_STRING.sub('""', text)
+        depth, deepest, line, lines = 0, None, 1, 0
+        for char in skeleton:
+            depth += (char in "[{") - (char in "]}")
+            if deepest is None or depth > deepest:
+                deepest, line = depth, lines + 1
+            lines += char == "\n"
+        return (0, 1) if deepest is None else (deepest, line)
+
+    for block in (1, 3, 7, 1 << 18):
         monkeypatch.setattr(formats, "_NESTING_BLOCK", block)
-        for text in texts:
-            assert formats.json_nesting(text) == whole(text), (block, text)
+        for text in texts + valid:
+            assert formats.json_nesting(text) == _nesting_by_hand(text), (block, text)
+        for text in valid:
+            assert formats.json_nesting(text) == skeleton_pass(text), (block, text)
+
+
+def test_broken_strings_before_deep_nesting_are_still_input_errors(tmp_path):
+    """Brackets the check takes for a string's (after an unterminated one) never reach the JSON reader as
+    structure: it stops at the broken string first."""
+    for text in ['{"toosicubix": 1, "images": "abc' + "[" * 100_000, '{"images": "a\n' + "[" * 100_000 + '"}',
+                 '{"images": ["\\' + "[" * 100_000]:
+        path = tmp_path / "broken.json"
+        path.write_text(text)
+        with pytest.raises(InputFileError, match="not valid JSON"):
+            load_annotations(path)
+        with pytest.raises(InputFileError, match="not valid JSON"):
+            index_annotations(path)

@@ -23,7 +23,9 @@ from toosicubix.pipeline.road_normal import (
     MIN_VEHICLES,
     RoadNormal,
     camera_key,
+    describe_without_pilot,
     estimate_road_normals,
+    without_pilot,
 )
 
 #: A camera looking 9 degrees down (ApolloCar3D's camera 5 looks about that much): R_cam_level.
@@ -47,7 +49,10 @@ def _result(ups) -> ImageResult:
 
 
 def _image(i, camera=CAMERA, ground=None) -> Image:
-    return Image(id=f"im{i}", file=None, camera=camera, vehicles=(), json_path=f"$.images[{i}]", ground=ground)
+    """A pilot image: it holds the vehicles the pilot fitted (their results are given apart)."""
+    vehicle = Vehicle(id="v", prototype="Car", box2d=None, parts=(), json_path=f"$.images[{i}].vehicles[0]")
+    return Image(id=f"im{i}", file=None, camera=camera, vehicles=(vehicle,), json_path=f"$.images[{i}]",
+                 ground=ground)
 
 
 def test_each_camera_gets_the_median_up_axis_of_its_vehicles():
@@ -172,3 +177,17 @@ def test_road_normal_round_trips_to_json():
     n = RoadNormal((700.0, 700.0, 600.0, 180.0), 3, (0.0, -1.0, 0.0), 40, 2.0)
     assert n.to_json()["camera"] == {"fx": 700.0, "fy": 700.0, "cx": 600.0, "cy": 180.0}
     assert n.to_json()["normal_sigma_deg"] == 3.0 and "looking 0.0 deg up" in n.describe()
+
+
+def test_cameras_the_pilot_has_no_vehicle_of_are_counted_not_listed():
+    """A batch whose every image has its own intrinsics has as many cameras as images: the header lists only
+    those the pilot saw (at most its 400 vehicles' cameras) and counts the rest."""
+    rng = np.random.default_rng(7)
+    cams = [Camera(K=np.array([[700.0 + i, 0, 600], [0, 700.0 + i, 180], [0, 0, 1]])) for i in range(50)]
+    counts = {camera_key(c): 1 for c in cams}
+    pilot = [_image(i, cams[i]) for i in range(0, 50, 10)]
+    normals = estimate_road_normals(pilot, [_result([_up(rng, NORMAL, 2.0)]) for _ in pilot], counts)
+    assert len(normals) == 5 and all(n.reason and n.vehicles == 1 for n in normals.values())
+    assert without_pilot(counts, normals) == {"cameras": 45, "images": 45}
+    assert "45 more camera(s) (45 images)" in describe_without_pilot(without_pilot(counts, normals))
+    assert describe_without_pilot({"cameras": 0, "images": 0}) == ""

@@ -76,6 +76,12 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
             click.echo(normal.describe(), err=True)
         if len(summary.road_normals) > 5:
             click.echo(f"  ... and {len(summary.road_normals) - 5} more cameras (results.json: road_normal)", err=True)
+        if summary.road_normal_without_pilot:
+            from toosicubix.pipeline.road_normal import describe_without_pilot
+
+            line = describe_without_pilot(summary.road_normal_without_pilot)
+            if line:
+                click.echo(line, err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)

@@ -32,25 +32,45 @@ _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 _DEPTH_STEP = np.zeros(256, dtype=np.int8)
 _DEPTH_STEP[[ord("["), ord("{")]] = 1
 _DEPTH_STEP[[ord("]"), ord("}")]] = -1
-#: Bytes of the text's skeleton scanned at once: the scan's own memory stays a few MB for any file size.
-_NESTING_BLOCK = 1 << 20
+#: Characters of the text scanned at once: the scan's own memory stays a few MB for any file size.
+_NESTING_BLOCK = 1 << 18
+_QUOTE, _BACKSLASH, _NEWLINE = ord('"'), ord("\\"), ord("\n")
 
 
 def json_nesting(text: str) -> tuple[int, int]:
     """The deepest nesting of arrays and objects in JSON ``text`` (strings ignored) and the 1-based line
-    where it is first reached; (0, 1) for a scalar. Linear in the text; no recursion; scanned in blocks."""
-    skeleton = _JSON_STRING.sub('""', text).encode("utf-8", "surrogatepass")
-    codes = np.frombuffer(skeleton, dtype=np.uint8)
-    if codes.size == 0:
-        return 0, 1
-    deepest, where, carry = None, 0, 0
-    for start in range(0, codes.size, _NESTING_BLOCK):
-        depth = np.cumsum(_DEPTH_STEP[codes[start:start + _NESTING_BLOCK]], dtype=np.int64) + carry
+    where it is first reached; (0, 1) for a scalar. Linear in the text; no recursion; no copy of the text.
+
+    Scanned in blocks of :data:`_NESTING_BLOCK` characters, carrying from one block to the next whether the
+    scan is inside a string, how many backslashes end the block and the depth: a quote opens or closes a
+    string unless an odd number of backslashes precedes it. Up to the first place where a JSON reader would
+    fail, this sees the structure that reader sees, so a text it passes cannot nest deeper in the reader.
+    """
+    deepest, where_line = None, 1
+    depth_carry, in_string, backslashes, lines = 0, 0, 0, 0
+    for start in range(0, len(text), _NESTING_BLOCK):
+        codes = np.frombuffer(text[start:start + _NESTING_BLOCK].encode("utf-8", "surrogatepass"), dtype=np.uint8)
+        n = codes.size
+        is_backslash = codes == _BACKSLASH
+        index = np.arange(n, dtype=np.int32)
+        last_other = np.maximum.accumulate(np.where(is_backslash, np.int32(-1), index))  # (n,) -1: none yet
+        # Backslashes right before each character: those since the last other one (or the block's start,
+        # counting the ones that ended the previous block).
+        before = np.empty(n, dtype=np.int64)
+        before[0] = backslashes
+        before[1:] = np.where(last_other[:-1] >= 0, index[:-1] - last_other[:-1], index[1:] + backslashes)
+        quotes = np.cumsum((codes == _QUOTE) & (before % 2 == 0), dtype=np.int64)
+        outside = (quotes + in_string) % 2 == 0  # (n,) after each character: not inside a string
+        depth = np.cumsum(np.where(outside, _DEPTH_STEP[codes], np.int8(0)), dtype=np.int64) + depth_carry
         k = int(np.argmax(depth))
         if deepest is None or depth[k] > deepest:  # the first place the maximum is reached
-            deepest, where = int(depth[k]), start + k
-        carry = int(depth[-1])
-    return deepest, skeleton.count(b"\n", 0, where) + 1
+            deepest, where_line = int(depth[k]), lines + int(np.count_nonzero(codes[:k] == _NEWLINE)) + 1
+        depth_carry, in_string = int(depth[-1]), int((quotes[-1] + in_string) % 2)
+        backslashes = n - 1 - int(last_other[-1]) if last_other[-1] >= 0 else backslashes + n
+        lines += int(np.count_nonzero(codes == _NEWLINE))
+    if deepest is None:
+        return 0, 1
+    return deepest, where_line
 
 
 def read_json_text(path: str | Path) -> str:

@@ -58,7 +58,13 @@ from toosicubix.pipeline.output_folder import (
     pause_after_file,
     staged_output,
 )
-from toosicubix.pipeline.road_normal import RoadNormal, camera_key, estimate_road_normals, ground_block
+from toosicubix.pipeline.road_normal import (
+    RoadNormal,
+    camera_key,
+    estimate_road_normals,
+    ground_block,
+    without_pilot,
+)
 from toosicubix.priors.table import Priors, SizePrior, load_priors
 from toosicubix.solver import (
     FitResult,
@@ -93,6 +99,7 @@ class BatchSummary:
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     click_noise: ClickNoise | None = None  # the click noise the batch was fitted with, and where it came from
     road_normals: tuple[RoadNormal, ...] = ()  # per camera, the road normal estimated from the batch (or why not)
+    road_normal_without_pilot: dict[str, int] = field(default_factory=dict)  # cameras the pilot had no vehicle of
 
     @property
     def n_failed(self) -> int:
@@ -545,6 +552,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         noise = estimate_from_pilot(pilot_results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
     normals = estimate_road_normals(pilot, pilot_results, cameras) if estimate_road_normal else {}
+    missing = without_pilot(cameras, normals) if estimate_road_normal else {}
     del pilot, pilot_results
     header = {
         "generator": f"toosicubix {__version__}",
@@ -556,6 +564,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
         **({"click_noise": noise.to_json()} if estimate_click_sigma else {}),
         **({"road_normal": [n.to_json() for n in normals.values()]} if estimate_road_normal else {}),
+        **({"road_normal_without_pilot": missing} if missing.get("cameras") else {}),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
@@ -576,7 +585,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, click_noise=noise,
-                        road_normals=tuple(normals.values()))
+                        road_normals=tuple(normals.values()), road_normal_without_pilot=missing)
 
 
 def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:

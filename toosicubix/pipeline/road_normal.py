@@ -101,13 +101,34 @@ def estimate_road_normals(pilot: Iterable[Image], results: Iterable[ImageResult]
     pilot, results : the pilot's images and their image results, pairwise
     cameras : per camera (:func:`camera_key`), how many images of the batch have no ground block of their own:
         the cameras to estimate for; pilot images with a ground block do not count
+
+    Returns
+    -------
+    The cameras the pilot has a vehicle of (at most as many as its vehicles, whatever the batch's number of
+    cameras); the others have no estimate (:func:`without_pilot` counts them).
     """
-    ups: dict[CameraKey, list[np.ndarray]] = {key: [] for key in cameras}
+    ups: dict[CameraKey, list[np.ndarray]] = {}
     for im, res in zip(pilot, results, strict=True):
         key = camera_key(im.camera)
-        if im.ground is None and key in ups:
-            ups[key].extend(np.asarray(v.R_cam_vehicle, dtype=float)[:, 2] for v in res.vehicles if v.ok)
+        if im.ground is None and key in cameras and im.vehicles:
+            ups.setdefault(key, []).extend(np.asarray(v.R_cam_vehicle, dtype=float)[:, 2]
+                                           for v in res.vehicles if v.ok)
     return {key: _estimate(key[:4], cameras[key], np.array(u).reshape(-1, 3)) for key, u in ups.items()}
+
+
+def without_pilot(cameras: dict[CameraKey, int], normals: dict[CameraKey, RoadNormal]) -> dict[str, int]:
+    """How many cameras, and images of theirs, the pilot had no vehicle of (so no estimate): ``{"cameras": n,
+    "images": m}`` (e.g. a batch whose every image has its own intrinsics)."""
+    missing = [n for key, n in cameras.items() if key not in normals]
+    return {"cameras": len(missing), "images": sum(missing)}
+
+
+def describe_without_pilot(counts: dict[str, int]) -> str:
+    """One line for the command's summary (empty when every camera had pilot vehicles)."""
+    if not counts["cameras"]:
+        return ""
+    return (f"road normal: none for {counts['cameras']} more camera(s) ({counts['images']} images): the pilot had "
+            f"none of their vehicles; vehicles only kept within 45 deg of upright (--road-normal sets it)")
 
 
 def _estimate(camera: tuple, images: int, ups: np.ndarray) -> RoadNormal:
