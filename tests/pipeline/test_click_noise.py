@@ -122,4 +122,4 @@ def test_fit_says_where_its_click_noise_came_from(tmp_path):
     summary = fit_file(SAMPLE, tmp_path / "given", options=SolverOptions(click_sigma=0.7))
     header = json.loads((tmp_path / "given" / "results.json").read_text())
     assert "click_noise" not in header and header["settings"]["click_sigma"] == 0.7
-    assert summary.click_noise.source == "given"
+    assert summary.pilot.click_noise.source == "given"

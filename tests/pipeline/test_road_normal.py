@@ -134,7 +134,8 @@ def test_fit_estimates_the_normal_and_fits_upright_on_it(tmp_path):
     plain = json.loads((tmp_path / "none" / "results.json").read_text())
     (block,) = estimated["road_normal"]
     assert block["vehicles"] == 40 and block["images"] == 40 and block["reason"] is None
-    assert summary.road_normals[0].normal == tuple(block["normal"])
+    (normal,) = summary.pilot.road_normals.values()
+    assert normal.normal == tuple(block["normal"])
     # 40 far cars whose own up axes scatter a few degrees: their median lies within 1 degree of the road's.
     assert np.rad2deg(np.arccos(np.dot(block["normal"], NORMAL))) < 1.0
     assert all(im["ground"]["estimated"] and im["ground"]["camera_height"] is None for im in estimated["images"])
@@ -191,3 +192,31 @@ def test_cameras_the_pilot_has_no_vehicle_of_are_counted_not_listed():
     assert without_pilot(counts, normals) == {"cameras": 45, "images": 45}
     assert "45 more camera(s) (45 images)" in describe_without_pilot(without_pilot(counts, normals))
     assert describe_without_pilot({"cameras": 0, "images": 0}) == ""
+
+
+def test_validate_fits_as_fit_does_with_the_batch_estimates(tmp_path):
+    """validate's fits are fit's: the same pilot, the same click noise and road normal, the same poses."""
+    from toosicubix.pipeline.validation import validate_file
+
+    path = tmp_path / "pitched.json"
+    path.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
+    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    fitted = json.loads((tmp_path / "out" / "results.json").read_text())
+    report = validate_file(path, estimate_click_sigma=True, estimate_road_normal=True)
+    as_json = report.to_json()
+    assert as_json["road_normal"] == fitted["road_normal"] and as_json["click_noise"] == fitted["click_noise"]
+    assert as_json["click_sigma"] == fitted["settings"]["click_sigma"]
+    poses = {v["id"]: v["R_cam_vehicle"] for im in fitted["images"] for v in im["vehicles"]}
+    assert len(report.vehicles) == 40
+    for check in report.vehicles:
+        np.testing.assert_array_equal(check.result.R_cam_vehicle, poses[check.result.id])
+    plain = validate_file(path).to_json()
+    assert "road_normal" not in plain and "click_noise" not in plain
+
+
+def test_validate_cli_says_what_the_pilot_estimated(tmp_path):
+    result = CliRunner().invoke(main, ["validate", "samples/annotations.json"])
+    assert "click noise: 1.5 px (default" in result.output and "road normal of camera fx 720 px" in result.output
+    result = CliRunner().invoke(main, ["validate", "samples/annotations.json", "--road-normal", "none",
+                                       "--click-sigma", "1.5"])
+    assert "road normal of" not in result.output and "click noise: 1.5 px (given)" in result.output

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
+from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options, pilot_lines
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -70,18 +70,8 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
             f"{summary.out_dir / 'results.json'} (full rotations)",
             err=True,
         )
-        if summary.click_noise is not None:
-            click.echo(summary.click_noise.describe(), err=True)
-        for normal in summary.road_normals[:5]:
-            click.echo(normal.describe(), err=True)
-        if len(summary.road_normals) > 5:
-            click.echo(f"  ... and {len(summary.road_normals) - 5} more cameras (results.json: road_normal)", err=True)
-        if summary.road_normal_without_pilot:
-            from toosicubix.pipeline.road_normal import describe_without_pilot
-
-            line = describe_without_pilot(summary.road_normal_without_pilot)
-            if line:
-                click.echo(line, err=True)
+        for line in pilot_lines(summary.pilot):
+            click.echo(line, err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)

@@ -165,9 +165,9 @@ _FITTING_OPTIONS = [
                  help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
     click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
                  help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) and the "
-                      "keypoints' soft term are for. fit: estimated from the batch's own residuals when not given "
+                      "keypoints' soft term are for. Estimated from the batch's own residuals when not given "
                       f"(a pilot fit of up to 400 vehicles; {SolverOptions.click_sigma:g} when their clicks are too "
-                      f"few to tell); validate: {SolverOptions.click_sigma:g} when not given."),
+                      "few to tell)."),
     click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
@@ -183,10 +183,9 @@ _FITTING_OPTIONS = [
     click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
                  help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
     click.option("--road-normal", default=None,
-                 help="Road normal in camera coordinates, x,y,z (vehicles upright on it); 'estimate': fit estimates it "
-                      "per camera from the batch's own fits (the default of fit when no ground is given); 'none': no "
-                      "road, vehicles only within 45 deg of the camera's up (the default of validate). With other "
-                      "ground options and no normal: 0,-1,0."),
+                 help="Road normal in camera coordinates, x,y,z (vehicles upright on it); 'estimate': per camera "
+                      "from the same pilot fit (the default when no ground is given); 'none': no road, vehicles only "
+                      "within 45 deg of the camera's up. With other ground options and no normal: 0,-1,0."),
     click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
     click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
     click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
@@ -280,6 +279,21 @@ def fitting_options(command: Callable) -> Callable:
     for option in reversed(_FITTING_OPTIONS):
         wrapper = option(wrapper)
     return wrapper
+
+
+def pilot_lines(pilot: Any) -> list[str]:
+    """The summary lines on what a batch's pilot fit estimated (``fit``, ``validate``): its click noise and
+    each camera's road normal (at most five cameras listed)."""
+    from toosicubix.pipeline.road_normal import describe_without_pilot
+
+    lines = [pilot.click_noise.describe()]
+    normals = list(pilot.road_normals.values())
+    lines += [n.describe() for n in normals[:5]]
+    if len(normals) > 5:
+        lines.append(f"  ... and {len(normals) - 5} more cameras (results.json: road_normal)")
+    if pilot.without_pilot:
+        lines.append(describe_without_pilot(pilot.without_pilot))
+    return [line for line in lines if line]
 
 
 class ProgressBar:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
+from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options, pilot_lines
 from toosicubix.pipeline.validation import Thresholds
 
 
@@ -32,7 +32,8 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     """Check an annotation file and say which vehicles need more clicks; writes nothing.
 
     Schema errors are listed with their JSON paths (exit code 2). Otherwise every vehicle is fitted as
-    `toosicubix fit` would fit it with the same options, and for each vehicle that is not well determined
+    `toosicubix fit` would fit it with the same options (the click noise and the road normal estimated from
+    the batch unless given, said on stderr), and for each vehicle that is not well determined
     the report gives its constraint count, the standard deviations of its pose and size for clicks off by
     --click-sigma pixels, what its clicks leave to the prior, any second answer (e.g. turned around) that
     fits nearly as well, and the parts to click next, with where they should appear in the image and how
@@ -54,9 +55,13 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     try:
         report = validate_file(annotations, fitting.priors_path, fitting.options, thresholds, fitting.ground,
                                fitting.joint_ground, next_clicks, fitting.jobs, progress=bar.update,
-                               on_start=bar.start)
+                               on_start=bar.start, estimate_click_sigma=not fitting.click_sigma_given,
+                               estimate_road_normal=fitting.estimate_road_normal)
     finally:
         bar.finish()
+    if not quiet and not as_json and report.pilot is not None:  # the JSON report holds them
+        for line in pilot_lines(report.pilot):
+            click.echo(line, err=True)
     if as_json:
         from toosicubix.formats.results import dumps
 

@@ -80,7 +80,8 @@ from toosicubix.solver import (
 from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 from toosicubix.solver.robust import with_weights
 
-__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fit_images", "fit_one"]
+__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "PilotFindings", "fit_file", "fit_images", "fit_one",
+           "run_pilot"]
 
 
 #: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
@@ -97,9 +98,7 @@ class BatchSummary:
     failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason), the first FAILED_KEPT in file order
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
-    click_noise: ClickNoise | None = None  # the click noise the batch was fitted with, and where it came from
-    road_normals: tuple[RoadNormal, ...] = ()  # per camera, the road normal estimated from the batch (or why not)
-    road_normal_without_pilot: dict[str, int] = field(default_factory=dict)  # cameras the pilot had no vehicle of
+    pilot: PilotFindings | None = None  # the click noise and road normals the batch was fitted with, and whence
 
     @property
     def n_failed(self) -> int:
@@ -484,6 +483,64 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
     return summary
 
 
+@dataclass(frozen=True)
+class PilotFindings:
+    """What a batch's pilot fit found (:func:`run_pilot`).
+
+    Attributes
+    ----------
+    options : the solver settings to fit the batch with (the estimated click noise in them)
+    click_noise : the click noise and where it came from ('given' when it was not estimated)
+    road_normals : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the estimated road
+        normal or why there is none; empty when not estimated
+    without_pilot : cameras (and their images) the pilot had no vehicle of; empty when not estimated
+    """
+
+    options: SolverOptions
+    click_noise: ClickNoise
+    road_normals: dict[tuple, RoadNormal] = field(default_factory=dict)
+    without_pilot: dict[str, int] = field(default_factory=dict)
+
+
+def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
+              jobs: int = 1, progress: Callable[[int], None] | None = None,
+              on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
+              estimate_road_normal: bool = False) -> PilotFindings:
+    """Fit every k-th vehicle of an indexed file (at most :data:`toosicubix.pipeline.click_noise.PILOT_VEHICLES`,
+    held in memory) and estimate from them what was asked: the click noise
+    (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
+    (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot.
+
+    ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
+    ``progress`` with each vehicle the pilot finishes.
+    """
+    cameras: Counter = Counter()  # images without their own ground block, per camera
+
+    def counted(images: Iterable[Image]) -> Iterator[Image]:
+        for im in images:
+            if im.ground is None:
+                cameras[camera_key(im.camera)] += 1
+            yield im
+
+    pilot: list[Image] = []
+    if estimate_click_sigma or estimate_road_normal:
+        pilot = list(pilot_images(counted(stream_images(index, ground)), index.vehicles,
+                                  keep=None if estimate_road_normal else telling))
+    n_pilot = sum(len(im.vehicles) for im in pilot)
+    if on_start is not None:
+        on_start(index.vehicles + n_pilot)
+    results = list(iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"), progress,
+                                   jobs)) if pilot else []
+    noise = ClickNoise(options.click_sigma, "given")
+    if estimate_click_sigma:
+        noise = estimate_from_pilot(results, options.click_sigma)
+        options = replace(options, click_sigma=noise.sigma_px)
+    if not estimate_road_normal:
+        return PilotFindings(options, noise)
+    normals = estimate_road_normals(pilot, results, cameras)
+    return PilotFindings(options, noise, normals, without_pilot(cameras, normals))
+
+
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
              options: SolverOptions | None = None,
              progress: Callable[[int], None] | None = None,
@@ -528,32 +585,9 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    # The pilot's vehicles (at most PILOT_VEHICLES, held in memory) for the click noise and the road normal;
-    # the road normal's also counts each camera's images.
-    cameras: Counter = Counter()
-
-    def counted(images: Iterable[Image]) -> Iterator[Image]:
-        for im in images:
-            if im.ground is None:
-                cameras[camera_key(im.camera)] += 1
-            yield im
-
-    pilot: list[Image] = []
-    if estimate_click_sigma or estimate_road_normal:
-        pilot = list(pilot_images(counted(stream_images(index, ground)), index.vehicles,
-                                  keep=None if estimate_road_normal else telling))
-    n_pilot = sum(len(im.vehicles) for im in pilot)
-    if on_start is not None:
-        on_start(index.vehicles + n_pilot)
-    pilot_results = list(iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"),
-                                         progress, jobs)) if pilot else []
-    noise = ClickNoise(options.click_sigma, "given")
-    if estimate_click_sigma:
-        noise = estimate_from_pilot(pilot_results, options.click_sigma)
-        options = replace(options, click_sigma=noise.sigma_px)
-    normals = estimate_road_normals(pilot, pilot_results, cameras) if estimate_road_normal else {}
-    missing = without_pilot(cameras, normals) if estimate_road_normal else {}
-    del pilot, pilot_results
+    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
+                      estimate_road_normal)
+    options, noise, normals, missing = pilot.options, pilot.click_noise, pilot.road_normals, pilot.without_pilot
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
@@ -584,8 +618,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
-                        out_dir=out_dir, scale_from=scale_from, click_noise=noise,
-                        road_normals=tuple(normals.values()), road_normal_without_pilot=missing)
+                        out_dir=out_dir, scale_from=scale_from, pilot=pilot)
 
 
 def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:

@@ -19,7 +19,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import iter_fit_images, stream_images
+from toosicubix.pipeline.batch import PilotFindings, iter_fit_images, on_estimated_roads, run_pilot, stream_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
@@ -129,6 +129,7 @@ class ValidationReport:
     part_sigma: float
     thresholds: Thresholds
     vehicles: list[VehicleCheck]
+    pilot: PilotFindings | None = None  # what the batch's pilot estimated (click noise, road normals), if run
 
     @property
     def ok(self) -> bool:
@@ -143,9 +144,17 @@ class ValidationReport:
                 "ambiguous": sum(bool(v.result.ambiguous) for v in self.vehicles)}
 
     def to_json(self) -> dict[str, Any]:
+        estimated: dict[str, Any] = {}
+        if self.pilot is not None and self.pilot.click_noise.source != "given":
+            estimated["click_noise"] = self.pilot.click_noise.to_json()
+        if self.pilot is not None and (self.pilot.road_normals or self.pilot.without_pilot):
+            estimated["road_normal"] = [n.to_json() for n in self.pilot.road_normals.values()]
+            if self.pilot.without_pilot.get("cameras"):
+                estimated["road_normal_without_pilot"] = self.pilot.without_pilot
         return {"toosicubix_validation": VALIDATION_VERSION, "annotations": str(self.source),
-                "click_sigma": self.click_sigma, "part_sigma": self.part_sigma, "thresholds": self.thresholds.to_json(),
-                "ok": self.ok, "summary": self.summary(), "vehicles": [v.to_json() for v in self.vehicles]}
+                "click_sigma": self.click_sigma, "part_sigma": self.part_sigma, **estimated,
+                "thresholds": self.thresholds.to_json(), "ok": self.ok, "summary": self.summary(),
+                "vehicles": [v.to_json() for v in self.vehicles]}
 
     def text(self, show_all: bool = False) -> str:
         """A report for people: one paragraph per vehicle that is not well determined (every vehicle with
@@ -209,13 +218,15 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
                   options: SolverOptions | None = None, thresholds: Thresholds | None = None,
                   ground: dict[str, object] | None = None, joint_ground: bool = False, next_clicks: int = 3,
                   jobs: int = 1, progress: Callable[[int], None] | None = None,
-                  on_start: Callable[[int], None] | None = None) -> ValidationReport:
+                  on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
+                  estimate_road_normal: bool = False) -> ValidationReport:
     """Fit every vehicle of a file as ``fit`` would, write nothing, judge each (see the module docstring).
 
     Parameters
     ----------
-    annotations, priors_path, options, ground, joint_ground, jobs, progress, on_start : as
-        :func:`toosicubix.batch.fit_file` takes them
+    annotations, priors_path, options, ground, joint_ground, jobs, progress, on_start, estimate_click_sigma,
+    estimate_road_normal : as :func:`toosicubix.pipeline.batch.fit_file` takes them (``toosicubix validate``, like
+        ``fit``, estimates the click noise and the road normals unless given them)
     thresholds : when a vehicle is well determined
     next_clicks : how many parts to suggest per vehicle
 
@@ -229,12 +240,15 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     thresholds = thresholds or Thresholds()
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
-    if on_start is not None:
-        on_start(index.vehicles)
+    if estimate_road_normal and (ground or joint_ground):
+        raise ValueError("estimate_road_normal goes without a ground or joint_ground: they say what the road is")
+    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
+                      estimate_road_normal)
+    options = pilot.options
     # Read image by image, as fit does: the fitter and the checks read the same stream.
-    images, for_checks = itertools.tee(stream_images(index, ground))
+    images, for_checks = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
-    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks)
+    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot)
