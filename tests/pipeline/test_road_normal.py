@@ -156,12 +156,12 @@ def test_cli_estimates_by_default_and_road_normal_none_turns_it_off(tmp_path):
     out = tmp_path / "out"
     result = runner.invoke(main, ["fit", "samples/annotations.json", "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert "road normal of camera fx 720 px (1 image): not estimated" in result.output
+    assert "road normal: not estimated for 2 camera(s) (3 images): the pilot fitted at most 3 vehicles" in result.output
     assert "road_normal" in json.loads((out / "results.json").read_text())
     for extra in (["--road-normal", "none"], ["--road-normal", "0,-1,0"], ["--kitti-ground"]):
         result = runner.invoke(main, ["fit", "samples/annotations.json", "-o", str(tmp_path / "x"), *extra])
         assert result.exit_code == 0, result.output
-        assert "road normal of" not in result.output
+        assert "road normal" not in result.output
         assert "road_normal" not in json.loads((tmp_path / "x" / "results.json").read_text())
     result = runner.invoke(main, ["fit", "samples/annotations.json", "-o", str(tmp_path / "y"),
                                   "--road-normal", "estimate", "--camera-height", "1.6"])
@@ -216,7 +216,7 @@ def test_validate_fits_as_fit_does_with_the_batch_estimates(tmp_path):
 
 def test_validate_cli_says_what_the_pilot_estimated(tmp_path):
     result = CliRunner().invoke(main, ["validate", "samples/annotations.json"])
-    assert "click noise: 1.5 px (default" in result.output and "road normal of camera fx 720 px" in result.output
+    assert "click noise: 1.5 px (default" in result.output and "road normal: not estimated for 2" in result.output
     result = CliRunner().invoke(main, ["validate", "samples/annotations.json", "--road-normal", "none",
                                        "--click-sigma", "1.5"])
-    assert "road normal of" not in result.output and "click noise: 1.5 px (given)" in result.output
+    assert "road normal" not in result.output and "click noise: 1.5 px (given)" in result.output

@@ -284,13 +284,19 @@ def fitting_options(command: Callable) -> Callable:
 def pilot_lines(pilot: Any) -> list[str]:
     """The summary lines on what a batch's pilot fit estimated (``fit``, ``validate``): its click noise and
     each camera's road normal (at most five cameras listed)."""
-    from toosicubix.pipeline.road_normal import describe_without_pilot
+    from toosicubix.pipeline.road_normal import MIN_VEHICLES, describe_without_pilot
 
     lines = [pilot.click_noise.describe()]
-    normals = list(pilot.road_normals.values())
+    # Cameras with an estimate, or refused one for scattered up axes, one line each; too few vehicles, one line.
+    normals = [n for n in pilot.road_normals.values() if n.spread_deg is not None]
+    few = [n for n in pilot.road_normals.values() if n.spread_deg is None]
     lines += [n.describe() for n in normals[:5]]
     if len(normals) > 5:
         lines.append(f"  ... and {len(normals) - 5} more cameras (results.json: road_normal)")
+    if few:
+        lines.append(f"road normal: not estimated for {len(few)} camera(s) ({sum(n.images for n in few)} images): the "
+                     f"pilot fitted at most {max(n.vehicles for n in few)} vehicles of each, {MIN_VEHICLES} needed; "
+                     "their vehicles only kept within 45 deg of upright (--road-normal sets it)")
     if pilot.without_pilot:
         lines.append(describe_without_pilot(pilot.without_pilot))
     return [line for line in lines if line]
