@@ -288,8 +288,9 @@ def pilot_lines(pilot: Any) -> list[str]:
 
     lines = [pilot.click_noise.describe()]
     # Cameras with an estimate, or refused one for scattered up axes, one line each; too few vehicles, one line.
-    normals = [n for n in pilot.road_normals.values() if n.spread_deg is not None]
-    few = [n for n in pilot.road_normals.values() if n.spread_deg is None]
+    everyone = list((pilot.road_normals or {}).values())
+    normals = [n for n in everyone if n.spread_deg is not None]
+    few = [n for n in everyone if n.spread_deg is None]
     lines += [n.describe() for n in normals[:5]]
     if len(normals) > 5:
         lines.append(f"  ... and {len(normals) - 5} more cameras (results.json: road_normal)")

@@ -492,14 +492,25 @@ class PilotFindings:
     options : the solver settings to fit the batch with (the estimated click noise in them)
     click_noise : the click noise and where it came from ('given' when it was not estimated)
     road_normals : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the estimated road
-        normal or why there is none; empty when not estimated
+        normal or why there is none; None when not estimated
     without_pilot : cameras (and their images) the pilot had no vehicle of; empty when not estimated
     """
 
     options: SolverOptions
     click_noise: ClickNoise
-    road_normals: dict[tuple, RoadNormal] = field(default_factory=dict)
+    road_normals: dict[tuple, RoadNormal] | None = None
     without_pilot: dict[str, int] = field(default_factory=dict)
+
+    def header(self) -> dict[str, Any]:
+        """What results.json's header (and validate's report) say about the pilot's estimates."""
+        out: dict[str, Any] = {}
+        if self.click_noise.source != "given":
+            out["click_noise"] = self.click_noise.to_json()
+        if self.road_normals is not None:
+            out["road_normal"] = [n.to_json() for n in self.road_normals.values()]
+        if self.without_pilot.get("cameras"):
+            out["road_normal_without_pilot"] = self.without_pilot
+        return out
 
 
 def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
@@ -587,7 +598,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     prepare_output_dir(out_dir)  # fail before the work, not after
     pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
                       estimate_road_normal)
-    options, noise, normals, missing = pilot.options, pilot.click_noise, pilot.road_normals, pilot.without_pilot
+    options = pilot.options
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
@@ -596,9 +607,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
-        **({"click_noise": noise.to_json()} if estimate_click_sigma else {}),
-        **({"road_normal": [n.to_json() for n in normals.values()]} if estimate_road_normal else {}),
-        **({"road_normal_without_pilot": missing} if missing.get("cameras") else {}),
+        **pilot.header(),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",
     }
@@ -614,7 +623,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                 scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
 
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), normals))
+    images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
@@ -628,10 +637,10 @@ def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> I
         yield from with_ground([image_from_schema(annotation, i)], ground or {})
 
 
-def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal]) -> Iterator[Image]:
+def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal] | None) -> Iterator[Image]:
     """The images, each without a ground block of its own given its camera's estimated road normal
     (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
-    blocks = {key: ground_block(n) for key, n in normals.items() if n.normal is not None}
+    blocks = {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
     for im in images:
         block = blocks.get(camera_key(im.camera)) if im.ground is None and blocks else None
         if block is None:

@@ -144,13 +144,7 @@ class ValidationReport:
                 "ambiguous": sum(bool(v.result.ambiguous) for v in self.vehicles)}
 
     def to_json(self) -> dict[str, Any]:
-        estimated: dict[str, Any] = {}
-        if self.pilot is not None and self.pilot.click_noise.source != "given":
-            estimated["click_noise"] = self.pilot.click_noise.to_json()
-        if self.pilot is not None and (self.pilot.road_normals or self.pilot.without_pilot):
-            estimated["road_normal"] = [n.to_json() for n in self.pilot.road_normals.values()]
-            if self.pilot.without_pilot.get("cameras"):
-                estimated["road_normal_without_pilot"] = self.pilot.without_pilot
+        estimated = self.pilot.header() if self.pilot is not None else {}
         return {"toosicubix_validation": VALIDATION_VERSION, "annotations": str(self.source),
                 "click_sigma": self.click_sigma, "part_sigma": self.part_sigma, **estimated,
                 "thresholds": self.thresholds.to_json(), "ok": self.ok, "summary": self.summary(),
