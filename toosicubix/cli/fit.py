@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options, pilot_lines
+from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -70,7 +70,7 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
             f"{summary.out_dir / 'results.json'} (full rotations)",
             err=True,
         )
-        for line in pilot_lines(summary.pilot):
+        for line in summary.pilot.describe() if summary.pilot is not None else ():
             click.echo(line, err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))

@@ -217,8 +217,8 @@ class Fitting:
     jobs : worker processes
     click_sigma_given : ``--click-sigma`` was given (else ``options.click_sigma`` is the default, and ``fit``
         estimates the click noise from the batch)
-    estimate_road_normal : ``fit`` estimates each camera's road normal from the batch (no ground option given,
-        or ``--road-normal estimate``)
+    estimate_road_normal : ``fit`` and ``validate`` estimate each camera's road normal from the batch (no ground
+        option given, or ``--road-normal estimate``)
     """
 
     priors_path: Path | None
@@ -279,28 +279,6 @@ def fitting_options(command: Callable) -> Callable:
     for option in reversed(_FITTING_OPTIONS):
         wrapper = option(wrapper)
     return wrapper
-
-
-def pilot_lines(pilot: Any) -> list[str]:
-    """The summary lines on what a batch's pilot fit estimated (``fit``, ``validate``): its click noise and
-    each camera's road normal (at most five cameras listed)."""
-    from toosicubix.pipeline.road_normal import MIN_VEHICLES, describe_without_pilot
-
-    lines = [pilot.click_noise.describe()]
-    # Cameras with an estimate, or refused one for scattered up axes, one line each; too few vehicles, one line.
-    everyone = list((pilot.road_normals or {}).values())
-    normals = [n for n in everyone if n.spread_deg is not None]
-    few = [n for n in everyone if n.spread_deg is None]
-    lines += [n.describe() for n in normals[:5]]
-    if len(normals) > 5:
-        lines.append(f"  ... and {len(normals) - 5} more cameras (results.json: road_normal)")
-    if few:
-        lines.append(f"road normal: not estimated for {len(few)} camera(s) ({sum(n.images for n in few)} images): the "
-                     f"pilot fitted at most {max(n.vehicles for n in few)} vehicles of each, {MIN_VEHICLES} needed; "
-                     "their vehicles only kept within 45 deg of upright (--road-normal sets it)")
-    if pilot.without_pilot:
-        lines.append(describe_without_pilot(pilot.without_pilot))
-    return [line for line in lines if line]
 
 
 class ProgressBar:

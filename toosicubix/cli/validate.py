@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options, pilot_lines
+from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
 from toosicubix.pipeline.validation import Thresholds
 
 
@@ -60,7 +60,7 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     finally:
         bar.finish()
     if not quiet and not as_json and report.pilot is not None:  # the JSON report holds them
-        for line in pilot_lines(report.pilot):
+        for line in report.pilot.describe():
             click.echo(line, err=True)
     if as_json:
         from toosicubix.formats.results import dumps

@@ -59,8 +59,10 @@ from toosicubix.pipeline.output_folder import (
     staged_output,
 )
 from toosicubix.pipeline.road_normal import (
+    MIN_VEHICLES,
     RoadNormal,
     camera_key,
+    describe_without_pilot,
     estimate_road_normals,
     ground_block,
     without_pilot,
@@ -511,6 +513,25 @@ class PilotFindings:
         if self.without_pilot.get("cameras"):
             out["road_normal_without_pilot"] = self.without_pilot
         return out
+
+    def describe(self) -> list[str]:
+        """Summary lines for ``fit`` and ``validate``: the click noise; each camera with a road normal (or one
+        refused for scattered up axes), at most five; one line for the cameras with too few pilot vehicles."""
+        lines = [self.click_noise.describe()]
+        cameras = list((self.road_normals or {}).values())
+        listed = [n for n in cameras if n.spread_deg is not None]
+        few = [n for n in cameras if n.spread_deg is None]
+        lines += [n.describe() for n in listed[:5]]
+        if len(listed) > 5:
+            lines.append(f"  ... and {len(listed) - 5} more cameras (results.json: road_normal)")
+        if few:
+            lines.append(f"road normal: not estimated for {len(few)} camera(s) ({sum(n.images for n in few)} images): "
+                         f"the pilot fitted at most {max(n.vehicles for n in few)} vehicles of each, "
+                         f"{MIN_VEHICLES} needed; their vehicles only kept within 45 deg of upright (--road-normal "
+                         "sets it)")
+        if self.without_pilot:
+            lines.append(describe_without_pilot(self.without_pilot))
+        return [line for line in lines if line]
 
 
 def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
