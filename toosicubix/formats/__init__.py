@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +24,6 @@ class FormatError(InputError):
 #: The deepest nesting of JSON arrays and objects a file may have (an annotation file needs 7, results 6);
 #: far below the depth at which Python's JSON reader runs out of stack.
 MAX_JSON_DEPTH = 32
-_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 
 
 #: +1 for an opening bracket or brace, -1 for a closing one, by byte.
