@@ -65,6 +65,7 @@ from toosicubix.pipeline.road_normal import (
     describe_without_pilot,
     estimate_road_normals,
     ground_block,
+    refuse_with_ground,
     without_pilot,
 )
 from toosicubix.priors.table import Priors, SizePrior, load_priors
@@ -610,8 +611,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     OutputFolderError
         The output folder holds label files toosicubix did not write.
     """
-    if estimate_road_normal and (ground or joint_ground):
-        raise ValueError("estimate_road_normal goes without a ground or joint_ground: they say what the road is")
+    refuse_with_ground(estimate_road_normal, ground, joint_ground)
     annotations, out_dir = Path(annotations), Path(out_dir)
     options = options or SolverOptions()
     priors = load_priors(priors_path)

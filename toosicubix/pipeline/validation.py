@@ -20,6 +20,7 @@ from typing import Any
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
 from toosicubix.pipeline.batch import PilotFindings, iter_fit_images, on_estimated_roads, run_pilot, stream_images
+from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
@@ -234,8 +235,7 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     thresholds = thresholds or Thresholds()
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
-    if estimate_road_normal and (ground or joint_ground):
-        raise ValueError("estimate_road_normal goes without a ground or joint_ground: they say what the road is")
+    refuse_with_ground(estimate_road_normal, ground, joint_ground)
     pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
                       estimate_road_normal)
     options = pilot.options
