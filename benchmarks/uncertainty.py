@@ -79,6 +79,7 @@ def calibration(simulated, ground: dict | None, folder: Path, options: SolverOpt
     seconds = time.perf_counter() - start
     truth = {(sv.source.image_id, sv.source.vehicle_id): sv for sv in simulated}
     yaw, depth, sig_yaw, sig_depth, flip, ambiguous, conf = [], [], [], [], [], [], []
+    misfits = 0
     for im in results:
         for v in im.vehicles:
             if not v.ok:
@@ -86,6 +87,7 @@ def calibration(simulated, ground: dict | None, folder: Path, options: SolverOpt
             sv = truth[(im.id, v.id)]
             flip.append(np.rad2deg(geodesic_angle(v.R_cam_vehicle, sv.R_cam_vehicle)) > 90.0)
             ambiguous.append(bool(v.ambiguous))
+            misfits += bool(v.residual_test is not None and v.residual_test.misfit)
             conf.append(v.confidence)
             yaw.append(yaw_error_deg(v.R_cam_vehicle, sv.R_cam_vehicle))
             depth.append((v.t_cam_vehicle[2] - sv.t_cam_vehicle[2]) / sv.t_cam_vehicle[2])
@@ -103,7 +105,7 @@ def calibration(simulated, ground: dict | None, folder: Path, options: SolverOpt
         "flips": int(np.sum(flip)), "flips_flagged_ambiguous": int(np.sum(np.array(flip) & np.array(ambiguous))),
         "flips_confidence_median": float(np.median(np.array(conf)[np.array(flip)])) if any(flip) else None,
         "others_confidence_median": float(np.median(np.array(conf)[~np.array(flip)])),
-        "ambiguous": int(np.sum(ambiguous)),
+        "ambiguous": int(np.sum(ambiguous)), "misfits": misfits,
     }
 
 
@@ -195,8 +197,12 @@ def main() -> None:
     parser.add_argument("--tune-part-sigma", default=None, metavar="GRID",
                         help="Instead: choose part_sigma on the tuning sequences from this comma-separated grid "
                              "(metres), e.g. 0.05,0.06,0.07,0.08,0.09,0.1.")
+    parser.add_argument("--misfit-level", type=float, default=None,
+                        help="The calibration rows with the chi-square test of each fit's residuals at this level "
+                             "(`fit --misfit-level`; rule 8 of RESULTS.md measured 0.99).")
     args = parser.parse_args()
-    report: dict = {"machine": machine(), "calibration": [], "next_click": []}
+    base = replace(OPTIONS, misfit_level=args.misfit_level)
+    report: dict = {"machine": machine(), "misfit_level": args.misfit_level, "calibration": [], "next_click": []}
     print(f"machine: {report['machine']}", flush=True)
     if args.tune_part_sigma:
         best, rows = part_sigma_landscape(args.data, [float(v) for v in args.tune_part_sigma.split(",")])
@@ -210,9 +216,9 @@ def main() -> None:
     realistic = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
     exact = simulate(vehicles, AnnotatorOptions(noise_px=1.0, exact_placement=True))
     rows = [(placement, label, ground, simulated, options)
-            for placement, simulated, options in (("realistic placement", realistic, OPTIONS),
+            for placement, simulated, options in (("realistic placement", realistic, base),
                                                    ("exact placement, part_sigma 0", exact,
-                                                    replace(OPTIONS, part_sigma=0.0)))
+                                                    replace(base, part_sigma=0.0)))
             for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND)))]
     with tempfile.TemporaryDirectory() as tmp:
         for placement, label, ground, simulated, options in rows:
@@ -227,7 +233,8 @@ def main() -> None:
                   f"deg vs median |error| {row['yaw_error_median_deg']:.2f}; flips (E_R > 90) {row['flips']}, of "
                   f"them flagged ambiguous {row['flips_flagged_ambiguous']}, median confidence "
                   f"{row['flips_confidence_median'] or 0:.2f} (others {row['others_confidence_median']:.2f}); "
-                  f"ambiguous {row['ambiguous']}", flush=True)
+                  f"ambiguous {row['ambiguous']}"
+                  + (f"; misfits {row['misfits']}" if args.misfit_level is not None else ""), flush=True)
     for budget in (int(b) for b in args.budgets.split(",")):
         for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND))):
             row = {"ground": label, **next_click(vehicles, budget, ground)}

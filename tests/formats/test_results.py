@@ -28,17 +28,20 @@ SAMPLE = REPO / "samples" / "annotations.json"
 
 @pytest.fixture(scope="module", params=[False, True], ids=["own", "joint"])
 def fitted(request):
-    """The sample fitted with next clicks, on its own (alternatives) or with its ground plane (joint blocks)."""
+    """The sample fitted with next clicks and the misfit test, on its own (alternatives) or with its ground plane
+    (joint blocks)."""
     images = load_images(SAMPLE)
     if request.param:
         images = with_ground(images, dict(KITTI_GROUND))
-    return fit_images(images, load_priors(), SolverOptions(), joint_ground=request.param, next_clicks=2)
+    return fit_images(images, load_priors(), SolverOptions(misfit_level=0.99), joint_ground=request.param,
+                      next_clicks=2)
 
 
 def test_every_vehicle_round_trips_through_json(fitted):
     vehicles = [v for im in fitted for v in im.vehicles]
     joint = any(v.cues is not None and v.cues.joint_ground for v in vehicles)
     assert len(vehicles) == 6 and all(v.ok for v in vehicles)  # every vehicle of the sample fits
+    assert sum(v.residual_test is not None for v in vehicles) >= 4  # tested where its clicks are redundant
     for v in vehicles:
         text = json.dumps(v.to_json(), allow_nan=False)
         again = VehicleResult.from_json(json.loads(text))
@@ -48,6 +51,7 @@ def test_every_vehicle_round_trips_through_json(fitted):
             np.testing.assert_array_equal(again.R_cam_vehicle, v.R_cam_vehicle)
             np.testing.assert_array_equal(again.residuals_px, v.residuals_px)
             assert again.sigma == v.sigma and again.cues == v.cues and again.solver == v.solver
+            assert again.residual_test == v.residual_test
             assert not joint or (again.cues.joint_ground is True and again.solver.joint_iterations is not None)
             assert len(again.next_clicks) == 2
             for a, b in zip(again.alternatives, v.alternatives, strict=True):

@@ -175,6 +175,10 @@ _FITTING_OPTIONS = [
                  show_default=True,
                  help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
                       " auto: for vehicles with keypoint or plate clicks only."),
+    click.option("--misfit-level", type=click.FloatRange(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
+                 help="Test each fit's residuals against the click noise (chi-square at this level, e.g. 0.99): a "
+                      "fit that fails is warned about ('misfit: ...', `residual_test` in results.json) and its sigmas "
+                      "widen to what its residuals show. Off by default (benchmarks/RESULTS.md, rule 8)."),
     click.option("--kitti-ground", is_flag=True,
                  help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
                       "deg, vehicles upright within 2 deg. The options below then change single fields."),
@@ -199,7 +203,7 @@ _FITTING_OPTIONS = [
                  help="Worker processes; the output is the same for any number."),
 ]
 _FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
-                  "kitti_ground",
+                  "misfit_level", "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
                   "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "jobs")
 
@@ -252,7 +256,8 @@ def _fitting(values: dict[str, Any]) -> Fitting:
     given_sigma = values["click_sigma"]
     options = replace(solver_options(values["config_path"], **explicit),
                       click_sigma=SolverOptions.click_sigma if given_sigma is None else given_sigma,
-                      part_sigma=values["part_sigma"], robust_loss=values["robust_loss"])
+                      part_sigma=values["part_sigma"], robust_loss=values["robust_loss"],
+                      misfit_level=values["misfit_level"])
     normal = _road_normal(values["road_normal"])
     given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
                                     "normal_sigma_deg", "upright_sigma_deg")}

@@ -24,6 +24,7 @@ import numpy as np
 
 from toosicubix.formats import FormatError, json_field, json_numbers, read_json
 from toosicubix.solver import Alternative  # the solver's type: results.json's ``alternatives``
+from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"
@@ -173,6 +174,8 @@ class VehicleResult:
     parameters : the wheel positions and other auxiliary unknowns by name, metres
     scale_from, scale_shares : the cue that sets the scale, and every cue's share of it
     sigma, confidence, observability, ambiguous, alternatives : how sure the fit is (README, "How sure is a fit")
+    residual_test : the chi-square test of its residuals (:mod:`toosicubix.solver.misfit`; a misfit's sigmas are
+        widened), or None when its clicks were not redundant enough (written only when set)
     warnings : what the solver warned about; solver : its statistics
     next_clicks : the best parts to click next (as :meth:`toosicubix.solver.guidance.Suggestion.to_json`
         gives them), or None when not asked for; next_clicks_error : why there are none
@@ -210,6 +213,7 @@ class VehicleResult:
     observability: Observability | None = None
     ambiguous: bool = False
     alternatives: tuple[Alternative, ...] = ()
+    residual_test: ResidualTest | None = None
     warnings: tuple[str, ...] = ()
     solver: SolverStats | None = None
     next_clicks: list[dict[str, Any]] | None = None
@@ -249,6 +253,8 @@ class VehicleResult:
                 out["click_weights"] = _array(self.click_weights)
             if self.downweighted:
                 out["downweighted"] = list(self.downweighted)
+            if self.residual_test is not None:
+                out["residual_test"] = self.residual_test.to_json()
         if self.solver is not None:
             out["solver"] = self.solver.to_json()
         if self.next_clicks is not None:
@@ -297,6 +303,7 @@ class VehicleResult:
                 sigma=get("sigma", Sigma.from_json), confidence=v.get("confidence"),
                 observability=get("observability", Observability.from_json), ambiguous=bool(v.get("ambiguous")),
                 alternatives=tuple(Alternative.from_json(a) for a in v.get("alternatives") or ()),
+                residual_test=get("residual_test", ResidualTest.from_json),
                 warnings=tuple(v.get("warnings") or ()), solver=get("solver", SolverStats.from_json),
                 next_clicks=get("next_clicks", list), next_clicks_error=v.get("next_clicks_error"),
                 extra={k: val for k, val in v.items() if k not in _KNOWN_KEYS},

@@ -70,6 +70,7 @@ from toosicubix.pipeline.road_normal import (
 )
 from toosicubix.priors.table import Priors, SizePrior, load_priors
 from toosicubix.solver import (
+    MISFIT_WARNING,
     FitResult,
     JointVehicle,
     Problem,
@@ -79,6 +80,7 @@ from toosicubix.solver import (
     fit_jointly,
     fit_vehicle,
     scale_shares,
+    tested,
 )
 from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 from toosicubix.solver.robust import with_weights
@@ -231,6 +233,7 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
         observability=Observability.from_json(fit.observability.to_json()) if fit.observability is not None else None,
         ambiguous=fit.ambiguous,
         alternatives=tuple(fit.alternatives),
+        residual_test=fit.residual_test,
         warnings=tuple(fit.warnings),
         **suggestions,
     )
@@ -420,11 +423,14 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         shares = scale_shares(own, R, t, p)
         u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
                          options.part_sigma)
+        u, test = tested(own, R, t, p, u, options)
+        warnings = tuple(w for w in vehicles[k].warnings if not w.startswith(MISFIT_WARNING))
         fit = FitResult(
             "ok", None, vehicles[k].constraints, parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
             t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
             residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
-            warnings=vehicles[k].warnings, click_weights=own.click_weights, downweighted=vehicles[k].downweighted,
+            warnings=(*warnings, test.sentence()) if test is not None and test.misfit else warnings,
+            click_weights=own.click_weights, downweighted=vehicles[k].downweighted, residual_test=test,
         )
         try:
             updated = checked_result(
@@ -627,6 +633,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
         "priors": priors.source if priors_path is not None else "bundled",
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
+                     **({"misfit_level": options.misfit_level} if options.misfit_level is not None else {}),
                      **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
         **pilot.header(),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "

@@ -31,6 +31,7 @@ from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
 from toosicubix.solver.joint import JointVehicle, fit_jointly
+from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, residual_test
 from toosicubix.solver.plausibility import faces_turned_to_camera, implausibility
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import (
@@ -48,6 +49,7 @@ from toosicubix.solver.uncertainty import (
     confidence,
     finite_or_none,
     residual_dof,
+    row_sigmas,
     uncertainties_with_added_clicks,
 )
 
@@ -92,6 +94,10 @@ class SolverOptions:
         'none': on ApolloCar3D's comparison half Cauchy moved the mean E_comb by less than the 0.002 that the
         rules fixed beforehand ask for (benchmarks/RESULTS.md)
     robust_rounds : how many reweighting rounds the robust loss takes at most
+    misfit_level : the level of the chi-square test of a fit's residuals (:mod:`.misfit`), e.g. 0.99; a fit that
+        fails it is warned about and its sigmas widen by the root of its chi-square per degree of freedom. Default
+        None (no test): on the simulated KITTI test split it took the yaw share within one sigma with a ground
+        block to 76.2 %, past the 60-76 % that rule 8 of benchmarks/RESULTS.md asked for
     """
 
     lambda_3d: float = 0.1
@@ -113,6 +119,7 @@ class SolverOptions:
     ambiguity_sigmas: float = 4.0
     robust_loss: str = "none"
     robust_rounds: int = 5
+    misfit_level: float | None = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,8 @@ class FitResult:
     downweighted : the labels of the clicks the robust loss down-weighted (factor below 0.5)
     residual_dof : the pixel residuals' effective degrees of freedom (:func:`.uncertainty.residual_dof`): what
         the batch's click-noise estimate pools
+    residual_test : the chi-square test of the residuals (:mod:`.misfit`), or None when not made; a misfit's
+        ``uncertainty`` is already widened
     """
 
     status: str
@@ -160,6 +169,7 @@ class FitResult:
     click_weights: np.ndarray | None = None
     downweighted: tuple[str, ...] = ()
     residual_dof: float | None = None
+    residual_test: ResidualTest | None = None
 
     @property
     def ambiguous(self) -> bool:
@@ -344,6 +354,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     scale_source = max(shares, key=shares.get) if shares else None
     u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source,
                      options.part_sigma, J_best)
+    dof = residual_dof(J_best, 2 * parts.n_clicks)
+    u, test = tested(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, u, options, dof)
+    if test is not None and test.misfit:
+        common["warnings"] = (*warnings, test.sentence())
     if collapsed and not (u is not None and np.isfinite(u.depth_rel) and u.depth_rel <= COLLAPSED_MAX_DEPTH_REL):
         depth = "not determined" if u is None or not np.isfinite(u.depth_rel) else f"uncertain by {u.depth_rel:.0%}"
         return FitResult("failed", f"degenerate clicks: every start collapsed onto the camera, and from typical part "
@@ -355,9 +369,29 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         "ok", None, R_cam_vehicle=best.R_cam_vehicle, t_cam_vehicle=best.t_cam_vehicle, p=best.p,
         cost=best.cost, cost_prior=float(prior_r @ prior_r), residuals_px=residuals, scale_shares=shares,
         uncertainty=u, observability=obs, alternatives=_alternatives(best, converged, options),
-        click_weights=problem.click_weights, downweighted=downweighted,
-        residual_dof=residual_dof(J_best, 2 * parts.n_clicks), **common,
+        click_weights=problem.click_weights, downweighted=downweighted, residual_dof=dof, residual_test=test,
+        **common,
     )
+
+
+def tested(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray, u: Uncertainty,
+           options: SolverOptions, dof: float | None = None) -> tuple[Uncertainty, ResidualTest | None]:
+    """A fit's uncertainty ``u`` after the chi-square test of its residuals (:mod:`.misfit`; ``dof`` their
+    effective degrees of freedom, computed when None), widened when it fails, and the test (None when
+    ``options.misfit_level`` is None or the clicks are not redundant enough)."""
+    if options.misfit_level is None:
+        return u, None
+    if dof is None:
+        _, J = residuals_and_jacobian(problem, R_cam_vehicle, t_cam_vehicle, p)
+        dof = residual_dof(J, 2 * problem.parts.n_clicks)
+    r = problem.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)  # (N, 2)
+    if problem.click_weights is not None:
+        r = r * problem.click_weights[:, None]
+    sigmas = row_sigmas(problem, R_cam_vehicle, t_cam_vehicle, p, options.click_sigma, options.part_sigma)
+    test = residual_test(r.reshape(-1), sigmas, dof, options.misfit_level)
+    if test is not None and test.misfit:
+        u = u.widened(test.ratio)
+    return u, test
 
 
 def _reweighted(problem: Problem, best: RefineResult, soft: np.ndarray | None, options: SolverOptions,
@@ -565,6 +599,7 @@ def _too_few(parts: PartsModel, needed: int) -> str:
 #: What :mod:`toosicubix.pipeline` and :mod:`toosicubix.solver.guidance` use; nothing past it.
 __all__ = [
     "MIN_DEPTH",
+    "MISFIT_WARNING",
     "FitResult",
     "JointVehicle",
     "Problem",
@@ -576,5 +611,6 @@ __all__ = [
     "fit_jointly",
     "fit_vehicle",
     "scale_shares",
+    "tested",
     "uncertainties_with_added_clicks",
 ]

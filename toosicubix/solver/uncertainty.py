@@ -72,6 +72,14 @@ class Uncertainty:
     scale_rel: float
     covariance: np.ndarray
 
+    def widened(self, variance_factor: float) -> Uncertainty:
+        """The same with every variance multiplied by ``variance_factor`` (standard deviations by its root): a
+        misfit's (:mod:`toosicubix.solver.misfit`)."""
+        k = math.sqrt(variance_factor)
+        return Uncertainty(self.yaw_deg * k, self.pitch_deg * k, self.roll_deg * k, self.depth_m * k,
+                           self.depth_rel * k, self.dimensions * k, self.position_m * k, self.scale_rel * k,
+                           self.covariance * variance_factor)
+
     def to_json(self) -> dict:
         """As results.json has it; ``null`` for a quantity the fit does not determine at all (infinite)."""
         scalars = ("yaw_deg", "pitch_deg", "roll_deg", "depth_m", "depth_rel")
