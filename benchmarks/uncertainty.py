@@ -109,7 +109,8 @@ def calibration(simulated, ground: dict | None, folder: Path, options: SolverOpt
     }
 
 
-def part_sigma_landscape(data: Path, grid: list[float]) -> tuple[float, list[dict]]:
+def part_sigma_landscape(data: Path, grid: list[float], options: SolverOptions = OPTIONS
+                         ) -> tuple[float, list[dict]]:
     """Choose ``part_sigma`` on the *tuning* sequences: the value whose yaw shares within 1 and 2 sigmas are
     nearest (least squares, over both ground settings) to a Gaussian's 68.27 % and 95.45 %."""
     vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["tuning"]))
@@ -122,7 +123,7 @@ def part_sigma_landscape(data: Path, grid: list[float]) -> tuple[float, list[dic
             for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND))):
                 folder = Path(tmp) / f"{value}-{label.replace(' ', '-')}"
                 folder.mkdir()
-                c = calibration(simulated, ground, folder, replace(OPTIONS, part_sigma=value))
+                c = calibration(simulated, ground, folder, replace(options, part_sigma=value))
                 row[label] = [c["yaw_within_1_sigma"], c["yaw_within_2_sigma"]]
                 loss += (c["yaw_within_1_sigma"] - 0.6827) ** 2 + (c["yaw_within_2_sigma"] - 0.9545) ** 2
             row["loss"] = loss
@@ -205,12 +206,12 @@ def main() -> None:
     report: dict = {"machine": machine(), "misfit_level": args.misfit_level, "calibration": [], "next_click": []}
     print(f"machine: {report['machine']}", flush=True)
     if args.tune_part_sigma:
-        best, rows = part_sigma_landscape(args.data, [float(v) for v in args.tune_part_sigma.split(",")])
+        best, rows = part_sigma_landscape(args.data, [float(v) for v in args.tune_part_sigma.split(",")], base)
         print(f"chosen part_sigma: {best} m (the default is {SolverOptions.part_sigma} m)")
         if args.json is not None:
             args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"machine": report["machine"], "landscape": rows, "chosen": best},
-                                            indent=1) + "\n")
+            args.json.write_text(json.dumps({"machine": report["machine"], "misfit_level": args.misfit_level,
+                                             "landscape": rows, "chosen": best}, indent=1) + "\n")
         return
     vehicles = select_kitti_tracking(args.data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))
     realistic = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
