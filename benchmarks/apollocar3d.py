@@ -149,6 +149,8 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         yaw_error = float(np.rad2deg(wrap_angle(ypr_from_R_cam_vehicle(m.pred.R_cam_vehicle)[0]
                                                 - ypr_from_R_cam_vehicle(m.gt.R_cam_vehicle)[0])))
         o["yaw_error_deg"], o["yaw_sigma_deg"] = yaw_error, sigma
+        up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
+        o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
         o["downweighted"] = len(fit.get("downweighted", []))
         o["misfit"] = bool((fit.get("residual_test") or {}).get("misfit"))
         objects.append(o)
@@ -164,9 +166,11 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         "seconds": seconds, "import": summary.lines(), **stats(objects),
         "by_keypoints": by_kp, "by_depth": by_depth,
         "yaw_within_1_sigma": within[0], "yaw_within_2_sigma": within[1],
+        "rotation_parts": rotation_parts(objects),
         "ground_truth_agrees": {"cars": len(agreeing), "contradicting": len(objects) - len(agreeing),
                                 **stats(agreeing), "yaw_within_1_sigma": calibration(agreeing)[0],
-                                "yaw_within_2_sigma": calibration(agreeing)[1]},
+                                "yaw_within_2_sigma": calibration(agreeing)[1],
+                                "rotation_parts": rotation_parts(agreeing)},
         "e_r_over_30_deg": int(sum(o["e_r_deg"] > 30 for o in objects)),
         "e_r_over_30_deg_by_ground_truth": dict(Counter(contradicting.get(o["id"], "agrees with the clicks")
                                                         for o in objects if o["e_r_deg"] > 30)),
@@ -175,6 +179,17 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         "cars_with_downweighted_clicks": int(sum(o["downweighted"] > 0 for o in objects)),
         "misfits": int(sum(o["misfit"] for o in objects)),
     }
+
+
+def rotation_parts(objects: list[dict]) -> dict:
+    """E_R's two parts, degrees, mean and median: the yaw error's size (what KITTI's labels can score) and the
+    angle between the fitted and the ground-truth up axes (pitch and roll together)."""
+    out = {}
+    for key, values in (("abs_yaw_error_deg", [abs(o["yaw_error_deg"]) for o in objects]),
+                        ("tilt_error_deg", [o["tilt_error_deg"] for o in objects])):
+        out[key] = {"mean": float(np.mean(values)) if values else None,
+                    "median": float(np.median(values)) if values else None}
+    return out
 
 
 def calibration(objects: list[dict]) -> tuple[float | None, float | None]:
@@ -349,6 +364,11 @@ def main() -> int:
                       f"{agree['e_r_deg']['median']:.2f}), mean E_comb {agree['e_comb']['mean']:.3f}, yaw within 1 / 2 "
                       f"sigmas {100 * agree['yaw_within_1_sigma']:.1f} % / {100 * agree['yaw_within_2_sigma']:.1f} %",
                       flush=True)
+                parts = {k: agree["rotation_parts"][k]["mean"] for k in ("abs_yaw_error_deg", "tilt_error_deg")}
+                every = {k: result["rotation_parts"][k]["mean"] for k in parts}
+                print(f"{'':<6} E_R's parts, means: |yaw error| {every['abs_yaw_error_deg']:.2f} deg, up-axis error "
+                      f"{every['tilt_error_deg']:.2f} (agreeing cars: {parts['abs_yaw_error_deg']:.2f}, "
+                      f"{parts['tilt_error_deg']:.2f})", flush=True)
                 kinds = "; ".join(f"{k} {n}" for k, n in sorted(result["contradicting_by_kind"].items()))
                 misses = "; ".join(f"{k} {n}" for k, n in sorted(result["e_r_over_30_deg_by_ground_truth"].items()))
                 print(f"{'':<6} the other {agree['contradicting']} fit: {kinds}. E_R > 30 deg by ground truth: "
