@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -16,8 +17,9 @@ from toosicubix.camera import Camera
 from toosicubix.cli import main
 from toosicubix.formats.results import read_results
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.render.folder import _fitted_uv, selected
+from toosicubix.render.folder import _fitted_uv, selected, vehicle_label
 from toosicubix.render.overlay import BLANK_BGR
+from toosicubix.solver.misfit import ResidualTest
 
 SAMPLE_FILE = REPO / "samples" / "annotations.json"
 
@@ -161,3 +163,27 @@ def test_only_failed_renders_the_images_with_a_failed_vehicle_boxed_in_red(fitte
     x1, y1, x2, _ = (round(v) for v in failed["box2d"])
     red = np.all(np.abs(picture.astype(int) - np.array([40, 40, 230])) < 30, axis=2)
     assert red[y1 - 1:y1 + 2, x1 + 5:x2 - 5].mean() > 0.5  # the box's top edge is red along its length
+
+
+def test_the_label_says_misfit_when_the_residual_test_failed(fitted):
+    v = next(v for im in read_results(fitted[0] / "out" / "results.json") for v in im.vehicles if v.ok)
+    assert "MISFIT" not in vehicle_label(v)
+    passed = replace(v, residual_test=ResidualTest(chi2=10.0, dof=10.0, level=0.99))
+    failed = replace(v, residual_test=ResidualTest(chi2=100.0, dof=10.0, level=0.99))  # 0.99 quantile: 23.2
+    assert "MISFIT" not in vehicle_label(passed)
+    assert vehicle_label(failed).endswith("MISFIT")
+
+
+def test_only_misfit_keeps_the_images_with_a_misfit(fitted):
+    from toosicubix.cli.render import render_command as render
+    from toosicubix.render.folder import ONLY_CHOICES
+
+    results = read_results(fitted[0] / "out" / "results.json")
+    assert not any(selected(r, "misfit") for r in results)  # fitted without the test
+    first = results[0]
+    v = next(k for k, v in enumerate(first.vehicles) if v.ok)
+    vehicles = list(first.vehicles)
+    vehicles[v] = replace(vehicles[v], residual_test=ResidualTest(chi2=100.0, dof=10.0, level=0.99))
+    assert selected(replace(first, vehicles=tuple(vehicles)), "misfit")
+    only = next(p for p in render.params if p.name == "only")
+    assert tuple(only.type.choices) == ONLY_CHOICES  # the command offers what the folder renderer knows

@@ -92,6 +92,7 @@ def test_fit_misfit_level_is_written(tmp_path):
     result = CliRunner().invoke(main, ["fit", str(REPO / "samples" / "annotations.json"), "-o", str(out),
                                        "--misfit-level", "0.99"])
     assert result.exit_code == 0, result.output
+    assert "misfits: 0 of 6 fitted vehicles failed the chi-square test" in result.output
     assert json.loads((out / "results.json").read_text())["settings"]["misfit_level"] == 0.99
     fitted = [v for im in read_results(out / "results.json") for v in im.vehicles if v.ok]
     # Tested where the clicks are redundant (at least one residual degree of freedom); the sample's clicks are

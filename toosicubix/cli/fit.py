@@ -75,6 +75,10 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)
+        if summary.misfits is not None:
+            click.echo(f"misfits: {summary.misfits} of {summary.ok} fitted vehicles failed the chi-square test of "
+                       "their residuals; their sigmas are widened (results.json: residual_test and a 'misfit' "
+                       "warning; `toosicubix render --only misfit` draws their images)", err=True)
         for image_id, vehicle_id, reason in summary.failed[:20]:
             click.echo(f"  failed: image {image_id} vehicle {vehicle_id}: {reason}", err=True)
         if summary.n_failed > 20:

@@ -22,9 +22,9 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
               help="Folder of the images: DIR/<file>, DIR/<file name>, DIR/<image id>.png|.jpg or, for KITTI "
                    "tracking ids, DIR/<seq>/<frame>.png [default: each image's `file`, relative to the annotation "
                    "file]. Without an image the overlay is drawn on a blank canvas of the image's size.")
-@click.option("--only", type=click.Choice(["failed", "ambiguous", "uncertain"]), default=None,
-              help="Render only images with a failed vehicle, an ambiguous one, or one whose yaw or depth sigma is "
-                   "beyond `toosicubix validate`'s thresholds.")
+@click.option("--only", type=click.Choice(["failed", "ambiguous", "uncertain", "misfit"]), default=None,
+              help="Render only images with a failed vehicle, an ambiguous one, one whose yaw or depth sigma is "
+                   "beyond `toosicubix validate`'s thresholds, or a misfit (results of `fit --misfit-level`).")
 @ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d", required=False)
 @click.option("--next-clicks", is_flag=True,
               help="Draw the parts suggested to click next (results.json of `fit --next-clicks N`) as targets.")

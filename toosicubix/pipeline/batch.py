@@ -104,6 +104,7 @@ class BatchSummary:
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     pilot: PilotFindings | None = None  # the click noise and road normals the batch was fitted with, and whence
+    misfits: int | None = None  # fitted vehicles whose residuals failed the chi-square test; None: not tested
 
     @property
     def n_failed(self) -> int:
@@ -641,21 +642,25 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     }
     failed: list[tuple[str, str, str]] = []
     scale_from: dict[str, int] = {}
+    misfits = [0]
 
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
             if not v.ok:
                 if len(failed) < FAILED_KEPT:
                     failed.append((im.id, v.id, v.error or ""))
-            elif v.scale_from:
-                scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
+            else:
+                if v.scale_from:
+                    scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
+                misfits[0] += bool(v.residual_test is not None and v.residual_test.misfit)
 
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
     images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
     results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
-                        out_dir=out_dir, scale_from=scale_from, pilot=pilot)
+                        out_dir=out_dir, scale_from=scale_from, pilot=pilot,
+                        misfits=misfits[0] if options.misfit_level is not None else None)
 
 
 def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:

@@ -39,9 +39,9 @@ from toosicubix.render.overlay import (
     text_scale,
 )
 
-#: ``--only`` choices: images with a failed vehicle, an ambiguous one, or one not well determined
-#: (yaw or depth sigma beyond ``toosicubix validate``'s default thresholds).
-ONLY_CHOICES = ("failed", "ambiguous", "uncertain")
+#: ``--only`` choices: images with a failed vehicle, an ambiguous one, one not well determined (yaw or depth
+#: sigma beyond ``toosicubix validate``'s default thresholds), or a misfit (``fit --misfit-level``).
+ONLY_CHOICES = ("failed", "ambiguous", "uncertain", "misfit")
 #: Where ``render`` writes inside the fit folder unless told otherwise.
 #: The default picture folder is OUT's sibling ``<OUT>-render``: never inside OUT, which ``fit`` replaces as a
 #: whole and which holds only what ``fit`` wrote.
@@ -112,7 +112,8 @@ def encode_png(image_bgr: np.ndarray, compression: int = PNG_COMPRESSION) -> byt
 
 
 def vehicle_label(v: VehicleResult) -> str:
-    """The short text beside a fitted cuboid: id, prototype, dimensions, depth, yaw sigma, confidence."""
+    """The short text beside a fitted cuboid: id, prototype, dimensions, depth, yaw sigma, confidence, and
+    AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so."""
     dx, dy, dz = v.dimensions
     parts = [f"{v.id} {v.prototype} {dx:.1f}x{dy:.1f}x{dz:.1f}m z{v.t_cam_vehicle[2]:.1f}m"]
     if v.sigma is not None and v.sigma.yaw_deg is not None:
@@ -121,6 +122,8 @@ def vehicle_label(v: VehicleResult) -> str:
         parts.append(f"conf {v.confidence:.2f}")
     if v.ambiguous:
         parts.append("AMBIGUOUS")
+    if v.residual_test is not None and v.residual_test.misfit:
+        parts.append("MISFIT")
     return " ".join(parts)
 
 
@@ -262,6 +265,8 @@ def selected(result: ImageResult, only: str | None) -> bool:
 
         thresholds = Thresholds(allow_ambiguous=True)
         return any(v.ok and judge(v, thresholds) for v in result.vehicles)
+    if only == "misfit":
+        return any(v.ok and v.residual_test is not None and v.residual_test.misfit for v in result.vehicles)
     raise ValueError(f"only: expected one of {', '.join(ONLY_CHOICES)}, got {only!r}")
 
 
