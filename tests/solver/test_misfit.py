@@ -102,3 +102,21 @@ def test_fit_misfit_level_is_written(tmp_path):
     bad = CliRunner().invoke(main, ["fit", str(REPO / "samples" / "annotations.json"), "-o", str(tmp_path / "o2"),
                                     "--misfit-level", "1.5"])
     assert bad.exit_code == 2 and "--misfit-level" in bad.output
+
+
+def test_the_next_clicks_of_a_misfit_start_from_its_widened_sigma():
+    from toosicubix.solver.guidance import suggest_clicks
+
+    rng = np.random.default_rng(5)
+    d, parts = twelve_keypoints(rng, 1.0)
+    left = next(k for k, p in enumerate(parts) if p.name == "lamp-rear-left")
+    parts[left] = replace(parts[left], uv=next(p for p in parts if p.name == "lamp-rear-right").uv.copy())
+    options = SolverOptions(click_sigma=1.0, misfit_level=0.99)
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d), options)
+    plain = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d), SolverOptions(click_sigma=1.0))
+    widened = suggest_clicks(parts, CAMERA, exact_prior(d), fit, options)
+    unwidened = suggest_clicks(parts, CAMERA, exact_prior(d), plain, SolverOptions(click_sigma=1.0))
+    assert widened and [s.name for s in widened] == [s.name for s in unwidened]  # the ranking is the same
+    k = math.sqrt(fit.residual_test.ratio)
+    for a, b in zip(widened, unwidened, strict=True):
+        assert a.yaw_sigma_deg == pytest.approx(k * b.yaw_sigma_deg, rel=1e-9)

@@ -179,6 +179,9 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     base_params = np.array([index[name] for name in base.param_names])
     now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks, rows,
                                                  options.click_sigma, options.part_sigma)
+    test = fit.residual_test
+    if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
+        now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]
     size = camera.image_size
     out = []
     for part, u in zip(placed, added, strict=True):
