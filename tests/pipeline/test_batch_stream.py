@@ -55,3 +55,42 @@ def test_the_summary_lists_a_bounded_number_of_failures(tmp_path, monkeypatch):
     assert (summary.vehicles, summary.ok, summary.n_failed, len(summary.failed)) == (6, 0, 6, 2)
     results = json.loads((tmp_path / "out" / "results.json").read_text())
     assert results["summary"]["failed"] == 6  # every failure is in results.json
+
+
+def _counting_fits(monkeypatch) -> list[str]:
+    calls: list[str] = []
+    fit_one = batch.fit_one
+
+    def counted(vehicle, *args):
+        calls.append(vehicle.id)
+        return fit_one(vehicle, *args)
+
+    monkeypatch.setattr(batch, "fit_one", counted)
+    return calls
+
+
+def test_a_small_batch_with_nothing_to_estimate_is_fitted_once(tmp_path, monkeypatch):
+    # The sample: 6 vehicles of parts on the cuboid (no click noise to estimate) under one camera (too few for a
+    # road normal). The pilot fits all 6 with the batch's settings, and its fits are written.
+    once = tmp_path / "once"
+    calls = _counting_fits(monkeypatch)
+    summary = fit_file(SAMPLE, once, estimate_click_sigma=True, estimate_road_normal=True)
+    assert summary.ok == 6 and len(calls) == 6
+    assert summary.pilot.results is not None and len(summary.pilot.results) == 3  # the sample's three images
+    # The same as fitting without a pilot, byte for byte but for the header's estimates.
+    plain = tmp_path / "plain"
+    fit_file(SAMPLE, plain)
+    assert len(calls) == 12
+    assert (once / "label_2" / "000001.txt").read_bytes() == (plain / "label_2" / "000001.txt").read_bytes()
+    a, b = (json.loads((d / "results.json").read_text()) for d in (once, plain))
+    assert a["images"] == b["images"]
+
+
+def test_a_batch_the_pilot_changes_is_fitted_again(tmp_path, monkeypatch):
+    calls = _counting_fits(monkeypatch)
+    # A robust loss: the pilot fits without it, so its fits are not the batch's.
+    fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True)
+    assert len(calls) == 12
+    # Next clicks: the pilot does not suggest any.
+    fit_file(SAMPLE, tmp_path / "next", estimate_road_normal=True, next_clicks=2)
+    assert len(calls) == 24

@@ -86,7 +86,7 @@ from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 from toosicubix.solver.robust import with_weights
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "PilotFindings", "fit_file", "fit_images", "fit_one",
-           "run_pilot"]
+           "fitted_batch", "run_pilot"]
 
 
 #: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
@@ -504,12 +504,16 @@ class PilotFindings:
     road_normals : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the estimated road
         normal or why there is none; None when not estimated
     without_pilot : cameras (and their images) the pilot had no vehicle of; empty when not estimated
+    results : the pilot's results, image by image in file order, when they are the batch's own: the pilot fitted
+        every vehicle with the settings the batch is fitted with and estimated no road normal (a small batch with
+        nothing to change); None otherwise. :func:`fitted_batch` then writes them instead of fitting again.
     """
 
     options: SolverOptions
     click_noise: ClickNoise
     road_normals: dict[tuple, RoadNormal] | None = None
     without_pilot: dict[str, int] = field(default_factory=dict)
+    results: list[ImageResult] | None = None
 
     def header(self) -> dict[str, Any]:
         """What results.json's header (and validate's report) say about the pilot's estimates."""
@@ -571,14 +575,41 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
         on_start(index.vehicles + n_pilot)
     results = list(iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"), progress,
                                    jobs)) if pilot else []
+    pilot_options = replace(options, robust_loss="none")
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
-    if not estimate_road_normal:
-        return PilotFindings(options, noise)
-    normals = estimate_road_normals(pilot, results, cameras)
-    return PilotFindings(options, noise, normals, without_pilot(cameras, normals))
+    normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
+    # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
+    # road normal that would give some images a ground block.
+    own = bool(pilot and n_pilot == index.vehicles and options == pilot_options
+           and not any(n.normal is not None for n in (normals or {}).values()))
+    if normals is None:
+        return PilotFindings(options, noise, results=results if own else None)
+    return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None)
+
+
+def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot: PilotFindings,
+                 progress: Callable[[int], None] | None = None, jobs: int = 1, joint_ground: bool = False,
+                 next_clicks: int = 0) -> Iterator[ImageResult]:
+    """The batch's results, image by image in file order (:func:`iter_fit_images` with the pilot's settings),
+    reusing the pilot's own fits when they are the batch's (:attr:`PilotFindings.results`) and the batch asks
+    nothing the pilot did not do (no joint ground, no next clicks): a small batch is then fitted once."""
+    if pilot.results is None or joint_ground or next_clicks:
+        yield from iter_fit_images(images, n_vehicles, priors, pilot.options, progress, jobs, joint_ground,
+                                   next_clicks)
+        return
+    done = iter(pilot.results)  # the images with vehicles, in file order
+    for im in images:
+        if not im.vehicles:  # the pilot skipped it: nothing to fit
+            yield from iter_fit_images([im], 0, priors, pilot.options)
+            continue
+        result = next(done)
+        assert result.id == im.id and len(result.vehicles) == len(im.vehicles)
+        if progress is not None:
+            progress(len(result.vehicles))
+        yield result
 
 
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
@@ -656,7 +687,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
 
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
     images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
-    results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
+    results = fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,

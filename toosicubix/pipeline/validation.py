@@ -19,7 +19,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import PilotFindings, iter_fit_images, on_estimated_roads, run_pilot, stream_images
+from toosicubix.pipeline.batch import PilotFindings, fitted_batch, on_estimated_roads, run_pilot, stream_images
 from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
@@ -241,7 +241,7 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     options = pilot.options
     # Read image by image, as fit does: the fitter and the checks read the same stream.
     images, for_checks = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
-    results = iter_fit_images(images, index.vehicles, priors, options, progress, jobs, joint_ground, next_clicks)
+    results = fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground, next_clicks)
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
