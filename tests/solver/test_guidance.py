@@ -83,3 +83,25 @@ def test_no_suggestions_for_a_failed_fit():
     fit = _fit(parts)
     assert not fit.ok
     assert suggest_clicks(parts, CAMERA, CAR, fit, OPTIONS) == []
+
+
+def test_suggestions_start_from_the_fits_own_sigma_when_clicks_are_weighted():
+    # Keypoints carry their spread as click weights: the guidance's "now" must be the fit's own uncertainty,
+    # not that of exactly placed keypoints.
+    from dataclasses import replace
+
+    from tests.parts.test_real_click_kinds import exact_prior, keypoint_parts, scene
+    from tests.solver.test_robust import TWELVE
+
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        d, R, t = scene(rng)
+        parts = [replace(p, uv=p.uv + rng.normal(0.0, 1.0, p.uv.shape)) for p in keypoint_parts(d, R, t, TWELVE)][:7]
+        options = SolverOptions(click_sigma=1.0)
+        fit = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d), options)
+        assert fit.ok and fit.click_weights is not None and np.all(fit.click_weights < 1)
+        suggestions = suggest_clicks(parts, CAMERA, exact_prior(d), fit, options)
+        assert suggestions
+        for s in suggestions:  # one Jacobian for the fit and the candidates: equal to rounding
+            assert s.yaw_sigma_deg + s.yaw_gain_deg == pytest.approx(fit.uncertainty.yaw_deg, rel=1e-9)
+            assert s.depth_sigma_rel + s.depth_gain_rel == pytest.approx(fit.uncertainty.depth_rel, rel=1e-9)

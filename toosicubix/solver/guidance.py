@@ -40,6 +40,7 @@ from toosicubix.solver import (
     finite_or_none,
     uncertainties_with_added_clicks,
 )
+from toosicubix.solver.robust import with_weights
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
@@ -176,6 +177,8 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         _set_own_values(combined.A[first:last], points_vehicle, p)
     problem = Problem.build(combined, camera, prior, options.lambda_3d, options.lambda_px, ground,
                             float(np.linalg.norm(t)))
+    if fit.click_weights is not None:  # the fit's own weights (keypoints' spread, robust factors); candidates weigh 1
+        problem = with_weights(problem, np.concatenate([fit.click_weights, np.ones(combined.n_clicks - base.n_clicks)]))
     base_params = np.array([index[name] for name in base.param_names])
     now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks, rows,
                                                  options.click_sigma, options.part_sigma)
