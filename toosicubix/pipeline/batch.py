@@ -573,9 +573,8 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
-    results = list(iter_fit_images(iter(pilot), n_pilot, priors, replace(options, robust_loss="none"), progress,
-                                   jobs)) if pilot else []
     pilot_options = replace(options, robust_loss="none")
+    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
