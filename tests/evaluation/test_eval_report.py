@@ -312,7 +312,10 @@ def test_means_and_medians_are_the_paper_table(tmp_path):
     assert s["e_r_mean_deg"] == pytest.approx(np.mean(e_r), abs=1e-12)
     text = format_report(result)
     header = next(line for line in text.splitlines() if "IoU_KITTI" in line)
-    assert header.split() == ["n", "IoU", "sIoU", "E_R", "deg", "E_t", "E_d", "E_comb", "IoU_KITTI"]
+    assert header.split() == ["n", "IoU", "sIoU", "E_R", "deg", "E_t", "E_d", "E_comb", "IoU_KITTI", "E_yaw", "deg"]
+    e_yaw = [r.metrics.e_yaw_deg for r in result.matched]
+    assert s["e_yaw_mean_deg"] == pytest.approx(np.mean(e_yaw), abs=1e-12)
+    assert all(y <= r.metrics.e_r_deg + 1e-9 for y, r in zip(e_yaw, result.matched, strict=True))
     assert any(line.startswith("mean ") for line in text.splitlines())
     assert any(line.startswith("median ") for line in text.splitlines())
 
@@ -327,7 +330,7 @@ def test_json_and_csv_outputs(tmp_path):
     assert SUMMARY_KEYS <= set(doc["summary"]) and len(doc["objects"]) == doc["summary"]["n_matched"] == 7
     obj = doc["objects"][0]
     for key in ("image_id", "pred_id", "gt_index", "class", "occlusion", "truncation", "depth", "iou", "siou",
-                "e_r_deg", "e_t", "e_d", "e_comb", "iou_kitti", "iou_2d"):
+                "e_r_deg", "e_t", "e_d", "e_comb", "iou_kitti", "e_yaw_deg", "iou_2d"):
         assert key in obj
     assert np.array(obj["gt"]["R_cam_vehicle"]).shape == (3, 3)
     assert {row["bin"] for row in doc["breakdowns"]["depth"]} >= {"0-10 m", "50+ m"}

@@ -97,6 +97,7 @@ def test_no_nan_is_ever_a_mean_or_a_cell():
     class Metrics:
         def __init__(self, v):
             self.iou = self.siou = self.e_r_deg = self.e_t = self.e_d = self.e_comb = self.iou_kitti = v
+            self.e_yaw_deg = v
 
     class Record:
         def __init__(self, v):

@@ -20,6 +20,7 @@ from toosicubix.evaluation.metrics import (
     scale_factor,
     scaled_iou,
     translation_error,
+    yaw_error_deg,
 )
 from toosicubix.geometry import R_cam_vehicle_from_ypr, so3_exp
 
@@ -84,3 +85,18 @@ def test_scale_factor_of_a_zero_translation_is_one():
 
 def test_metric_names_match_the_record():
     assert set(METRIC_NAMES) == set(ObjectMetrics.__dataclass_fields__)
+
+
+def test_yaw_error_is_the_kitti_yaw_difference_alone_wrapped():
+    ry = np.deg2rad
+    # Pitch and roll add to E_R but not to the yaw error.
+    pred = R_cam_vehicle_from_ypr(ry(40.0), ry(5.0), ry(-3.0))
+    truth = R_cam_vehicle_from_ypr(ry(10.0), 0.0, 0.0)
+    assert yaw_error_deg(pred, truth) == pytest.approx(30.0, abs=1e-12)
+    assert rotation_error_deg(pred, truth) > 30.0
+    # Across the +-180 seam: 175 and -175 degrees are 10 apart; a vehicle turned around is 180 off.
+    assert yaw_error_deg(R_cam_vehicle_from_ypr(ry(175.0), 0.0, 0.0),
+                         R_cam_vehicle_from_ypr(ry(-175.0), 0.0, 0.0)) == pytest.approx(10.0, abs=1e-9)
+    assert yaw_error_deg(R_cam_vehicle_from_ypr(ry(90.0), 0.0, 0.0),
+                         R_cam_vehicle_from_ypr(ry(-90.0), 0.0, 0.0)) == pytest.approx(180.0, abs=1e-9)
+    assert object_metrics(GT, GT).e_yaw_deg == 0.0

@@ -12,7 +12,7 @@ import numpy as np
 
 from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.iou import iou_3d, iou_bev_height_yaw
-from toosicubix.geometry import geodesic_angle
+from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 
 
 def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
@@ -27,6 +27,22 @@ def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
     float, degrees in [0, 180]
     """
     return float(np.degrees(geodesic_angle(R_pred, R_gt)))
+
+
+def yaw_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
+    """The size of the KITTI yaw (``rotation_y``, about the camera's y axis) difference, wrapped: the part of E_R
+    that KITTI's labels, which have no pitch or roll, can score.
+
+    Parameters
+    ----------
+    R_pred, R_gt : (3, 3) rotations ``R_cam_vehicle``
+
+    Returns
+    -------
+    float, degrees in [0, 180]
+    """
+    difference = ypr_from_R_cam_vehicle(R_pred)[0] - ypr_from_R_cam_vehicle(R_gt)[0]
+    return float(abs(np.degrees(wrap_angle(difference))))
 
 
 def translation_error(t_pred: np.ndarray, t_gt: np.ndarray) -> float:
@@ -87,6 +103,7 @@ class ObjectMetrics:
     e_d : relative dimension error, unitless
     e_comb : combined error, unitless
     iou_kitti : KITTI-style yaw-only bird's-eye x height IoU, [0, 1] (for comparison with KITTI tools)
+    e_yaw_deg : the KITTI yaw's error alone (:func:`yaw_error_deg`), degrees in [0, 180]
     """
 
     iou: float
@@ -96,10 +113,11 @@ class ObjectMetrics:
     e_d: float
     e_comb: float
     iou_kitti: float
+    e_yaw_deg: float
 
 
-#: Metric names in report order, as in the paper's table (plus KITTI's yaw-only IoU).
-METRIC_NAMES = ("iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb", "iou_kitti")
+#: Metric names in report order, as in the paper's table (plus KITTI's yaw-only IoU and the yaw's error alone).
+METRIC_NAMES = ("iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb", "iou_kitti", "e_yaw_deg")
 
 
 def object_metrics(pred: Cuboid, gt: Cuboid) -> ObjectMetrics:
@@ -110,4 +128,5 @@ def object_metrics(pred: Cuboid, gt: Cuboid) -> ObjectMetrics:
     return ObjectMetrics(
         iou=iou_3d(pred, gt), siou=scaled_iou(pred, gt), e_r_deg=e_r_deg, e_t=e_t, e_d=e_d,
         e_comb=combined_error(e_t, e_d, e_r_deg), iou_kitti=iou_bev_height_yaw(pred, gt),
+        e_yaw_deg=yaw_error_deg(pred.R_cam_vehicle, gt.R_cam_vehicle),
     )

@@ -60,7 +60,7 @@ class MatchedObject:
             "occlusion": self.occlusion, "occlusion_fraction": self.occlusion_fraction,
             "truncation": self.truncation, "depth": self.depth, "iou_2d": self.iou_2d,
             "iou": m.iou, "siou": m.siou, "e_r_deg": m.e_r_deg, "e_t": m.e_t, "e_d": m.e_d, "e_comb": m.e_comb,
-            "iou_kitti": m.iou_kitti, "yaw_only": self.yaw_only,
+            "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
             "pred_source": self.pred_source, "gt_source": self.gt_source,
         }
 

@@ -37,6 +37,7 @@ _STAT_KEYS = (
     ("e_d_mean", "e_d_median", "e_d"),
     ("e_comb_mean", "e_comb_median", "e_comb"),
     ("iou_kitti_mean", "iou_kitti_median", "iou_kitti"),
+    ("e_yaw_mean_deg", "e_yaw_median_deg", "e_yaw_deg"),
 )
 
 
@@ -44,7 +45,7 @@ def metric_stats(records: Sequence[MatchedObject]) -> dict[str, float | None]:
     """Mean and median of every metric over ``records``; None when there are none.
 
     Keys: ``iou_mean``, ``iou_median``, ``siou_mean``, ..., ``e_r_mean_deg``, ``e_r_median_deg``, ...,
-    ``iou_kitti_mean``, ``iou_kitti_median``.
+    ``iou_kitti_mean``, ``iou_kitti_median``, ``e_yaw_mean_deg``, ``e_yaw_median_deg``.
     """
     out: dict[str, float | None] = {}
     for mean_key, median_key, attr in _STAT_KEYS:
@@ -120,13 +121,13 @@ def breakdowns(result: EvaluationResult) -> dict[str, Any]:
 # --- terminal table ---------------------------------------------------------------------------------------
 
 _COLUMNS = (("IoU", "iou"), ("sIoU", "siou"), ("E_R deg", "e_r_deg"), ("E_t", "e_t"), ("E_d", "e_d"),
-            ("E_comb", "e_comb"), ("IoU_KITTI", "iou_kitti"))
+            ("E_comb", "e_comb"), ("IoU_KITTI", "iou_kitti"), ("E_yaw deg", "e_yaw_deg"))
 
 
 def _cell(value: float | None, attr: str) -> str:
     if value is None or not math.isfinite(value):
         return "-"
-    return f"{value:.2f}" if attr == "e_r_deg" else f"{value:.3f}"
+    return f"{value:.2f}" if attr in ("e_r_deg", "e_yaw_deg") else f"{value:.3f}"
 
 
 def _table(rows: list[tuple[str, int, dict[str, Any], str]], label_width: int) -> list[str]:
@@ -228,7 +229,7 @@ def result_to_json(result: EvaluationResult) -> dict[str, Any]:
 CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
-    "iou_kitti", "yaw_only", "pred_source", "gt_source",
+    "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source",
 )
 
 
