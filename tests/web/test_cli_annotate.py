@@ -99,3 +99,39 @@ def test_unknown_prototype_in_the_file(scene, tmp_path):
     result = _run(str(image), "-o", str(out))
     assert result.exit_code == 2
     assert f"{out}: $.images[0].vehicles[0].prototype: unknown prototype 'Boat'" in result.output
+
+
+def _ground_given(monkeypatch, scene, tmp_path, *options: str):
+    """The ground block `annotate` hands the session with ``options`` (the session stops the command)."""
+    from toosicubix.web import session
+
+    given = {}
+
+    class Recording:
+        def __init__(self, *args, ground=None, **kwargs):
+            given["ground"] = ground
+            raise session.ApiError("stop here")
+
+    monkeypatch.setattr(session, "Session", Recording)
+    image, cameras = scene
+    result = _run(str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"), *options)
+    assert result.exit_code == 2 and "stop here" in result.output, result.output
+    return given["ground"]
+
+
+def test_road_normal_and_camera_height_make_the_new_images_ground(monkeypatch, scene, tmp_path):
+    assert _ground_given(monkeypatch, scene, tmp_path) is None
+    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0.04,-0.99,0.15") == {
+        "normal": (0.04, -0.99, 0.15)}
+    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0,-1,0.1", "--camera-height", "1.4") == {
+        "normal": (0.0, -1.0, 0.1), "camera_height": 1.4}
+    kitti = _ground_given(monkeypatch, scene, tmp_path, "--kitti-ground", "--camera-height", "1.8")
+    assert kitti["camera_height"] == 1.8 and kitti["camera_height_sigma"] == 0.1 and kitti["normal"] == (0.0, -1.0, 0.0)
+
+
+def test_a_bad_road_normal_is_refused(scene, tmp_path):
+    image, cameras = scene
+    for value, expected in (("1,2", "expected three numbers x,y,z"), ("0,0,0", "non-zero road normal"),
+                            ("nan,1,0", "ground options")):
+        result = _run(str(image), "--cameras", str(cameras), "--road-normal", value)
+        assert result.exit_code == 2 and expected in result.output, (value, result.output)

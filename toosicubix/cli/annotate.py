@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput
+from toosicubix.cli.options import BadInput, parse_normal
 
 
 @click.command("annotate")
@@ -25,11 +25,20 @@ from toosicubix.cli.options import BadInput
               help="Give images the file does not have yet KITTI's ground block (camera 1.65 +- 0.1 m above a road "
                    "whose normal is -y): vehicles stand on the road, which fixes their scale far better than the "
                    "size prior alone. It is written to the file, so `fit` uses it too.")
+@click.option("--road-normal", default=None, metavar="X,Y,Z",
+              help="Give images the file does not have yet a road of this normal (camera frame, e.g. the "
+                   "`road_normal` that `fit` estimated for this camera in results.json): vehicles stand upright on "
+                   "it (within 2 deg; the normal known within 1), which tells far vehicles' pose from their "
+                   "depth-reversed one. Replaces --kitti-ground's normal.")
+@click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="With it, the camera's height above that road, metres (+- 0.05; with --kitti-ground 0.1): "
+                   "vehicles stand on the road, which fixes their scale. Replaces --kitti-ground's height.")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
 def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
-                     priors_path: Path | None, kitti_ground: bool, host: str, port: int) -> None:
+                     priors_path: Path | None, kitti_ground: bool, road_normal: str | None,
+                     camera_height: float | None, host: str, port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
     After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
@@ -40,23 +49,27 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     \b
     Example:
       toosicubix annotate image_2/*.png --cameras cameras.json -o annotations.json
+      toosicubix annotate frames/*.jpg --cameras cameras.json --road-normal 0.04,-0.99,0.15
     """
-    from toosicubix.annotations.schema import InputFileError
-    from toosicubix.model import KITTI_GROUND
+    from toosicubix.annotations.schema import InputFileError, parse_ground_block
+    from toosicubix.pipeline.settings import ground_overrides
     from toosicubix.priors.table import load_priors
     from toosicubix.web.server import serve
     from toosicubix.web.session import ApiError, Session, load_cameras
 
+    normal = parse_normal(road_normal) if road_normal is not None else None
+    ground = ground_overrides(kitti_ground, normal, camera_height=camera_height) or None
     missing = [str(p) for p in images if not p.is_file()]
     if missing:
         raise BadInput(f"no such image: {', '.join(missing)}")
     if not out.parent.is_dir():
         raise BadInput(f"{out}: the folder {out.parent} does not exist")
     try:
+        if ground is not None:
+            parse_ground_block(ground, "ground options")  # a zero normal: refused here, not on the first click
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
-        ground = dict(KITTI_GROUND) if kitti_ground else None
         session = Session(list(images), out, cameras, priors, prototype, ground=ground)
     except (InputFileError, ApiError) as exc:
         raise BadInput(str(exc)) from None

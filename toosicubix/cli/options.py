@@ -237,13 +237,24 @@ class Fitting:
 def _road_normal(value: str | None) -> tuple[float, float, float] | None:
     if value is None or value in ("estimate", "none"):
         return None
+    return parse_normal(value, "three numbers x,y,z, 'estimate' or 'none'")
+
+
+def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[float, float, float]:
+    """A road normal given as ``x,y,z`` (camera frame; its length is the ground block's to check: the schema
+    refuses a zero one and normalises the rest).
+
+    Raises
+    ------
+    click.BadParameter
+        Not three numbers (exit 2 with ``expected`` in the message).
+    """
     try:
         normal = tuple(float(v) for v in value.split(","))
     except ValueError:
         normal = ()
     if len(normal) != 3:
-        raise click.BadParameter(f"expected three numbers x,y,z, 'estimate' or 'none', got {value!r}",
-                                 param_hint="--road-normal")
+        raise click.BadParameter(f"expected {expected}, got {value!r}", param_hint="--road-normal")
     return normal  # type: ignore[return-value]
 
 
