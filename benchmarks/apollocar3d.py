@@ -46,7 +46,6 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
-from toosicubix.geometry import wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.parts.learned import contradicting, learn_positions, learned_mapping
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.solver import SolverOptions
@@ -146,9 +145,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
             "e_d": m.metrics.e_d, "e_comb": m.metrics.e_comb}}
         fit = fits[(m.image_id, m.pred_id)]
         sigma = (fit.get("sigma") or {}).get("yaw_deg")
-        yaw_error = float(np.rad2deg(wrap_angle(ypr_from_R_cam_vehicle(m.pred.R_cam_vehicle)[0]
-                                                - ypr_from_R_cam_vehicle(m.gt.R_cam_vehicle)[0])))
-        o["yaw_error_deg"], o["yaw_sigma_deg"] = yaw_error, sigma
+        o["yaw_error_deg"], o["yaw_sigma_deg"] = m.metrics.e_yaw_deg, sigma  # the yaw's error alone, >= 0
         up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
         o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
         o["downweighted"] = len(fit.get("downweighted", []))
@@ -185,7 +182,7 @@ def rotation_parts(objects: list[dict]) -> dict:
     """E_R's two parts, degrees, mean and median: the yaw error's size (what KITTI's labels can score) and the
     angle between the fitted and the ground-truth up axes (pitch and roll together)."""
     out = {}
-    for key, values in (("abs_yaw_error_deg", [abs(o["yaw_error_deg"]) for o in objects]),
+    for key, values in (("abs_yaw_error_deg", [o["yaw_error_deg"] for o in objects]),
                         ("tilt_error_deg", [o["tilt_error_deg"] for o in objects])):
         out[key] = {"mean": float(np.mean(values)) if values else None,
                     "median": float(np.median(values)) if values else None}
@@ -194,7 +191,7 @@ def rotation_parts(objects: list[dict]) -> dict:
 
 def calibration(objects: list[dict]) -> tuple[float | None, float | None]:
     """The shares of cars whose yaw error is within one and two predicted sigmas."""
-    ratio = np.array([abs(o["yaw_error_deg"]) / o["yaw_sigma_deg"] for o in objects if o["yaw_sigma_deg"]])
+    ratio = np.array([o["yaw_error_deg"] / o["yaw_sigma_deg"] for o in objects if o["yaw_sigma_deg"]])
     if not len(ratio):
         return None, None
     return float(np.mean(ratio <= 1)), float(np.mean(ratio <= 2))
