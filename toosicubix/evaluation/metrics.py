@@ -30,16 +30,9 @@ def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
 
 
 def yaw_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
-    """The size of the KITTI yaw (``rotation_y``, about the camera's y axis) difference, wrapped: the part of E_R
-    that KITTI's labels, which have no pitch or roll, can score.
-
-    Parameters
-    ----------
-    R_pred, R_gt : (3, 3) rotations ``R_cam_vehicle``
-
-    Returns
-    -------
-    float, degrees in [0, 180]
+    """The size of the KITTI yaw (``rotation_y``, about the camera's y axis) difference, wrapped, in degrees
+    (0 to 180) of the two (3, 3) ``R_cam_vehicle``: the part of E_R that KITTI's labels, which have no pitch or
+    roll, can score.
     """
     difference = ypr_from_R_cam_vehicle(R_pred)[0] - ypr_from_R_cam_vehicle(R_gt)[0]
     return float(abs(np.degrees(wrap_angle(difference))))
