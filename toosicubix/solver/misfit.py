@@ -10,8 +10,9 @@ a part the model places badly, a vehicle unlike its prototype). Its covariance i
 passes keeps the covariance of the stated noise. The test comes first so that a batch whose noise model holds
 keeps its calibration: scaling every fit with a ratio above one would widen about half of them by chance.
 
-Real human clicks (ApolloCar3D) have heavier tails than one noise level per batch: the rule that made the test
-a default, and what it did there, are in benchmarks/RESULTS.md (rule 8).
+Real human clicks (ApolloCar3D) have heavier tails than one noise level per batch. The test is off unless asked
+for (``SolverOptions.misfit_level``, ``--misfit-level``): the rules that decided it and what it did on real and
+simulated clicks are in benchmarks/RESULTS.md (rules 8 and 9).
 """
 
 from __future__ import annotations
