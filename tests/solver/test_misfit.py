@@ -120,3 +120,48 @@ def test_the_next_clicks_of_a_misfit_start_from_its_widened_sigma():
     k = math.sqrt(fit.residual_test.ratio)
     for a, b in zip(widened, unwidened, strict=True):
         assert a.yaw_sigma_deg == pytest.approx(k * b.yaw_sigma_deg, rel=1e-9)
+
+
+def _spy_batches(monkeypatch) -> list[list]:
+    """Record the batches of starts that stage (c) refines."""
+    import toosicubix.solver as solver_module
+
+    batches: list[list] = []
+    refine = solver_module._refine_batch
+
+    def spy(problem, batch, *args):
+        batches.append(list(batch))
+        return refine(problem, batch, *args)
+
+    monkeypatch.setattr(solver_module, "_refine_batch", spy)
+    return batches
+
+
+def test_a_fit_the_noise_explains_refines_one_batch(monkeypatch):
+    batches = _spy_batches(monkeypatch)
+    d, parts = twelve_keypoints(np.random.default_rng(11), 1.0)
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d), SolverOptions(click_sigma=1.0, refine_starts=1))
+    assert fit.ok and len(batches) == 1
+
+
+def test_a_misfit_refines_the_next_plausible_starts_and_keeps_the_cheapest(monkeypatch):
+    """The search goes on after a misfit whether or not --misfit-level is given (rule 10, RESULTS.md)."""
+    batches = _spy_batches(monkeypatch)
+    rng = np.random.default_rng(5)
+    d, parts = twelve_keypoints(rng, 1.0)
+    left = next(k for k, p in enumerate(parts) if p.name == "lamp-rear-left")
+    parts[left] = replace(parts[left], uv=next(p for p in parts if p.name == "lamp-rear-right").uv.copy())
+    options = SolverOptions(click_sigma=1.0, refine_starts=1)  # one start per batch: more are left to refine
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d), options)
+    assert fit.ok
+    assert len(batches) == 2
+    first, second = batches
+    assert len(first) == options.refine_starts and 0 < len(second) <= options.refine_starts
+    assert all(c.implausible is None for c in second)
+    # The second batch's starts are new ones, each at least distinct_deg from every start of the first.
+    for c in second:
+        angles = [np.rad2deg(np.arccos(np.clip((np.trace(c.R @ f.R.T) - 1) / 2, -1, 1))) for f in first]
+        assert min(angles) >= options.distinct_deg
+    # The answer is the cheapest plausible of both batches: no minimum of either is cheaper (alternatives list
+    # the others that are at least 15 degrees away).
+    assert all(a.cost >= fit.cost for a in fit.alternatives if a.implausible is None)

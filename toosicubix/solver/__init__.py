@@ -8,9 +8,9 @@ starts are never compared by it. Each descent result is moved to the scale its s
 (the pixel data term does not change with scale; a negative scale turns a mirrored, behind-the-camera
 answer around), must then have positive dimensions and every point in front of the camera, and is
 ranked by the pixel cost. The best few with distinct rotations are refined (the next few too when the
-first few found nothing plausible, or only a misfit), and the lowest final pixel cost wins among the plausible answers (:mod:`.plausibility`: roughly upright, every clicked part on
-a face turned to the camera); an implausible answer is returned only when no plausible one was found,
-with a warning.
+first few found nothing plausible, or only a misfit), and the lowest final pixel cost wins among the
+plausible answers (:mod:`.plausibility`: roughly upright, every clicked part on a face turned to the
+camera); an implausible answer is returned only when no plausible one was found, with a warning.
 """
 
 from __future__ import annotations
