@@ -135,3 +135,60 @@ def test_a_bad_road_normal_is_refused(scene, tmp_path):
                             ("nan,1,0", "ground options")):
         result = _run(str(image), "--cameras", str(cameras), "--road-normal", value)
         assert result.exit_code == 2 and expected in result.output, (value, result.output)
+
+
+def _served_session(monkeypatch, *args: str):
+    """The session `annotate` would serve with ``args``, and what it said (serving is stopped)."""
+    from toosicubix.web import server
+
+    served = {}
+
+    def record(session, host, port):
+        served["session"] = session
+        raise OSError("stop here")
+
+    monkeypatch.setattr(server, "serve", record)
+    result = _run(*args)
+    assert result.exit_code == 2 and "stop here" in result.output, result.output
+    return served["session"], result.output
+
+
+def test_the_page_fits_the_files_vehicles_as_fit_does(monkeypatch, tmp_path):
+    """With vehicles in the file, the page fits with the click noise and road normal `fit` estimates for it."""
+    import cv2
+    import numpy as np
+
+    from tests.pipeline.test_road_normal import _pitched_batch
+    from toosicubix.annotations.convert import document_json
+    from toosicubix.pipeline.batch import fit_file
+
+    out = tmp_path / "pitched.json"
+    out.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
+    fit_file(out, tmp_path / "fitted", estimate_click_sigma=True, estimate_road_normal=True)
+    fitted = json.loads((tmp_path / "fitted" / "results.json").read_text())
+    image = tmp_path / "im000.png"
+    cv2.imwrite(str(image), np.zeros((375, 1242, 3), np.uint8))
+
+    session, said = _served_session(monkeypatch, str(image), "-o", str(out), "--port", "0")
+    assert "click noise:" in said and "estimated from the residuals of 40 vehicles" in said
+    assert "road normal of camera" in said
+    assert session.options.click_sigma == fitted["settings"]["click_sigma"]
+    view = session.image_view(0)["vehicles"][0]["fit"]
+    # The same fit_one with the same settings and ground: the same bits.
+    np.testing.assert_array_equal(view["R_cam_vehicle"], fitted["images"][0]["vehicles"][0]["R_cam_vehicle"])
+    assert json.loads(out.read_text()) == json.loads(out.read_text()) and "ground" not in json.loads(
+        out.read_text())["images"][0]  # the estimate is the page's, never written to the file
+
+    session, said = _served_session(monkeypatch, str(image), "-o", str(out), "--port", "0", "--road-normal", "none",
+                                    "--click-sigma", "2")
+    assert "click noise: 2 px (given); no road normal estimated" in said and "estimating" not in said
+    assert session.options.click_sigma == 2.0
+    plain = session.image_view(0)["vehicles"][0]["fit"]
+    assert not np.array_equal(plain["R_cam_vehicle"], view["R_cam_vehicle"])
+
+
+def test_a_new_file_is_fitted_with_the_default_click_noise(monkeypatch, scene, tmp_path):
+    image, cameras = scene
+    session, said = _served_session(monkeypatch, str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"))
+    assert "click noise: 1.5 px (default: no file yet to estimate it from); no road normal estimated" in said
+    assert session.options.click_sigma == 1.5

@@ -29,22 +29,29 @@ from toosicubix.cli.options import BadInput, parse_normal
               help="Give images the file does not have yet a road of this normal (camera frame, e.g. the "
                    "`road_normal` that `fit` estimated for this camera in results.json): vehicles stand upright on "
                    "it (within 2 deg; the normal known within 1), which tells far vehicles' pose from their "
-                   "depth-reversed one. Replaces --kitti-ground's normal.")
+                   "depth-reversed one. Replaces --kitti-ground's normal. 'none': no road normal estimated from "
+                   "the file's vehicles either.")
 @click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
               help="With it, the camera's height above that road, metres (+- 0.05; with --kitti-ground 0.1): "
                    "vehicles stand on the road, which fixes their scale. Replaces --kitti-ground's height.")
+@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Click noise in pixels the page's sigmas and next clicks are for. Not given: estimated at start "
+                   "from the file's vehicles as `fit` estimates it (1.5 when the file has too few).")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
 def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
                      priors_path: Path | None, kitti_ground: bool, road_normal: str | None,
-                     camera_height: float | None, host: str, port: int) -> None:
+                     camera_height: float | None, click_sigma: float | None, host: str, port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
     After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
-    yaw and depth sigmas and the parts to click next. A click left unnamed takes the name of the nearest
-    predicted part once the named clicks fix a cuboid. The file is written after every change; two pages on
-    one file never lose a click (a change made on a stale page is refused and re-applied after a reload).
+    yaw and depth sigmas and the parts to click next. When the file already has vehicles, the click noise and
+    each camera's road normal are first estimated from them, as `fit` estimates them (the road normal only for
+    images without a ground block of their own, and never written to the file). A click left unnamed takes the
+    name of the nearest predicted part once the named clicks fix a cuboid. The file is written after every
+    change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
+    after a reload).
 
     \b
     Example:
@@ -57,7 +64,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.web.server import serve
     from toosicubix.web.session import ApiError, Session, load_cameras
 
-    normal = parse_normal(road_normal) if road_normal is not None else None
+    estimate_road = road_normal != "none"
+    normal = parse_normal(road_normal) if road_normal not in (None, "none") else None
     ground = ground_overrides(kitti_ground, normal, camera_height=camera_height) or None
     missing = [str(p) for p in images if not p.is_file()]
     if missing:
@@ -70,7 +78,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
-        session = Session(list(images), out, cameras, priors, prototype, ground=ground)
+        options, road_grounds = _batch_settings(out, priors, click_sigma, estimate_road)
+        session = Session(list(images), out, cameras, priors, prototype, options, ground=ground,
+                          road_grounds=road_grounds)
     except (InputFileError, ApiError) as exc:
         raise BadInput(str(exc)) from None
     try:
@@ -86,3 +96,25 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         click.echo("stopped", err=True)
     finally:
         server.server_close()
+
+
+def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road: bool):
+    """The solver settings and per-camera road grounds (when ``estimate_road``) that `fit` would estimate for the
+    file ``out`` (none when it does not exist yet); says on stderr what they are."""
+    from dataclasses import replace
+
+    from toosicubix.pipeline.batch import estimated_grounds, file_estimates
+    from toosicubix.solver import SolverOptions
+
+    options = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
+    wanted = [what for what, asked in (("the click noise", click_sigma is None), ("road normals", estimate_road))
+              if asked]
+    if not out.is_file() or not wanted:
+        source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
+        click.echo(f"click noise: {options.click_sigma:g} px ({source}); no road normal estimated", err=True)
+        return options, None
+    click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {out}, as `fit` does ...", err=True)
+    findings = file_estimates(out, priors, options, click_sigma is None, estimate_road)
+    for line in findings.describe():
+        click.echo(line, err=True)
+    return findings.options, estimated_grounds(findings.road_normals)

@@ -589,6 +589,30 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None)
 
 
+def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
+                   estimate_road_normal: bool = True, progress: Callable[[int], None] | None = None) -> PilotFindings:
+    """What ``toosicubix fit ANNOTATIONS`` would estimate before fitting, with its default ground settings: the
+    click noise (unless ``estimate_click_sigma`` is False: ``options.click_sigma`` was given) and each camera's
+    road normal (unless ``estimate_road_normal`` is False), by :func:`run_pilot`. For fitting single vehicles of
+    the file as that batch fits them (the annotate page); :func:`estimated_grounds` gives the normals as ground
+    blocks.
+
+    Raises
+    ------
+    InputFileError
+        Bad annotation file, unknown prototype.
+    """
+    index = index_annotations(Path(annotations), known_prototypes=list(priors))
+    return run_pilot(index, None, priors, options, progress=progress, estimate_click_sigma=estimate_click_sigma,
+                     estimate_road_normal=estimate_road_normal)
+
+
+def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, dict[str, object]]:
+    """Per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block its estimated road normal
+    gives the camera's images without one of their own; cameras without an estimate are left out."""
+    return {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
+
+
 def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot: PilotFindings,
                  progress: Callable[[int], None] | None = None, jobs: int = 1, joint_ground: bool = False,
                  next_clicks: int = 0) -> Iterator[ImageResult]:
@@ -703,7 +727,7 @@ def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> I
 def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal] | None) -> Iterator[Image]:
     """The images, each without a ground block of its own given its camera's estimated road normal
     (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
-    blocks = {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
+    blocks = estimated_grounds(normals)
     for im in images:
         block = blocks.get(camera_key(im.camera)) if im.ground is None and blocks else None
         if block is None:

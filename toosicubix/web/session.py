@@ -30,7 +30,7 @@ import math
 import os
 import re
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,7 @@ from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import keypoint_faces
 from toosicubix.pipeline.batch import check_prototypes, fit_one
+from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.priors.table import Priors
 from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
@@ -96,6 +97,8 @@ class ClickedPart:
     uv : (k, 2) pixels as clicked
     known : ``(metres, sigma)`` of a length annotation
     auto : how the session named it: ``{"name", "runner_up", "distance_px", "runner_up_distance_px"}``
+    extra : a keypoint's or plate's further fields as the file has them (``at``, ``spread``, ``visible``: its
+        typical position, from a mapping); kept through every edit but a rename, never made by the page
     """
 
     kind: str | None
@@ -103,10 +106,24 @@ class ClickedPart:
     uv: list[list[float]]
     known: tuple[float, float] | None = None
     auto: dict[str, Any] | None = None
+    extra: dict[str, Any] | None = None
 
     @property
     def named(self) -> bool:
         return self.name is not None
+
+    @classmethod
+    def of(cls, part: Part) -> ClickedPart:
+        """The part of an annotation file (or request) as the page edits it, with its further fields."""
+        fields = vocabulary.KINDS[part.kind].fields_extra
+        extra = {key: (value.tolist() if isinstance(value, np.ndarray) else value)
+                 for key, _ in fields if (value := getattr(part, key)) is not None}
+        return cls(part.kind, part.name, part.uv.tolist(), part.known, extra=extra or None)
+
+    def model_fields(self) -> dict[str, Any]:
+        """``extra`` as :class:`toosicubix.model.Part` takes it (arrays for the rows)."""
+        return {key: (np.asarray(value, dtype=float) if isinstance(value, list) else value)
+                for key, value in (self.extra or {}).items()}
 
 
 @dataclass
@@ -210,14 +227,20 @@ class Session:
     prototype : the prototype of a new vehicle
     ground : the ground block (annotation file fields, e.g. :data:`toosicubix.model.KITTI_GROUND`) given to
         images the file does not have yet; the file's own blocks are kept
+    road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block of the road
+        normal ``fit`` estimates for it (:func:`toosicubix.pipeline.batch.file_estimates`): the page fits that
+        camera's images without a ground block of their own on it, as ``fit`` does; never written to the file
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
-                 thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None):
+                 thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None,
+                 road_grounds: dict[tuple, dict[str, Any]] | None = None):
         self.out = Path(out)
         self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
         self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
+        self._road_grounds = {key: replace(ground_from_schema(parse_ground_block(block, "estimated road normal")),
+                                           from_batch=True) for key, block in (road_grounds or {}).items()}
         self.priors = priors
         if prototype not in priors:
             raise ApiError(f"unknown prototype {prototype!r}; known: {', '.join(sorted(priors))}")
@@ -277,7 +300,7 @@ class Session:
     def _vehicle_state(v: Vehicle) -> VehicleState:
         return VehicleState(
             id=v.id, prototype=v.prototype, box2d=None if v.box2d is None else [float(x) for x in v.box2d],
-            parts=[ClickedPart(p.kind, p.name, p.uv.tolist(), p.known) for p in v.parts],
+            parts=[ClickedPart.of(p) for p in v.parts],
             known_dimensions=dict(v.known_dimensions))
 
     def document(self) -> dict[str, Any]:
@@ -354,7 +377,7 @@ class Session:
     def _model_vehicle(self, image: ImageState, j: int, v: VehicleState) -> Vehicle:
         """The vehicle with its named clicks, as :mod:`toosicubix.model` has it."""
         parts = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"{image.id}.vehicles[{j}].parts[{k}]",
-                           p.known) for k, p in enumerate(v.parts) if p.named)
+                           p.known, **p.model_fields()) for k, p in enumerate(v.parts) if p.named)
         box = None if v.box2d is None else np.asarray(v.box2d, dtype=float)
         return Vehicle(v.id, v.prototype, box, parts, f"vehicles[{j}]", dict(v.known_dimensions))
 
@@ -366,10 +389,16 @@ class Session:
         cached = self._fits.get(key)
         if cached is None:
             cached = self._fits[key] = {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                          self.options, image.ground, next_clicks=1000)}
+                                                          self.options, self._ground_of(image), next_clicks=1000)}
             if len(self._fits) > 2000:
                 self._fits.pop(next(iter(self._fits)))
         return cached["result"]
+
+    def _ground_of(self, image: ImageState) -> GroundPlane | None:
+        """The image's own ground, else its camera's estimated road (as ``fit`` fits it), else None."""
+        if image.ground is not None or not self._road_grounds:
+            return image.ground
+        return self._road_grounds.get(camera_key(image.camera))
 
     def _auto_name(self, image: ImageState, j: int, v: VehicleState) -> list[dict[str, Any]]:
         """Name the vehicle's unnamed clicks, oldest first, while its fit succeeds; what was named."""
@@ -530,7 +559,7 @@ class Session:
         self._check_prototype(v.prototype)
         parts = [part_from_schema(p, "") for p in v.parts]
         state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
-                             parts=[ClickedPart(p.kind, p.name, p.uv.tolist(), p.known) for p in parts])
+                             parts=[ClickedPart.of(p) for p in parts])
         with self._lock:
             return {"revision": self.revision, **self._vehicle_view(self.image(index), 0, state)}
 
@@ -575,6 +604,7 @@ class Session:
             uv = _pixels(r.get("uv"), 1, "uv")
             v.parts.append(ClickedPart(None, None, uv))
         else:
+            _check_page_made(kind)
             kind, name = _kind_name(kind, name)
             uv = _pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
             self._check_not_clicked(v, kind, name)
@@ -595,6 +625,12 @@ class Session:
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
         part = self._part(v, r)
+        if (r.get("kind"), r.get("name")) == (part.kind, part.name):
+            return
+        if part.extra is not None and r.get("kind") == part.kind:
+            raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
+                           f"import the clicks again to rename it")
+        _check_page_made(r.get("kind"))
         kind, name = _kind_name(r.get("kind"), r.get("name"))
         if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
             raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
@@ -602,7 +638,7 @@ class Session:
         if vocabulary.KINDS[kind].known and part.known is None:
             raise ApiError(f"kind: a {kind} annotation needs its known size; delete it and add it again")
         self._check_not_clicked(v, kind, name, part)
-        part.kind, part.name, part.auto = kind, name, None
+        part.kind, part.name, part.auto, part.extra = kind, name, None, None
 
     def _op_delete_click(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -644,6 +680,15 @@ class Session:
 
 
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
+
+
+def _check_page_made(kind: Any) -> None:
+    """A kind whose annotations need a typical position (keypoints, plates: from a mapping) is never made on the
+    page (ApiError); other kinds, known or not, pass (:func:`_kind_name` checks them)."""
+    entry = vocabulary.KINDS.get(kind) if isinstance(kind, str) else None
+    if entry is not None and any(key == "at" for key, _ in entry.fields_extra):
+        raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
+                       "keypoint mapping (`toosicubix import`); the page does not make one")
 
 
 def naming_candidates(result: VehicleResult, camera: Camera,
