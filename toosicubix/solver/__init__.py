@@ -31,7 +31,7 @@ from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
 from toosicubix.solver.joint import JointVehicle, fit_jointly
-from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, residual_test
+from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, chi2_quantile, residual_test
 from toosicubix.solver.plausibility import faces_turned_to_camera, implausibility
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import (
@@ -419,12 +419,17 @@ def _cheapest(converged: list[tuple[RefineResult, str | None]]
 def _misfit(problem: Problem, r: RefineResult, options: SolverOptions) -> bool:
     """Whether answer ``r`` fails the chi-square test of its residuals at :data:`SEARCH_LEVEL`, whatever
     ``options.misfit_level`` says: its clicks are worse explained than their noise allows, so the search goes on."""
-    _, J = residuals_and_jacobian(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p)
     residuals = problem.pixel_residuals(r.R_cam_vehicle, r.t_cam_vehicle, r.p)  # (N, 2)
     if problem.click_weights is not None:
         residuals = residuals * problem.click_weights[:, None]
     sigmas = row_sigmas(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p, options.click_sigma, options.part_sigma)
-    test = residual_test(residuals.reshape(-1), sigmas, residual_dof(J, 2 * problem.parts.n_clicks), SEARCH_LEVEL)
+    n_rows = residuals.size
+    # The effective degrees of freedom never exceed the rows (sum of (1 - h_i)^2 over the hat matrix's
+    # eigenvalues in [0, 1]): below the quantile at n_rows, the fit passes without the Jacobian (most fits).
+    if not np.sum((residuals.reshape(-1) / sigmas) ** 2) > chi2_quantile(SEARCH_LEVEL, n_rows):
+        return False
+    _, J = residuals_and_jacobian(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p)
+    test = residual_test(residuals.reshape(-1), sigmas, residual_dof(J, n_rows), SEARCH_LEVEL)
     return test is not None and test.misfit
 
 
