@@ -31,7 +31,7 @@ from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
 from toosicubix.solver.joint import JointVehicle, fit_jointly
-from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, chi2_quantile, residual_test
+from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, residual_test
 from toosicubix.solver.plausibility import faces_turned_to_camera, implausibility
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import (
@@ -310,10 +310,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     converged, refine_iterations = _refine_batch(problem, ordered[:k], options, max_tilt, parts.click_labels,
                                                  click_faces)
     best, best_any = _cheapest(converged)
-    further = None
+    further, checked = None, None
     if best is None:
         further = ordered[k:2 * k]
-    elif _misfit(problem, best, options):
+    elif (checked := _checked(problem, best, options)).misfit:
         more = _plausible_first(candidates, parts.click_labels, max_tilt, np.deg2rad(options.distinct_deg),
                                 2 * k, problem.up, click_faces)
         further = [c for c in more if c.implausible is None][k:]
@@ -337,7 +337,11 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_refine = time.perf_counter()
     timings = {"init": t_init - t_start, "descent": t_descent - t_init, "refine": t_refine - t_descent}
 
-    _, J_best = residuals_and_jacobian(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
+    if checked is not None and checked.answer is best:  # the same answer of the same problem: its Jacobian
+        J_best, dof = checked.J, checked.dof
+    else:
+        _, J_best = residuals_and_jacobian(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
+        dof = residual_dof(J_best, 2 * parts.n_clicks)
     degenerate = _degeneracy(problem, J_best, options.rank_tolerance)
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
@@ -350,7 +354,6 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     scale_source = max(shares, key=shares.get) if shares else None
     u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source,
                      options.part_sigma, J_best)
-    dof = residual_dof(J_best, 2 * parts.n_clicks)
     u, test = tested(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, u, options, dof)
     if test is not None and test.misfit:
         common["warnings"] = (*warnings, test.sentence())
@@ -416,21 +419,28 @@ def _cheapest(converged: list[tuple[RefineResult, str | None]]
     return best, best_any
 
 
-def _misfit(problem: Problem, r: RefineResult, options: SolverOptions) -> bool:
-    """Whether answer ``r`` fails the chi-square test of its residuals at :data:`SEARCH_LEVEL`, whatever
-    ``options.misfit_level`` says: its clicks are worse explained than their noise allows, so the search goes on."""
+@dataclass(frozen=True)
+class _Checked:
+    """A first batch's answer after the chi-square test of its residuals at :data:`SEARCH_LEVEL` (whatever
+    ``options.misfit_level`` says), with the Jacobian (M, 6 + P) and residual degrees of freedom it took, which
+    the analysis reuses when the answer stays."""
+
+    answer: RefineResult
+    misfit: bool
+    J: np.ndarray
+    dof: float
+
+
+def _checked(problem: Problem, r: RefineResult, options: SolverOptions) -> _Checked:
+    """Test answer ``r``: a misfit's clicks are worse explained than their noise allows, and the search goes on."""
+    _, J = residuals_and_jacobian(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p)
+    dof = residual_dof(J, 2 * problem.parts.n_clicks)
     residuals = problem.pixel_residuals(r.R_cam_vehicle, r.t_cam_vehicle, r.p)  # (N, 2)
     if problem.click_weights is not None:
         residuals = residuals * problem.click_weights[:, None]
     sigmas = row_sigmas(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p, options.click_sigma, options.part_sigma)
-    n_rows = residuals.size
-    # The effective degrees of freedom never exceed the rows (sum of (1 - h_i)^2 over the hat matrix's
-    # eigenvalues in [0, 1]): below the quantile at n_rows, the fit passes without the Jacobian (most fits).
-    if not np.sum((residuals.reshape(-1) / sigmas) ** 2) > chi2_quantile(SEARCH_LEVEL, n_rows):
-        return False
-    _, J = residuals_and_jacobian(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p)
-    test = residual_test(residuals.reshape(-1), sigmas, residual_dof(J, n_rows), SEARCH_LEVEL)
-    return test is not None and test.misfit
+    test = residual_test(residuals.reshape(-1), sigmas, dof, SEARCH_LEVEL)
+    return _Checked(r, test is not None and test.misfit, J, dof)
 
 
 def _reweighted(problem: Problem, best: RefineResult, soft: np.ndarray | None, options: SolverOptions,
