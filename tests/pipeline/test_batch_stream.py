@@ -91,6 +91,22 @@ def test_a_batch_the_pilot_changes_is_fitted_again(tmp_path, monkeypatch):
     # A robust loss: the pilot fits without it, so its fits are not the batch's.
     fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True)
     assert len(calls) == 12
-    # Next clicks: the pilot does not suggest any.
-    fit_file(SAMPLE, tmp_path / "next", estimate_road_normal=True, next_clicks=2)
-    assert len(calls) == 24
+
+
+def test_next_clicks_are_suggested_by_a_pilot_that_fits_every_vehicle(tmp_path, monkeypatch):
+    """fit --next-clicks and validate (which always asks for next clicks) fit a small batch once, and write what
+    a batch without a pilot writes."""
+    from toosicubix.pipeline.validation import validate_file
+
+    calls = _counting_fits(monkeypatch)
+    once = tmp_path / "once"
+    fit_file(SAMPLE, once, estimate_click_sigma=True, estimate_road_normal=True, next_clicks=2)
+    assert len(calls) == 6
+    fit_file(SAMPLE, tmp_path / "plain", next_clicks=2)
+    assert len(calls) == 12
+    a, b = (json.loads((d / "results.json").read_text()) for d in (once, tmp_path / "plain"))
+    assert a["images"] == b["images"] and all(len(v["next_clicks"]) == 2 for im in a["images"] for v in im["vehicles"])
+    report = validate_file(SAMPLE, estimate_click_sigma=True, estimate_road_normal=True)
+    assert len(calls) == 18 and len(report.vehicles) == 6
+    plain = validate_file(SAMPLE)
+    assert [c.result.next_clicks for c in report.vehicles] == [c.result.next_clicks for c in plain.vehicles]

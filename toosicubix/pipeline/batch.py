@@ -507,6 +507,7 @@ class PilotFindings:
     results : the pilot's results, image by image in file order, when they are the batch's own: the pilot fitted
         every vehicle with the settings the batch is fitted with and estimated no road normal (a small batch with
         nothing to change); None otherwise. :func:`fitted_batch` then writes them instead of fitting again.
+    next_clicks : how many next clicks per vehicle those results have
     """
 
     options: SolverOptions
@@ -514,6 +515,7 @@ class PilotFindings:
     road_normals: dict[tuple, RoadNormal] | None = None
     without_pilot: dict[str, int] = field(default_factory=dict)
     results: list[ImageResult] | None = None
+    next_clicks: int = 0
 
     def header(self) -> dict[str, Any]:
         """What results.json's header (and validate's report) say about the pilot's estimates."""
@@ -549,11 +551,13 @@ class PilotFindings:
 def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
               jobs: int = 1, progress: Callable[[int], None] | None = None,
               on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
-              estimate_road_normal: bool = False) -> PilotFindings:
+              estimate_road_normal: bool = False, next_clicks: int = 0) -> PilotFindings:
     """Fit every k-th vehicle of an indexed file (at most :data:`toosicubix.pipeline.click_noise.PILOT_VEHICLES`,
     held in memory) and estimate from them what was asked: the click noise
     (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
-    (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot.
+    (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot. When the pilot fits every
+    vehicle of the file, it also suggests the ``next_clicks`` the batch asks for, so that its fits can be the
+    batch's (:attr:`PilotFindings.results`).
 
     ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
     ``progress`` with each vehicle the pilot finishes.
@@ -574,7 +578,10 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
     pilot_options = replace(options, robust_loss="none")
-    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs)) if pilot else []
+    every = n_pilot == index.vehicles
+    pilot_next = next_clicks if every else 0
+    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs,
+                                   next_clicks=pilot_next)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
@@ -582,11 +589,12 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
     # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
     # road normal that would give some images a ground block.
-    own = bool(pilot and n_pilot == index.vehicles and options == pilot_options
+    own = bool(pilot and every and options == pilot_options
            and not any(n.normal is not None for n in (normals or {}).values()))
     if normals is None:
-        return PilotFindings(options, noise, results=results if own else None)
-    return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None)
+        return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
+    return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
+                         pilot_next)
 
 
 def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
@@ -618,8 +626,8 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot
                  next_clicks: int = 0) -> Iterator[ImageResult]:
     """The batch's results, image by image in file order (:func:`iter_fit_images` with the pilot's settings),
     reusing the pilot's own fits when they are the batch's (:attr:`PilotFindings.results`) and the batch asks
-    nothing the pilot did not do (no joint ground, no next clicks): a small batch is then fitted once."""
-    if pilot.results is None or joint_ground or next_clicks:
+    nothing the pilot did not do (no joint ground, as many next clicks): a small batch is then fitted once."""
+    if pilot.results is None or joint_ground or next_clicks != pilot.next_clicks:
         yield from iter_fit_images(images, n_vehicles, priors, pilot.options, progress, jobs, joint_ground,
                                    next_clicks)
         return
@@ -679,7 +687,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal)
+                      estimate_road_normal, 0 if joint_ground else next_clicks)
     options = pilot.options
     header = {
         "generator": f"toosicubix {__version__}",

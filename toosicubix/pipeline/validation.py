@@ -237,7 +237,7 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     index = index_annotations(annotations, known_prototypes=list(priors))
     refuse_with_ground(estimate_road_normal, ground, joint_ground)
     pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal)
+                      estimate_road_normal, 0 if joint_ground else next_clicks)
     options = pilot.options
     # Read image by image, as fit does: the fitter and the checks read the same stream.
     images, for_checks = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
