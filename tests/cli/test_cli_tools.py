@@ -2,11 +2,11 @@
 
 import json
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import jsonschema
 
 from tests.cli.test_cli_fit import run
+from tests.formats.test_openlabel import SCHEMA
 from tests.formats.tool_fixtures import (
     cameras_doc,
     cvat_xml,
@@ -16,9 +16,6 @@ from tests.formats.tool_fixtures import (
     write_json,
 )
 from toosicubix.parts.keypoints import KEYPOINTS
-
-SCHEMA = json.loads((Path(__file__).parents[1] / "formats" / "fixtures" / "openlabel_json_schema-1.0.0.json")
-                    .read_text())
 
 
 def test_template_prints_each_tool_and_refuses_unknown_prototypes(tmp_path):

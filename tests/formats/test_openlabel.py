@@ -1,7 +1,7 @@
 """OpenLABEL 1.0.0 export: valid against the official schema, a known cuboid's val number by number."""
 
 import json
-from pathlib import Path
+from importlib.resources import files
 
 import jsonschema
 import numpy as np
@@ -13,8 +13,12 @@ from toosicubix.formats.fitted import FittedImage, FittedVehicle, load_fitted
 from toosicubix.formats.openlabel import cuboid_val, openlabel_document
 from toosicubix.formats.results import Sigma, VehicleResult
 
-#: The official ASAM OpenLABEL 1.0.0 JSON Schema; see fixtures/openlabel_json_schema-1.0.0.md for its source.
-SCHEMA = json.loads((Path(__file__).parent / "fixtures" / "openlabel_json_schema-1.0.0.json").read_text())
+#: The official ASAM OpenLABEL 1.0.0 JSON Schema (draft-07, ``$id`` https://openlabel.asam.net/V1-0-0/schema#),
+#: as the ``openlabel-checker`` package (MPL-2.0, the test extra) ships it, fetched unmodified from ASAM's site
+#: (its PROVENANCE.md); not copied into this repository, whose licence cannot cover ASAM's file. Known quirk: its
+#: ``stream_properties`` ``oneOf`` is malformed, so ``intrinsics_pinhole`` is not validated; the exporter writes
+#: the ``camera_matrix_3x4`` / ``distortion_coeffs_1xN`` names of the standard's own example.
+SCHEMA = json.loads((files("openlabel_checker") / "schema_data" / "openlabel_json_schema-v1.0.0.json").read_text())
 
 # A car 10 m ahead, facing away from the camera: vehicle X (forward) = camera z, Y (left) = camera -x,
 # Z (up) = camera -y.
