@@ -176,6 +176,7 @@ def test_the_page_fits_the_files_vehicles_as_fit_does(monkeypatch, tmp_path):
     view = session.image_view(0)["vehicles"][0]["fit"]
     # The same fit_one with the same settings and ground: the same bits.
     np.testing.assert_array_equal(view["R_cam_vehicle"], fitted["images"][0]["vehicles"][0]["R_cam_vehicle"])
+    assert view["road"] == "estimated" and view["click_sigma_px"] == fitted["settings"]["click_sigma"]  # the page says
     assert json.loads(out.read_text()) == json.loads(out.read_text()) and "ground" not in json.loads(
         out.read_text())["images"][0]  # the estimate is the page's, never written to the file
 
@@ -185,6 +186,7 @@ def test_the_page_fits_the_files_vehicles_as_fit_does(monkeypatch, tmp_path):
     assert session.options.click_sigma == 2.0
     plain = session.image_view(0)["vehicles"][0]["fit"]
     assert not np.array_equal(plain["R_cam_vehicle"], view["R_cam_vehicle"])
+    assert plain["road"] is None and plain["click_sigma_px"] == 2.0
 
 
 def test_a_new_file_is_fitted_with_the_default_click_noise(monkeypatch, scene, tmp_path):

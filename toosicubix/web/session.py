@@ -473,6 +473,8 @@ class Session:
                 "well_determined": not problems, "problems": list(problems),
                 "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
                 "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
+                "click_sigma_px": self.options.click_sigma,
+                "road": _road_kind(self._ground_of(image)),
             })
         targets = [s for s in (result.next_clicks or []) if s["visible"] and s["inside_image"]][:TARGETS]
         return {"id": v.id, "prototype": v.prototype, "box2d": v.box2d, "done": v.done, "parts": parts,
@@ -680,6 +682,14 @@ class Session:
 
 
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
+
+
+def _road_kind(ground: GroundPlane | None) -> str | None:
+    """What the fit stood on: 'estimated' (the camera's road normal from the file's vehicles), 'given' (the
+    image's ground block), or None."""
+    if ground is None:
+        return None
+    return "estimated" if ground.from_batch else "given"
 
 
 def _check_page_made(kind: Any) -> None:

@@ -236,7 +236,8 @@ function panels() {
       <tr><td>yaw</td><td>${f.yaw_pitch_roll_deg[0].toFixed(1)}°</td><td>σ ${fmt(f.sigma.yaw_deg)}°</td></tr>
       <tr><td>depth</td><td>${f.depth_m.toFixed(2)} m</td><td>σ ${fmt(f.sigma.depth_rel, 1, 100)} %</td></tr>
       <tr><td>size</td><td colspan="2">${f.dimensions.map((d) => d.toFixed(2)).join(" × ")} m</td></tr>
-      <tr><td>rms</td><td colspan="2">${fmt(f.rms_px, 2)} px</td></tr></table>`;
+      <tr><td>rms</td><td colspan="2">${fmt(f.rms_px, 2)} px</td></tr>
+      <tr><td>for</td><td colspan="2">clicks σ ${fmt(f.click_sigma_px, 2)} px${f.road ? `, upright on the road (${f.road})` : ""}</td></tr></table>`;
   }
   v.parts.forEach((p) => {
     const li = document.createElement("li");
