@@ -290,9 +290,17 @@ function dot(p, colour, radius = 4, outline = "#000") {
   ctx.stroke();
 }
 
-function label(p, text, colour) {
+// Label boxes [x, y, w, h] drawn this frame: a label that would overlap one is left out (zoom in to see it),
+// unless it is the selected click's.
+let placedLabels = [];
+
+function label(p, text, colour, always = false) {
   const [x, y] = toScreen(p);
   ctx.font = "12px system-ui, sans-serif";
+  const box = [x + 6, y - 18, ctx.measureText(text).width, 15];
+  const overlaps = (b) => box[0] < b[0] + b[2] && b[0] < box[0] + box[2] && box[1] < b[1] + b[3] && b[1] < box[1] + box[3];
+  if (!always && placedLabels.some(overlaps)) return;
+  placedLabels.push(box);
   ctx.lineWidth = 3;
   ctx.strokeStyle = "rgba(0,0,0,0.7)";
   ctx.strokeText(text, x + 6, y - 6);
@@ -309,6 +317,7 @@ function render() {
     canvas.height = Math.round(rect.height);
   }
   ctx.clearRect(0, 0, canvas.width, canvas.height);
+  placedLabels = [];
   if (state.image.complete && state.image.naturalWidth) {
     ctx.imageSmoothingEnabled = state.zoom < 2;
     ctx.drawImage(state.image, state.panX, state.panY, state.image.naturalWidth * state.zoom,
@@ -379,7 +388,7 @@ function drawVehicle(v, selected) {
     });
     if (selected) {
       const text = p.name ? (p.kind === "point" ? p.name : `${p.name} ${p.kind}`) : "?";
-      label(p.uv[0], text, p.name ? "#fff" : "#ff9800");
+      label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
     }
   }
   ctx.globalAlpha = 1;
