@@ -132,3 +132,43 @@ def test_cli_tune_needs_one_ground_truth_and_valid_grids(tmp_path):
     assert runner.invoke(main, ["tune", str(annotations)]).exit_code == 2
     result = runner.invoke(main, ["tune", str(annotations), "--kitti", str(gt), "--lambda-ps", "1,-2"])
     assert result.exit_code == 2 and "expected positive numbers" in result.output
+
+
+def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
+    """Each grid point is scored on the fits `fit --config` makes: the estimated click noise and road normal."""
+    import numpy as np
+
+    from tests.pipeline.test_road_normal import _pitched_batch
+    from toosicubix.annotations.convert import document_json, load_images
+    from toosicubix.pipeline.batch import fit_file, fit_images
+    from toosicubix.pipeline.tuning import fitted_as_fit_fits
+    from toosicubix.priors.table import load_priors
+    from toosicubix.solver import SolverOptions
+
+    path = tmp_path / "pitched.json"
+    path.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
+    priors = load_priors()
+    images, options, findings = fitted_as_fit_fits(path, load_images(path), priors, SolverOptions())
+    assert all(im.ground is not None and im.ground.from_batch for im in images)
+    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    fitted = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert options.click_sigma == fitted["settings"]["click_sigma"] and findings.header()["road_normal"] == fitted[
+        "road_normal"]
+    scored = {v.id: v.R_cam_vehicle for im in fit_images(images, priors, options) for v in im.vehicles}
+    for im in fitted["images"]:
+        for v in im["vehicles"]:
+            np.testing.assert_array_equal(scored[v["id"]], v["R_cam_vehicle"])
+
+
+def test_cli_tune_says_what_it_estimated(tmp_path):
+    annotations, gt = sample_with_ground_truth()
+    args = ["tune", str(annotations), "--kitti", str(gt), "--lambdas", "1", "--lambda-ps", "1", "--no-refine"]
+    result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "a.json")])
+    assert result.exit_code == 0, result.output
+    assert "click noise: 1.5 px (default" in result.output and "road normal: not estimated for 2" in result.output
+    assert json.loads((tmp_path / "a.json").read_text())["tuned"]["click_sigma"] == 1.5
+    result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "b.json"), "--click-sigma", "2",
+                                       "--road-normal", "none"])
+    assert result.exit_code == 0 and "estimating" not in result.output
+    tuned = json.loads((tmp_path / "b.json").read_text())["tuned"]
+    assert tuned["click_sigma"] == 2.0 and "road_normal" not in tuned

@@ -26,8 +26,15 @@ from toosicubix.cli.options import GroundTruth, float_list, ground_truth_options
 @click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU needed to pair a fit with a ground-truth vehicle.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
+@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Click noise in pixels (it weighs keypoints' soft term). Not given: estimated from the file's "
+                   "residuals, as `fit` does.")
+@click.option("--road-normal", type=click.Choice(["estimate", "none"]), default="estimate", show_default=True,
+              help="estimate: fit each camera's images upright on its road normal estimated from the file's "
+                   "vehicles, as `fit` does by default; none: without one (as `fit --road-normal none`).")
 def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path, lambdas: str, lambda_ps: str,
-                 refine: bool, priors_path: Path | None, min_iou: float, jobs: int) -> None:
+                 refine: bool, priors_path: Path | None, min_iou: float, jobs: int, click_sigma: float | None,
+                 road_normal: str) -> None:
     """Choose lambda and lambda_p by maximising mean sIoU against ground truth, as the paper does.
 
     Fits every vehicle of ANNOTATIONS with each pair of weights on a log grid (then the half-steps around
@@ -35,18 +42,25 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     median E_R of the best beside it) and writes the best pair to a settings file for `fit --config`.
     Tune on vehicles you will not report accuracy on.
 
+    The fits are made as `fit` makes them by default: the click noise and each camera's road normal are first
+    estimated from the file's vehicles (once, with the default weights), unless --click-sigma or --road-normal
+    none say otherwise.
+
     \b
     Example:
       toosicubix simulate --kitti-tracking data/kitti_tracking --sequences 0000-0009 -o tuning.json
       toosicubix tune tuning.json --kitti tuning_gt -o settings.json --jobs 2
       toosicubix fit annotations.json --config settings.json
     """
+    from dataclasses import replace
+
     from toosicubix.annotations.convert import load_images
     from toosicubix.evaluation import EvalOptions, open_ground_truth
     from toosicubix.pipeline.batch import check_prototypes
     from toosicubix.pipeline.settings import settings_document, write_settings_file
-    from toosicubix.pipeline.tuning import tune
+    from toosicubix.pipeline.tuning import fitted_as_fit_fits, tune
     from toosicubix.priors.table import load_priors
+    from toosicubix.solver import SolverOptions
 
     grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")
     images = load_images(annotations)
@@ -54,6 +68,14 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     check_prototypes(images, priors, annotations)
     source = open_ground_truth(ground_truth.kind, ground_truth.root)
     n = sum(len(im.vehicles) for im in images)
+    base = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
+    findings = None
+    if click_sigma is None or road_normal == "estimate":
+        click.echo("estimating the click noise and road normals from the file's vehicles, as `fit` does ...", err=True)
+        images, base, findings = fitted_as_fit_fits(annotations, images, priors, base, click_sigma is None,
+                                                    road_normal == "estimate")
+        for line in findings.describe():
+            click.echo(line, err=True)
     click.echo(f"tuning on {n} vehicles in {len(images)} images", err=True)
 
     def report(point) -> None:
@@ -61,13 +83,14 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
                    f"{point.siou_mean:.4f}  mean IoU {point.iou_mean:.4f}  median E_R {point.e_r_median_deg:.2f} deg"
                    f"  ({point.n_matched} matched, {point.n_failed} failed)", err=True)
 
-    result = tune(images, priors, source, grid_l, grid_p, eval_options=EvalOptions(min_iou=min_iou), refine=refine,
-                  jobs=jobs, progress=report)
+    result = tune(images, priors, source, grid_l, grid_p, base=base, eval_options=EvalOptions(min_iou=min_iou),
+                  refine=refine, jobs=jobs, progress=report)
     best = result.best
     click.echo(result.landscape())
     click.echo(f"best: lambda {best.lambda_3d:g}, lambda_p {best.lambda_px:g}: mean sIoU {best.siou_mean:.4f}, "
                f"mean IoU {best.iou_mean:.4f}, median E_R {best.e_r_median_deg:.2f} deg ({best.n_matched} vehicles)")
     tuned = {"annotations": str(annotations), "ground_truth": f"{ground_truth.flag} {ground_truth.root}",
-             "priors": str(priors_path) if priors_path else "bundled", **result.to_json()}
+             "priors": str(priors_path) if priors_path else "bundled", "click_sigma": base.click_sigma,
+             **(findings.header() if findings is not None else {}), **result.to_json()}
     write_settings_file(config_out, settings_document(best.lambda_3d, best.lambda_px, tuned))
     click.echo(f"wrote {config_out}", err=True)
