@@ -165,3 +165,19 @@ def test_a_misfit_refines_the_next_plausible_starts_and_keeps_the_cheapest(monke
     # The answer is the cheapest plausible of both batches: no minimum of either is cheaper (alternatives list
     # the others that are at least 15 degrees away).
     assert all(a.cost >= fit.cost for a in fit.alternatives if a.implausible is None)
+
+
+def test_the_search_past_a_misfit_never_takes_an_answer_at_an_absurd_depth(tmp_path):
+    """A fuzz finding: with an absurd tangential distortion (p1 = 100) on one image, a vehicle's first answer is a
+    misfit and the next starts reach a cheaper answer 8 km away, which the depth check then fails. The search
+    keeps the first answer instead, as the fit without the search did."""
+    doc = json.loads((REPO / "samples" / "annotations.json").read_text())
+    doc["images"][2]["camera"]["distortion"][2] = 100.0
+    path = tmp_path / "distorted.json"
+    path.write_text(json.dumps(doc))
+    from toosicubix.pipeline.batch import fit_file
+
+    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    statuses = {v["id"]: v["status"] for im in results["images"] for v in im["vehicles"]}
+    assert statuses["7"] == "ok", statuses

@@ -320,6 +320,9 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     if further:
         extra_converged, extra_iterations = _refine_batch(problem, further, options, max_tilt, parts.click_labels,
                                                           click_faces)
+        if checked is not None:  # searching past a misfit: an answer at an absurd depth is no better answer
+            extra_converged = [(r, why or _absurd_depth(camera, r.t_cam_vehicle, r.p[:3]))
+                               for r, why in extra_converged]
         converged += extra_converged
         refine_iterations += extra_iterations
         best, best_any = _cheapest(converged)
