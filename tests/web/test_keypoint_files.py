@@ -81,6 +81,11 @@ def test_the_page_makes_no_keypoint_and_renames_none_to_another(keypoint_file):
     with pytest.raises(ApiError, match="typical position is its name's"):
         session.edit(0, {"revision": session.revision, "op": "rename", "vehicle": vehicle, "part": 0,
                          "kind": "keypoint", "name": "lamp-front-left"})
+    # Renamed to its own name: nothing changes (the position stays).
+    before = _parts(out)
+    session.edit(0, {"revision": session.revision, "op": "rename", "vehicle": vehicle, "part": 0,
+                     "kind": before[0]["kind"], "name": before[0]["name"]})
+    assert _parts(out) == before
     # Renamed to a part of the cuboid model, it drops the keypoint's position.
     session.edit(0, {"revision": session.revision, "op": "rename", "vehicle": vehicle, "part": 0,
                      "kind": "point", "name": "edge-rear-left"})

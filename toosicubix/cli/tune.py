@@ -70,8 +70,10 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     n = sum(len(im.vehicles) for im in images)
     base = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
     findings = None
-    if click_sigma is None or road_normal == "estimate":
-        click.echo("estimating the click noise and road normals from the file's vehicles, as `fit` does ...", err=True)
+    wanted = [what for what, asked in (("the click noise", click_sigma is None), ("road normals",
+                                                                                  road_normal == "estimate")) if asked]
+    if wanted:
+        click.echo(f"estimating {' and '.join(wanted)} from the file's vehicles, as `fit` does ...", err=True)
         images, base, findings = fitted_as_fit_fits(annotations, images, priors, base, click_sigma is None,
                                                     road_normal == "estimate")
         for line in findings.describe():

@@ -627,7 +627,8 @@ class Session:
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
         part = self._part(v, r)
-        if (r.get("kind"), r.get("name")) == (part.kind, part.name):
+        if (r.get("kind"), r.get("name")) == (part.kind, part.name):  # the same name: now the user's, not auto
+            part.auto = None
             return
         if part.extra is not None and r.get("kind") == part.kind:
             raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
