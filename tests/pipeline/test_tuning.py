@@ -140,15 +140,15 @@ def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
 
     from tests.pipeline.test_road_normal import _pitched_batch
     from toosicubix.annotations.convert import document_json, load_images
-    from toosicubix.pipeline.batch import fit_file, fit_images
-    from toosicubix.pipeline.tuning import fitted_as_fit_fits
+    from toosicubix.pipeline.batch import file_estimates, fit_file, fit_images, on_estimated_roads
     from toosicubix.priors.table import load_priors
     from toosicubix.solver import SolverOptions
 
     path = tmp_path / "pitched.json"
     path.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
     priors = load_priors()
-    images, options, findings = fitted_as_fit_fits(path, load_images(path), priors, SolverOptions())
+    findings = file_estimates(path, priors, SolverOptions())  # what `tune` does before its grid
+    images, options = list(on_estimated_roads(load_images(path), findings.road_normals)), findings.options
     assert all(im.ground is not None and im.ground.from_batch for im in images)
     fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
     fitted = json.loads((tmp_path / "out" / "results.json").read_text())
@@ -170,5 +170,6 @@ def test_cli_tune_says_what_it_estimated(tmp_path):
     result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "b.json"), "--click-sigma", "2",
                                        "--road-normal", "none"])
     assert result.exit_code == 0 and "estimating" not in result.output
+    assert "click noise: 2 px (given); no road normal estimated" in result.output
     tuned = json.loads((tmp_path / "b.json").read_text())["tuned"]
     assert tuned["click_sigma"] == 2.0 and "road_normal" not in tuned

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput, parse_normal
+from toosicubix.cli.options import BadInput, announced_estimates, parse_normal
 
 
 @click.command("annotate")
@@ -103,18 +103,15 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
     file ``out`` (none when it does not exist yet); says on stderr what they are."""
     from dataclasses import replace
 
-    from toosicubix.pipeline.batch import estimated_grounds, file_estimates
+    from toosicubix.pipeline.batch import estimated_grounds
     from toosicubix.solver import SolverOptions
 
     options = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
-    wanted = [what for what, asked in (("the click noise", click_sigma is None), ("road normals", estimate_road))
-              if asked]
-    if not out.is_file() or not wanted:
+    if not out.is_file():
         source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
         click.echo(f"click noise: {options.click_sigma:g} px ({source}); no road normal estimated", err=True)
         return options, None
-    click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {out}, as `fit` does ...", err=True)
-    findings = file_estimates(out, priors, options, click_sigma is None, estimate_road)
-    for line in findings.describe():
-        click.echo(line, err=True)
+    findings = announced_estimates(out, priors, options, click_sigma is None, estimate_road)
+    if findings is None:
+        return options, None
     return findings.options, estimated_grounds(findings.road_normals)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import GroundTruth, float_list, ground_truth_options
+from toosicubix.cli.options import GroundTruth, announced_estimates, float_list, ground_truth_options
 
 
 @click.command("tune")
@@ -56,9 +56,9 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
 
     from toosicubix.annotations.convert import load_images
     from toosicubix.evaluation import EvalOptions, open_ground_truth
-    from toosicubix.pipeline.batch import check_prototypes
+    from toosicubix.pipeline.batch import check_prototypes, on_estimated_roads
     from toosicubix.pipeline.settings import settings_document, write_settings_file
-    from toosicubix.pipeline.tuning import fitted_as_fit_fits, tune
+    from toosicubix.pipeline.tuning import tune
     from toosicubix.priors.table import load_priors
     from toosicubix.solver import SolverOptions
 
@@ -69,15 +69,9 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     source = open_ground_truth(ground_truth.kind, ground_truth.root)
     n = sum(len(im.vehicles) for im in images)
     base = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
-    findings = None
-    wanted = [what for what, asked in (("the click noise", click_sigma is None), ("road normals",
-                                                                                  road_normal == "estimate")) if asked]
-    if wanted:
-        click.echo(f"estimating {' and '.join(wanted)} from the file's vehicles, as `fit` does ...", err=True)
-        images, base, findings = fitted_as_fit_fits(annotations, images, priors, base, click_sigma is None,
-                                                    road_normal == "estimate")
-        for line in findings.describe():
-            click.echo(line, err=True)
+    findings = announced_estimates(annotations, priors, base, click_sigma is None, road_normal == "estimate")
+    if findings is not None:  # fitted as `fit` fits them: the estimated click noise, on each camera's road
+        images, base = list(on_estimated_roads(images, findings.road_normals)), findings.options
     click.echo(f"tuning on {n} vehicles in {len(images)} images", err=True)
 
     def report(point) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from toosicubix.evaluation import EvalOptions, GroundTruthSource, evaluate, predictions_from_results, summarize
 from toosicubix.model import Image
-from toosicubix.pipeline.batch import PilotFindings, file_estimates, fit_images, on_estimated_roads
+from toosicubix.pipeline.batch import fit_images
 from toosicubix.priors.table import Priors
 from toosicubix.solver import SolverOptions
 
@@ -171,15 +171,3 @@ def tune(images: list[Image], priors: Priors, ground_truth: GroundTruthSource,
         return score(images, priors, ground_truth, replace(base, lambda_3d=lam, lambda_px=lp), eval_options, jobs)
 
     return grid_search(evaluate_point, lambdas, lambda_ps, refine, progress)
-
-
-def fitted_as_fit_fits(path: Any, images: list[Image], priors: Priors, base: SolverOptions,
-                       estimate_click_sigma: bool = True, estimate_road_normal: bool = True
-                       ) -> tuple[list[Image], SolverOptions, PilotFindings]:
-    """The images of the annotation file ``path`` (``images``, already read) and the settings with which
-    ``toosicubix fit`` fits them by default: the click noise and each camera's road normal estimated by a pilot
-    fit (:func:`toosicubix.pipeline.batch.file_estimates`, made once with ``base``'s weights), the images
-    without a ground block of their own set on their camera's road. For :func:`tune` to score what ``fit
-    --config`` will do with the weights it picks."""
-    findings = file_estimates(path, priors, base, estimate_click_sigma, estimate_road_normal)
-    return list(on_estimated_roads(images, findings.road_normals)), findings.options, findings
