@@ -643,6 +643,20 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot
         yield result
 
 
+def pilot_and_fits(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
+                   jobs: int, progress: Callable[[int], None] | None, on_start: Callable[[int], None] | None,
+                   estimate_click_sigma: bool, estimate_road_normal: bool, joint_ground: bool, next_clicks: int
+                   ) -> tuple[PilotFindings, Iterator[Image], Iterator[ImageResult]]:
+    """A batch as ``fit`` fits it (``fit`` and ``validate``): the pilot (:func:`run_pilot`), then, lazily, every
+    image of the file on its camera's estimated road (a second reader of the stream, for the labels or the
+    checks) and its fit (:func:`fitted_batch`), in file order."""
+    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
+                      estimate_road_normal, 0 if joint_ground else next_clicks)
+    images, second = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
+    return pilot, second, fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground,
+                                       next_clicks)
+
+
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
              options: SolverOptions | None = None,
              progress: Callable[[int], None] | None = None,
@@ -686,8 +700,9 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal, 0 if joint_ground else next_clicks)
+    # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
+    pilot, for_labels, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
+                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks)
     options = pilot.options
     header = {
         "generator": f"toosicubix {__version__}",
@@ -716,9 +731,6 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
                     scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
                 misfits[0] += bool(v.residual_test is not None and v.residual_test.misfit)
 
-    # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    images, for_labels = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
-    results = fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground, next_clicks)
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,

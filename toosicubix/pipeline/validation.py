@@ -10,7 +10,6 @@ parts to click next (:mod:`toosicubix.guidance`).
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,7 +18,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import PilotFindings, fitted_batch, on_estimated_roads, run_pilot, stream_images
+from toosicubix.pipeline.batch import PilotFindings, pilot_and_fits
 from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
@@ -236,12 +235,10 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     priors = load_priors(priors_path)
     index = index_annotations(annotations, known_prototypes=list(priors))
     refuse_with_ground(estimate_road_normal, ground, joint_ground)
-    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal, 0 if joint_ground else next_clicks)
-    options = pilot.options
     # Read image by image, as fit does: the fitter and the checks read the same stream.
-    images, for_checks = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
-    results = fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground, next_clicks)
+    pilot, for_checks, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
+                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks)
+    options = pilot.options
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]

@@ -386,11 +386,7 @@ def tested(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarra
     if dof is None:
         _, J = residuals_and_jacobian(problem, R_cam_vehicle, t_cam_vehicle, p)
         dof = residual_dof(J, 2 * problem.parts.n_clicks)
-    r = problem.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)  # (N, 2)
-    if problem.click_weights is not None:
-        r = r * problem.click_weights[:, None]
-    sigmas = row_sigmas(problem, R_cam_vehicle, t_cam_vehicle, p, options.click_sigma, options.part_sigma)
-    test = residual_test(r.reshape(-1), sigmas, dof, options.misfit_level)
+    test = _residual_test(problem, R_cam_vehicle, t_cam_vehicle, p, options, dof, options.misfit_level)
     if test is not None and test.misfit:
         u = u.widened(test.ratio)
     return u, test
@@ -438,12 +434,19 @@ def _checked(problem: Problem, r: RefineResult, options: SolverOptions) -> _Chec
     """Test answer ``r``: a misfit's clicks are worse explained than their noise allows, and the search goes on."""
     _, J = residuals_and_jacobian(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p)
     dof = residual_dof(J, 2 * problem.parts.n_clicks)
-    residuals = problem.pixel_residuals(r.R_cam_vehicle, r.t_cam_vehicle, r.p)  # (N, 2)
-    if problem.click_weights is not None:
-        residuals = residuals * problem.click_weights[:, None]
-    sigmas = row_sigmas(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p, options.click_sigma, options.part_sigma)
-    test = residual_test(residuals.reshape(-1), sigmas, dof, SEARCH_LEVEL)
+    test = _residual_test(problem, r.R_cam_vehicle, r.t_cam_vehicle, r.p, options, dof, SEARCH_LEVEL)
     return _Checked(r, test is not None and test.misfit, J, dof)
+
+
+def _residual_test(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
+                   options: SolverOptions, dof: float, level: float) -> ResidualTest | None:
+    """The chi-square test (:mod:`.misfit`) at ``level`` of the pixel residuals of the answer (R, t, p), weighed
+    as the pixel cost weighs them, each over its row's noise."""
+    r = problem.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)  # (N, 2)
+    if problem.click_weights is not None:
+        r = r * problem.click_weights[:, None]
+    sigmas = row_sigmas(problem, R_cam_vehicle, t_cam_vehicle, p, options.click_sigma, options.part_sigma)
+    return residual_test(r.reshape(-1), sigmas, dof, level)
 
 
 def _reweighted(problem: Problem, best: RefineResult, soft: np.ndarray | None, options: SolverOptions,
