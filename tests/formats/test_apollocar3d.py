@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 
 import numpy as np
@@ -9,9 +11,12 @@ import pytest
 from click.testing import CliRunner
 
 from tests.conftest import shared_data_dir
+from tests.eval_scenes import K_KITTI, Pose, write_results
 from toosicubix.annotations.schema import InputFileError
 from toosicubix.cli import main
+from toosicubix.evaluation import evaluate_folder, format_report, result_to_csv, result_to_json
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
+from toosicubix.evaluation.report import keypoint_breakdown
 from toosicubix.formats.apollocar3d import pose_to_vehicle, read_apollocar3d, read_car_models
 
 MODELS = {"0": {"name": "a", "type": "3x", "length": 4.8, "width_body": 1.8, "width_with_mirrors": 2.0,
@@ -45,6 +50,35 @@ def test_ground_truth_source(tmp_path):
     assert obj.cls == "Car" and obj.subtype == "3x"
     np.testing.assert_allclose(obj.box2d, [10, 20, 40, 60])
     np.testing.assert_allclose(obj.cuboid_rect.dimensions, [4.8, 1.8, 1.5])
+
+
+def test_eval_breaks_down_by_labelled_keypoints_and_states_no_occlusion(tmp_path):
+    # Two cars with 12 and 31 labelled keypoints (v > 0), predicted exactly: the report bins them by that count
+    # and has no occlusion section (ApolloCar3D states none); JSON and CSV carry the count.
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [], "annotations": []}
+    for k, (labelled, x) in enumerate(((12, -4.0), (31, 4.0))):
+        kp = np.zeros((66, 3))
+        kp[:labelled] = (100.0, 100.0, 2)
+        coco["annotations"].append({"id": 9 + k, "image_id": 1, "category_id": 0, "bbox": [100 + 800 * k, 20, 300, 200],
+                                    "keypoints": kp.ravel().tolist(), "pose": [np.pi, 0.0, 0.0, x, 2.0, 20.0]})
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    source = ApolloCar3DGroundTruth(tmp_path / "kp.json")
+    gts = source.load("x_Camera_5").objects
+    assert [g.keypoints for g in gts] == [12, 31] and source.occlusion_kind is None
+    poses = {"x_Camera_5": [Pose(g.cuboid_rect.R_cam_vehicle, g.cuboid_rect.t_cam_vehicle, g.cuboid_rect.dimensions,
+                                 g.box2d, "Car") for g in gts]}
+    out = write_results(tmp_path / "out", poses, K_KITTI, np.zeros(3), (3384, 2710))
+    result = evaluate_folder(out, "apollocar3d", tmp_path / "kp.json")
+    assert [r.keypoints for r in result.matched] == [12, 31]
+    rows = {row["bin"]: row["n"] for row in keypoint_breakdown(result.matched)}
+    assert rows == {"0-9": 0, "10-14": 1, "15-19": 0, "20-29": 0, "30+": 1}
+    text = format_report(result)
+    assert "By keypoints labelled on the ground-truth object" in text and "occlusion" not in text
+    doc = result_to_json(result)
+    assert set(doc["breakdowns"]) == {"depth", "keypoints"}
+    assert [o["keypoints"] for o in doc["objects"]] == [12, 31]
+    assert [r["keypoints"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["12", "31"]
 
 
 def test_bad_pose_names_the_json_path(tmp_path):

@@ -59,6 +59,7 @@ class GtObject:
     track_id : KITTI tracking track id, Cityscapes instanceId, else None
     source : where it was read: ``file:line`` or ``file $.objects[i]``
     subtype : Cityscapes ``3d.type`` (e.g. 'Mid Size Car'), else ''
+    keypoints : how many keypoints people labelled on it (ApolloCar3D), else None
     """
 
     index: int
@@ -71,6 +72,7 @@ class GtObject:
     track_id: int | None
     source: str
     subtype: str = ""
+    keypoints: int | None = None
 
 
 @dataclass(frozen=True)
@@ -104,12 +106,12 @@ class GroundTruthSource:
     kind : 'kitti', 'kitti-tracking' or 'cityscapes'
     root : the folder given
     default_classes : classes scored when none are asked for
-    occlusion_kind : 'level' (KITTI 0-3) or 'fraction' (Cityscapes)
+    occlusion_kind : 'level' (KITTI 0-3), 'fraction' (Cityscapes), or None (no occlusion in this ground truth)
     """
 
     kind: str = ""
     default_classes: tuple[str, ...] = ()
-    occlusion_kind: str = "level"
+    occlusion_kind: str | None = "level"
 
     def __init__(self, root: str | Path):
         self.root = Path(root)
@@ -297,6 +299,7 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
 
     kind = "apollocar3d"
     default_classes = ("Car",)
+    occlusion_kind = None
 
     def __init__(self, root: str | Path, car_models: str | Path | None = None):
         from toosicubix.annotations.schema import InputFileError
@@ -323,7 +326,8 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         objects = tuple(GtObject(
             index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
             box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None, track_id=int(car.id)
-            if car.id.isdigit() else None, source=car.source, subtype=car.model.type) for k, car in enumerate(im.cars))
+            if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
+            keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0))) for k, car in enumerate(im.cars))
         return GtImage(id=image_id, objects=objects, t_cam_rect=np.zeros(3), K=None, source=str(self.root))
 
     def describe(self) -> str:

@@ -30,6 +30,7 @@ class MatchedObject:
     pred, gt : the two cuboids in the camera frame where the prediction's ``K`` applies
     yaw_only : the prediction came from a KITTI label file (no pitch or roll)
     pred_source, gt_source : where each was read
+    keypoints : how many keypoints people labelled on the ground-truth object (ApolloCar3D), else None
     """
 
     image_id: str
@@ -50,6 +51,7 @@ class MatchedObject:
     yaw_only: bool
     pred_source: str
     gt_source: str
+    keypoints: int | None = None
 
     def row(self) -> dict[str, Any]:
         """The flat record (one CSV row): identifiers, conditions, then the metrics."""
@@ -61,7 +63,7 @@ class MatchedObject:
             "truncation": self.truncation, "depth": self.depth, "iou_2d": self.iou_2d,
             "iou": m.iou, "siou": m.siou, "e_r_deg": m.e_r_deg, "e_t": m.e_t, "e_d": m.e_d, "e_comb": m.e_comb,
             "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
-            "pred_source": self.pred_source, "gt_source": self.gt_source,
+            "pred_source": self.pred_source, "gt_source": self.gt_source, "keypoints": self.keypoints,
         }
 
 
@@ -110,7 +112,7 @@ class EvaluationResult:
     n_images : predicted images scored
     n_gt_images : images the ground truth holds
     n_gt_images_without_pred : ground-truth images with no predictions (normal; not scored)
-    occlusion_kind : 'level' (KITTI) or 'fraction' (Cityscapes)
+    occlusion_kind : 'level' (KITTI), 'fraction' (Cityscapes) or None (the ground truth has no occlusion)
     warnings : things the user should know (frames, calibration), one line each
     settings : what was compared with what, and how
     """
@@ -123,6 +125,6 @@ class EvaluationResult:
     n_images: int
     n_gt_images: int
     n_gt_images_without_pred: int
-    occlusion_kind: str
+    occlusion_kind: str | None
     warnings: tuple[str, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)

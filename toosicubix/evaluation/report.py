@@ -1,8 +1,9 @@
 """Aggregates of an evaluation and its outputs: the terminal table, JSON and CSV.
 
 Every metric is reported as mean (as the paper does) and median, over all matched objects and per
-bin of ground-truth depth (z in the camera frame) and of occlusion (KITTI level; Cityscapes
-occlusion fraction binned, see :data:`OCCLUSION_FRACTION_BINS`).
+bin of ground-truth depth (z in the camera frame), of occlusion where the ground truth states it (KITTI level;
+Cityscapes occlusion fraction binned, see :data:`OCCLUSION_FRACTION_BINS`), and of the number of keypoints people
+labelled where it counts them (ApolloCar3D, :data:`KEYPOINT_BINS`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0,
 OCCLUSION_LEVELS = {0: "0 fully visible", 1: "1 partly occluded", 2: "2 largely occluded", 3: "3 unknown"}
 #: Cityscapes occlusion-fraction bins: [lo, hi), the last one closed.
 OCCLUSION_FRACTION_BINS: tuple[tuple[float, float], ...] = ((0.0, 0.1), (0.1, 0.4), (0.4, 0.7), (0.7, 1.0))
+#: Bins of labelled keypoints per ground-truth object: [lo, hi).
+KEYPOINT_BINS: tuple[tuple[float, float], ...] = ((0, 10), (10, 15), (15, 20), (20, 30), (30, math.inf))
+_OCCLUSION_TITLES = {"level": "KITTI occlusion level", "fraction": "Cityscapes occlusion fraction"}
 
 #: (summary key of the mean, summary key of the median, attribute of ObjectMetrics), in the paper's order.
 _STAT_KEYS = (
@@ -108,14 +112,28 @@ def occlusion_breakdown(records: Sequence[MatchedObject], kind: str) -> list[dic
     return [row for row in _breakdown(records, bins) if row["n"] > 0 or row["bin"] != "unknown"]
 
 
+def keypoint_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
+    """Statistics per bin of labelled keypoints (:data:`KEYPOINT_BINS`), over the records that count them."""
+    bins = [(_bin_label(lo, hi) if math.isinf(hi) else f"{lo:g}-{hi - 1:g}",
+             lambda r, lo=lo, hi=hi: r.keypoints is not None and lo <= r.keypoints < hi) for lo, hi in KEYPOINT_BINS]
+    return _breakdown(records, bins)
+
+
+def _counts_keypoints(result: EvaluationResult) -> bool:
+    return any(r.keypoints is not None for r in result.matched)
+
+
 def breakdowns(result: EvaluationResult) -> dict[str, Any]:
-    """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``."""
-    return {
-        "depth": depth_breakdown(result.matched),
-        "occlusion": occlusion_breakdown(result.matched, result.occlusion_kind),
-        "occlusion_kind": "KITTI occlusion level" if result.occlusion_kind == "level"
-        else "Cityscapes occlusion fraction",
-    }
+    """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``;
+    ``occlusion`` and ``occlusion_kind`` only where the ground truth states occlusion, ``keypoints`` (rows per
+    bin of labelled keypoints) only where it counts them."""
+    out: dict[str, Any] = {"depth": depth_breakdown(result.matched)}
+    if result.occlusion_kind is not None:
+        out["occlusion"] = occlusion_breakdown(result.matched, result.occlusion_kind)
+        out["occlusion_kind"] = _OCCLUSION_TITLES[result.occlusion_kind]
+    if _counts_keypoints(result):
+        out["keypoints"] = keypoint_breakdown(result.matched)
+    return out
 
 
 # --- terminal table ---------------------------------------------------------------------------------------
@@ -146,8 +164,9 @@ def _stat_key(attr: str, which: str) -> str:
 
 
 def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
-    """The terminal report: the paper's table (mean and median of every metric), breakdowns by depth and
-    occlusion (means), then the counts and the first unmatched, failed and excluded objects."""
+    """The terminal report: the paper's table (mean and median of every metric), breakdowns (means) by depth, by
+    occlusion where the ground truth states it and by labelled keypoints where it counts them, then the counts and
+    the first unmatched, failed and excluded objects."""
     s = result.settings
     stats = metric_stats(result.matched)
     n = len(result.matched)
@@ -161,11 +180,15 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
         "By ground-truth depth (means):",
         *_table([(r["bin"], r["n"], r, "mean") for r in depth_breakdown(result.matched)], 20),
         "",
-        ("By KITTI occlusion level (means):" if result.occlusion_kind == "level"
-         else "By Cityscapes occlusion fraction (means):"),
-        *_table([(r["bin"], r["n"], r, "mean") for r in occlusion_breakdown(result.matched, result.occlusion_kind)],
-                20),
-        "",
+    ]
+    if result.occlusion_kind is not None:
+        lines += [f"By {_OCCLUSION_TITLES[result.occlusion_kind]} (means):",
+                  *_table([(r["bin"], r["n"], r, "mean")
+                           for r in occlusion_breakdown(result.matched, result.occlusion_kind)], 20), ""]
+    if _counts_keypoints(result):
+        lines += ["By keypoints labelled on the ground-truth object (means):",
+                  *_table([(r["bin"], r["n"], r, "mean") for r in keypoint_breakdown(result.matched)], 20), ""]
+    lines += [
         f"images scored: {result.n_images}; ground-truth images without predictions (not scored): "
         f"{result.n_gt_images_without_pred} of {result.n_gt_images}",
         f"matched: {n}; unmatched predictions: {len(result.unmatched_pred)}; unmatched ground truth: "
@@ -229,7 +252,7 @@ def result_to_json(result: EvaluationResult) -> dict[str, Any]:
 CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
-    "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source",
+    "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints",
 )
 
 
