@@ -537,7 +537,8 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
         cv2.line(panel, tuple(_fixed(a)), tuple(_fixed(b)), grid, 1, cv2.LINE_AA, SHIFT)
         u = frame.uv([[x, 0.0]])[0, 0]
         if margin_left <= u <= width - 10:
-            cv2.putText(panel, f"{x:g}", (int(u - 8 * m), int(height - margin_bottom + 16 * m)), _FONT, scale, TEXT_BGR,
+            label = f"{x + 0.0:g}"  # + 0.0: the tick at -0.0 reads "0"
+            cv2.putText(panel, label, (int(u - 8 * m), int(height - margin_bottom + 16 * m)), _FONT, scale, TEXT_BGR,
                         lw, cv2.LINE_AA)
     cv2.putText(panel, "x (m, right)", (int(width / 2 - 40 * m), int(height - 4 * m)), _FONT, scale, TEXT_BGR, lw,
                 cv2.LINE_AA)
