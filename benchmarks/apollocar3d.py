@@ -24,6 +24,7 @@ pairs), alone and with the wheel centres as hubs, the configuration that failed 
 Run from the repository root (about two minutes on 2 cores):
 
     python benchmarks/apollocar3d.py [--jobs 2] [--json benchmarks/results/apollocar3d.json]
+    python benchmarks/apollocar3d.py --keypoints OTHER/apollocar3d_val_test.json   # another folder, same layout
 """
 
 from __future__ import annotations
@@ -303,17 +304,35 @@ def format_row(r: dict) -> str:
             f" | {means} | {medians}")
 
 
-def sorted_images(folder: Path) -> list:
-    """The folder's images sorted by file name (the split's order: even learning, odd comparison)."""
-    return sorted(read_apollocar3d(folder / "apollocar3d_val_dev.json", read_car_models(folder / "car_models.json")),
-                  key=lambda im: im.file_name)
+def sorted_images(folder: Path, keypoints: Path | None = None) -> list:
+    """The folder's images (of its ``apollocar3d_val_dev.json``, or of ``keypoints``) sorted by file name (the
+    split's order: even learning, odd comparison)."""
+    keypoints = keypoints or folder / "apollocar3d_val_dev.json"
+    return sorted(read_apollocar3d(keypoints, read_car_models(folder / "car_models.json")), key=lambda im: im.file_name)
 
 
-def bundled_positions_are(images: list) -> str:
-    """'in sample' when ``images`` (:func:`sorted_images`) are the ones the bundled positions were learned from,
-    else 'out of sample'."""
-    names = "\n".join(im.file_name for im in images)
-    return "in sample" if hashlib.sha256(names.encode()).hexdigest() == BUNDLED_LEARNED_ON else "out of sample"
+def bundled_positions_are(images: list, data: Path) -> str:
+    """Whether the "all" rows score the bundled positions in or out of sample: 'in sample' when ``images``
+    (:func:`sorted_images`) are the ones they were learned from, 'out of sample' when none of them is, else how
+    many are. The images they were learned from are those of ``data`` (the shared folder), when its image names
+    are the ones :data:`BUNDLED_LEARNED_ON` records."""
+    names = [im.file_name for im in images]
+    if _names_digest(names) == BUNDLED_LEARNED_ON:
+        return "in sample"
+    source = data / "apollocar3d" / "apollocar3d_val_dev.json"
+    if not source.is_file():
+        return "out of sample unless its images are some of those they were learned from (not found to compare)"
+    learned_from = {im["file_name"] for im in json.loads(source.read_text())["images"]}
+    if _names_digest(sorted(learned_from)) != BUNDLED_LEARNED_ON:
+        return f"of unknown sample ({source} is not the folder they were learned from)"
+    shared = len(set(names) & learned_from)
+    if shared == len(names):
+        return "in sample (its images are among those they were learned from)"
+    return "out of sample" if not shared else f"in sample for {shared} of its {len(names)} images"
+
+
+def _names_digest(names: list[str]) -> str:
+    return hashlib.sha256("\n".join(names).encode()).hexdigest()
 
 
 def learned_on_even(images: list, cameras) -> MappingFile:
@@ -329,16 +348,19 @@ def learned_on_even(images: list, cameras) -> MappingFile:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None, help="the shared data folder (default ../shared/data)")
+    parser.add_argument("--keypoints", type=Path, default=None,
+                        help="another ApolloCar3D keypoint file, e.g. the held-out half's, with its cameras.json and "
+                             "car_models.json beside it (default DATA/apollocar3d/apollocar3d_val_dev.json)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     parser.add_argument("--robust-loss", default=SolverOptions.robust_loss, choices=("auto", "cauchy", "none"))
     parser.add_argument("--click-sigma", type=float, default=None,
                         help="fit with this click noise (px); default: estimated from each batch, as `fit` does")
     args = parser.parse_args()
-    folder = (args.data or default_data_dir()) / "apollocar3d"
-    keypoints_path = folder / "apollocar3d_val_dev.json"
+    keypoints_path = args.keypoints or (args.data or default_data_dir()) / "apollocar3d" / "apollocar3d_val_dev.json"
+    folder = keypoints_path.parent
     if not keypoints_path.is_file():
-        print(f"no ApolloCar3D data at {folder}", file=sys.stderr)
+        print(f"no ApolloCar3D keypoint file at {keypoints_path}", file=sys.stderr)
         return 2
     options = SolverOptions(robust_loss=args.robust_loss)
     if args.click_sigma is not None:
@@ -346,12 +368,12 @@ def main() -> int:
     coco = json.loads(keypoints_path.read_text())
     counts = labelled_counts(coco)
     scored = {k for k, n in counts.items() if n >= MIN_KEYPOINTS}
-    images = sorted_images(folder)
+    images = sorted_images(folder, keypoints_path)
     halves = {"all": {im.id for im in images}, "odd": {im.id for im in images[1::2]}}
     cameras = load_cameras(folder / "cameras.json")
     learned_even = learned_on_even(images, cameras)
     names = load_mapping("apollocar3d-66")[0].keypoints
-    bundled = bundled_positions_are(images)
+    bundled = bundled_positions_are(images, args.data or default_data_dir())
     print(f"all    rows: the bundled positions on {len(images)} images, {bundled} (odd rows: positions learned on "
           f"this folder's even images, out of sample)", flush=True)
     normal_of = {"odd": road_normal(images[0::2]), "all": road_normal(images)}
