@@ -194,3 +194,60 @@ def test_a_new_file_is_fitted_with_the_default_click_noise(monkeypatch, scene, t
     session, said = _served_session(monkeypatch, str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"))
     assert "click noise: 1.5 px (default: no file yet to estimate it from); no road normal estimated" in said
     assert session.options.click_sigma == 1.5
+
+
+def test_the_page_estimates_again_as_the_file_grows(monkeypatch, tmp_path):
+    """A file of 20 vehicles gives no road normal (30 needed); once it has 40 (written by another program and
+    reloaded), the page estimates again, in the background, and fits as `fit` fits the 40-vehicle file."""
+    import cv2
+    import numpy as np
+
+    from tests.pipeline.test_road_normal import _pitched_batch
+    from toosicubix.annotations.convert import document_json
+    from toosicubix.pipeline.batch import fit_file
+
+    batch = _pitched_batch(40, np.random.default_rng(8))
+    out = tmp_path / "pitched.json"
+    out.write_text(json.dumps(document_json(batch[:20])))
+    image = tmp_path / "im000.png"
+    cv2.imwrite(str(image), np.zeros((375, 1242, 3), np.uint8))
+    session, said = _served_session(monkeypatch, str(image), "-o", str(out), "--port", "0")
+    assert "the pilot fitted at most 20 vehicles of each, 30 needed" in said
+    assert session.image_view(0)["vehicles"][0]["fit"]["road"] is None
+
+    out.write_text(json.dumps(document_json(batch)))
+    fit_file(out, tmp_path / "fitted", estimate_click_sigma=True, estimate_road_normal=True)
+    fitted = json.loads((tmp_path / "fitted" / "results.json").read_text())
+    session.reload()
+    session.wait_for_estimates(60.0)
+    view = session.image_view(0)["vehicles"][0]["fit"]
+    assert view["road"] == "estimated" and view["click_sigma_px"] == fitted["settings"]["click_sigma"]
+    np.testing.assert_array_equal(view["R_cam_vehicle"], fitted["images"][0]["vehicles"][0]["R_cam_vehicle"])
+    assert session.estimate_again_if_grown() is False  # 40 is not twice 40
+
+
+def test_the_page_estimates_again_when_the_vehicles_double(scene, tmp_path):
+    """The rule, with a stand-in estimate: from 30 vehicles on, each time they double, up to the pilot's 400."""
+    from dataclasses import replace
+
+    from toosicubix.priors.table import load_priors
+    from toosicubix.solver import SolverOptions
+    from toosicubix.web.session import Session, load_cameras
+
+    image, cameras = scene
+    asked = []
+
+    def estimate():
+        asked.append(session._vehicle_count())
+        return replace(SolverOptions(), click_sigma=0.5 + len(asked)), None
+
+    session = Session([image], tmp_path / "a.json", load_cameras(cameras, [image.stem]), load_priors(),
+                      estimate=estimate)
+    for _ in range(130):
+        session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
+        session.wait_for_estimates(10.0)
+    assert asked == [30, 60, 120]
+    assert session.options.click_sigma == 3.5  # the last estimate's
+    session._estimated_from = 400
+    session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
+    assert session.estimate_again_if_grown() is False

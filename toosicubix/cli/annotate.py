@@ -36,7 +36,8 @@ from toosicubix.cli.options import BadInput, announced_estimates, parse_normal
                    "vehicles stand on the road, which fixes their scale. Replaces --kitti-ground's height.")
 @click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
               help="Click noise in pixels the page's sigmas and next clicks are for. Not given: estimated at start "
-                   "from the file's vehicles as `fit` estimates it (1.5 when the file has too few).")
+                   "from the file's vehicles as `fit` estimates it (1.5 when the file has too few), and again as "
+                   "they grow.")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
@@ -48,7 +49,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
     yaw and depth sigmas and the parts to click next. When the file already has vehicles, the click noise and
     each camera's road normal are first estimated from them, as `fit` estimates them (the road normal only for
-    images without a ground block of their own, and never written to the file). A click left unnamed takes the
+    images without a ground block of their own, and never written to the file); they are estimated again, in
+    the background, each time the file's vehicles double from 30 on, up to the 400 that `fit`'s pilot takes
+    (each fit on the page says what it was made for). A click left unnamed takes the
     name of the nearest predicted part once the named clicks fix a cuboid. The file is written after every
     change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
     after a reload).
@@ -78,9 +81,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
-        options, road_grounds = _batch_settings(out, priors, click_sigma, estimate_road)
+        options, road_grounds, estimate = _batch_settings(out, priors, click_sigma, estimate_road)
         session = Session(list(images), out, cameras, priors, prototype, options, ground=ground,
-                          road_grounds=road_grounds)
+                          road_grounds=road_grounds, estimate=estimate)
     except (InputFileError, ApiError) as exc:
         raise BadInput(str(exc)) from None
     try:
@@ -100,18 +103,28 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
 
 def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road: bool):
     """The solver settings and per-camera road grounds (when ``estimate_road``) that `fit` would estimate for the
-    file ``out`` (none when it does not exist yet); says on stderr what they are."""
+    file ``out`` (none when it does not exist yet), saying on stderr what they are, and the function that estimates
+    them again from the file as it grows (None when nothing is estimated)."""
     from dataclasses import replace
 
     from toosicubix.pipeline.batch import estimated_grounds
+    from toosicubix.pipeline.road_normal import MIN_VEHICLES
     from toosicubix.solver import SolverOptions
 
     options = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
+    if click_sigma is not None and not estimate_road:
+        click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
+        return options, None, None
+
+    def estimate():
+        findings = announced_estimates(out, priors, options, click_sigma is None, estimate_road)
+        return findings.options, estimated_grounds(findings.road_normals)
+
     if not out.is_file():
         source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
-        click.echo(f"click noise: {options.click_sigma:g} px ({source}); no road normal estimated", err=True)
-        return options, None
-    findings = announced_estimates(out, priors, options, click_sigma is None, estimate_road)
-    if findings is None:
-        return options, None
-    return findings.options, estimated_grounds(findings.road_normals)
+        what = "the road normal" if click_sigma is not None else "both"
+        click.echo(f"click noise: {options.click_sigma:g} px ({source}); no road normal estimated yet (the page "
+                   f"estimates {what} as `fit` does once the file has {MIN_VEHICLES} vehicles, and again as they "
+                   "double)", err=True)
+        return options, None, estimate
+    return (*estimate(), estimate)

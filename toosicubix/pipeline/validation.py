@@ -159,8 +159,8 @@ class ValidationReport:
         tail = (f"{self.source}: {s['vehicles']} vehicles: {s['well_determined']} well determined, "
                 f"{s['not_well_determined']} not, {s['failed']} failed (well determined: yaw sigma <= "
                 f"{t.max_yaw_sigma_deg:g} deg, depth sigma <= {100 * t.max_depth_sigma_rel:g} %"
-                f"{'' if t.allow_ambiguous else ', not ambiguous'}; for clicks off by {self.click_sigma:.3g} px on parts "
-                f"{self.part_sigma:g} m off the cuboid model)")
+                f"{'' if t.allow_ambiguous else ', not ambiguous'}; for clicks off by {self.click_sigma:.3g} px on "
+                f"parts {self.part_sigma:g} m off the cuboid model)")
         return "\n\n".join([*blocks, tail]) + "\n"
 
 

@@ -30,6 +30,7 @@ import math
 import os
 import re
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -54,7 +55,8 @@ from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import keypoint_faces
 from toosicubix.pipeline.batch import check_prototypes, fit_one
-from toosicubix.pipeline.road_normal import camera_key
+from toosicubix.pipeline.click_noise import PILOT_VEHICLES
+from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.priors.table import Priors
 from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
@@ -230,17 +232,23 @@ class Session:
     road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block of the road
         normal ``fit`` estimates for it (:func:`toosicubix.pipeline.batch.file_estimates`): the page fits that
         camera's images without a ground block of their own on it, as ``fit`` does; never written to the file
+    estimate : what ``fit`` would estimate from the file as it is on disk, ``(options, road_grounds)``, or None
+        when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are taken
+        to be its answer for the file as it was read; as the file grows, the page estimates again, in the
+        background (:meth:`estimate_again_if_grown`)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
                  thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None,
-                 road_grounds: dict[tuple, dict[str, Any]] | None = None):
+                 road_grounds: dict[tuple, dict[str, Any]] | None = None,
+                 estimate: Callable[[], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None):
         self.out = Path(out)
         self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
         self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
-        self._road_grounds = {key: replace(ground_from_schema(parse_ground_block(block, "estimated road normal")),
-                                           from_batch=True) for key, block in (road_grounds or {}).items()}
+        self._road_grounds = _road_grounds(road_grounds)
+        self._estimate = estimate
+        self._estimating: threading.Thread | None = None
         self.priors = priors
         if prototype not in priors:
             raise ApiError(f"unknown prototype {prototype!r}; known: {', '.join(sorted(priors))}")
@@ -261,6 +269,7 @@ class Session:
         self._cameras = cameras
         self.revision = 0
         self._load()
+        self._estimated_from = self._vehicle_count()  # the vehicles the given options were estimated from
 
     # -- loading and saving ------------------------------------------------------------------------------------
 
@@ -292,6 +301,50 @@ class Session:
                 vehicles, file, block, ground = [], self._relative(path), self._ground_block, self._ground
             self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles))
         self._restore_extras()
+
+    def _vehicle_count(self) -> int:
+        """The vehicles of the file as this session has it (served images and the others)."""
+        return (sum(len(im.vehicles) for im in self.images)
+                + sum(len(d.get("vehicles") or []) for d in self._others))
+
+    # -- estimating again as the file grows ---------------------------------------------------------------------
+
+    def estimate_again_if_grown(self) -> bool:
+        """Start estimating the click noise and road normals again from the file, in a background thread, when
+        its vehicles have doubled since the last estimate and number at least :data:`MIN_VEHICLES` (what a
+        camera's road normal needs), until an estimate has had as many as ``fit``'s pilot takes
+        (:data:`PILOT_VEHICLES`). When it is done, the page fits with the new estimates (each fit says which it
+        was made for). Called after every saved change; True when it started one."""
+        with self._lock:
+            if self._estimate is None or (self._estimating is not None and self._estimating.is_alive()):
+                return False
+            n = self._vehicle_count()
+            if self._estimated_from >= PILOT_VEHICLES or n < max(MIN_VEHICLES, 2 * self._estimated_from):
+                return False
+            self._estimating = threading.Thread(target=self._estimate_again, args=(n,), name="estimates",
+                                                daemon=True)
+            self._estimating.start()
+            return True
+
+    def _estimate_again(self, vehicles: int) -> None:
+        try:
+            options, road_grounds = self._estimate()  # type: ignore[misc]
+            grounds = _road_grounds(road_grounds)
+        except (InputFileError, OSError, ValueError):
+            # The file changed on disk into something unreadable: keep the estimates there are; the next save
+            # (which reads it first) says what happened.
+            with self._lock:
+                self._estimated_from = vehicles
+            return
+        with self._lock:
+            self.options, self._road_grounds, self._estimated_from = options, grounds, vehicles
+            self._fits.clear()
+
+    def wait_for_estimates(self, timeout: float | None = None) -> None:
+        """Wait until an estimate started by :meth:`estimate_again_if_grown` is done (tests, shutting down)."""
+        thread = self._estimating
+        if thread is not None:
+            thread.join(timeout)
 
     def _relative(self, path: Path) -> str:
         return Path(os.path.relpath(path.resolve(), self.out.resolve().parent)).as_posix()
@@ -532,6 +585,7 @@ class Session:
                 image.undo.append(before)
                 del image.undo[:-UNDO_DEPTH]
             self.revision += 1
+            self.estimate_again_if_grown()
             return {**self.image_view(index), "op": op, **outcome, "auto_named": auto}
 
     def save(self, request: Any) -> dict[str, Any]:
@@ -571,6 +625,7 @@ class Session:
             self._load()
             self._fits.clear()
             self.revision += 1
+            self.estimate_again_if_grown()
             return self.summary()
 
     # -- the operations (under the lock; they may raise ApiError before changing anything) ----------------------
@@ -683,6 +738,12 @@ class Session:
 
 
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
+
+
+def _road_grounds(blocks: dict[tuple, dict[str, Any]] | None) -> dict[tuple, GroundPlane]:
+    """Per camera, the ground plane of an estimated road normal's block (the batch's, never the file's)."""
+    return {key: replace(ground_from_schema(parse_ground_block(block, "estimated road normal")), from_batch=True)
+            for key, block in (blocks or {}).items()}
 
 
 def _road_kind(ground: GroundPlane | None) -> str | None:
