@@ -237,8 +237,8 @@ def test_the_page_estimates_again_when_the_vehicles_double(scene, tmp_path):
     image, cameras = scene
     asked = []
 
-    def estimate():
-        asked.append(session._vehicle_count())
+    def estimate(path):
+        asked.append(len(json.loads(path.read_text())["images"][0]["vehicles"]))  # the session's snapshot
         return replace(SolverOptions(), click_sigma=0.5 + len(asked)), None
 
     session = Session([image], tmp_path / "a.json", load_cameras(cameras, [image.stem]), load_priors(),

@@ -116,8 +116,8 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
         click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
         return options, None, None
 
-    def estimate():
-        findings = announced_estimates(out, priors, options, click_sigma is None, estimate_road)
+    def estimate(path: Path):
+        findings = announced_estimates(path, priors, options, click_sigma is None, estimate_road, shown=out)
         return findings.options, estimated_grounds(findings.road_normals)
 
     if not out.is_file():
@@ -127,4 +127,4 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
                    f"estimates {what} as `fit` does once the file has {MIN_VEHICLES} vehicles, and again as they "
                    "double)", err=True)
         return options, None, estimate
-    return (*estimate(), estimate)
+    return (*estimate(out), estimate)

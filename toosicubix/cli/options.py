@@ -259,11 +259,12 @@ def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[flo
 
 
 def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimate_click_sigma: bool,
-                        estimate_road_normal: bool) -> Any:
+                        estimate_road_normal: bool, shown: Path | None = None) -> Any:
     """What `fit` would estimate from the vehicles of the annotation file ``path`` before fitting it (the pilot,
-    :func:`toosicubix.pipeline.batch.file_estimates`), saying on stderr what is estimated and what was found; None,
-    with a line saying so, when nothing is asked. For the commands that fit single vehicles as `fit` fits them
-    (annotate, tune)."""
+    :func:`toosicubix.pipeline.batch.file_estimates`), saying on stderr what is estimated (from the file named
+    ``shown``, default ``path``: annotate estimates from a snapshot of its file) and what was found; None, with a
+    line saying so, when nothing is asked. For the commands that fit single vehicles as `fit` fits them (annotate,
+    tune)."""
     from toosicubix.pipeline.batch import file_estimates
 
     wanted = [what for what, asked in (("the click noise", estimate_click_sigma),
@@ -271,7 +272,7 @@ def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimat
     if not wanted:
         click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
         return None
-    click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {path}, as `fit` does ...", err=True)
+    click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {shown or path}, as `fit` does ...", err=True)
     findings = file_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal)
     for line in findings.describe():
         click.echo(line, err=True)

@@ -29,6 +29,7 @@ import json
 import math
 import os
 import re
+import tempfile
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -232,17 +233,17 @@ class Session:
     road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block of the road
         normal ``fit`` estimates for it (:func:`toosicubix.pipeline.batch.file_estimates`): the page fits that
         camera's images without a ground block of their own on it, as ``fit`` does; never written to the file
-    estimate : what ``fit`` would estimate from the file as it is on disk, ``(options, road_grounds)``, or None
-        when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are taken
-        to be its answer for the file as it was read; as the file grows, the page estimates again, in the
-        background (:meth:`estimate_again_if_grown`)
+    estimate : what ``fit`` would estimate from an annotation file (its path), ``(options, road_grounds)``, or
+        None when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are
+        taken to be its answer for the file as it was read; as the file grows, the page estimates again from a
+        snapshot of its state, in the background (:meth:`estimate_again_if_grown`)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
                  thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None,
                  road_grounds: dict[tuple, dict[str, Any]] | None = None,
-                 estimate: Callable[[], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None):
+                 estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None):
         self.out = Path(out)
         self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
         self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
@@ -321,21 +322,26 @@ class Session:
             n = self._vehicle_count()
             if self._estimated_from >= PILOT_VEHICLES or n < max(MIN_VEHICLES, 2 * self._estimated_from):
                 return False
-            self._estimating = threading.Thread(target=self._estimate_again, args=(n,), name="estimates",
-                                                daemon=True)
+            # A snapshot of the file as the session has it: the estimate reads a consistent file, whatever
+            # another program does to the real one meanwhile.
+            with tempfile.NamedTemporaryFile("w", suffix=".json", prefix="toosicubix-annotate-",
+                                             delete=False) as snapshot:
+                json.dump(self.document(), snapshot, allow_nan=False)
+            self._estimating = threading.Thread(target=self._estimate_again, args=(Path(snapshot.name), n),
+                                                name="estimates", daemon=True)
             self._estimating.start()
             return True
 
-    def _estimate_again(self, vehicles: int) -> None:
+    def _estimate_again(self, snapshot: Path, vehicles: int) -> None:
         try:
-            options, road_grounds = self._estimate()  # type: ignore[misc]
+            options, road_grounds = self._estimate(snapshot)  # type: ignore[misc]
             grounds = _road_grounds(road_grounds)
-        except (InputFileError, OSError, ValueError):
-            # The file changed on disk into something unreadable: keep the estimates there are; the next save
-            # (which reads it first) says what happened.
+        except InputFileError:  # e.g. a prototype another program wrote into the file: keep the estimates there are
             with self._lock:
                 self._estimated_from = vehicles
             return
+        finally:
+            snapshot.unlink(missing_ok=True)
         with self._lock:
             self.options, self._road_grounds, self._estimated_from = options, grounds, vehicles
             self._fits.clear()
