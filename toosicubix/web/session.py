@@ -311,11 +311,11 @@ class Session:
     # -- estimating again as the file grows ---------------------------------------------------------------------
 
     def estimate_again_if_grown(self) -> bool:
-        """Start estimating the click noise and road normals again from the file, in a background thread, when
-        its vehicles have doubled since the last estimate and number at least :data:`MIN_VEHICLES` (what a
-        camera's road normal needs), until an estimate has had as many as ``fit``'s pilot takes
-        (:data:`PILOT_VEHICLES`). When it is done, the page fits with the new estimates (each fit says which it
-        was made for). Called after every saved change; True when it started one."""
+        """Start estimating the click noise and road normals again from the file as this session has it, in a
+        background thread, when its vehicles have doubled since the last estimate and number at least
+        :data:`MIN_VEHICLES` (what a camera's road normal needs), until an estimate has had as many as ``fit``'s
+        pilot takes (:data:`PILOT_VEHICLES`). When it is done, the page fits with the new estimates (each fit says
+        which it was made for). Called after every saved change; True when it started one."""
         with self._lock:
             if self._estimate is None or (self._estimating is not None and self._estimating.is_alive()):
                 return False
@@ -327,14 +327,14 @@ class Session:
             with tempfile.NamedTemporaryFile("w", suffix=".json", prefix="toosicubix-annotate-",
                                              delete=False) as snapshot:
                 json.dump(self.document(), snapshot, allow_nan=False)
-            self._estimating = threading.Thread(target=self._estimate_again, args=(Path(snapshot.name), n),
-                                                name="estimates", daemon=True)
+            self._estimating = threading.Thread(target=self._estimate_again, name="estimates", daemon=True,
+                                                args=(self._estimate, Path(snapshot.name), n))
             self._estimating.start()
             return True
 
-    def _estimate_again(self, snapshot: Path, vehicles: int) -> None:
+    def _estimate_again(self, estimate: Callable, snapshot: Path, vehicles: int) -> None:
         try:
-            options, road_grounds = self._estimate(snapshot)  # type: ignore[misc]
+            options, road_grounds = estimate(snapshot)
             grounds = _road_grounds(road_grounds)
         except InputFileError:  # e.g. a prototype another program wrote into the file: keep the estimates there are
             with self._lock:
