@@ -103,7 +103,7 @@ class GroundTruthSource:
 
     Attributes
     ----------
-    kind : 'kitti', 'kitti-tracking' or 'cityscapes'
+    kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
     root : the folder given
     default_classes : classes scored when none are asked for
     occlusion_kind : 'level' (KITTI 0-3), 'fraction' (Cityscapes), or None (no occlusion in this ground truth)
