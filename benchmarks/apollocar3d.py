@@ -148,12 +148,15 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     for m in result.matched:
         if m.pred_id not in scored:
             continue
-        o = {"id": m.pred_id, "depth": m.depth, "keypoints": counts[m.pred_id], **{
+        o = {"id": m.pred_id, "depth": m.depth, "keypoints": counts[m.pred_id], "type": m.subtype, **{
             "iou": m.metrics.iou, "siou": m.metrics.siou, "e_r_deg": m.metrics.e_r_deg, "e_t": m.metrics.e_t,
             "e_d": m.metrics.e_d, "e_comb": m.metrics.e_comb}}
         fit = fits[(m.image_id, m.pred_id)]
         sigma = (fit.get("sigma") or {}).get("yaw_deg")
         o["yaw_error_deg"], o["yaw_sigma_deg"] = m.metrics.e_yaw_deg, sigma  # the yaw's error alone, >= 0
+        z_pred, z_gt = float(m.pred.t_cam_vehicle[2]), float(m.gt.t_cam_vehicle[2])
+        o["depth_error_rel"] = (z_pred - z_gt) / z_gt  # signed: < 0 fitted nearer than the ground truth
+        o["depth_error_m"], o["depth_sigma_m"] = abs(z_pred - z_gt), (fit.get("sigma") or {}).get("depth_m")
         up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
         o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
         o["downweighted"] = len(fit.get("downweighted", []))
@@ -164,6 +167,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     by_depth = {(f"{lo:g}+ m" if np.isinf(hi) else f"{lo:g}-{hi:g} m"): stats(
         [o for o in objects if lo <= o["depth"] < hi]) for lo, hi in DEPTH_BINS}
     within = calibration(objects)
+    depth_within = calibration(objects, "depth")
     agreeing = [o for o in objects if o["id"] not in contradicting]
     return {
         "row": row.label, "half": half, "mapping": mapping.name, "options": list(row.options), "ground": ground,
@@ -171,6 +175,8 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         "seconds": seconds, "import": summary.lines(), **stats(objects),
         "by_keypoints": by_kp, "by_depth": by_depth,
         "yaw_within_1_sigma": within[0], "yaw_within_2_sigma": within[1],
+        "depth_within_1_sigma": depth_within[0], "depth_within_2_sigma": depth_within[1],
+        "depth_error_rel_median_by_type": depth_bias(objects),
         "rotation_parts": rotation_parts(objects),
         "ground_truth_agrees": {"cars": len(agreeing), "contradicting": len(objects) - len(agreeing),
                                 **stats(agreeing), "yaw_within_1_sigma": calibration(agreeing)[0],
@@ -197,9 +203,17 @@ def rotation_parts(objects: list[dict]) -> dict:
     return out
 
 
-def calibration(objects: list[dict]) -> tuple[float | None, float | None]:
-    """The shares of cars whose yaw error is within one and two predicted sigmas."""
-    ratio = np.array([o["yaw_error_deg"] / o["yaw_sigma_deg"] for o in objects if o["yaw_sigma_deg"]])
+def depth_bias(objects: list[dict]) -> dict[str, float]:
+    """Per car-model type (``2x``, ``3x``, ``SUV``), the median signed relative depth error: < 0 when the fits put
+    its cars nearer than the ground truth (the prototype's sizes smaller than the type's CAD models)."""
+    types = sorted({o["type"] for o in objects})
+    return {t: float(np.median([o["depth_error_rel"] for o in objects if o["type"] == t])) for t in types}
+
+
+def calibration(objects: list[dict], of: str = "yaw") -> tuple[float | None, float | None]:
+    """The shares of cars whose yaw (or depth: ``of="depth"``) error is within one and two predicted sigmas."""
+    error, sigma = ("yaw_error_deg", "yaw_sigma_deg") if of == "yaw" else ("depth_error_m", "depth_sigma_m")
+    ratio = np.array([o[error] / o[sigma] for o in objects if o[sigma]])
     if not len(ratio):
         return None, None
     return float(np.mean(ratio <= 1)), float(np.mean(ratio <= 2))
@@ -410,6 +424,11 @@ def main() -> int:
                           f"{100 * result['yaw_within_2_sigma']:.1f} %; E_R > 30 deg: {result['e_r_over_30_deg']}; "
                           f"click noise {result['click_noise']['sigma_px']:.2f} px ({result['click_noise']['source']})"
                           + (f"; misfits {result['misfits']}" if row.misfit_level is not None else ""),
+                          flush=True)
+                    bias = ", ".join(f"{t} {100 * v:+.1f} %"
+                                     for t, v in result["depth_error_rel_median_by_type"].items())
+                    print(f"{'':<6} depth within 1 / 2 predicted sigmas: {100 * result['depth_within_1_sigma']:.1f} "
+                          f"% / {100 * result['depth_within_2_sigma']:.1f} %; median depth error by car type: {bias}",
                           flush=True)
                 agree = result["ground_truth_agrees"]
                 if agree["yaw_within_1_sigma"] is None:
