@@ -78,6 +78,35 @@ def test_cityscapes_prototypes_map_to_kitti_types(tmp_path):
     assert "warning: Mini Truck: only 1 sample" in result.stderr
 
 
+def test_apollocar3d_cars_give_priors_per_prototype_of_their_type(tmp_path):
+    # Three saloons of model 0 and two of model 1 (the geometric median is model 0's extents: a majority there),
+    # two hatchbacks of model 2; each labelled car counts once, with its car model's extents.
+    models = {"0": {"type": "3x", "length": 4.8, "width_body": 1.8, "height": 1.45},
+              "1": {"type": "3x", "length": 4.6, "width_body": 1.75, "height": 1.5},
+              "2": {"type": "2x", "length": 4.2, "width_body": 1.72, "height": 1.52}}
+    cars = [0, 0, 0, 1, 1, 2, 2]
+    coco = {"images": [{"id": 1, "file_name": "a_Camera_5.jpg"}], "categories": [],
+            "annotations": [{"id": k, "image_id": 1, "category_id": m, "bbox": [10, 20, 30, 40],
+                             "keypoints": [0, 0, 0] * 66, "pose": [3.14, 0.0, 0.0, 0.0, 1.0, 20.0 + 5 * k]}
+                            for k, m in enumerate(cars)]}
+    keypoints, car_models = tmp_path / "kp.json", tmp_path / "models.json"
+    keypoints.write_text(json.dumps(coco))
+    car_models.write_text(json.dumps(models))
+    out = tmp_path / "priors.json"
+    result = run("--apollocar3d", keypoints, "--car-models", car_models, "--min-samples", "2", "-o", out)
+    assert result.exit_code == 0, result.output
+    doc = load_priors_file(out)
+    assert sorted(doc.prototypes) == ["Car", "Sedan"]
+    sedan = doc.prototypes["Sedan"]
+    assert sedan.n == 5 and sedan.kitti_type == "Car"
+    # The geometric median is the majority point, found as a data point by its optimality test (exact; the file
+    # keeps what JSON rounds to).
+    assert sedan.mean == pytest.approx([4.8, 1.8, 1.45], abs=1e-9)
+    assert doc.prototypes["Car"].n == 2
+    assert sedan.source.startswith(f"toosicubix priors --apollocar3d {keypoints} --car-models {car_models}: ")
+    assert "Sedan: n=5 cars" in result.stderr
+
+
 def test_quiet_prints_nothing(tmp_path, tracking):
     result = run("--kitti-tracking", tracking, "-q", "-o", tmp_path / "p.json")
     assert result.exit_code == 0 and result.stderr == ""
@@ -92,6 +121,7 @@ def test_quiet_prints_nothing(tmp_path, tracking):
     (["--kitti-tracking", "{gt}", "--classes", " , "], "expected at least one class name"),
     (["--kitti-tracking", "{gt}", "--classes", "Tram"], "no class gave a prior"),
     (["--kitti-tracking", "{tmp}/absent"], "ground-truth folder not found"),
+    (["--kitti-tracking", "{gt}", "--car-models", "{tmp}/models.json"], "--car-models goes with --apollocar3d only"),
 ])
 def test_bad_input_exits_2(tmp_path, tracking, args, message):
     args = [a.format(gt=tracking, tmp=tmp_path) for a in args]

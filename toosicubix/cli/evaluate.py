@@ -6,15 +6,14 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, parse_classes
+from toosicubix.cli.options import BadInput, GroundTruth, car_models_option, ground_truth_options, parse_classes
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
 @click.command("eval")
 @click.argument("out", required=False, default=DEFAULT_OUTPUT_DIR, type=click.Path(file_okay=False, path_type=Path))
 @ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d")
-@click.option("--car-models", "car_models_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="With --apollocar3d: ApolloCar3D's car_models.json [default: beside the keypoint file].")
+@car_models_option
 @click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
 @click.option("--classes", default=None,
@@ -54,8 +53,6 @@ def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | N
     from toosicubix.evaluation import EvalOptions, evaluate_folder, format_report, write_csv, write_json
 
     options = EvalOptions(min_iou=min_iou, classes=parse_classes(classes))
-    if car_models_path is not None and ground_truth.kind != "apollocar3d":
-        raise click.UsageError("--car-models goes with --apollocar3d only")
     source_options = {"car_models": car_models_path} if car_models_path is not None else {}
     result = evaluate_folder(out, ground_truth.kind, ground_truth.root, options, **source_options)
     if not quiet:

@@ -149,6 +149,22 @@ def ground_truth_options(*kinds: str, required: bool = True) -> Callable:
     return decorate
 
 
+def car_models_option(command: Callable) -> Callable:
+    """Add ``--car-models`` (ApolloCar3D's ``car_models.json``) to a command with ``--apollocar3d``; put it right
+    below :func:`ground_truth_options`. The command receives ``car_models_path``, refused with another ground
+    truth."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, ground_truth: GroundTruth | None, car_models_path: Path | None, **kwargs: Any) -> Any:
+        if car_models_path is not None and (ground_truth is None or ground_truth.kind != "apollocar3d"):
+            raise click.UsageError("--car-models goes with --apollocar3d only")
+        return command(*args, ground_truth=ground_truth, car_models_path=car_models_path, **kwargs)
+
+    return click.option("--car-models", "car_models_path", type=click.Path(dir_okay=False, path_type=Path),
+                        default=None, help="With --apollocar3d: ApolloCar3D's car_models.json [default: beside the "
+                                           "keypoint file].")(wrapper)
+
+
 # --- fitting -----------------------------------------------------------------------------------------------
 
 _FITTING_OPTIONS = [

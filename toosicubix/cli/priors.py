@@ -6,16 +6,25 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, parse_classes, parse_sequences
+from toosicubix.cli.options import (
+    BadInput,
+    GroundTruth,
+    car_models_option,
+    ground_truth_options,
+    parse_classes,
+    parse_sequences,
+)
 
 
 @click.command("priors")
-@ground_truth_options()
+@ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d")
+@car_models_option
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Priors file to write (JSON); may be the --base file.")
 @click.option("--classes", default=None,
               help="Comma-separated classes, case-insensitive [default: Car,Van,Truck for KITTI; every vehicle "
-                   "prototype type found for Cityscapes].")
+                   "prototype type found for Cityscapes; for ApolloCar3D the prototypes of its car-model types: Car "
+                   "(hatchbacks), Sedan, SUV].")
 @click.option("--sequences", default=None, help="KITTI tracking only: e.g. 0000-0009 or 0001,0005 (default: all).")
 @click.option("--min-samples", type=click.IntRange(min=1), default=20, show_default=True,
               help="Classes with fewer samples are written but named in a warning; fewer than 2 are skipped.")
@@ -26,17 +35,19 @@ from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, 
               help="paper: geometric median of the outer products divided by c (Gaussian-consistent for isotropic "
                    "spread); whitened: its fixed point in whitened coordinates (consistent for any Gaussian).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary or warnings on stderr.")
-def priors_command(ground_truth: GroundTruth, out_path: Path, classes: str | None, sequences: str | None,
-                   min_samples: int, base_path: Path | None, method: str, quiet: bool) -> None:
+def priors_command(ground_truth: GroundTruth, car_models_path: Path | None, out_path: Path, classes: str | None,
+                   sequences: str | None, min_samples: int, base_path: Path | None, method: str, quiet: bool) -> None:
     """Estimate Gaussian size priors per class from ground-truth cuboids, as the paper does.
 
-    Per class (KITTI type, or Cityscapes 3D prototype type): mean = geometric median of the dimension
-    vectors (dx, dy, dz) = (length, width, height); covariance = geometric median of the outer products
-    (d - mean)(d - mean)^T divided by the Gaussian consistency factor c = 0.586. KITTI object labels count
-    every object once, KITTI tracking every track once, Cityscapes 3D groups boxes by their prototype
-    `type` name (e.g. 'Mid Size Car'). Writes a priors file for `toosicubix fit --priors`; every entry
-    records its data, its sample count and the method. Per-class counts and means go to stderr, with a
-    warning naming every class with fewer than --min-samples samples.
+    Per class (KITTI type, Cityscapes 3D prototype type, ApolloCar3D prototype): mean = geometric median of
+    the dimension vectors (dx, dy, dz) = (length, width, height); covariance = geometric median of the outer
+    products (d - mean)(d - mean)^T divided by the Gaussian consistency factor c = 0.586. KITTI object labels
+    count every object once, KITTI tracking every track once, Cityscapes 3D groups boxes by their prototype
+    `type` name (e.g. 'Mid Size Car'), ApolloCar3D counts every labelled car once with its car model's
+    extents, grouped by the prototype its car-model type gets on import (hatchback Car, saloon Sedan, SUV).
+    Writes a priors file for `toosicubix fit --priors`; every entry records its data, its sample count and
+    the method. Per-class counts and means go to stderr, with a warning naming every class with fewer than
+    --min-samples samples.
 
     Exit code 0 on success, 2 for a missing folder, a malformed label file (file and line) or no estimable class.
 
@@ -44,6 +55,7 @@ def priors_command(ground_truth: GroundTruth, out_path: Path, classes: str | Non
     Example:
       toosicubix priors --kitti-tracking data/kitti_tracking --sequences 0000-0009 -o priors.json
       toosicubix priors --cityscapes gtBbox3d/train --base priors.json -o priors.json
+      toosicubix priors --apollocar3d apollo_train.json --car-models car_models.json -o apollo-priors.json
     """
     from toosicubix.annotations.schema import load_priors_file
     from toosicubix.priors.estimation import (
@@ -58,9 +70,10 @@ def priors_command(ground_truth: GroundTruth, out_path: Path, classes: str | Non
         raise click.UsageError("--sequences applies to --kitti-tracking only")
     sequence_names = parse_sequences(sequences)
     class_list = parse_classes(classes)
-    command = priors_command_line(ground_truth.kind, ground_truth.root, class_list, sequence_names, method)
+    command = priors_command_line(ground_truth.kind, ground_truth.root, class_list, sequence_names, method,
+                                  car_models_path)
     base = load_priors_file(base_path) if base_path is not None else None
-    samples = collect_dimensions(ground_truth.kind, ground_truth.root, class_list, sequence_names)
+    samples = collect_dimensions(ground_truth.kind, ground_truth.root, class_list, sequence_names, car_models_path)
     estimates = estimate_priors(samples, min_samples=min_samples, method=method, command=command)  # type: ignore[arg-type]
     if not quiet:
         for warning in estimates.warnings:

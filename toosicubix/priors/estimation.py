@@ -230,8 +230,8 @@ class DimensionSamples:
     ----------
     dimensions : class name (as spelled in the data) -> (n, 3) ``(dx, dy, dz)`` metres, one row per
         object (KITTI object, Cityscapes) or per track (KITTI tracking)
-    kind : 'kitti', 'kitti-tracking' or 'cityscapes'
-    root : the folder read, as given
+    kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
+    root : the folder (ApolloCar3D: the keypoint file) read, as given
     unit : 'object' or 'track': what one row stands for
     sequences : the tracking sequences read, or None (all, or not tracking)
     missing : requested classes without any sample
@@ -250,7 +250,9 @@ class DimensionSamples:
         """What was read, for an entry's provenance: e.g. 'KITTI tracking labels in DIR, sequences
         0000-0009, one sample per track'."""
         what = {"kitti": "KITTI object labels", "kitti-tracking": "KITTI tracking labels",
-                "cityscapes": "Cityscapes 3D gtBbox3d boxes grouped by their prototype type"}[self.kind]
+                "cityscapes": "Cityscapes 3D gtBbox3d boxes grouped by their prototype type",
+                "apollocar3d": "ApolloCar3D cars (their car models' extents) grouped by the prototype of their "
+                               "car-model type"}[self.kind]
         text = f"{what} in {self.root}"
         if self.kind == "kitti-tracking":
             text += f", sequences {format_sequences(self.sequences) if self.sequences is not None else 'all'}"
@@ -273,9 +275,12 @@ def format_sequences(names: Sequence[str]) -> str:
 
 
 def priors_command_line(kind: str, root: str | Path, classes: Sequence[str] | None = None,
-                        sequences: Sequence[str] | None = None, method: str = "paper") -> str:
+                        sequences: Sequence[str] | None = None, method: str = "paper",
+                        car_models: str | Path | None = None) -> str:
     """The ``toosicubix priors`` command that estimates these priors, recorded in every entry's source."""
     command = f"toosicubix priors --{kind} {root}"
+    if car_models is not None:
+        command += f" --car-models {car_models}"
     if sequences is not None:
         command += f" --sequences {format_sequences(sequences)}"
     if classes is not None:
@@ -286,16 +291,20 @@ def priors_command_line(kind: str, root: str | Path, classes: Sequence[str] | No
 
 
 def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | None = None,
-                       sequences: Sequence[str] | None = None) -> DimensionSamples:
+                       sequences: Sequence[str] | None = None, car_models: str | Path | None = None
+                       ) -> DimensionSamples:
     """Read the dimensions of every object of the asked classes from a ground-truth folder.
 
     Parameters
     ----------
-    kind : 'kitti' (object labels), 'kitti-tracking' or 'cityscapes'
-    root : the folder, laid out as :mod:`toosicubix.formats.datasets` describes
-    classes : class names, matched case-insensitively (KITTI ``type``, Cityscapes ``3d.type``); default
-        Car, Van, Truck for KITTI and every prototype ``type`` of a vehicle box for Cityscapes
+    kind : 'kitti' (object labels), 'kitti-tracking', 'cityscapes' or 'apollocar3d'
+    root : the folder, laid out as :mod:`toosicubix.formats.datasets` describes; ApolloCar3D: its keypoint file
+    classes : class names, matched case-insensitively (KITTI ``type``, Cityscapes ``3d.type``, ApolloCar3D the
+        prototype of the car-model type, :data:`toosicubix.formats.apollocar3d.PROTOTYPE_OF_TYPE`); default
+        Car, Van, Truck for KITTI and every class found for the others
     sequences : tracking only: sequence names such as '0003'; default all
+    car_models : ApolloCar3D only: its ``car_models.json`` (default: beside the keypoint file); one sample per
+        labelled car, the extents of its car model
 
     Returns
     -------
@@ -313,6 +322,8 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
     root = Path(root)
     if sequences is not None and kind != "kitti-tracking":
         raise PriorEstimationError("sequences can only be chosen for KITTI tracking labels")
+    if car_models is not None and kind != "apollocar3d":
+        raise PriorEstimationError("car models go with ApolloCar3D only")
     if kind == "kitti":
         rows, notes, unit = _kitti_object_rows(root), [], "object"
     elif kind == "kitti-tracking":
@@ -320,10 +331,13 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
         unit = "track"
     elif kind == "cityscapes":
         rows, notes, unit = _cityscapes_rows(root), [], "object"
+    elif kind == "apollocar3d":
+        rows, notes, unit = _apollocar3d_rows(root, car_models), [], "car"
     else:
-        raise PriorEstimationError(f"unknown ground-truth kind {kind!r}; expected kitti, kitti-tracking or cityscapes")
+        raise PriorEstimationError(f"unknown ground-truth kind {kind!r}; expected kitti, kitti-tracking, cityscapes "
+                                   "or apollocar3d")
     if classes is None:
-        if kind == "cityscapes":
+        if kind in ("cityscapes", "apollocar3d"):
             classes = sorted({name for name, _ in rows})
         else:
             classes = KITTI_DEFAULT_CLASSES
@@ -390,14 +404,24 @@ def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
     return rows
 
 
+def _apollocar3d_rows(path: Path, car_models: str | Path | None) -> list[tuple[str, np.ndarray]]:
+    from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, read_apollocar3d, read_car_models
+
+    models = read_car_models(car_models if car_models is not None else path.parent / "car_models.json")
+    return [(PROTOTYPE_OF_TYPE.get(car.model.type, "Car"), car.model.dimensions)
+            for image in read_apollocar3d(path, models) for car in image.cars]
+
+
 # --- priors per class --------------------------------------------------------------------------------------
 
 
 def kitti_type_for(name: str, kind: str) -> str:
-    """The KITTI type written for a class: itself for KITTI data, by :data:`CITYSCAPES_KITTI_TYPES` (else
-    'Misc') for Cityscapes prototype names."""
+    """The KITTI type written for a class: itself for KITTI data, 'Car' for ApolloCar3D (cars only), by
+    :data:`CITYSCAPES_KITTI_TYPES` (else 'Misc') for Cityscapes prototype names."""
     if kind in ("kitti", "kitti-tracking"):
         return name
+    if kind == "apollocar3d":
+        return "Car"
     return CITYSCAPES_KITTI_TYPES.get(name, "Misc")
 
 
