@@ -60,7 +60,10 @@ def test_the_ground_truth_options_are_declared_once():
             if param.name.startswith("ground_truth_"):
                 helps.setdefault(param.name, set()).add(param.help)
     assert set(helps) == {"ground_truth_kitti", "ground_truth_kitti_tracking", "ground_truth_cityscapes",
-                          "ground_truth_apollocar3d"}  # ApolloCar3D's keypoint file: eval (and render) only
+                          "ground_truth_apollocar3d"}  # ApolloCar3D's keypoint file: eval, priors (and render) only
     assert all(len(texts) == 1 for texts in helps.values())
-    assert not any(p.name == "ground_truth_apollocar3d" for name in ("priors", "tune", "simulate")
+    assert not any(p.name == "ground_truth_apollocar3d" for name in ("tune", "simulate")
                    for p in main.commands[name].params)
+    car_models = [p.help for name in ("eval", "priors") for p in main.commands[name].params
+                  if p.name == "car_models_path"]
+    assert len(car_models) == 2 and len(set(car_models)) == 1  # one shared option
