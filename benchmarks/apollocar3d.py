@@ -203,6 +203,14 @@ def rotation_parts(objects: list[dict]) -> dict:
     return out
 
 
+def listed_cars(images: list, found: dict[str, str], scored: set[str]) -> dict[str, dict]:
+    """The cars whose ground truth contradicts their clicks (``found``: id -> kind), each with its image, its
+    ground-truth depth and whether it is scored, for a reader to look at them one by one."""
+    where = {str(c.id): (im.file_name, float(c.t_cam_vehicle[2])) for im in images for c in im.cars}
+    return {cid: {"kind": kind, "image": where[cid][0], "depth_m": round(where[cid][1], 1), "scored": cid in scored}
+            for cid, kind in sorted(found.items(), key=lambda item: int(item[0]) if item[0].isdigit() else 0)}
+
+
 def depth_bias(objects: list[dict]) -> dict[str, float]:
     """Per car-model type (``2x``, ``3x``, ``SUV``), the median signed relative depth error: < 0 when the fits put
     its cars nearer than the ground truth (the prototype's sizes smaller than the type's CAD models)."""
@@ -452,7 +460,9 @@ def main() -> int:
     doc = {"generator": "benchmarks/apollocar3d.py", "machine": machine(), "min_keypoints": MIN_KEYPOINTS,
            "robust_loss": args.robust_loss, "click_sigma": args.click_sigma, "paper_kitti": PAPER_KITTI,
            "bundled_positions": bundled,
-           "ends_named": ends_of, "contradicting_by_depth": depth_of, "rows": rows}
+           "ends_named": ends_of, "contradicting_by_depth": depth_of,
+           "contradicting_cars": {half: listed_cars(images, found, scored) for half, found in contradicting_of.items()},
+           "rows": rows}
     if args.json is not None:
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
     return 0
