@@ -113,7 +113,7 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
 
     options = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
     if click_sigma is not None and not estimate_road:
-        click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
+        announced_estimates(out, priors, options, False, False)  # nothing to estimate: it says so
         return options, None, None
 
     def estimate(path: Path):
