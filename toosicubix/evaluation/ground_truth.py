@@ -304,12 +304,12 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
     def __init__(self, root: str | Path, car_models: str | Path | None = None):
         from toosicubix.annotations.schema import InputFileError
         from toosicubix.formats import FormatError
-        from toosicubix.formats.apollocar3d import read_apollocar3d, read_car_models
+        from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
 
         self.root = Path(root)
         if not self.root.is_file():
             raise EvaluationInputError(f"{self.root}: ApolloCar3D keypoint file not found")
-        self.car_models = Path(car_models) if car_models is not None else self.root.parent / "car_models.json"
+        self.car_models = car_models_file(self.root, car_models)
         try:
             images = read_apollocar3d(self.root, read_car_models(self.car_models))
         except InputFileError as exc:

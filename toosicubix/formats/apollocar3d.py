@@ -165,6 +165,17 @@ def _numbers(obj: dict, key: str, shape: tuple[int, ...], path: str | Path, wher
 PROTOTYPE_OF_TYPE = {"2x": "Car", "3x": "Sedan", "SUV": "SUV"}
 
 
+def prototype_of(car_type: str, prototype_of_type: dict[str, str] | None = None) -> str:
+    """The prototype a car of this car-model type gets (``prototype_of_type``, default :data:`PROTOTYPE_OF_TYPE`);
+    'Car' for a type it does not name."""
+    return (PROTOTYPE_OF_TYPE if prototype_of_type is None else prototype_of_type).get(car_type, "Car")
+
+
+def car_models_file(keypoints: str | Path, car_models: str | Path | None = None) -> Path:
+    """``car_models`` if given, else the ``car_models.json`` beside the keypoint file."""
+    return Path(car_models) if car_models is not None else Path(keypoints).parent / "car_models.json"
+
+
 def keypoint_samples(images: list[ApolloImage], names: list[str], K_of: dict[str, np.ndarray],
                      prototype_of_type: dict[str, str] | None = None) -> list:
     """Every labelled keypoint (v > 0) of the images as a :class:`toosicubix.parts.learned.KeypointSample`.
@@ -177,12 +188,11 @@ def keypoint_samples(images: list[ApolloImage], names: list[str], K_of: dict[str
     """
     from toosicubix.parts.learned import KeypointSample
 
-    prototype_of_type = PROTOTYPE_OF_TYPE if prototype_of_type is None else prototype_of_type
     out = []
     for im in images:
         K_inv = np.linalg.inv(K_of[im.id])
         for car in im.cars:
-            prototype = prototype_of_type.get(car.model.type, "Car")
+            prototype = prototype_of(car.model.type, prototype_of_type)
             for j in np.flatnonzero(car.keypoints[:, 2] > 0):
                 ray = K_inv @ np.array([car.keypoints[j, 0], car.keypoints[j, 1], 1.0])
                 out.append(KeypointSample(prototype, names[j], f"{im.id}/{car.id}", ray, car.R_cam_vehicle,

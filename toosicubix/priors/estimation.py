@@ -232,7 +232,7 @@ class DimensionSamples:
         object (KITTI object, Cityscapes) or per track (KITTI tracking)
     kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
     root : the folder (ApolloCar3D: the keypoint file) read, as given
-    unit : 'object' or 'track': what one row stands for
+    unit : 'object', 'track' or 'car' (ApolloCar3D): what one row stands for
     sequences : the tracking sequences read, or None (all, or not tracking)
     missing : requested classes without any sample
     notes : remarks for the report (tracks whose rows disagree, boxes without a type)
@@ -405,10 +405,10 @@ def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
 
 
 def _apollocar3d_rows(path: Path, car_models: str | Path | None) -> list[tuple[str, np.ndarray]]:
-    from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, read_apollocar3d, read_car_models
+    from toosicubix.formats.apollocar3d import car_models_file, prototype_of, read_apollocar3d, read_car_models
 
-    models = read_car_models(car_models if car_models is not None else path.parent / "car_models.json")
-    return [(PROTOTYPE_OF_TYPE.get(car.model.type, "Car"), car.model.dimensions)
+    models = read_car_models(car_models_file(path, car_models))
+    return [(prototype_of(car.model.type), car.model.dimensions)
             for image in read_apollocar3d(path, models) for car in image.cars]
 
 
