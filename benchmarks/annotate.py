@@ -247,7 +247,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
             if len(clicks) < APOLLO_MIN_KEYPOINTS:
                 continue
             order = [clicks[i] for i in rng.permutation(len(clicks))]
-            keypoints = {p.keypoint: list(p.by_prototype.get(vehicle.prototype, p.position).at)
+            keypoints = {p.keypoint: list(p.position_for(vehicle.prototype).at)
                          for p in mapping.parts if p.kind == "keypoint"}
             points = {p.part for p in mapping.parts if p.kind == "point"}
             row = {"image": image.id, "vehicle": vehicle.id, "keypoints": len(clicks)}

@@ -99,7 +99,15 @@ class KeypointPosition(_Model):
         return spread
 
 
-class MappingKeypoint(_MappingPart):
+class _PositionFor:
+    """What a part with a typical position (``position``, ``by_prototype``) gives a vehicle."""
+
+    def position_for(self, prototype: str) -> KeypointPosition:
+        """Its position on a vehicle of ``prototype``: that prototype's own, else the one for all."""
+        return self.by_prototype.get(prototype, self.position)  # type: ignore[attr-defined]
+
+
+class MappingKeypoint(_MappingPart, _PositionFor):
     """One keypoint at a typical place on the vehicle (``keypoint`` part), per prototype or for all."""
 
     kind: Literal["keypoint"]
@@ -108,7 +116,7 @@ class MappingKeypoint(_MappingPart):
     by_prototype: dict[str, KeypointPosition] = Field(default_factory=dict)
 
 
-class MappingPlate(_MappingPart):
+class MappingPlate(_MappingPart, _PositionFor):
     """A licence plate's two ends as a ``plate`` part: a centreline point and its known width."""
 
     kind: Literal["plate"]
@@ -141,6 +149,12 @@ class MappingFile(_Model):
     prototypes: dict[str, str] = Field(
         default_factory=dict, description="Prototype per COCO category id (as a string) or category name.")
     parts: list[MappingPart]
+
+    def keypoint_positions(self, prototype: str) -> dict[str, KeypointPosition]:
+        """The keypoint parts made without an option, by keypoint name, at their positions on a vehicle of
+        ``prototype`` (what the annotate page offers)."""
+        return {p.keypoint: p.position_for(prototype) for p in self.parts
+                if isinstance(p, MappingKeypoint) and p.option is None}
 
     def known_keypoints(self) -> set[str]:
         names = set(self.unused) | set(self.keypoints or ())
@@ -377,7 +391,7 @@ def _make_parts(parts: list[Any], labelled: dict[str, tuple[float, float, bool]]
         taken |= set(names)
         xy = [list(labelled[n][:2]) for n in names]
         if isinstance(part, MappingKeypoint):
-            pos = part.by_prototype.get(prototype, part.position)
+            pos = part.position_for(prototype)
             entry: dict[str, Any] = {"kind": "keypoint", "name": part.keypoint, "xy": xy[0], "at": list(pos.at),
                                      "spread": list(pos.spread)}
             if not labelled[part.keypoint][2]:
@@ -390,7 +404,7 @@ def _make_parts(parts: list[Any], labelled: dict[str, tuple[float, float, bool]]
         elif isinstance(part, MappingDirection):
             out.append({"kind": "direction", "axis": part.axis, "tail": xy[0], "head": xy[1]})
         elif isinstance(part, MappingPlate):
-            pos = part.by_prototype.get(prototype, part.position)
+            pos = part.position_for(prototype)
             out.append({"kind": "plate", "face": part.face, "a": xy[0], "b": xy[1], "at": list(pos.at),
                         "spread": list(pos.spread), "metres": part.metres, "sigma": part.sigma})
         else:
