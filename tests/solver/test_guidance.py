@@ -105,3 +105,37 @@ def test_suggestions_start_from_the_fits_own_sigma_when_clicks_are_weighted():
         for s in suggestions:  # one Jacobian for the fit and the candidates: equal to rounding
             assert s.yaw_sigma_deg + s.yaw_gain_deg == pytest.approx(fit.uncertainty.yaw_deg, rel=1e-9)
             assert s.depth_sigma_rel + s.depth_gain_rel == pytest.approx(fit.uncertainty.depth_rel, rel=1e-9)
+
+
+def test_a_mappings_keypoints_are_suggested_instead_of_the_vocabulary_at_their_place_and_weight():
+    """With ``keypoints`` (a mapping's, for the annotate page), the candidates are those keypoints not clicked
+    yet: each placed at ``at`` on the fitted cuboid, seen when a face it sits near is turned to the camera, and
+    clicked exactly there it gives the predicted uncertainty (the refit weighs it by its spread as predicted;
+    its soft weight is taken at the distance of the refit's best start, not the fitted one: 1e-3 relative)."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts, project
+    from tests.parts.test_real_click_kinds import scene as keypoint_scene
+
+    d, R, t = keypoint_scene(np.random.default_rng(5))
+    clicked = keypoint_parts(d, R, t)[:6]
+    prior = exact_prior(d)
+    fit = fit_vehicle(build_parts_model(tuple(clicked)), CAMERA, prior, OPTIONS)
+    assert fit.ok
+    more = {"lamp-front-left": (0.46, 0.36, 0.55), "lamp-front-right": (0.46, -0.36, 0.55),
+            "mirror-right": (0.18, -0.5, 0.65)}
+    keypoints = {name: (np.array(at), np.full(3, 0.02)) for name, at in {**REAR_LEFT, **more}.items()}
+    suggestions = suggest_clicks(tuple(clicked), CAMERA, prior, fit, OPTIONS, keypoints=keypoints)
+    assert {s.name for s in suggestions} == set(keypoints) - {p.name for p in clicked}
+    assert {s.kind for s in suggestions} == {"keypoint"}
+    # Seen from behind and the left: the right front lamp and the right mirror sit near faces turned away only;
+    # the left front lamp sits near the front and the left face, and the left one is seen.
+    assert {s.name for s in suggestions if not s.visible} == {"lamp-front-right", "mirror-right"}
+    for s in suggestions:
+        at = keypoints[s.name][0]
+        expected_uv = project((at * fit.dimensions)[None], fit.R_cam_vehicle, fit.t_cam_vehicle)
+        np.testing.assert_allclose(s.uv, expected_uv, atol=1e-9)
+    for s in [s for s in suggestions if s.visible][:3]:
+        at, spread = keypoints[s.name]
+        refit = fit_vehicle(build_parts_model((*clicked, Part("keypoint", s.name, s.uv, "$", None, at, spread))),
+                            CAMERA, prior, OPTIONS)
+        assert refit.uncertainty.yaw_deg == pytest.approx(s.yaw_sigma_deg, rel=1e-3)
+        assert refit.uncertainty.depth_rel == pytest.approx(s.depth_sigma_rel, rel=1e-3)

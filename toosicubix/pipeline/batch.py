@@ -20,7 +20,7 @@ import itertools
 import os
 import traceback
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -131,16 +131,19 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
 
 
 def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
-            ground: GroundPlane | None = None, next_clicks: int = 0) -> VehicleResult:
+            ground: GroundPlane | None = None, next_clicks: int = 0,
+            keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> VehicleResult:
     """Fit one vehicle and describe it as results.json does; never raises.
 
-    ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.guidance`), 0: none.
+    ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
+    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name -> ``(at, spread)``).
     """
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
         with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
-            return checked_result(_vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks))
+            return checked_result(_vehicle_result(vehicle, camera, prior, parts, fit, ground, options, next_clicks,
+                                                  keypoints))
     except UnusableFit as exc:
         return _failed(vehicle, prior, str(exc))
     except Exception as exc:  # one vehicle must never stop the batch
@@ -202,7 +205,8 @@ def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
 
 
 def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
-                    ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0) -> VehicleResult:
+                    ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0,
+                    keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> VehicleResult:
     common = {"id": vehicle.id, "prototype": vehicle.prototype, "kitti_type": prior.kitti_type,
               "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
               "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
@@ -213,7 +217,7 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
     ry, pitch, roll = ypr_from_R_cam_vehicle(R)
     suggestions: dict[str, Any] = {}
     if next_clicks > 0:
-        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks)
+        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks, keypoints)
     return VehicleResult(
         status="ok", error=None, R_cam_vehicle=R, t_cam_vehicle=t, dimensions=d, box2d=box2d, **common,
         box2d_source="annotated" if vehicle.box2d is not None else "projected",
@@ -241,12 +245,14 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
 
 
 def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
-                 ground: GroundPlane | None, n: int) -> dict[str, Any]:
-    """The ``n`` best parts to click next (``next_clicks``, or ``next_clicks_error`` when guidance failed);
-    an error here never fails the vehicle."""
+                 ground: GroundPlane | None, n: int,
+                 keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> dict[str, Any]:
+    """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
+    guidance failed); an error here never fails the vehicle."""
     try:
         suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
-                                     box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type))
+                                     box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type),
+                                     keypoints=keypoints)
     except Exception as exc:  # guidance is advice: the fit stands without it
         return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
     return {"next_clicks": [s.to_json() for s in suggestions[:n]]}

@@ -16,20 +16,22 @@ The cuboid's corners are suggested only on box-shaped vehicles (vans, trucks, bu
 when the person has clicked a corner already: on a car they are points in the air that nobody can click.
 
 The candidates, their typical positions, the faces they are seen on and the prototypes they suit are the part
-vocabulary's (:mod:`toosicubix.parts.vocabulary`).
+vocabulary's (:mod:`toosicubix.parts.vocabulary`), or, when given, a keypoint mapping's keypoints (at their
+typical positions, weighed by their spread as a fit weighs them).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts import vocabulary
-from toosicubix.parts.linear import build_parts_model
+from toosicubix.parts.linear import build_parts_model, keypoint_faces
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver import (
     MIN_DEPTH,
@@ -40,7 +42,7 @@ from toosicubix.solver import (
     finite_or_none,
     uncertainties_with_added_clicks,
 )
-from toosicubix.solver.robust import with_weights
+from toosicubix.solver.robust import soft_weights, with_weights
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
@@ -132,7 +134,8 @@ def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> l
 def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: FitResult,
                    options: SolverOptions | None = None, ground: GroundPlane | None = None,
                    known_dimensions: dict[str, tuple[float, float]] | None = None,
-                   box_shaped: bool = False) -> list[Suggestion]:
+                   box_shaped: bool = False,
+                   keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> list[Suggestion]:
     """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty.
 
     Parameters
@@ -140,6 +143,10 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     parts : the vehicle's annotations; fit : its fit (no suggestions when it failed)
     options, ground, known_dimensions : as the fit had them
     box_shaped : suggest the cuboid's corners too (see :func:`is_box_shaped`)
+    keypoints : the candidates instead of the vocabulary's parts: keypoint name -> ``(at, spread)``, each (3,)
+        fractions of the dimensions (a mapping's keypoints, for a person clicking in its vocabulary); each not
+        clicked yet is placed at ``at`` on the fitted cuboid, weighted by its spread as a fit weighs it, and
+        visible when a face it sits near (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera
 
     Returns
     -------
@@ -156,11 +163,20 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
 
     # Every candidate at its typical place, all in one model: one Jacobian serves them all.
-    placed = []
-    for kind, name in _candidates(parts, box_shaped, camera_side):
-        points_cam = _typical_points(kind, name, d, wheels, camera_side) @ R.T + t
+    placed, placed_vehicle = [], []
+    if keypoints is None:
+        typical = [(Part(kind, name, np.empty((0, 2)), "$"), _typical_points(kind, name, d, wheels, camera_side))
+                   for kind, name in _candidates(parts, box_shaped, camera_side)]
+    else:
+        clicked = {p.name for p in parts if p.kind == "keypoint"}
+        typical = [(Part("keypoint", name, np.empty((0, 2)), "$", at=np.asarray(at, dtype=float),
+                         spread=np.asarray(spread, dtype=float)), (d * np.asarray(at, dtype=float))[None])
+                   for name, (at, spread) in keypoints.items() if name not in clicked]
+    for part, points_vehicle in typical:
+        points_cam = points_vehicle @ R.T + t
         if np.all(points_cam[:, 2] > MIN_DEPTH):
-            placed.append(Part(kind, name, camera.project(points_cam), "$"))
+            placed.append(replace(part, uv=camera.project(points_cam)))
+            placed_vehicle.append(points_vehicle)
     if not placed:
         return []
     combined = build_parts_model((*parts, *placed), known_dimensions)
@@ -172,13 +188,17 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         if name in index and np.isnan(p[index[name]]):
             p[index[name]] = wheels[axle]
     rows = _click_rows(parts, placed)
-    for part, (first, last) in zip(placed, rows, strict=True):
-        points_vehicle = _typical_points(part.kind, part.name, d, wheels, camera_side)
+    for points_vehicle, (first, last) in zip(placed_vehicle, rows, strict=True):
         _set_own_values(combined.A[first:last], points_vehicle, p)
     problem = Problem.build(combined, camera, prior, options.lambda_3d, options.lambda_px, ground,
                             float(np.linalg.norm(t)))
-    if fit.click_weights is not None:  # the fit's own weights (keypoints' spread, robust factors); candidates weigh 1
-        problem = with_weights(problem, np.concatenate([fit.click_weights, np.ones(combined.n_clicks - base.n_clicks)]))
+    # The fit's own weights (keypoints' spread, robust factors); a candidate weighs as its spread makes a fit
+    # weigh it (1 for cuboid parts).
+    soft = soft_weights(problem, float(np.linalg.norm(t)), options.click_sigma)
+    if fit.click_weights is not None or soft is not None:
+        own = fit.click_weights if fit.click_weights is not None else np.ones(base.n_clicks)
+        added_weights = soft[base.n_clicks:] if soft is not None else np.ones(combined.n_clicks - base.n_clicks)
+        problem = with_weights(problem, np.concatenate([own, added_weights]))
     base_params = np.array([index[name] for name in base.param_names])
     now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks, rows,
                                                  options.click_sigma, options.part_sigma)
@@ -188,8 +208,9 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     size = camera.image_size
     out = []
     for part, u in zip(placed, added, strict=True):
-        visible = all(f is None or any(facing[x] for x in f)
-                      for f in map(vocabulary.faces_of_click, part.click_labels))
+        faces = ([keypoint_faces(part.at)] if part.kind == "keypoint"
+                 else map(vocabulary.faces_of_click, part.click_labels))
+        visible = all(f is None or any(facing[x] for x in f) for f in faces)
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
         score = (math.log(_bounded(now.yaw_deg) / _bounded(u.yaw_deg))
                  + math.log(_bounded(now.depth_rel) / _bounded(u.depth_rel)))
