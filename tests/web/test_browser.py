@@ -136,3 +136,41 @@ def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
         other.close()
         server.shutdown()
         server.server_close()
+
+
+def test_click_keypoints_of_a_mapping_in_the_browser(page, scene, tmp_path: Path):
+    """With a mapping, a keypoint is named by typing in the filter box and pressing Enter; an unnamed click is
+    then named the nearest of the mapping's keypoints, and x takes the runner-up (a keypoint too)."""
+    from tests.web.test_mapping import NAMED as KEYPOINTS
+    from tests.web.test_mapping import _session, _uv
+
+    out = tmp_path / "annotations.json"
+    session = _session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.locator("#keypoint-section").is_visible()
+        page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 3; "
+                      "state.panX = r.width / 2 - 3 * 700; state.panY = r.height / 2 - 3 * 270; render(); }")
+        revision = 0
+        for name in KEYPOINTS:
+            page.fill("#keypoint-filter", name.replace("-", " "))
+            page.press("#keypoint-filter", "Enter")
+            assert f"next click: keypoint {name}" in page.locator("#message").inner_text()
+            page.mouse.click(*_screen(page, _uv(name)[0]))
+            revision += 1 + (revision == 0)
+            _wait_revision(page, revision)
+        page.keyboard.press("Escape")
+        page.mouse.click(*_screen(page, _uv("sill-left")[0]))
+        _wait_revision(page, revision + 1)
+        assert "named sill-left" in page.locator("#message").inner_text()
+        runner_up = page.evaluate("state.lastAuto.runner_up")
+        page.keyboard.press("x")
+        _wait_revision(page, revision + 2)
+        parts = load_images(out)[0].vehicles[0].parts
+        assert [(p.kind, p.name) for p in parts] == [("keypoint", n) for n in (*KEYPOINTS, runner_up)]
+        assert session.image_view(0)["vehicles"][0]["fit"]["status"] == "ok"
+    finally:
+        server.shutdown()
+        server.server_close()

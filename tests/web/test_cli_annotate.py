@@ -251,3 +251,15 @@ def test_the_page_estimates_again_when_the_vehicles_double(scene, tmp_path):
     session._estimated_from = 400
     session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
     assert session.estimate_again_if_grown() is False
+
+
+def test_mapping_gives_the_page_its_keypoints(monkeypatch, scene, tmp_path):
+    image, cameras = scene
+    args = (str(image), "--cameras", str(cameras), "-o", str(tmp_path / "a.json"))
+    session, _ = _served_session(monkeypatch, *args, "--mapping", "apollocar3d-66")
+    assert session.mapping.name == "apollocar3d-66" and len(session.summary()["keypoints"]) == 66
+    result = _run(*args, "--mapping", "apollocar3d-66-paper")
+    assert result.exit_code == 2
+    assert "the mapping apollocar3d-66-paper has no keypoint parts" in result.output
+    result = _run(*args, "--mapping", str(tmp_path / "none.json"))
+    assert result.exit_code == 2 and "none.json" in result.output and "no such mapping file" in result.output

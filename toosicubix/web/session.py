@@ -18,6 +18,11 @@ Auto-naming: a click made without a name is named as soon as the vehicle's named
 succeeds): it takes the name of the point part whose predicted position is nearest, among the parts not yet
 clicked on a face turned to the camera (:func:`toosicubix.solver.guidance.suggest_clicks` places each at its
 typical position on the fitted cuboid). The response names the choice and the runner-up.
+
+A keypoint mapping (``--mapping``, :class:`toosicubix.formats.coco.MappingFile`) adds its keypoints to what the
+page makes: a click named one is a ``keypoint`` part with the mapping's position for the vehicle's prototype,
+unnamed clicks are named among the mapping's keypoints instead of the point parts, and the next clicks suggested
+are its keypoints.
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ from toosicubix.camera import Camera
 from toosicubix.formats import FormatError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
+from toosicubix.formats.coco import MappingFile
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
@@ -237,14 +243,20 @@ class Session:
         None when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are
         taken to be its answer for the file as it was read; as the file grows, the page estimates again from a
         snapshot of its state, in the background (:meth:`estimate_again_if_grown`)
+    mapping : a keypoint mapping (:func:`toosicubix.formats.coco.load_mapping`) whose keypoints the page offers
+        besides the vocabulary: a click named one takes its typical position for the vehicle's prototype (and
+        again when the prototype changes), unnamed clicks are named among its keypoints, and the parts to click
+        next are its keypoints. None, or a mapping without keypoint parts: the vocabulary alone
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
                  thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None,
                  road_grounds: dict[tuple, dict[str, Any]] | None = None,
-                 estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None):
+                 estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None,
+                 mapping: MappingFile | None = None):
         self.out = Path(out)
+        self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
         self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
         self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
         self._road_grounds = _road_grounds(road_grounds)
@@ -307,6 +319,24 @@ class Session:
         """The vehicles of the file as this session has it (served images and the others)."""
         return (sum(len(im.vehicles) for im in self.images)
                 + sum(len(d.get("vehicles") or []) for d in self._others))
+
+    def _keypoints(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+        """The mapping's keypoints on a vehicle of ``prototype``: name -> ``(at, spread)``; None without one."""
+        if self.mapping is None:
+            return None
+        return {name: (np.asarray(pos.at, dtype=float), np.asarray(pos.spread, dtype=float))
+                for name, pos in self.mapping.keypoint_positions(prototype).items()}
+
+    def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
+        """A mapping keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of
+        ``prototype``; None when the mapping does not have it."""
+        position = None if self.mapping is None else self.mapping.keypoint_positions(prototype).get(name)
+        if position is None:
+            return None
+        extra: dict[str, Any] = {"at": list(position.at), "spread": list(position.spread)}
+        if visible is not None:
+            extra["visible"] = visible
+        return extra
 
     # -- estimating again as the file grows ---------------------------------------------------------------------
 
@@ -448,7 +478,8 @@ class Session:
         cached = self._fits.get(key)
         if cached is None:
             cached = self._fits[key] = {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                          self.options, self._ground_of(image), next_clicks=1000)}
+                                                          self.options, self._ground_of(image), next_clicks=1000,
+                                                          keypoints=self._keypoints(v.prototype))}
             if len(self._fits) > 2000:
                 self._fits.pop(next(iter(self._fits)))
         return cached["result"]
@@ -468,13 +499,22 @@ class Session:
             result = self._fit(image, j, v)
             if not result.ok:
                 break
-            choice = nearest_parts(part.uv[0], naming_candidates(result, image.camera))
+            keypoints = self._keypoints(v.prototype)
+            if keypoints is None:
+                candidates = naming_candidates(result, image.camera)
+            else:  # the mapping's vocabulary: its keypoints not clicked yet
+                clicked = {p.name for p in v.parts if p.kind == "keypoint"}
+                candidates = naming_candidates(result, image.camera, {n: at for n, (at, _) in keypoints.items()
+                                                                      if n not in clicked}, points=set())
+            choice = nearest_parts(part.uv[0], candidates)
             if not choice:
                 break
             best = choice[0]
             runner = choice[1] if len(choice) > 1 else None
             part.kind, part.name = best["kind"], best["name"]
-            part.auto = {"name": best["name"], "distance_px": best["distance_px"],
+            part.extra = self._keypoint_extra(v.prototype, best["name"]) if best["kind"] == "keypoint" else None
+            part.auto = {"kind": best["kind"], "name": best["name"], "distance_px": best["distance_px"],
+                         "runner_up_kind": None if runner is None else runner["kind"],
                          "runner_up": None if runner is None else runner["name"],
                          "runner_up_distance_px": None if runner is None else runner["distance_px"]}
             named.append({"vehicle": v.id, "part": v.parts.index(part), **part.auto})
@@ -493,6 +533,8 @@ class Session:
                             "done": sum(v.done for v in im.vehicles)} for im in self.images],
                 "vocabulary": {k.kind: {"clicks": list(k.clicks), "names": list(k.names)}
                                for k in vocabulary.KINDS.values() if not k.known},
+                "mapping": None if self.mapping is None else self.mapping.name,
+                "keypoints": [] if self.mapping is None else list(self.mapping.keypoint_positions(self.prototype)),
                 "thresholds": self.thresholds.to_json(),
             }
 
@@ -650,6 +692,10 @@ class Session:
         if "prototype" in r:
             self._check_prototype(r["prototype"])
             v.prototype = r["prototype"]
+            for part in v.parts:  # the mapping's keypoints sit where they sit on that prototype
+                if part.kind == "keypoint":
+                    extra = self._keypoint_extra(v.prototype, part.name, (part.extra or {}).get("visible"))
+                    part.extra = extra or part.extra
         if "box2d" in r:
             v.box2d = _box(r["box2d"])
         if "done" in r:
@@ -666,8 +712,12 @@ class Session:
         if kind is None and name is None:
             uv = _pixels(r.get("uv"), 1, "uv")
             v.parts.append(ClickedPart(None, None, uv))
+        elif kind == "keypoint" and (extra := self._keypoint_extra(v.prototype, name)) is not None:
+            uv = _pixels(r.get("uv"), 1, "uv")
+            self._check_not_clicked(v, kind, name)
+            v.parts.append(ClickedPart(kind, name, uv, extra=extra))
         else:
-            _check_page_made(kind)
+            self._check_page_made(kind, name)
             kind, name = _kind_name(kind, name)
             uv = _pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
             self._check_not_clicked(v, kind, name)
@@ -691,10 +741,17 @@ class Session:
         if (r.get("kind"), r.get("name")) == (part.kind, part.name):  # the same name: now the user's, not auto
             part.auto = None
             return
+        if r.get("kind") == "keypoint" and len(part.uv) == 1:
+            extra = self._keypoint_extra(v.prototype, r.get("name"), (part.extra or {}).get("visible"))
+            if extra is not None:
+                self._check_not_clicked(v, "keypoint", r["name"], part)
+                part.kind, part.name, part.auto, part.extra = "keypoint", r["name"], None, extra
+                return
         if part.extra is not None and r.get("kind") == part.kind:
+            other = "" if self.mapping is None else f", or name it a keypoint of {self.mapping.name}"
             raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
-                           f"import the clicks again to rename it")
-        _check_page_made(r.get("kind"))
+                           f"import the clicks again to rename it{other}")
+        self._check_page_made(r.get("kind"), r.get("name"))
         kind, name = _kind_name(r.get("kind"), r.get("name"))
         if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
             raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
@@ -736,6 +793,19 @@ class Session:
             raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r}")
         return v.parts[k]
 
+    def _check_page_made(self, kind: Any, name: Any) -> None:
+        """A kind whose annotations need a typical position (keypoints, plates: from a mapping) is made on the
+        page only for the given mapping's keypoints (the caller's case): anything else of such a kind is refused
+        (ApiError); other kinds, known or not, pass (:func:`_kind_name` checks them)."""
+        entry = vocabulary.KINDS.get(kind) if isinstance(kind, str) else None
+        if entry is None or not any(key == "at" for key, _ in entry.fields_extra):
+            return
+        if self.mapping is None:
+            raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
+                           "keypoint mapping: start the page with --mapping (e.g. apollocar3d-66) to click keypoints")
+        raise ApiError(f"name: {kind} {name!r} is not a keypoint of the mapping {self.mapping.name} (its keypoints "
+                       f"are in the palette; plates are not made on the page)")
+
     @staticmethod
     def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None) -> None:
         for p in v.parts:
@@ -758,15 +828,6 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
     if ground is None:
         return None
     return "estimated" if ground.from_batch else "given"
-
-
-def _check_page_made(kind: Any) -> None:
-    """A kind whose annotations need a typical position (keypoints, plates: from a mapping) is never made on the
-    page (ApiError); other kinds, known or not, pass (:func:`_kind_name` checks them)."""
-    entry = vocabulary.KINDS.get(kind) if isinstance(kind, str) else None
-    if entry is not None and any(key == "at" for key, _ in entry.fields_extra):
-        raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
-                       "keypoint mapping (`toosicubix import`); the page does not make one")
 
 
 def naming_candidates(result: VehicleResult, camera: Camera,

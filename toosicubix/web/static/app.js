@@ -12,6 +12,9 @@ const HOTKEYS = {
   "a": ["direction", "forward"], "s": ["direction", "leftward"],
 };
 const CLICK_NAMES = { symmetry: ["left light", "right light"], direction: ["tail", "head"] };
+// Kinds named by one click: a point part, or a keypoint of the mapping the page was started with (--mapping).
+const oneClick = (kind) => kind === "point" || kind === "keypoint";
+const partLabel = (kind, name) => (oneClick(kind) ? name : `${kind} ${name}`);
 
 const state = {
   session: null, index: 0, view: null, revision: 0, vehicle: null, armed: null, pending: [],
@@ -51,6 +54,15 @@ async function start() {
     select.appendChild(option);
   }
   select.value = doc.prototype;
+  if (doc.keypoints.length) {
+    $("keypoint-section").hidden = false;
+    $("mapping-name").textContent = doc.mapping;
+    $("keypoint-filter").addEventListener("input", buildPalette);
+    $("keypoint-filter").addEventListener("keydown", (e) => {  // Enter: name the next click the first match
+      const first = $("keypoints").querySelector("button");
+      if (e.key === "Enter" && first) { e.target.blur(); arm(["keypoint", first.dataset.name]); }
+    });
+  }
   buildPalette();
   await showImage(0);
 }
@@ -123,7 +135,7 @@ async function newVehicle(box2d) {
 async function addClick(uv) {
   if (!currentVehicle()) await newVehicle();
   if (!currentVehicle()) return;
-  if (state.armed && state.armed[0] !== "point") {
+  if (state.armed && !oneClick(state.armed[0])) {
     state.pending.push(uv);
     if (state.pending.length < 2) {
       say(`${state.armed[0]} ${state.armed[1]}: now click the ${CLICK_NAMES[state.armed[0]][1]}`);
@@ -135,7 +147,7 @@ async function addClick(uv) {
   if (state.armed) {
     change.kind = state.armed[0];
     change.name = state.armed[1];
-    change.uv = state.armed[0] === "point" ? [uv] : state.pending;
+    change.uv = oneClick(state.armed[0]) ? [uv] : state.pending;
   } else {
     change.uv = [uv];
   }
@@ -163,7 +175,7 @@ async function addClick(uv) {
 async function takeRunnerUp() {
   const a = state.lastAuto;
   if (!a || !a.runner_up) { say("no auto-named click to change", true); return; }
-  const doc = await edit({ op: "rename", vehicle: a.vehicle, part: a.part, kind: "point", name: a.runner_up });
+  const doc = await edit({ op: "rename", vehicle: a.vehicle, part: a.part, kind: a.runner_up_kind, name: a.runner_up });
   if (doc) { say(`renamed to ${a.runner_up}`); state.lastAuto = null; }
 }
 
@@ -180,22 +192,37 @@ function buildPalette() {
     for (const name of entry.names) {
       const button = document.createElement("button");
       const key = keys[`${kind} ${name}`];
-      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + (kind === "point" ? name : `${kind} ${name}`);
-      button.dataset.kind = kind;
-      button.dataset.name = name;
-      if (state.armed && state.armed[0] === kind && state.armed[1] === name) button.classList.add("armed");
-      if (clicked.has(`${kind} ${name}`)) button.classList.add("clicked");
-      button.onclick = () => arm([kind, name]);
-      palette.appendChild(button);
+      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + partLabel(kind, name);
+      palette.appendChild(paletteButton(button, kind, name, clicked));
     }
   }
+  // The mapping's keypoints (--mapping), those whose name holds every word of the filter.
+  const list = $("keypoints");
+  list.textContent = "";
+  const words = $("keypoint-filter").value.toLowerCase().split(/[\s_]+/).filter(Boolean);
+  for (const name of state.session.keypoints) {
+    if (!words.every((w) => name.toLowerCase().includes(w))) continue;
+    const button = document.createElement("button");
+    button.textContent = name.replaceAll("_", " ");
+    button.title = name;
+    list.appendChild(paletteButton(button, "keypoint", name, clicked));
+  }
+}
+
+function paletteButton(button, kind, name, clicked) {
+  button.dataset.kind = kind;
+  button.dataset.name = name;
+  if (state.armed && state.armed[0] === kind && state.armed[1] === name) button.classList.add("armed");
+  if (clicked.has(`${kind} ${name}`)) button.classList.add("clicked");
+  button.onclick = () => arm([kind, name]);
+  return button;
 }
 
 function arm(choice) {
   state.armed = choice;
   state.pending = [];
   if (choice) {
-    const first = choice[0] === "point" ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
+    const first = oneClick(choice[0]) ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
     say(`next click: ${choice[0]} ${choice[1]}: click ${first}`);
   } else {
     say("next click: unnamed (auto-named once the cuboid is fixed)");
