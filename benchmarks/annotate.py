@@ -29,6 +29,17 @@ same 100 images: in-sample for the positions; ``--out-of-sample`` learns them on
     python benchmarks/annotate.py --vehicles 60 --kitti-ground -o benchmarks/results/annotate-kitti-ground.json
     python benchmarks/annotate.py --apollocar3d -o benchmarks/results/annotate-apollocar3d.json
     python benchmarks/annotate.py --apollocar3d --out-of-sample -o benchmarks/results/annotate-apollocar3d-odd.json
+    python benchmarks/annotate.py --apollocar3d --guidance -o benchmarks/results/annotate-apollocar3d-guidance.json
+
+``--apollocar3d --guidance`` measures the page's targets with a mapping (``annotate --mapping``) on the same real
+keypoints, out of sample (positions learned on the even images, the odd images' cars with at least 10 labelled
+keypoints scored). Each car starts from the first 4 of its labelled keypoints in a seeded order (seed 0), then
+gains one labelled keypoint at a time in two orders: ``seeded`` (the rest of that order) and ``guided`` (the
+first of the page's drawn targets, the five best visible ones inside the image, that the person labelled on this
+car, else the next of the seeded order: a labelled keypoint stands for one the person could see). Each fit is
+the page's (``fit_one`` with the page's default options and the mapping's keypoints as candidates). Reported per
+order and number of clicks: the share of cars validate calls well determined, and mean / median E_R (degrees)
+and E_t (``|t - t_gt| / |t_gt|``, bottom-face centres) against the ground-truth poses.
 """
 
 from __future__ import annotations
@@ -155,10 +166,13 @@ def main() -> None:
                         help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
     parser.add_argument("--out-of-sample", action="store_true",
                         help="with --apollocar3d: positions learned on the even images, the odd images scored")
+    parser.add_argument("--guidance", action="store_true",
+                        help="with --apollocar3d: the page's targets against a seeded order (out of sample)")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
-        report = apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample)
+        report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed) if args.guidance else
+                  apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample))
         if args.out:
             args.out.write_text(json.dumps(report, indent=1) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -291,6 +305,102 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",
+            "seconds": round(time.perf_counter() - t0, 1), "machine": machine(), "summary": summary, "cars": cars}
+
+
+GUIDANCE_START = 4
+GUIDANCE_SCORED_AT = (4, 5, 6, 7, 8, 10, 12)
+ORDERS = ("seeded", "guided")
+
+
+def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
+    """The page's targets with a keypoint mapping against a seeded order, on ApolloCar3D's real keypoints, out
+    of sample (see the module's docstring)."""
+    from toosicubix.formats.apollocar3d import read_apollocar3d, read_car_models
+    from toosicubix.geometry import geodesic_angle
+    from toosicubix.pipeline.validation import Thresholds, judge
+    from toosicubix.web.session import TARGETS
+
+    keypoints_path = folder / "apollocar3d_val_dev.json"
+    cameras = load_cameras(folder / "cameras.json")
+    images_sorted = sorted_images(folder)
+    mapping = learned_on_even(images_sorted, cameras)
+    scored_images = {im.id for im in images_sorted[1::2]}
+    truth = {(im.id, car.id): car for im in read_apollocar3d(keypoints_path, read_car_models(
+        folder / "car_models.json")) for car in im.cars}
+    document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "annotations.json"
+        path.write_text(json.dumps(document))
+        images = [im for im in load_images(path) if im.id in scored_images]
+    priors, options, thresholds = load_priors(), SolverOptions(), Thresholds()
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    cars = []
+    for image in images:
+        for vehicle in image.vehicles:
+            clicks = [p for p in vehicle.parts if p.kind == "keypoint"]
+            if len(clicks) < APOLLO_MIN_KEYPOINTS:
+                continue
+            order = [clicks[i] for i in rng.permutation(len(clicks))]
+            keypoints = {n: (np.asarray(pos.at), np.asarray(pos.spread))
+                         for n, pos in mapping.keypoint_positions(vehicle.prototype).items()}
+            gt = truth[(image.id, vehicle.id)]
+            row = {"image": image.id, "vehicle": vehicle.id, "keypoints": len(clicks)}
+            for how in ORDERS:
+                named, rest, steps = list(order[:GUIDANCE_START]), list(order[GUIDANCE_START:]), []
+                while True:
+                    result = fit_one(replace(vehicle, parts=tuple(named)), image.camera, priors[vehicle.prototype],
+                                     options, image.ground, next_clicks=1000, keypoints=keypoints)
+                    step = {"clicks": len(named), "ok": result.ok}
+                    if result.ok:
+                        step.update({"well_determined": not judge(result, thresholds),
+                                     "e_r_deg": round(float(np.rad2deg(geodesic_angle(result.R_cam_vehicle,
+                                                                                     gt.R_cam_vehicle))), 3),
+                                     "e_t": round(float(np.linalg.norm(result.t_cam_vehicle - gt.t_cam_vehicle)
+                                                        / np.linalg.norm(gt.t_cam_vehicle)), 4)})
+                    steps.append(step)
+                    if not rest:
+                        break
+                    nxt = rest[0]
+                    if how == "guided" and result.ok:
+                        targets = [t["name"] for t in result.next_clicks if t["visible"] and t["inside_image"]]
+                        labelled = {p.name: p for p in rest}
+                        nxt = next((labelled[n] for n in targets[:TARGETS] if n in labelled), None)
+                        step["target_taken"] = nxt is not None
+                        nxt = nxt or rest[0]
+                    rest.remove(nxt)
+                    named.append(nxt)
+                row[how] = steps
+            cars.append(row)
+    summary = {}
+    for how in ORDERS:
+        per_n = {}
+        for n in GUIDANCE_SCORED_AT:
+            steps = [s for c in cars for s in c[how] if s["clicks"] == n]
+            fitted = [s for s in steps if s["ok"]]
+            per_n[str(n)] = {
+                "cars": len(steps), "fitted": len(fitted),
+                "well_determined": round(sum(s["well_determined"] for s in fitted) / len(steps), 3) if steps else None,
+                "e_r_deg_mean": _mean([s["e_r_deg"] for s in fitted]),
+                "e_r_deg_median": round(float(np.median([s["e_r_deg"] for s in fitted])), 2) if fitted else None,
+                "e_t_mean": round(float(np.mean([s["e_t"] for s in fitted])), 4) if fitted else None,
+                "e_t_median": round(float(np.median([s["e_t"] for s in fitted])), 4) if fitted else None}
+        reached = [next((s["clicks"] for s in c[how] if s.get("well_determined")), None) for c in cars]
+        summary[how] = {"by_clicks": per_n, "reached_well_determined": sum(r is not None for r in reached)}
+    taken = [s["target_taken"] for c in cars for s in c["guided"] if "target_taken" in s]
+    summary["guided"]["steps_that_took_a_target"] = f"{sum(taken)} of {len(taken)}"
+    both = [c for c in cars if all(any(s.get("well_determined") for s in c[how]) for how in ORDERS)]
+    for how in ORDERS:
+        summary[how]["mean_clicks_to_well_determined_on_common"] = _mean(
+            [next(s["clicks"] for s in c[how] if s.get("well_determined")) for c in both])
+    summary["reached_by_both"] = len(both)
+    return {"benchmark": "annotate --apollocar3d --guidance", "data": "ApolloCar3D apollocar3d_val_dev.json",
+            "mapping": "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)",
+            "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "start": GUIDANCE_START, "targets": TARGETS,
+            "orders": {"seeded": "one numpy generator (seed) permuting each car's keypoints, cars in file order",
+                       "guided": "after the start, the first of the page's targets the car has labelled, else "
+                                 "the next of the seeded order"},
             "seconds": round(time.perf_counter() - t0, 1), "machine": machine(), "summary": summary, "cars": cars}
 
 
