@@ -143,3 +143,48 @@ def test_keypoints_the_mapping_does_not_have_are_refused(clicked, scene, tmp_pat
     with pytest.raises(ApiError, match="start the page with --mapping"):
         plain.edit(0, {"revision": plain.revision, "op": "add_click", "vehicle": plain_vehicle, "kind": "keypoint",
                        "name": "lamp-front-left", "uv": _uv("lamp-front-left")})
+
+
+@pytest.mark.parametrize("name", [["lamp-front-left"], {"a": 1}, 5, None, True, ""])
+def test_a_keypoint_name_of_the_wrong_type_is_a_clear_refusal(clicked, name):
+    session, out, vehicle = clicked
+    before = out.read_text()
+    with pytest.raises(ApiError, match="name"):
+        _edit(session, op="add_click", vehicle=vehicle, kind="keypoint", name=name, uv=[[10.0, 20.0]])
+    with pytest.raises(ApiError, match="name"):
+        _edit(session, op="rename", vehicle=vehicle, part=0, kind="keypoint", name=name)
+    assert out.read_text() == before
+
+
+def test_random_requests_get_only_clear_refusals(scene, tmp_path):
+    """600 seeded requests, half of them sensible changes and half fields of any type: every one is applied or
+    refused with an ApiError (HTTP 400/404/409 and its message), never another exception (HTTP 500)."""
+    import random
+
+    rng = random.Random(0)
+    session = _session(scene, tmp_path / "a.json")
+    junk = [None, True, 0, -1, 1.5, float("nan"), "", "x", "keypoint", "point", "SUV", [], [1], [[1, 2]],
+            [[1.0, 2.0], [3.0, 4.0]], {"a": 1}, "1", 10**30, "lamp-front-left", "wheel-front-left", "plate"]
+    ops = ["add_vehicle", "set_vehicle", "delete_vehicle", "add_click", "move_click", "rename", "delete_click", "undo"]
+    applied = 0
+    for _ in range(600):
+        ids = [v.id for v in session.images[0].vehicles]
+        name = rng.choice(list(AT))
+        if rng.random() < 0.5:
+            op = rng.choice(["add_vehicle", "add_click", "add_click", "rename", "set_vehicle", "move_click"])
+            r = {"op": op, "vehicle": rng.choice(ids) if ids else "1", "kind": "keypoint", "name": name,
+                 "uv": _uv(name)[0] if op == "move_click" else _uv(name), "click": 0, "part": rng.randrange(12),
+                 "prototype": rng.choice(["Car", "SUV", "Boat"])}
+        else:
+            r = {key: rng.choice(junk + ids) for key in ("vehicle", "kind", "name", "uv", "part", "click",
+                                                         "prototype", "box2d", "done", "known") if rng.random() < 0.6}
+            r["op"] = rng.choice([*ops, None, 3])
+        try:
+            _edit(session, **r)
+            applied += 1
+        except ApiError:
+            pass
+    assert applied > 100  # the sensible half grows a state to work on
+    from toosicubix.annotations.convert import load_images
+
+    assert sum(len(v.parts) for v in load_images(tmp_path / "a.json")[0].vehicles) > 0  # fit reads the file

@@ -330,7 +330,9 @@ class Session:
     def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
         """A mapping keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of
         ``prototype``; None when the mapping does not have it."""
-        position = None if self.mapping is None else self.mapping.keypoint_positions(prototype).get(name)
+        if self.mapping is None or not isinstance(name, str):
+            return None
+        position = self.mapping.keypoint_positions(prototype).get(name)
         if position is None:
             return None
         extra: dict[str, Any] = {"at": list(position.at), "spread": list(position.spread)}
@@ -774,8 +776,8 @@ class Session:
     # -- checks -----------------------------------------------------------------------------------------------
 
     def _check_prototype(self, prototype: Any) -> None:
-        if prototype not in self.priors:
-            raise ApiError(f"prototype: unknown {prototype!r}; known: {', '.join(sorted(self.priors))}")
+        if not isinstance(prototype, str) or prototype not in self.priors:
+            raise ApiError(f"prototype: unknown {prototype!r:.60}; known: {', '.join(sorted(self.priors))}")
 
     @staticmethod
     def _vehicle(image: ImageState, r: dict) -> VehicleState:
@@ -910,8 +912,8 @@ def _known(value: Any) -> tuple[float, float]:
 
 
 def _kind_name(kind: Any, name: Any) -> tuple[str, str]:
-    if kind not in vocabulary.KINDS:
-        raise ApiError(f"kind: expected one of {', '.join(vocabulary.KINDS)}, got {kind!r}")
-    if name not in vocabulary.KINDS[kind].names:
+    if not isinstance(kind, str) or kind not in vocabulary.KINDS:
+        raise ApiError(f"kind: expected one of {', '.join(vocabulary.KINDS)}, got {kind!r:.60}")
+    if not isinstance(name, str) or name not in vocabulary.KINDS[kind].names:
         raise ApiError(f"name: expected a {kind} name ({', '.join(vocabulary.KINDS[kind].names)}), got {name!r}")
     return kind, name
