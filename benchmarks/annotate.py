@@ -174,7 +174,7 @@ def main() -> None:
         report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed) if args.guidance else
                   apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample))
         if args.out:
-            args.out.write_text(json.dumps(report, indent=1) + "\n")
+            args.out.write_text((_compact_steps(report) if args.guidance else json.dumps(report, indent=1)) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
         return
 
@@ -402,6 +402,22 @@ def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
                        "guided": "after the start, the first of the page's targets the car has labelled, else "
                                  "the next of the seeded order"},
             "seconds": round(time.perf_counter() - t0, 1), "machine": machine(), "summary": summary, "cars": cars}
+
+
+#: The fields of a step of ``--guidance``'s cars, as the JSON lists them.
+STEP_FIELDS = ("clicks", "ok", "well_determined", "e_r_deg", "e_t", "target_taken")
+
+
+def _compact_steps(report: dict) -> str:
+    """``--guidance``'s report as JSON, one line per car, each step a list of :data:`STEP_FIELDS` (None: not
+    known, e.g. a failed fit's errors, or a seeded step's target)."""
+    cars = [{**{k: v for k, v in c.items() if k not in ORDERS},
+             **{how: [[step.get(f) for f in STEP_FIELDS] for step in c[how]] for how in ORDERS}}
+            for c in report["cars"]]
+    head = json.dumps({**{k: v for k, v in report.items() if k != "cars"}, "step_fields": list(STEP_FIELDS)},
+                      indent=1)
+    rows = ",\n  ".join(json.dumps(c, separators=(",", ":")) for c in cars)
+    return head[:-2] + ',\n "cars": [\n  ' + rows + "\n ]\n}"
 
 
 def _compact(report: dict) -> str:
