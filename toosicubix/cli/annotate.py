@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
-from toosicubix.cli.options import BadInput, announced_estimates, parse_normal
+from toosicubix.cli.options import BadInput, announced_estimates, keypoint_mapping_option, parse_normal
 
 
 @click.command("annotate")
@@ -38,17 +39,17 @@ from toosicubix.cli.options import BadInput, announced_estimates, parse_normal
               help="Click noise in pixels the page's sigmas and next clicks are for. Not given: estimated at start "
                    "from the file's vehicles as `fit` estimates it (1.5 when the file has too few), and again as "
                    "they grow.")
-@click.option("--mapping", "mapping_name", default=None, metavar="NAME|FILE",
-              help="Also offer a keypoint mapping's keypoints (bundled: apollocar3d-66, ApolloCar3D's 66 car "
-                   "keypoints: lamp, glass, door and handle corners, wheel centres, plates; or a mapping file, e.g. "
-                   "from `toosicubix learn-parts`): a click named one takes its typical position for the vehicle's "
-                   "prototype, unnamed clicks are named among them, and the parts to click next are them.")
+@keypoint_mapping_option("Also offer a keypoint mapping's keypoints (bundled: apollocar3d-66, ApolloCar3D's 66 car "
+                         "keypoints: lamp, glass, door and handle corners, wheel centres, plates; or a mapping file, "
+                         "e.g. from `toosicubix learn-parts`): a click named one takes its typical position for the "
+                         "vehicle's prototype, unnamed clicks are named among them, and the parts to click next are "
+                         "them.")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
 def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
                      priors_path: Path | None, kitti_ground: bool, road_normal: str | None,
-                     camera_height: float | None, click_sigma: float | None, mapping_name: str | None, host: str,
+                     camera_height: float | None, click_sigma: float | None, mapping: Any, host: str,
                      port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
@@ -70,7 +71,6 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
       toosicubix annotate frames/*.jpg --cameras cameras.json --mapping apollocar3d-66
     """
     from toosicubix.annotations.schema import InputFileError, parse_ground_block
-    from toosicubix.formats.coco import load_mapping
     from toosicubix.pipeline.settings import ground_overrides
     from toosicubix.priors.table import load_priors
     from toosicubix.web.server import serve
@@ -88,10 +88,6 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         if ground is not None:
             parse_ground_block(ground, "ground options")  # a zero normal: refused here, not on the first click
         priors = load_priors(priors_path)
-        mapping = load_mapping(mapping_name)[0] if mapping_name is not None else None
-        if mapping is not None and not mapping.keypoint_positions(prototype):
-            raise BadInput(f"--mapping {mapping_name}: the mapping {mapping.name} has no keypoint parts (its parts "
-                           "are the page's own vocabulary, which the page offers anyway)")
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
         options, road_grounds, estimate = _batch_settings(out, priors, click_sigma, estimate_road)

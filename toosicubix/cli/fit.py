@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
+from toosicubix.cli.options import (
+    EXIT_OK,
+    EXIT_SOME_FAILED,
+    Fitting,
+    ProgressBar,
+    fitting_options,
+    keypoint_mapping_option,
+)
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -20,8 +28,11 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.option("--next-clicks", type=click.IntRange(min=0), default=0, show_default=True,
               help="Per vehicle, add to results.json this many parts to click next, best first (about 2 ms a "
                    "vehicle; `toosicubix validate` shows them).")
+@keypoint_mapping_option("With --next-clicks: suggest this keypoint mapping's keypoints (e.g. apollocar3d-66, or a "
+                         "mapping file) instead of the cuboid vocabulary's parts, for clicks made in its vocabulary.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
-def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks: int, quiet: bool) -> None:
+def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks: int, mapping: Any,
+                quiet: bool) -> None:
     """Fit a 3D cuboid to every annotated vehicle.
 
     Reads ANNOTATIONS (annotation file v1, see `toosicubix schema`) and writes OUT/label_2/<image id>.txt
@@ -58,7 +69,7 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
     try:
         summary = fit_file(annotations, out_dir, fitting.priors_path, fitting.options, progress=bar.update,
                            on_start=bar.start, jobs=fitting.jobs, ground=fitting.ground,
-                           joint_ground=fitting.joint_ground, next_clicks=next_clicks,
+                           joint_ground=fitting.joint_ground, next_clicks=next_clicks, keypoints=mapping,
                            estimate_click_sigma=not fitting.click_sigma_given,
                            estimate_road_normal=fitting.estimate_road_normal)
     finally:

@@ -165,6 +165,37 @@ def car_models_option(command: Callable) -> Callable:
                                            "keypoint file].")(wrapper)
 
 
+def keypoint_mapping_option(help_text: str) -> Callable:
+    """Add ``--mapping NAME|FILE`` (a bundled keypoint mapping or a mapping file, with keypoint parts) to a
+    command; it receives ``mapping``, the loaded :class:`toosicubix.formats.coco.MappingFile` or None. A mapping
+    that does not load, or has no keypoint parts, is bad input naming it (exit 2)."""
+
+    def decorate(command: Callable) -> Callable:
+        @functools.wraps(command)
+        def wrapper(*args: Any, mapping_name: str | None, **kwargs: Any) -> Any:
+            return command(*args, mapping=_keypoint_mapping(mapping_name), **kwargs)
+
+        return click.option("--mapping", "mapping_name", default=None, metavar="NAME|FILE", help=help_text)(wrapper)
+
+    return decorate
+
+
+def _keypoint_mapping(name: str | None) -> Any:
+    if name is None:
+        return None
+    from toosicubix.annotations.schema import InputFileError
+    from toosicubix.formats.coco import load_mapping
+
+    try:
+        mapping, _ = load_mapping(name)
+    except InputFileError as exc:
+        raise BadInput(str(exc)) from None
+    if not mapping.keypoint_positions(mapping.prototype):
+        raise BadInput(f"--mapping {name}: the mapping {mapping.name} has no keypoint parts (its parts are the "
+                       "vocabulary's own, which are suggested anyway)")
+    return mapping
+
+
 # --- fitting -----------------------------------------------------------------------------------------------
 
 _FITTING_OPTIONS = [

@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
-from toosicubix.cli.options import EXIT_OK, EXIT_SOME_FAILED, Fitting, ProgressBar, fitting_options
+from toosicubix.cli.options import (
+    EXIT_OK,
+    EXIT_SOME_FAILED,
+    Fitting,
+    ProgressBar,
+    fitting_options,
+    keypoint_mapping_option,
+)
 from toosicubix.pipeline.validation import Thresholds
 
 
@@ -23,12 +31,15 @@ from toosicubix.pipeline.validation import Thresholds
               help="... and (unless this flag is given) no second answer fits the clicks about as well.")
 @click.option("--next-clicks", type=click.IntRange(min=0), default=3, show_default=True,
               help="How many parts to suggest clicking next, per vehicle.")
+@keypoint_mapping_option("Suggest this keypoint mapping's keypoints (e.g. apollocar3d-66, or a mapping file) as the "
+                         "next clicks instead of the cuboid vocabulary's parts, for clicks made in its vocabulary.")
 @fitting_options
 @click.option("--all", "show_all", is_flag=True, help="Describe every vehicle, not only those that need work.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout instead of text.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar on stderr.")
 def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigma_rel: float, allow_ambiguous: bool,
-                     next_clicks: int, fitting: Fitting, show_all: bool, as_json: bool, quiet: bool) -> None:
+                     next_clicks: int, mapping: Any, fitting: Fitting, show_all: bool, as_json: bool,
+                     quiet: bool) -> None:
     """Check an annotation file and say which vehicles need more clicks; writes nothing.
 
     Schema errors are listed with their JSON paths (exit code 2). Otherwise every vehicle is fitted as
@@ -47,6 +58,7 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
       toosicubix validate annotations.json
       toosicubix validate annotations.json --kitti-ground --max-yaw-sigma 3 --all
       toosicubix validate annotations.json --json > report.json
+      toosicubix validate apollo.json --mapping apollocar3d-66   # keypoints to click next
     """
     from toosicubix.pipeline.validation import validate_file
 
@@ -56,7 +68,7 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
         report = validate_file(annotations, fitting.priors_path, fitting.options, thresholds, fitting.ground,
                                fitting.joint_ground, next_clicks, fitting.jobs, progress=bar.update,
                                on_start=bar.start, estimate_click_sigma=not fitting.click_sigma_given,
-                               estimate_road_normal=fitting.estimate_road_normal)
+                               estimate_road_normal=fitting.estimate_road_normal, keypoints=mapping)
     finally:
         bar.finish()
     if not quiet and not as_json and report.pilot is not None:  # the JSON report holds them

@@ -30,6 +30,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from pydantic import ConfigDict, Field, field_validator
 
 from toosicubix.annotations import schema as schemas
@@ -155,6 +156,11 @@ class MappingFile(_Model):
         ``prototype`` (what the annotate page offers)."""
         return {p.keypoint: p.position_for(prototype) for p in self.parts
                 if isinstance(p, MappingKeypoint) and p.option is None}
+
+    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """:meth:`keypoint_positions` as the solver's guidance takes them: name -> ``(at, spread)``, (3,) each."""
+        return {name: (np.asarray(pos.at, dtype=float), np.asarray(pos.spread, dtype=float))
+                for name, pos in self.keypoint_positions(prototype).items()}
 
     def known_keypoints(self) -> set[str]:
         names = set(self.unused) | set(self.keypoints or ())

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -150,6 +150,15 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return _failed(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
                                        f"(at {Path(where.filename).name}:{where.lineno})")
+
+
+class KeypointCatalogue(Protocol):
+    """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
+    :class:`toosicubix.formats.coco.MappingFile`)."""
+
+    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Name -> ``(at, spread)``, (3,) fractions of the dimensions, on a vehicle of ``prototype``."""
+        ...
 
 
 class UnusableFit(ValueError):
@@ -302,8 +311,24 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     return lines
 
 
-def _fit_task(task: tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]) -> VehicleResult:
+def _fit_task(task: tuple) -> VehicleResult:
+    """:func:`fit_one` of (vehicle, camera, prior, options, ground, next_clicks, keypoints)."""
     return fit_one(*task)
+
+
+def _candidates_of(keypoints: KeypointCatalogue | None
+                   ) -> Callable[[str], Mapping[str, tuple[np.ndarray, np.ndarray]] | None]:
+    """Per prototype, the keypoints to suggest (None: the vocabulary's parts), each prototype's made once."""
+    made: dict[str, Mapping[str, tuple[np.ndarray, np.ndarray]]] = {}
+
+    def of(prototype: str) -> Mapping[str, tuple[np.ndarray, np.ndarray]] | None:
+        if keypoints is None:
+            return None
+        if prototype not in made:
+            made[prototype] = keypoints.keypoint_candidates(prototype)
+        return made[prototype]
+
+    return of
 
 
 def _worker_init() -> None:
@@ -312,7 +337,8 @@ def _worker_init() -> None:
 
 def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
                progress: Callable[[int], None] | None = None, jobs: int = 1,
-               joint_ground: bool = False, next_clicks: int = 0) -> list[ImageResult]:
+               joint_ground: bool = False, next_clicks: int = 0,
+               keypoints: KeypointCatalogue | None = None) -> list[ImageResult]:
     """Fit every vehicle of every image.
 
     Parameters
@@ -323,26 +349,30 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
     joint_ground : then refine each image's vehicles together with its ground plane (images with a
         ground block); the camera height may be unknown
     next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
+    keypoints : suggest these keypoints instead of the vocabulary's parts (a keypoint mapping,
+        :class:`toosicubix.formats.coco.MappingFile`: its keypoints at their positions for each prototype)
     """
     n = sum(len(im.vehicles) for im in images)
-    return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks))
+    return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks, keypoints))
 
 
 def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, options: SolverOptions,
                     progress: Callable[[int], None] | None = None, jobs: int = 1,
-                    joint_ground: bool = False, next_clicks: int = 0) -> Iterator[ImageResult]:
+                    joint_ground: bool = False, next_clicks: int = 0,
+                    keypoints: KeypointCatalogue | None = None) -> Iterator[ImageResult]:
     """:func:`fit_images` one image at a time, in input order: the images are read from ``images`` only as
     the workers need them, and each result is handed on as soon as its image is done, so memory does not
     grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
     """
     pending: deque[Image] = deque()
     done: list[VehicleResult] = []
+    candidates = _candidates_of(keypoints if next_clicks > 0 else None)
 
-    def tasks() -> Iterator[tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]]:
+    def tasks() -> Iterator[tuple]:
         for im in images:
             pending.append(im)
             for v in im.vehicles:
-                yield v, im.camera, priors[v.prototype], options, im.ground, next_clicks
+                yield v, im.camera, priors[v.prototype], options, im.ground, next_clicks, candidates(v.prototype)
 
     def finished_images() -> Iterator[ImageResult]:
         while pending and len(done) >= len(pending[0].vehicles):
@@ -351,7 +381,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
             del done[:len(im.vehicles)]
             ground = _ground_json(im.ground, estimated=im.ground.from_batch) if im.ground is not None else None
             if joint_ground and im.ground is not None:
-                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks)
+                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks, keypoints)
             yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
                               image_size=im.camera.image_size, vehicles=vehicles, ground=ground)
 
@@ -364,8 +394,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
     yield from finished_images()  # images without vehicles at the end
 
 
-def _fit_chunk(tasks: list[tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int]]
-               ) -> list[VehicleResult]:
+def _fit_chunk(tasks: list[tuple]) -> list[VehicleResult]:
     return [fit_one(*task) for task in tasks]
 
 
@@ -399,7 +428,8 @@ def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | No
 
 
 def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
-                      next_clicks: int = 0) -> tuple[list[VehicleResult], dict[str, Any]]:
+                      next_clicks: int = 0, keypoints: KeypointCatalogue | None = None
+                      ) -> tuple[list[VehicleResult], dict[str, Any]]:
     """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
     return the updated results and the plane. Failed vehicles stay as they were."""
     ground = image.ground
@@ -441,7 +471,8 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         )
         try:
             updated = checked_result(
-                _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks))
+                _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks,
+                                _candidates_of(keypoints if next_clicks > 0 else None)(v.prototype)))
         except UnusableFit as exc:
             out[k] = _failed(v, jv.problem.prior, f"after the joint refinement: {exc}")
             continue
@@ -557,7 +588,8 @@ class PilotFindings:
 def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
               jobs: int = 1, progress: Callable[[int], None] | None = None,
               on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
-              estimate_road_normal: bool = False, next_clicks: int = 0) -> PilotFindings:
+              estimate_road_normal: bool = False, next_clicks: int = 0,
+              keypoints: KeypointCatalogue | None = None) -> PilotFindings:
     """Fit every k-th vehicle of an indexed file (at most :data:`toosicubix.pipeline.click_noise.PILOT_VEHICLES`,
     held in memory) and estimate from them what was asked: the click noise
     (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
@@ -587,7 +619,7 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     every = n_pilot == index.vehicles
     pilot_next = next_clicks if every else 0
     results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs,
-                                   next_clicks=pilot_next)) if pilot else []
+                                   next_clicks=pilot_next, keypoints=keypoints)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
@@ -629,13 +661,13 @@ def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, di
 
 def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot: PilotFindings,
                  progress: Callable[[int], None] | None = None, jobs: int = 1, joint_ground: bool = False,
-                 next_clicks: int = 0) -> Iterator[ImageResult]:
+                 next_clicks: int = 0, keypoints: KeypointCatalogue | None = None) -> Iterator[ImageResult]:
     """The batch's results, image by image in file order (:func:`iter_fit_images` with the pilot's settings),
     reusing the pilot's own fits when they are the batch's (:attr:`PilotFindings.results`) and the batch asks
     nothing the pilot did not do (no joint ground, as many next clicks): a small batch is then fitted once."""
     if pilot.results is None or joint_ground or next_clicks != pilot.next_clicks:
         yield from iter_fit_images(images, n_vehicles, priors, pilot.options, progress, jobs, joint_ground,
-                                   next_clicks)
+                                   next_clicks, keypoints)
         return
     done = iter(pilot.results)  # the images with vehicles, in file order
     for im in images:
@@ -651,16 +683,17 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot
 
 def pilot_and_fits(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
                    jobs: int, progress: Callable[[int], None] | None, on_start: Callable[[int], None] | None,
-                   estimate_click_sigma: bool, estimate_road_normal: bool, joint_ground: bool, next_clicks: int
+                   estimate_click_sigma: bool, estimate_road_normal: bool, joint_ground: bool, next_clicks: int,
+                   keypoints: KeypointCatalogue | None = None
                    ) -> tuple[PilotFindings, Iterator[Image], Iterator[ImageResult]]:
     """A batch as ``fit`` fits it (``fit`` and ``validate``): the pilot (:func:`run_pilot`), then, lazily, every
     image of the file on its camera's estimated road (a second reader of the stream, for the labels or the
     checks) and its fit (:func:`fitted_batch`), in file order."""
     pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal, 0 if joint_ground else next_clicks)
+                      estimate_road_normal, 0 if joint_ground else next_clicks, keypoints)
     images, second = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
     return pilot, second, fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground,
-                                       next_clicks)
+                                       next_clicks, keypoints)
 
 
 def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
@@ -669,7 +702,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
              on_start: Callable[[int], None] | None = None, jobs: int = 1,
              ground: dict[str, object] | None = None, joint_ground: bool = False,
              next_clicks: int = 0, estimate_click_sigma: bool = False,
-             estimate_road_normal: bool = False) -> BatchSummary:
+             estimate_road_normal: bool = False, keypoints: KeypointCatalogue | None = None) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -684,6 +717,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     ground : ground-block fields (schema names) set for every image of the file
     joint_ground : refine each image's vehicles together with its ground plane
     next_clicks : per vehicle, how many suggestions of what to click next results.json gets (0: none)
+    keypoints : suggest a keypoint mapping's keypoints instead of the vocabulary's parts (:func:`fit_images`)
     estimate_click_sigma : first estimate the click noise from a pilot fit's residuals
         (:mod:`toosicubix.pipeline.click_noise`) and fit with it; ``options.click_sigma`` is the pilot's
         assumption and stays when the batch's clicks are too few to estimate it (``toosicubix fit`` does this
@@ -708,7 +742,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Pa
     prepare_output_dir(out_dir)  # fail before the work, not after
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
     pilot, for_labels, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
-                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks)
+                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks,
+                                                keypoints)
     options = pilot.options
     header = {
         "generator": f"toosicubix {__version__}",

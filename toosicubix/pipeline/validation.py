@@ -18,7 +18,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import PilotFindings, pilot_and_fits
+from toosicubix.pipeline.batch import KeypointCatalogue, PilotFindings, pilot_and_fits
 from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
@@ -213,7 +213,7 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
                   ground: dict[str, object] | None = None, joint_ground: bool = False, next_clicks: int = 3,
                   jobs: int = 1, progress: Callable[[int], None] | None = None,
                   on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
-                  estimate_road_normal: bool = False) -> ValidationReport:
+                  estimate_road_normal: bool = False, keypoints: KeypointCatalogue | None = None) -> ValidationReport:
     """Fit every vehicle of a file as ``fit`` would, write nothing, judge each (see the module docstring).
 
     Parameters
@@ -223,6 +223,7 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
         ``fit``, estimates the click noise and the road normals unless given them)
     thresholds : when a vehicle is well determined
     next_clicks : how many parts to suggest per vehicle
+    keypoints : suggest a keypoint mapping's keypoints instead of the vocabulary's parts
 
     Raises
     ------
@@ -237,7 +238,8 @@ def validate_file(annotations: str | Path, priors_path: str | Path | None = None
     refuse_with_ground(estimate_road_normal, ground, joint_ground)
     # Read image by image, as fit does: the fitter and the checks read the same stream.
     pilot, for_checks, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
-                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks)
+                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks,
+                                                keypoints)
     options = pilot.options
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)

@@ -322,10 +322,7 @@ class Session:
 
     def _keypoints(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
         """The mapping's keypoints on a vehicle of ``prototype``: name -> ``(at, spread)``; None without one."""
-        if self.mapping is None:
-            return None
-        return {name: (np.asarray(pos.at, dtype=float), np.asarray(pos.spread, dtype=float))
-                for name, pos in self.mapping.keypoint_positions(prototype).items()}
+        return None if self.mapping is None else self.mapping.keypoint_candidates(prototype)
 
     def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
         """A mapping keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of

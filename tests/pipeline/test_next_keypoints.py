@@ -1,0 +1,89 @@
+"""``fit --next-clicks N --mapping M`` and ``validate --mapping M``: the parts to click next are the mapping's
+keypoints, in every path of the batch (one process or several, the pilot's own fits, the joint ground)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.pipeline.test_road_normal import _pitched_batch
+from tests.solver.test_robust import TWELVE
+from toosicubix.annotations.convert import document_json
+from toosicubix.cli import main
+from toosicubix.formats.coco import MappingFile
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.validation import validate_file
+
+#: Keypoints the twelve clicked ones leave: the front and right side (turned away from these rear-left views)
+#: and two more on the left side.
+MORE = {"lamp-front-left": (0.46, 0.36, 0.55), "lamp-front-right": (0.46, -0.36, 0.55),
+        "mirror-right": (0.18, -0.5, 0.65), "sill-front": (0.25, 0.49, 0.15), "glass-side-left": (-0.05, 0.45, 0.8)}
+
+
+def _mapping() -> MappingFile:
+    parts = [{"kind": "keypoint", "keypoint": name, "position": {"at": list(at), "spread": [0.01, 0.01, 0.01]}}
+             for name, at in {**TWELVE, **MORE}.items()]
+    return MappingFile.model_validate({"toosicubix_mapping": 1, "name": "twelve-and-more", "parts": parts})
+
+
+@pytest.fixture
+def keypoint_file(tmp_path: Path) -> Path:
+    """Three images of one car each, its twelve keypoints clicked but the last four (left for suggestions)."""
+    images = _pitched_batch(3, np.random.default_rng(11))
+    doc = document_json(images)
+    for im in doc["images"]:
+        im["vehicles"][0]["parts"] = im["vehicles"][0]["parts"][:8]
+    path = tmp_path / "keypoints.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _suggested(out: Path) -> list[list[tuple[str, str]]]:
+    results = json.loads((out / "results.json").read_text())
+    return [[(s["kind"], s["name"]) for s in v["next_clicks"]] for im in results["images"] for v in im["vehicles"]]
+
+
+def test_fit_suggests_the_mappings_keypoints_not_clicked_yet(keypoint_file, tmp_path):
+    mapping = _mapping()
+    fit_file(keypoint_file, tmp_path / "one", next_clicks=20, keypoints=mapping)
+    suggested = _suggested(tmp_path / "one")
+    clicked = set(list(TWELVE)[:8])
+    for names in suggested:
+        assert names and all(kind == "keypoint" for kind, _ in names)
+        assert {n for _, n in names} == set(TWELVE) - clicked | set(MORE)  # every one not clicked, once
+    # Several processes: the same bytes. The pilot's own fits, reused (a file too small for a road normal: the
+    # pilot fitted every vehicle as the batch does): the same suggestions.
+    fit_file(keypoint_file, tmp_path / "two", next_clicks=20, keypoints=mapping, jobs=2)
+    assert (tmp_path / "two" / "results.json").read_bytes() == (tmp_path / "one" / "results.json").read_bytes()
+    summary = fit_file(keypoint_file, tmp_path / "pilot", next_clicks=20, keypoints=mapping,
+                       estimate_road_normal=True)
+    assert summary.pilot.results is not None  # reused
+    assert _suggested(tmp_path / "pilot") == suggested
+    # Refined together with the ground plane, the vehicles keep keypoint suggestions.
+    ground = {"normal": [0.0, -float(np.cos(np.deg2rad(9.0))), -float(np.sin(np.deg2rad(9.0)))]}
+    fit_file(keypoint_file, tmp_path / "joint", next_clicks=20, keypoints=mapping, ground=ground, joint_ground=True)
+    assert all(names and all(k == "keypoint" for k, _ in names) for names in _suggested(tmp_path / "joint"))
+    # Without a mapping: the vocabulary's parts, as before.
+    fit_file(keypoint_file, tmp_path / "plain", next_clicks=20)
+    assert all(all(k != "keypoint" for k, _ in names) for names in _suggested(tmp_path / "plain"))
+
+
+def test_validate_names_keypoints_to_click_next(keypoint_file, tmp_path):
+    report = validate_file(keypoint_file, next_clicks=3, keypoints=_mapping())
+    for check in report.vehicles:
+        names = [s["name"] for s in check.result.next_clicks]
+        assert len(names) == 3 and set(names) <= set(TWELVE) | set(MORE)
+    mapping_file = tmp_path / "mapping.json"
+    mapping_file.write_text(_mapping().model_dump_json())
+    result = CliRunner().invoke(main, ["validate", str(keypoint_file), "--mapping", str(mapping_file), "--all", "-q"])
+    assert result.exit_code in (0, 1), result.output
+    assert "click next:" in result.output
+    listed = [line.split(". ", 1)[1].split(" near ")[0] for line in result.output.splitlines()
+              if line.startswith("    ") and " near (" in line]
+    assert listed and set(listed) <= set(TWELVE) | set(MORE)
+    bad = CliRunner().invoke(main, ["validate", str(keypoint_file), "--mapping", "apollocar3d-66-paper"])
+    assert bad.exit_code == 2 and "has no keypoint parts" in bad.output
