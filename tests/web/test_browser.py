@@ -54,17 +54,21 @@ def _wait_revision(page, revision: int) -> None:
     page.wait_for_function(f"state.revision >= {revision}", timeout=20000)
 
 
+def _open_zoomed_in(page, url: str) -> None:
+    """Open the page and zoom in on the synthetic vehicle (the page's mouse wheel does this; set here exactly):
+    mouse positions are whole CSS pixels, so at zoom 3 a click lands within 0.17 image pixels of the part."""
+    page.goto(url)
+    page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+    page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 3; "
+                  "state.panX = r.width / 2 - 3 * 700; state.panY = r.height / 2 - 3 * 270; render(); }")
+
+
 def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
     out = tmp_path / "annotations.json"
     session = make_session(scene, out)
     server = serve_in_thread(session)
     try:
-        page.goto(server.url)
-        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
-        # Zoom in on the vehicle (the page's mouse wheel does this; set here exactly): mouse positions are whole
-        # CSS pixels, so at zoom 3 a click lands within 0.17 image pixels of the part.
-        page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 3; "
-                      "state.panX = r.width / 2 - 3 * 700; state.panY = r.height / 2 - 3 * 270; render(); }")
+        _open_zoomed_in(page, server.url)
         # Six named parts: with the minimal five (six constraints) clicks half a pixel off leave the fit degenerate.
         named, unnamed = clicks(NAMED) + clicks(UNNAMED)[:1], clicks(UNNAMED)[1:]
         revision = 0
@@ -148,11 +152,8 @@ def test_click_keypoints_of_a_mapping_in_the_browser(page, scene, tmp_path: Path
     session = _session(scene, out)
     server = serve_in_thread(session)
     try:
-        page.goto(server.url)
-        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        _open_zoomed_in(page, server.url)
         assert page.locator("#keypoint-section").is_visible()
-        page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 3; "
-                      "state.panX = r.width / 2 - 3 * 700; state.panY = r.height / 2 - 3 * 270; render(); }")
         revision = 0
         for name in KEYPOINTS:
             page.fill("#keypoint-filter", name.replace("-", " "))
