@@ -130,9 +130,22 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
         raise InputFileError(source, problems)
 
 
+#: Keypoints to suggest for one vehicle: name -> ``(at, spread)``, (3,) fractions of the dimensions.
+Keypoints = Mapping[str, tuple[np.ndarray, np.ndarray]]
+
+
+class KeypointCatalogue(Protocol):
+    """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
+    :class:`toosicubix.formats.coco.MappingFile`)."""
+
+    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Name -> ``(at, spread)``, (3,) fractions of the dimensions, on a vehicle of ``prototype``."""
+        ...
+
+
 def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
             ground: GroundPlane | None = None, next_clicks: int = 0,
-            keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> VehicleResult:
+            keypoints: Keypoints | None = None) -> VehicleResult:
     """Fit one vehicle and describe it as results.json does; never raises.
 
     ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
@@ -150,15 +163,6 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return _failed(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
                                        f"(at {Path(where.filename).name}:{where.lineno})")
-
-
-class KeypointCatalogue(Protocol):
-    """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
-    :class:`toosicubix.formats.coco.MappingFile`)."""
-
-    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Name -> ``(at, spread)``, (3,) fractions of the dimensions, on a vehicle of ``prototype``."""
-        ...
 
 
 class UnusableFit(ValueError):
@@ -215,7 +219,7 @@ def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
 
 def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
                     ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0,
-                    keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> VehicleResult:
+                    keypoints: Keypoints | None = None) -> VehicleResult:
     common = {"id": vehicle.id, "prototype": vehicle.prototype, "kitti_type": prior.kitti_type,
               "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
               "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
@@ -255,7 +259,7 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
 
 def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
                  ground: GroundPlane | None, n: int,
-                 keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> dict[str, Any]:
+                 keypoints: Keypoints | None = None) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
     guidance failed); an error here never fails the vehicle."""
     try:
@@ -311,17 +315,20 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     return lines
 
 
-def _fit_task(task: tuple) -> VehicleResult:
-    """:func:`fit_one` of (vehicle, camera, prior, options, ground, next_clicks, keypoints)."""
+#: What :func:`fit_one` takes, as the batch hands it to a worker.
+FitTask = tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int, Keypoints | None]
+
+
+def _fit_task(task: FitTask) -> VehicleResult:
     return fit_one(*task)
 
 
 def _candidates_of(keypoints: KeypointCatalogue | None
-                   ) -> Callable[[str], Mapping[str, tuple[np.ndarray, np.ndarray]] | None]:
+                   ) -> Callable[[str], Keypoints | None]:
     """Per prototype, the keypoints to suggest (None: the vocabulary's parts), each prototype's made once."""
-    made: dict[str, Mapping[str, tuple[np.ndarray, np.ndarray]]] = {}
+    made: dict[str, Keypoints] = {}
 
-    def of(prototype: str) -> Mapping[str, tuple[np.ndarray, np.ndarray]] | None:
+    def of(prototype: str) -> Keypoints | None:
         if keypoints is None:
             return None
         if prototype not in made:
@@ -368,7 +375,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
     done: list[VehicleResult] = []
     candidates = _candidates_of(keypoints if next_clicks > 0 else None)
 
-    def tasks() -> Iterator[tuple]:
+    def tasks() -> Iterator[FitTask]:
         for im in images:
             pending.append(im)
             for v in im.vehicles:
@@ -394,7 +401,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
     yield from finished_images()  # images without vehicles at the end
 
 
-def _fit_chunk(tasks: list[tuple]) -> list[VehicleResult]:
+def _fit_chunk(tasks: list[FitTask]) -> list[VehicleResult]:
     return [fit_one(*task) for task in tasks]
 
 
@@ -438,6 +445,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     if not fitted:
         return vehicles, _ground_json(ground, estimated=False)
     joint_vehicles, models = [], []
+    candidates = _candidates_of(keypoints if next_clicks > 0 else None)
     for k, v in fitted:
         parts = build_parts_model(v.parts, v.known_dimensions)
         r = vehicles[k]  # its clicks keep the weights of its own fit (keypoints' soft term, robust factors)
@@ -472,7 +480,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         try:
             updated = checked_result(
                 _vehicle_result(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks,
-                                _candidates_of(keypoints if next_clicks > 0 else None)(v.prototype)))
+                                candidates(v.prototype)))
         except UnusableFit as exc:
             out[k] = _failed(v, jv.problem.prior, f"after the joint refinement: {exc}")
             continue
