@@ -414,7 +414,7 @@ function drawVehicle(v, selected) {
       dot(uv, colour, p.index === state.selectedPart && selected ? 6 : 4, selected ? "#000" : "#444");
     });
     if (selected) {
-      const text = p.name ? (p.kind === "point" ? p.name : `${p.name} ${p.kind}`) : "?";
+      const text = p.name ? (oneClick(p.kind) ? p.name : `${p.name} ${p.kind}`) : "?";
       label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
     }
   }
