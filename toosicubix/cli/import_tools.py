@@ -156,6 +156,9 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     Exit code 0 on success, 2 for a malformed file (named with its JSON path), an image without a camera or a
     keypoint the mapping does not know.
 
+    Then, in the same vocabulary: `toosicubix validate ann.json --mapping apollocar3d-66` says which keypoints to
+    click next, and `toosicubix annotate IMAGES --mapping apollocar3d-66 -o ann.json` clicks them on a page.
+
     \b
     Example:
       toosicubix import coco apollo_val.json --mapping apollocar3d-66 --cameras cameras.json -o ann.json
