@@ -75,7 +75,7 @@ from toosicubix.simulate.annotator import (
 from toosicubix.solver import SolverOptions
 from toosicubix.web.client import Client
 from toosicubix.web.server import serve_in_thread
-from toosicubix.web.session import Session, naming_candidates, nearest_parts
+from toosicubix.web.session import NAMING_GRAZING_DEG, Session, naming_candidates, nearest_parts
 
 STRATEGIES = ("named", "auto", "guided")
 
@@ -166,13 +166,20 @@ def main() -> None:
                         help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
     parser.add_argument("--out-of-sample", action="store_true",
                         help="with --apollocar3d: positions learned on the even images, the odd images scored")
+    parser.add_argument("--design", action="store_true",
+                        help="with --apollocar3d: the learning half only (positions learned on images 0, 4, 8, ..., "
+                             "the cars of images 2, 6, 10, ... scored), for choosing a setting (RESULTS.md rule 12)")
+    parser.add_argument("--naming-grazing-deg", type=float, default=NAMING_GRAZING_DEG,
+                        help="with --apollocar3d: name among keypoints on faces turned away by up to this (degrees; "
+                             "negative: turned toward the camera by at least that) [default: the page's]")
     parser.add_argument("--guidance", action="store_true",
                         help="with --apollocar3d: the page's targets against a seeded order (out of sample)")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
         report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed) if args.guidance else
-                  apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample))
+                  apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample,
+                                     design=args.design, grazing_deg=args.naming_grazing_deg))
         if args.out:
             args.out.write_text((_compact_steps(report) if args.guidance else json.dumps(report, indent=1)) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -231,16 +238,20 @@ APOLLO_MIN_KEYPOINTS = 10
 
 
 def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
-                       out_of_sample: bool = False) -> dict:
+                       out_of_sample: bool = False, design: bool = False,
+                       grazing_deg: float = NAMING_GRAZING_DEG) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
     keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
-    cars scored."""
+    cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
+    scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     scored_images = None
-    if out_of_sample:
+    if out_of_sample or design:
         sorted_ = sorted_images(folder)
+        if design:
+            sorted_ = sorted_[0::2]
         mapping = learned_on_even(sorted_, cameras)
         scored_images = {im.id for im in sorted_[1::2]}
     else:
@@ -279,7 +290,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                 taken = {(p.kind, p.name) for p in named}
                 candidates = naming_candidates(
                     result, image.camera, {n: at for n, at in keypoints.items() if ("keypoint", n) not in taken},
-                    {n for n in points if ("point", n) not in taken})
+                    {n for n in points if ("point", n) not in taken}, grazing_deg)
                 right = top2 = 0
                 for part in order[k:]:
                     ranked = [(c["kind"], c["name"]) for c in nearest_parts(part.uv[0].tolist(), candidates)]
@@ -300,8 +311,11 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
             "true_in_top_2": round(c["top2"] / c["scored"], 3) if c["scored"] else None,
             "true_part_not_visible_on_fit": c["true_not_visible"]}
     return {"benchmark": "annotate --apollocar3d", "data": "ApolloCar3D apollocar3d_val_dev.json (100 images)",
-            "mapping": ("apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
+            "mapping": ("apollocar3d-66, positions learned on images 0, 4, 8, ...; images 2, 6, 10, ... scored "
+                        "(design, learning half only)" if design else
+                        "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
                         if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
+            "naming_grazing_deg": grazing_deg,
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",

@@ -75,6 +75,9 @@ UNDO_DEPTH = 500
 TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+#: How far past edge-on (degrees) a face a keypoint sits near may be turned for an unnamed click to be named that
+#: keypoint; negative: turned toward the camera by at least that (RESULTS.md, rule 12).
+NAMING_GRAZING_DEG = -VISIBLE_MIN_DEG
 #: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
 FRONT_FACE = (0, 3, 7, 4)
 
@@ -831,18 +834,20 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
 
 def naming_candidates(result: VehicleResult, camera: Camera,
                       keypoints: dict[str, Any] | None = None,
-                      points: set[str] | None = None) -> list[dict[str, Any]]:
+                      points: set[str] | None = None,
+                      grazing_deg: float = NAMING_GRAZING_DEG) -> list[dict[str, Any]]:
     """What an unnamed click on a fitted vehicle may be, each as ``next_clicks`` has it (kind, name, uv (1, 2),
     visible): the vocabulary's point parts among the fit's ``next_clicks`` (at their typical positions; only
     those named in ``points`` when given), then each keypoint of ``keypoints`` (name -> ``at``, fractions of the
     dimensions) projected from that place on the fitted cuboid, visible when a face it sits near
-    (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera as a suggestion's must be, or
-    when it sits near none. A keypoint behind the camera is left out."""
+    (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera (``grazing_deg``: turned away by
+    up to that, negative: toward it by at least that; by default as a suggestion's must be), or when it sits
+    near none. A keypoint behind the camera is left out."""
     out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
     if not keypoints or not result.ok:
         return out
     R, t, d = (np.asarray(x, dtype=float) for x in (result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions))
-    facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
+    facing = faces_turned_to_camera(R, t, d, grazing_deg=grazing_deg)
     for name, at in keypoints.items():
         at = np.asarray(at, dtype=float)
         point_cam = R @ (d * at) + t
