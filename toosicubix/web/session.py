@@ -67,7 +67,6 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.priors.table import Priors
 from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
-from toosicubix.solver.guidance import VISIBLE_MIN_DEG
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -76,8 +75,9 @@ TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 #: How far past edge-on (degrees) a face a keypoint sits near may be turned for an unnamed click to be named that
-#: keypoint; negative: turned toward the camera by at least that (RESULTS.md, rule 12).
-NAMING_GRAZING_DEG = -VISIBLE_MIN_DEG
+#: keypoint; negative: turned toward the camera by at least that. 0: any face turned toward the camera (a click
+#: shows its part is seen), chosen by RESULTS.md's rule 12 over the targets' -5 (VISIBLE_MIN_DEG).
+NAMING_GRAZING_DEG = 0.0
 #: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
 FRONT_FACE = (0, 3, 7, 4)
 
