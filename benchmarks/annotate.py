@@ -357,8 +357,7 @@ def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
             if len(clicks) < APOLLO_MIN_KEYPOINTS:
                 continue
             order = [clicks[i] for i in rng.permutation(len(clicks))]
-            keypoints = {n: (np.asarray(pos.at), np.asarray(pos.spread))
-                         for n, pos in mapping.keypoint_positions(vehicle.prototype).items()}
+            keypoints = mapping.keypoint_candidates(vehicle.prototype)
             gt = truth[(image.id, vehicle.id)]
             row = {"image": image.id, "vehicle": vehicle.id, "keypoints": len(clicks)}
             for how in ORDERS:
