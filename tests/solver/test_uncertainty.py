@@ -183,3 +183,25 @@ def test_the_sandwich_is_positive_semidefinite_even_when_badly_conditioned():
     H_inv = np.linalg.inv(H)
     expected = H_inv @ (1.5**2 * J_px.T @ J_px + 100.0 * J_cue.T @ J_cue) @ H_inv
     np.testing.assert_allclose(np.diag(cov), np.diag(expected), rtol=1e-6)
+
+
+def test_a_vehicle_clicked_in_keypoints_is_advised_in_keypoints():
+    """A car seen from behind, clicked on its rear lamps, glass and bumper only (keypoints at typical
+    positions, as ApolloCar3D's people click): its length is left to the prior, and the advice names
+    keypoints (a front and a rear one), never the cuboid vocabulary's arrows or ground contacts."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
+
+    rear = {name: at for name, at in REAR_LEFT.items() if name.split("-")[0] in ("lamp", "glass", "bumper")}
+    d = np.array([4.6, 1.8, 1.5])
+    R = R_cam_vehicle_from_ypr(np.deg2rad(-120.0))
+    parts = build_parts_model(keypoint_parts(d, R, np.array([0.5, 1.6, 20.0]), rear))
+    assert parts.keypoints_only
+    fit = fit_vehicle(parts, CAMERA, exact_prior(d))
+    assert fit.ok and fit.observability.keypoints_only
+    sentences = " ".join(fit.observability.sentences())
+    assert "length mostly set by the prior: click a keypoint at the front and one at the rear" in sentences
+    assert "arrow" not in sentences and "ground" not in sentences.split("scale set by")[0]
+    # The same view clicked in the cuboid vocabulary keeps the cuboid advice.
+    _, _, cuboid = _fit("rear", 0)
+    assert not cuboid.observability.keypoints_only
+    assert "click a front and a rear part" in " ".join(cuboid.observability.sentences())

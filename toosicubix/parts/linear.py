@@ -128,6 +128,11 @@ class PartsModel:
         return 2 * self.n_clicks - self.n_aux
 
     @property
+    def keypoints_only(self) -> bool:
+        """Every click is a keypoint or a plate end (at a typical position), none a cuboid part or an arrow."""
+        return self.n_clicks > 0 and all(click(label).kind in ("keypoint", "plate") for label in self.click_labels)
+
+    @property
     def arrow_tails(self) -> tuple[int, ...]:
         """The click index of each direction arrow's tail; its head is the next click."""
         return tuple(i for i, label in enumerate(self.click_labels) if _is_arrow_tail(label))

@@ -46,6 +46,16 @@ _HINTS = {
     "width": "click parts on both sides (both wheels of an axle, a light pair, both edges of an end)",
     "height": "click a roof or top part and one on the ground (a wheel)",
 }
+#: The same advice for a vehicle clicked only in keypoints (a mapping's, e.g. ApolloCar3D's): no arrows,
+#: no ground contacts, no cuboid edges.
+_KEYPOINT_HINTS = {
+    "yaw": "click keypoints front to rear along one side (a front and a rear wheel centre, a side's lamps)",
+    "pitch": "click keypoints at both ends (front and rear) and low on the body (wheel centres)",
+    "roll": "click keypoints on both sides of one end (its left and right lamps)",
+    "length": "click a keypoint at the front and one at the rear",
+    "width": "click keypoints on both sides, as far apart as they go (both mirrors, both lamps of one end)",
+    "height": "click a high keypoint (a glass top corner) and a low one (a wheel centre)",
+}
 
 
 @dataclass(frozen=True)
@@ -232,7 +242,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     G = ypr_gradient(R)
     u = _uncertainty(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
-    return u, _observability(full, clicks_only, scale_from)
+    return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only)
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -293,21 +303,24 @@ class Observability:
         the clicks leave it to the cues
     status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
     scale_from : the cue that sets the scale
+    keypoints_only : every click is a keypoint (or plate) at a typical position: the advice names keypoints
     """
 
     ratios: dict[str, float]
     status: dict[str, str]
     scale_from: str | None
+    keypoints_only: bool = False
 
     def sentences(self) -> list[str]:
         """Plain sentences, one per quantity the clicks do not fix, and one on the scale."""
         out = []
+        hints = _KEYPOINT_HINTS if self.keypoints_only else _HINTS
         for name in QUANTITIES:
             status = self.status[name]
             if status == "cues only":
-                out.append(f"{name} set by the prior, not by the clicks: {_HINTS[name]}")
+                out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
             elif status == "mostly cues":
-                out.append(f"{name} mostly set by the prior: {_HINTS[name]}")
+                out.append(f"{name} mostly set by the prior: {hints[name]}")
         if self.scale_from:
             source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(
                 self.scale_from, self.scale_from)
@@ -321,7 +334,8 @@ class Observability:
                 "sentences": self.sentences()}
 
 
-def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None) -> Observability:
+def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
+                   keypoints_only: bool) -> Observability:
     ratios, status = {}, {}
     for name, v_full in full.items():
         v_clicks = clicks_only[name]
@@ -329,7 +343,7 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         ratios[name] = ratio
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
-    return Observability(ratios, status, scale_from)
+    return Observability(ratios, status, scale_from, keypoints_only)
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
