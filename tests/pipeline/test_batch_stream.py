@@ -110,3 +110,26 @@ def test_next_clicks_are_suggested_by_a_pilot_that_fits_every_vehicle(tmp_path, 
     assert len(calls) == 18 and len(report.vehicles) == 6
     plain = validate_file(SAMPLE)
     assert [c.result.next_clicks for c in report.vehicles] == [c.result.next_clicks for c in plain.vehicles]
+
+
+def test_a_pilot_whose_fits_are_not_reused_suggests_nothing(tmp_path, monkeypatch):
+    """Guidance costs about a fit: the pilot asks for it only for fits it hands on. A robust loss makes the
+    pilot's fits not the batch's; the sample's 6 vehicles are then fitted twice and given suggestions once.
+    When the pilot's fits are reused (several processes too), each vehicle is given suggestions once."""
+    suggested: list[int] = []
+    suggest = batch.suggest_clicks
+
+    def counted(*args, **kwargs):
+        suggested.append(1)
+        return suggest(*args, **kwargs)
+
+    monkeypatch.setattr(batch, "suggest_clicks", counted)
+    calls = _counting_fits(monkeypatch)
+    fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True,
+             next_clicks=2)
+    assert len(calls) == 12 and len(suggested) == 6
+    summary = fit_file(SAMPLE, tmp_path / "reused", estimate_road_normal=True, next_clicks=2)
+    assert summary.pilot.results is not None and len(calls) == 18 and len(suggested) == 12
+    fit_file(SAMPLE, tmp_path / "two", estimate_road_normal=True, next_clicks=2, jobs=2)  # counted in workers
+    a, b = (json.loads((d / "results.json").read_text()) for d in (tmp_path / "reused", tmp_path / "two"))
+    assert a["images"] == b["images"] and all(len(v["next_clicks"]) == 2 for im in a["images"] for v in im["vehicles"])

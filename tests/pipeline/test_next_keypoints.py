@@ -63,6 +63,8 @@ def test_fit_suggests_the_mappings_keypoints_not_clicked_yet(keypoint_file, tmp_
                        estimate_road_normal=True)
     assert summary.pilot.results is not None  # reused
     assert _suggested(tmp_path / "pilot") == suggested
+    a, b = (json.loads((d / "results.json").read_text())["images"] for d in (tmp_path / "pilot", tmp_path / "one"))
+    assert a == b  # every vehicle as fitted without a pilot, suggestions included
     # Refined together with the ground plane, the vehicles keep keypoint suggestions.
     ground = {"normal": [0.0, -float(np.cos(np.deg2rad(9.0))), -float(np.sin(np.deg2rad(9.0)))]}
     fit_file(keypoint_file, tmp_path / "joint", next_clicks=20, keypoints=mapping, ground=ground, joint_ground=True)

@@ -82,11 +82,12 @@ from toosicubix.solver import (
     scale_shares,
     tested,
 )
-from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
+from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
+from toosicubix.solver.misfit import ResidualTest
 from toosicubix.solver.robust import with_weights
 
-__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "PilotFindings", "fit_file", "fit_images", "fit_one",
-           "fitted_batch", "run_pilot"]
+__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "PilotFindings", "fit_as_written", "fit_file",
+           "fit_images", "fit_one", "fitted_batch", "run_pilot", "with_next_clicks"]
 
 
 #: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
@@ -257,7 +258,7 @@ def _vehicle_result(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: P
     )
 
 
-def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitResult, options: SolverOptions,
+def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted, options: SolverOptions,
                  ground: GroundPlane | None, n: int,
                  keypoints: Keypoints | None = None) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
@@ -269,6 +270,71 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: FitRes
     except Exception as exc:  # guidance is advice: the fit stands without it
         return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
     return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
+
+
+@dataclass(frozen=True)
+class _FitAsWritten:
+    """A fit as results.json keeps it, seen as guidance reads a fit (:class:`toosicubix.solver.guidance.Fitted`)."""
+
+    result: VehicleResult
+
+    @property
+    def ok(self) -> bool:
+        return self.result.ok
+
+    @property
+    def uncertainty(self) -> Sigma | None:
+        return self.result.sigma
+
+    @property
+    def R_cam_vehicle(self) -> np.ndarray:
+        return self.result.R_cam_vehicle
+
+    @property
+    def t_cam_vehicle(self) -> np.ndarray:
+        return self.result.t_cam_vehicle
+
+    @property
+    def dimensions(self) -> np.ndarray:
+        return self.result.dimensions
+
+    @property
+    def p(self) -> np.ndarray:  # (P,): the dimensions, then the auxiliary unknowns in the parts model's order
+        return np.concatenate([self.result.dimensions, np.fromiter(self.result.parameters.values(), float)])
+
+    @property
+    def click_weights(self) -> np.ndarray | None:
+        return self.result.click_weights
+
+    @property
+    def residual_test(self) -> ResidualTest | None:
+        return self.result.residual_test
+
+
+def fit_as_written(result: VehicleResult) -> Fitted:
+    """A vehicle's result as guidance reads a fit: what :func:`fit_one` would have suggested from the fit itself
+    is suggested from its result (the same pose, unknowns, weights and residual test)."""
+    return _FitAsWritten(result)
+
+
+#: What :func:`with_next_clicks` takes, as the batch hands it to a worker.
+SuggestTask = tuple[Vehicle, Camera, SizePrior, VehicleResult, SolverOptions, GroundPlane | None, int,
+                    Keypoints | None]
+
+
+def with_next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, result: VehicleResult,
+                     options: SolverOptions, ground: GroundPlane | None, n: int,
+                     keypoints: Keypoints | None = None) -> VehicleResult:
+    """``result`` (:func:`fit_one`'s, without next clicks) with the ``n`` next clicks that :func:`fit_one` would
+    have given it with ``next_clicks=n``; a failed vehicle is returned as it is. Never raises."""
+    if not result.ok:
+        return result
+    try:
+        with np.errstate(all="ignore"):
+            suggestions = _next_clicks(vehicle, camera, prior, fit_as_written(result), options, ground, n, keypoints)
+            return checked_result(replace(result, **suggestions))
+    except UnusableFit as exc:
+        return _failed(vehicle, prior, str(exc))
 
 
 def _solver_stats(fit: FitResult) -> SolverStats:
@@ -317,10 +383,6 @@ def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
 
 #: What :func:`fit_one` takes, as the batch hands it to a worker.
 FitTask = tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int, Keypoints | None]
-
-
-def _fit_task(task: FitTask) -> VehicleResult:
-    return fit_one(*task)
 
 
 def _candidates_of(keypoints: KeypointCatalogue | None
@@ -405,12 +467,18 @@ def _fit_chunk(tasks: list[FitTask]) -> list[VehicleResult]:
     return [fit_one(*task) for task in tasks]
 
 
-def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int) -> Iterator[VehicleResult]:
-    """``fit_one`` over ``tasks`` in order, in ``jobs`` processes, with a bounded number of chunks of
-    ``chunk`` tasks in flight (the pool's own ``map`` would take every task at once)."""
+def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
+    return [with_next_clicks(*task) for task in tasks]
+
+
+def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
+                 work: Callable[[list], list[VehicleResult]] = _fit_chunk) -> Iterator[VehicleResult]:
+    """``work`` (:func:`fit_one` over a chunk, by default) over ``tasks`` in order, in ``jobs`` processes, with a
+    bounded number of chunks of ``chunk`` tasks in flight (the pool's own ``map`` would take every task at
+    once)."""
     if jobs <= 1:
         for task in tasks:
-            yield _fit_task(task)
+            yield from work([task])
         return
     in_flight: deque[Future[list[VehicleResult]]] = deque()
     with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
@@ -419,7 +487,7 @@ def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int) -> Iterator[Vehi
                 batch = list(itertools.islice(tasks, chunk))
                 if not batch:
                     break
-                in_flight.append(pool.submit(_fit_chunk, batch))
+                in_flight.append(pool.submit(work, batch))
             if not in_flight:
                 return
             yield from in_flight.popleft().result()
@@ -602,8 +670,9 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     held in memory) and estimate from them what was asked: the click noise
     (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
     (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot. When the pilot fits every
-    vehicle of the file, it also suggests the ``next_clicks`` the batch asks for, so that its fits can be the
-    batch's (:attr:`PilotFindings.results`).
+    vehicle of the file with the batch's settings, its fits are the batch's (:attr:`PilotFindings.results`), and it
+    then adds the ``next_clicks`` the batch asks for to them (``jobs`` processes). Fits it does not hand on get
+    none: guidance costs about as much as a fit, and would be thrown away.
 
     ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
     ``progress`` with each vehicle the pilot finishes.
@@ -625,9 +694,7 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
         on_start(index.vehicles + n_pilot)
     pilot_options = replace(options, robust_loss="none")
     every = n_pilot == index.vehicles
-    pilot_next = next_clicks if every else 0
-    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs,
-                                   next_clicks=pilot_next, keypoints=keypoints)) if pilot else []
+    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
@@ -637,10 +704,26 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     # road normal that would give some images a ground block.
     own = bool(pilot and every and options == pilot_options
            and not any(n.normal is not None for n in (normals or {}).values()))
+    pilot_next = next_clicks if own else 0
+    if own and next_clicks > 0:
+        results = _with_next_clicks(pilot, results, priors, options, next_clicks, keypoints, jobs)
     if normals is None:
         return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
                          pilot_next)
+
+
+def _with_next_clicks(images: list[Image], results: list[ImageResult], priors: Priors, options: SolverOptions,
+                      n: int, keypoints: KeypointCatalogue | None, jobs: int) -> list[ImageResult]:
+    """The pilot's results (``images``' fits, in order), ``n`` next clicks per vehicle (:func:`with_next_clicks`)."""
+    candidates = _candidates_of(keypoints)
+    tasks = ((v, im.camera, priors[v.prototype], r, options, im.ground, n, candidates(v.prototype))
+             for im, result in zip(images, results, strict=True)
+             for v, r in zip(im.vehicles, result.vehicles, strict=True))
+    n_vehicles = sum(len(im.vehicles) for im in images)
+    done = iter(_ordered_map(tasks, jobs if n_vehicles > 1 else 1, max(1, min(64, n_vehicles // (4 * jobs))),
+                             _suggest_chunk))
+    return [replace(result, vehicles=[next(done) for _ in result.vehicles]) for result in results]
 
 
 def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -35,7 +36,6 @@ from toosicubix.parts.linear import build_parts_model, keypoint_faces
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver import (
     MIN_DEPTH,
-    FitResult,
     Problem,
     SolverOptions,
     faces_turned_to_camera,
@@ -43,6 +43,33 @@ from toosicubix.solver import (
     uncertainties_with_added_clicks,
 )
 from toosicubix.solver.robust import soft_weights, with_weights
+
+
+class Fitted(Protocol):
+    """What :func:`suggest_clicks` reads of a fit: a :class:`~toosicubix.solver.FitResult`, or a fit as
+    results.json keeps it (:func:`toosicubix.pipeline.batch.fit_as_written`).
+
+    ``R_cam_vehicle`` (3, 3), ``t_cam_vehicle`` (3,), ``dimensions`` (3,), ``p`` (P,) every unknown in the
+    parts model's order, ``click_weights`` (N,) or None, ``residual_test`` or None; ``uncertainty`` is only
+    asked whether it is there."""
+
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def uncertainty(self) -> Any: ...
+    @property
+    def R_cam_vehicle(self) -> np.ndarray: ...
+    @property
+    def t_cam_vehicle(self) -> np.ndarray: ...
+    @property
+    def dimensions(self) -> np.ndarray: ...
+    @property
+    def p(self) -> np.ndarray: ...
+    @property
+    def click_weights(self) -> np.ndarray | None: ...
+    @property
+    def residual_test(self) -> Any: ...
+
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
@@ -131,7 +158,7 @@ def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> l
     return out
 
 
-def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: FitResult,
+def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted,
                    options: SolverOptions | None = None, ground: GroundPlane | None = None,
                    known_dimensions: dict[str, tuple[float, float]] | None = None,
                    box_shaped: bool = False,
@@ -245,4 +272,4 @@ def _set_own_values(A_rows: np.ndarray, points_vehicle: np.ndarray, p: np.ndarra
         p[j] = (points_vehicle[i, axis] - rest) / A_rows[i, axis, j]
 
 
-__all__ = ["Suggestion", "is_box_shaped", "suggest_clicks"]
+__all__ = ["Fitted", "Suggestion", "is_box_shaped", "suggest_clicks"]
