@@ -64,7 +64,7 @@ from toosicubix.annotations.convert import load_images
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import coco_to_annotations, load_mapping
 from toosicubix.model import KITTI_GROUND
-from toosicubix.pipeline.batch import fit_one
+from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,

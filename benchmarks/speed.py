@@ -1,6 +1,6 @@
 """Speed and memory of ``toosicubix fit`` on simulated clicks over real KITTI tracking ground truth.
 
-1. Per-vehicle fit time in one process: ``toosicubix.batch.fit_one`` (parts model, solver, result) on
+1. Per-vehicle fit time in one process: ``toosicubix.pipeline.vehicle.fit_one`` (parts model, solver, result) on
    every vehicle of the accuracy benchmark's test split at 1 px click noise; median, p95 and mean, over
    all vehicles and over those fitted (vehicles with too few clicks return at once).
 2. Throughput of the command line with ``--jobs 1`` and ``--jobs 2`` on the same annotation file of
@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
 from toosicubix.model import Vehicle
-from toosicubix.pipeline.batch import fit_one
+from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,

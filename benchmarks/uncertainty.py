@@ -48,7 +48,7 @@ from toosicubix.formats.results import dumps
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import KITTI_GROUND
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.pipeline.batch import fit_images
+from toosicubix.pipeline.fitting import fit_images
 from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,

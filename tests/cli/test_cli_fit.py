@@ -87,9 +87,9 @@ def test_one_unsolvable_vehicle_does_not_stop_the_batch(tmp_path):
 
 
 def test_internal_error_in_one_vehicle_is_contained(tmp_path, monkeypatch):
-    import toosicubix.pipeline.batch as batch
+    import toosicubix.pipeline.vehicle as one
 
-    real = batch.fit_vehicle
+    real = one.fit_vehicle
     calls = {"n": 0}
 
     def flaky(*args, **kwargs):
@@ -98,7 +98,7 @@ def test_internal_error_in_one_vehicle_is_contained(tmp_path, monkeypatch):
             raise RuntimeError("boom")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(batch, "fit_vehicle", flaky)
+    monkeypatch.setattr(one, "fit_vehicle", flaky)
     summary = fit_file(SAMPLE, tmp_path / "out")
     assert summary.ok == 5 and len(summary.failed) == 1
     assert summary.failed[0][2].startswith("internal error: RuntimeError: boom")

@@ -19,7 +19,7 @@ from toosicubix.formats.results import (
     results_to_json,
 )
 from toosicubix.model import KITTI_GROUND
-from toosicubix.pipeline.batch import fit_images
+from toosicubix.pipeline.fitting import fit_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 

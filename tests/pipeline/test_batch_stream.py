@@ -6,8 +6,9 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import load_images
-from toosicubix.pipeline import batch
-from toosicubix.pipeline.batch import fit_file, fit_images, iter_fit_images
+from toosicubix.pipeline import batch, fitting, vehicle
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.fitting import fit_images, iter_fit_images
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
@@ -59,13 +60,13 @@ def test_the_summary_lists_a_bounded_number_of_failures(tmp_path, monkeypatch):
 
 def _counting_fits(monkeypatch) -> list[str]:
     calls: list[str] = []
-    fit_one = batch.fit_one
+    fit_one = fitting.fit_one  # as the batch calls it
 
     def counted(vehicle, *args):
         calls.append(vehicle.id)
         return fit_one(vehicle, *args)
 
-    monkeypatch.setattr(batch, "fit_one", counted)
+    monkeypatch.setattr(fitting, "fit_one", counted)
     return calls
 
 
@@ -117,13 +118,13 @@ def test_a_pilot_whose_fits_are_not_reused_suggests_nothing(tmp_path, monkeypatc
     pilot's fits not the batch's; the sample's 6 vehicles are then fitted twice and given suggestions once.
     When the pilot's fits are reused (several processes too), each vehicle is given suggestions once."""
     suggested: list[int] = []
-    suggest = batch.suggest_clicks
+    suggest = vehicle.suggest_clicks
 
     def counted(*args, **kwargs):
         suggested.append(1)
         return suggest(*args, **kwargs)
 
-    monkeypatch.setattr(batch, "suggest_clicks", counted)
+    monkeypatch.setattr(vehicle, "suggest_clicks", counted)
     calls = _counting_fits(monkeypatch)
     fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True,
              next_clicks=2)

@@ -12,7 +12,7 @@ from tests.scenes import CAMERA
 from tests.solver.test_robust import TWELVE
 from toosicubix.formats.results import ImageResult, SolverStats, VehicleResult
 from toosicubix.model import Image, Part, Vehicle
-from toosicubix.pipeline.batch import fit_file, fit_one
+from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.click_noise import (
     MIN_DOF,
     Redundancy,
@@ -21,6 +21,7 @@ from toosicubix.pipeline.click_noise import (
     pooled_sigma,
     redundancy,
 )
+from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.solver import SolverOptions
 
 SAMPLE = "samples/annotations.json"

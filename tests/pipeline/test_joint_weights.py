@@ -10,7 +10,8 @@ from tests.parts.test_real_click_kinds import exact_prior
 from tests.pipeline.test_click_noise import _keypoint_vehicle
 from tests.scenes import CAMERA
 from toosicubix.model import GroundPlane, Image
-from toosicubix.pipeline.batch import fit_image_jointly, fit_one
+from toosicubix.pipeline.fitting import fit_image_jointly
+from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.solver import SolverOptions
 
 #: The scenes' vehicles stand 1.6 m below the camera on a level road; the height is left to the joint fit.

@@ -17,7 +17,8 @@ from toosicubix.cli import main
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.geometry import R_cam_vehicle_from_ypr
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
-from toosicubix.pipeline.batch import fit_file, on_estimated_roads
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.pilot import on_estimated_roads
 from toosicubix.pipeline.road_normal import (
     MAX_SPREAD_DEG,
     MIN_VEHICLES,

@@ -140,7 +140,9 @@ def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
 
     from tests.pipeline.test_road_normal import _pitched_batch
     from toosicubix.annotations.convert import document_json, load_images
-    from toosicubix.pipeline.batch import file_estimates, fit_file, fit_images, on_estimated_roads
+    from toosicubix.pipeline.batch import fit_file
+    from toosicubix.pipeline.fitting import fit_images
+    from toosicubix.pipeline.pilot import file_estimates, on_estimated_roads
     from toosicubix.priors.table import load_priors
     from toosicubix.solver import SolverOptions
 

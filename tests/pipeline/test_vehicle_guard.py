@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from tests.conftest import REPO
-from toosicubix.formats.results import read_results
+from toosicubix.formats.results import ImageResult, read_results
 from toosicubix.geometry import R_cam_vehicle_from_ypr
-from toosicubix.pipeline import batch
+from toosicubix.pipeline import vehicle as one
+from toosicubix.pipeline.batch import fit_file
 from toosicubix.solver import FitResult
 
 SAMPLE = REPO / "samples" / "annotations.json"
@@ -18,7 +19,7 @@ SAMPLE = REPO / "samples" / "annotations.json"
 
 def fake_fit(t_cam_vehicle, dimensions=(4.0, 1.7, 1.5), first_only=True):
     """A stand-in for fit_vehicle that returns ``t_cam_vehicle`` for the sample's first vehicle."""
-    real = batch.fit_vehicle
+    real = one.fit_vehicle
     calls = []
 
     def fit(parts, camera, prior, options, ground):
@@ -52,9 +53,9 @@ def without_boxes(tmp_path):
     ((0.0, 1.0, 10.0), (np.inf, 1.7, 1.5), "non-finite"),
 ])
 def test_an_unusable_fit_is_failed_and_the_batch_goes_on(tmp_path, monkeypatch, t, dimensions, reason):
-    monkeypatch.setattr(batch, "fit_vehicle", fake_fit(t, dimensions))
+    monkeypatch.setattr(one, "fit_vehicle", fake_fit(t, dimensions))
     out = tmp_path / "out"
-    summary = batch.fit_file(without_boxes(tmp_path), out)
+    summary = fit_file(without_boxes(tmp_path), out)
     vehicles = [v for im in read_results(out / "results.json") for v in im.vehicles]
     assert vehicles[0].status == "failed" and reason in vehicles[0].error, vehicles[0].error
     assert not vehicles[0].error.startswith("internal error")
@@ -71,11 +72,11 @@ def test_a_cuboid_half_behind_the_camera_keeps_its_box():
 
     camera = Camera(K=np.array([[720.0, 0, 620], [0, 720, 180], [0, 0, 1]]), image_size=(1242, 375))
     vehicle = Vehicle(id="1", prototype="Car", box2d=None, parts=(), json_path="$")
-    box, truncated = batch._box2d(vehicle, camera, R_cam_vehicle_from_ypr(np.pi / 2), np.array([0.0, 1.5, 1.0]),
+    box, truncated = one._box2d(vehicle, camera, R_cam_vehicle_from_ypr(np.pi / 2), np.array([0.0, 1.5, 1.0]),
                                   np.array([4.0, 1.7, 1.5]))
     assert np.all(np.isfinite(box)) and 0.0 <= truncated <= 1.0
-    with pytest.raises(batch.UnusableFit, match="wholly behind"):
-        batch._box2d(vehicle, camera, np.eye(3), np.array([0.0, 1.5, -10.0]), np.array([4.0, 1.7, 1.5]))
+    with pytest.raises(one.UnusableFit, match="wholly behind"):
+        one._box2d(vehicle, camera, np.eye(3), np.array([0.0, 1.5, -10.0]), np.array([4.0, 1.7, 1.5]))
 
 
 def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
@@ -84,17 +85,17 @@ def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
     failed = VehicleResult(id="1", status="failed", error="degenerate clicks: ...", prototype="Car", kitti_type="Car",
                            solver=SolverStats(starts=4, starts_from_lines=True, descent_iterations=0,
                                               refine_iterations=0, initial_cost=float("nan")))
-    checked = batch.checked_result(failed)
+    checked = one.checked_result(failed)
     assert checked.error == failed.error and checked.kitti_type == "Car" and checked.solver is None
     with pytest.raises(ValueError, match=r"NaN or infinity \(not JSON\) at \$\.images\[0\]\.vehicles\[0\]\.solver"):
-        dumps(results_to_json([batch.ImageResult("a", np.eye(3), np.zeros(3), None, [failed])]))
+        dumps(results_to_json([ImageResult("a", np.eye(3), np.zeros(3), None, [failed])]))
 
 
 @pytest.fixture(scope="module")
 def sample_results(tmp_path_factory):
     """The sample's fitted vehicles, with their next clicks."""
     out = tmp_path_factory.mktemp("guard") / "out"
-    batch.fit_file(SAMPLE, out, next_clicks=2)
+    fit_file(SAMPLE, out, next_clicks=2)
     return [v for im in read_results(out / "results.json") for v in im.vehicles]
 
 
@@ -123,9 +124,9 @@ def _alternative(**changes):
 ])
 def test_a_nan_or_infinity_anywhere_in_a_fit_fails_it_with_its_path(sample_results, change, path):
     result = next(v for v in sample_results if v.ok)
-    assert batch.checked_result(result) is result
-    with pytest.raises(batch.UnusableFit, match=f"non-finite value at {re.escape(path)}$"):
-        batch.checked_result(replace(result, **change(result)))
+    assert one.checked_result(result) is result
+    with pytest.raises(one.UnusableFit, match=f"non-finite value at {re.escape(path)}$"):
+        one.checked_result(replace(result, **change(result)))
 
 
 def test_the_quick_finiteness_check_agrees_with_the_json_form(sample_results):
@@ -135,4 +136,4 @@ def test_the_quick_finiteness_check_agrees_with_the_json_form(sample_results):
     assert not all_finite(np.array([1.0, np.nan], dtype=object))  # cannot tell: the JSON form decides
     assert not all_finite(object())
     nan_unwritten = replace(next(v for v in sample_results if v.ok), status="failed", cost=float("nan"))
-    assert not all_finite(nan_unwritten) and batch.checked_result(nan_unwritten) is nan_unwritten
+    assert not all_finite(nan_unwritten) and one.checked_result(nan_unwritten) is nan_unwritten

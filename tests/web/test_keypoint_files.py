@@ -44,7 +44,7 @@ def test_keypoint_vehicles_fit_on_the_page(keypoint_file):
     fit = session.image_view(0)["vehicles"][0]["fit"]
     assert fit["status"] == "ok", fit
     # The page's fit is the batch's fit of that vehicle: the same function on the same parts.
-    from toosicubix.pipeline.batch import fit_one
+    from toosicubix.pipeline.vehicle import fit_one
     from toosicubix.solver import SolverOptions
 
     (loaded, *_) = load_images(out)

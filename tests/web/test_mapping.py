@@ -83,7 +83,7 @@ def test_a_named_keypoint_takes_its_position_and_fits_as_fit_does(clicked):
     assert all(p["at"] == list(AT[p["name"]]) and p["spread"] == list(SPREAD) for p in parts)
     # The page's fit is fit's fit of the file's vehicle (the same function on the same parts).
     from toosicubix.annotations.convert import load_images
-    from toosicubix.pipeline.batch import fit_one
+    from toosicubix.pipeline.vehicle import fit_one
     from toosicubix.solver import SolverOptions
 
     (image,) = load_images(out)

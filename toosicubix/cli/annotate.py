@@ -116,7 +116,7 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
     them again from the file as it grows (None when nothing is estimated)."""
     from dataclasses import replace
 
-    from toosicubix.pipeline.batch import estimated_grounds
+    from toosicubix.pipeline.pilot import estimated_grounds
     from toosicubix.pipeline.road_normal import MIN_VEHICLES
     from toosicubix.solver import SolverOptions
 

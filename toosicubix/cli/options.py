@@ -308,11 +308,11 @@ def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[flo
 def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimate_click_sigma: bool,
                         estimate_road_normal: bool, shown: Path | None = None) -> Any:
     """What `fit` would estimate from the vehicles of the annotation file ``path`` before fitting it (the pilot,
-    :func:`toosicubix.pipeline.batch.file_estimates`), saying on stderr what is estimated (from the file named
+    :func:`toosicubix.pipeline.pilot.file_estimates`), saying on stderr what is estimated (from the file named
     ``shown``, default ``path``: annotate estimates from a snapshot of its file) and what was found; None, with a
     line saying so, when nothing is asked. For the commands that fit single vehicles as `fit` fits them (annotate,
     tune)."""
-    from toosicubix.pipeline.batch import file_estimates
+    from toosicubix.pipeline.pilot import file_estimates
 
     wanted = [what for what, asked in (("the click noise", estimate_click_sigma),
                                        ("road normals", estimate_road_normal)) if asked]

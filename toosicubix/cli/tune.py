@@ -56,7 +56,8 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
 
     from toosicubix.annotations.convert import load_images
     from toosicubix.evaluation import EvalOptions, open_ground_truth
-    from toosicubix.pipeline.batch import check_prototypes, on_estimated_roads
+    from toosicubix.pipeline.fitting import check_prototypes
+    from toosicubix.pipeline.pilot import on_estimated_roads
     from toosicubix.pipeline.settings import settings_document, write_settings_file
     from toosicubix.pipeline.tuning import tune
     from toosicubix.priors.table import load_priors

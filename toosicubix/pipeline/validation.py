@@ -18,7 +18,9 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline.batch import KeypointCatalogue, PilotFindings, pilot_and_fits
+from toosicubix.pipeline.batch import pilot_and_fits
+from toosicubix.pipeline.fitting import KeypointCatalogue
+from toosicubix.pipeline.pilot import PilotFindings
 from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions

@@ -47,7 +47,7 @@ from toosicubix.solver.robust import soft_weights, with_weights
 
 class Fitted(Protocol):
     """What :func:`suggest_clicks` reads of a fit: a :class:`~toosicubix.solver.FitResult`, or a fit as
-    results.json keeps it (:func:`toosicubix.pipeline.batch.fit_as_written`).
+    results.json keeps it (:func:`toosicubix.pipeline.vehicle.fit_as_written`).
 
     ``R_cam_vehicle`` (3, 3), ``t_cam_vehicle`` (3,), ``dimensions`` (3,), ``p`` (P,) every unknown in the
     parts model's order, ``click_weights`` (N,) or None, ``residual_test`` or None; ``uncertainty`` is only

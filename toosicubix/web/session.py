@@ -61,10 +61,11 @@ from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import keypoint_faces
-from toosicubix.pipeline.batch import check_prototypes, fit_one
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
+from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
+from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.priors.table import Priors
 from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
 
@@ -240,7 +241,7 @@ class Session:
     ground : the ground block (annotation file fields, e.g. :data:`toosicubix.model.KITTI_GROUND`) given to
         images the file does not have yet; the file's own blocks are kept
     road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block of the road
-        normal ``fit`` estimates for it (:func:`toosicubix.pipeline.batch.file_estimates`): the page fits that
+        normal ``fit`` estimates for it (:func:`toosicubix.pipeline.pilot.file_estimates`): the page fits that
         camera's images without a ground block of their own on it, as ``fit`` does; never written to the file
     estimate : what ``fit`` would estimate from an annotation file (its path), ``(options, road_grounds)``, or
         None when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are

@@ -1,0 +1,278 @@
+"""Many vehicles: fit every vehicle of a stream of images, in one process or several, in input order and with
+memory that does not grow with the batch (:func:`iter_fit_images`); refine an image's vehicles together with its
+ground plane (:func:`fit_image_jointly`)."""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Protocol
+
+import cv2
+import numpy as np
+
+from toosicubix.annotations.convert import image_from_schema, with_ground
+from toosicubix.annotations.schema import InputFileError
+from toosicubix.annotations.stream import AnnotationIndex, iter_image_annotations
+from toosicubix.camera import Camera
+from toosicubix.formats.results import ImageResult, VehicleResult
+from toosicubix.model import GroundPlane, Image, Vehicle
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline.vehicle import (
+    Keypoints,
+    SuggestTask,
+    UnusableFit,
+    checked_result,
+    describe_fit,
+    failed_result,
+    fit_one,
+    with_next_clicks,
+)
+from toosicubix.priors.table import Priors, SizePrior
+from toosicubix.solver import (
+    MISFIT_WARNING,
+    FitResult,
+    JointVehicle,
+    Problem,
+    SolverOptions,
+    analyse,
+    fit_jointly,
+    scale_shares,
+    tested,
+)
+from toosicubix.solver.robust import with_weights
+
+__all__ = ["FitTask", "KeypointCatalogue", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images",
+           "iter_fit_images", "stream_images"]
+
+
+def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
+    """Every vehicle's prototype must be in the priors table.
+
+    Raises
+    ------
+    InputFileError
+        Naming each vehicle's JSON path and listing the known prototypes.
+    """
+    known = sorted(priors)
+    problems = [
+        (f"{v.json_path}.prototype", f"unknown prototype {v.prototype!r}; known: {', '.join(known)}")
+        for im in images for v in im.vehicles if v.prototype not in priors
+    ]
+    if problems:
+        raise InputFileError(source, problems)
+
+
+class KeypointCatalogue(Protocol):
+    """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
+    :class:`toosicubix.formats.coco.MappingFile`)."""
+
+    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Name -> ``(at, spread)``, (3,) fractions of the dimensions, on a vehicle of ``prototype``."""
+        ...
+
+
+#: What :func:`~toosicubix.pipeline.vehicle.fit_one` takes, as the batch hands it to a worker.
+FitTask = tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int, Keypoints | None]
+
+
+def _candidates_of(keypoints: KeypointCatalogue | None
+                   ) -> Callable[[str], Keypoints | None]:
+    """Per prototype, the keypoints to suggest (None: the vocabulary's parts), each prototype's made once."""
+    made: dict[str, Keypoints] = {}
+
+    def of(prototype: str) -> Keypoints | None:
+        if keypoints is None:
+            return None
+        if prototype not in made:
+            made[prototype] = keypoints.keypoint_candidates(prototype)
+        return made[prototype]
+
+    return of
+
+
+def _worker_init() -> None:
+    cv2.setNumThreads(1)  # one process per core; no threads on top
+
+
+def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
+               progress: Callable[[int], None] | None = None, jobs: int = 1,
+               joint_ground: bool = False, next_clicks: int = 0,
+               keypoints: KeypointCatalogue | None = None) -> list[ImageResult]:
+    """Fit every vehicle of every image.
+
+    Parameters
+    ----------
+    progress : called with the number of vehicles just finished
+    jobs : worker processes; the results are the same for any number (each vehicle is fitted on its own,
+        deterministically, and the results come back in input order)
+    joint_ground : then refine each image's vehicles together with its ground plane (images with a
+        ground block); the camera height may be unknown
+    next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
+    keypoints : suggest these keypoints instead of the vocabulary's parts (a keypoint mapping,
+        :class:`toosicubix.formats.coco.MappingFile`: its keypoints at their positions for each prototype)
+    """
+    n = sum(len(im.vehicles) for im in images)
+    return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks, keypoints))
+
+
+def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, options: SolverOptions,
+                    progress: Callable[[int], None] | None = None, jobs: int = 1,
+                    joint_ground: bool = False, next_clicks: int = 0,
+                    keypoints: KeypointCatalogue | None = None) -> Iterator[ImageResult]:
+    """:func:`fit_images` one image at a time, in input order: the images are read from ``images`` only as
+    the workers need them, and each result is handed on as soon as its image is done, so memory does not
+    grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
+    """
+    pending: deque[Image] = deque()
+    done: list[VehicleResult] = []
+    candidates = _candidates_of(keypoints if next_clicks > 0 else None)
+
+    def tasks() -> Iterator[FitTask]:
+        for im in images:
+            pending.append(im)
+            for v in im.vehicles:
+                yield v, im.camera, priors[v.prototype], options, im.ground, next_clicks, candidates(v.prototype)
+
+    def finished_images() -> Iterator[ImageResult]:
+        while pending and len(done) >= len(pending[0].vehicles):
+            im = pending.popleft()
+            vehicles = done[:len(im.vehicles)]
+            del done[:len(im.vehicles)]
+            ground = _ground_json(im.ground, estimated=im.ground.from_batch) if im.ground is not None else None
+            if joint_ground and im.ground is not None:
+                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks, keypoints)
+            yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
+                              image_size=im.camera.image_size, vehicles=vehicles, ground=ground)
+
+    for result in _ordered_map(tasks(), jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs)):
+        done.append(result)
+        if progress is not None:
+            progress(1)
+        yield from finished_images()
+    yield from finished_images()  # images without vehicles at the end
+
+
+def _chunk(n_vehicles: int, jobs: int) -> int:
+    """How many vehicles go to a worker at once: about four chunks per worker, at most 64 vehicles each."""
+    return max(1, min(64, n_vehicles // (4 * jobs)))
+
+
+def _fit_chunk(tasks: list[FitTask]) -> list[VehicleResult]:
+    return [fit_one(*task) for task in tasks]
+
+
+def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
+    return [with_next_clicks(*task) for task in tasks]
+
+
+def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
+                 work: Callable[[list], list[VehicleResult]] = _fit_chunk) -> Iterator[VehicleResult]:
+    """``work`` (:func:`~toosicubix.pipeline.vehicle.fit_one` over a chunk, by default) over ``tasks`` in order,
+    in ``jobs`` processes, with a bounded number of chunks of ``chunk`` tasks in flight (the pool's own ``map``
+    would take every task at once)."""
+    if jobs <= 1:
+        for task in tasks:
+            yield from work([task])
+        return
+    in_flight: deque[Future[list[VehicleResult]]] = deque()
+    with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+        while True:
+            while len(in_flight) < 4 * jobs:
+                batch = list(itertools.islice(tasks, chunk))
+                if not batch:
+                    break
+                in_flight.append(pool.submit(work, batch))
+            if not in_flight:
+                return
+            yield from in_flight.popleft().result()
+
+
+def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | None = None,
+                 normal: np.ndarray | None = None) -> dict[str, Any]:
+    return {
+        "normal": (ground.normal if normal is None else normal).tolist(),
+        "camera_height": ground.camera_height if camera_height is None else camera_height,
+        "estimated": estimated,
+    }
+
+
+def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
+                      next_clicks: int = 0, keypoints: KeypointCatalogue | None = None
+                      ) -> tuple[list[VehicleResult], dict[str, Any]]:
+    """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
+    return the updated results and the plane. Failed vehicles stay as they were."""
+    ground = image.ground
+    assert ground is not None
+    fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok]
+    if not fitted:
+        return vehicles, _ground_json(ground, estimated=False)
+    joint_vehicles, models = [], []
+    candidates = _candidates_of(keypoints if next_clicks > 0 else None)
+    for k, v in fitted:
+        parts = build_parts_model(v.parts, v.known_dimensions)
+        r = vehicles[k]  # its clicks keep the weights of its own fit (keypoints' soft term, robust factors)
+        problem = with_weights(Problem.build(parts, image.camera, priors[v.prototype], options.lambda_3d,
+                                             options.lambda_px), r.click_weights)
+        p = np.concatenate([r.dimensions, [r.parameters[name] for name in parts.param_names[3:]]])
+        joint_vehicles.append(JointVehicle(problem, r.R_cam_vehicle, r.t_cam_vehicle, p))
+        models.append(parts)
+    try:
+        result = fit_jointly(joint_vehicles, ground)
+    except Exception as exc:  # the vehicles keep their own fits
+        plane = _ground_json(ground, estimated=False)
+        plane["joint_error"] = f"{type(exc).__name__}: {exc}"
+        return vehicles, plane
+    plane_fitted = replace(ground, normal=result.normal, camera_height=result.camera_height)
+    out = list(vehicles)
+    for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
+        own = with_weights(Problem.build(parts, image.camera, jv.problem.prior, options.lambda_3d, options.lambda_px,
+                                         plane_fitted, float(np.linalg.norm(t))), jv.problem.click_weights)
+        shares = scale_shares(own, R, t, p)
+        u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
+                         options.part_sigma)
+        u, test = tested(own, R, t, p, u, options)
+        warnings = tuple(w for w in vehicles[k].warnings if not w.startswith(MISFIT_WARNING))
+        fit = FitResult(
+            "ok", None, vehicles[k].constraints, parts.n_clicks, parts.n_aux, R_cam_vehicle=R,
+            t_cam_vehicle=t, p=p, cost=own.cost_px(R, t, p), cost_prior=float(np.sum(own.prior_residual(p) ** 2)),
+            residuals_px=own.pixel_residuals(R, t, p), scale_shares=shares, uncertainty=u, observability=obs,
+            warnings=(*warnings, test.sentence()) if test is not None and test.misfit else warnings,
+            click_weights=own.click_weights, downweighted=vehicles[k].downweighted, residual_test=test,
+        )
+        try:
+            updated = checked_result(
+                describe_fit(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks,
+                                candidates(v.prototype)))
+        except UnusableFit as exc:
+            out[k] = failed_result(v, jv.problem.prior, f"after the joint refinement: {exc}")
+            continue
+        out[k] = replace(updated, cues=replace(updated.cues, joint_ground=True),
+                         solver=replace(vehicles[k].solver, joint_iterations=result.iterations))
+    return out, {**_ground_json(ground, True, result.camera_height, result.normal),
+                 "joint_iterations": result.iterations, "vehicles": len(fitted)}
+
+
+def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
+    """The images of an indexed annotation file (:func:`toosicubix.annotations.stream.index_annotations`), one
+    at a time, with the options' ground block applied."""
+    for i, annotation in iter_image_annotations(index):
+        yield from with_ground([image_from_schema(annotation, i)], ground or {})
+
+
+def add_next_clicks(images: list[Image], results: list[ImageResult], priors: Priors, options: SolverOptions,
+                    n: int, keypoints: KeypointCatalogue | None, jobs: int) -> list[ImageResult]:
+    """``results`` (:func:`iter_fit_images`' of ``images``, in order, without next clicks) with ``n`` next clicks per
+    vehicle, as if they had been asked for (:func:`~toosicubix.pipeline.vehicle.with_next_clicks`), in ``jobs``
+    processes."""
+    candidates = _candidates_of(keypoints)
+    tasks = ((v, im.camera, priors[v.prototype], r, options, im.ground, n, candidates(v.prototype))
+             for im, result in zip(images, results, strict=True)
+             for v, r in zip(im.vehicles, result.vehicles, strict=True))
+    n_vehicles = sum(len(im.vehicles) for im in images)
+    done = iter(_ordered_map(tasks, jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs), _suggest_chunk))
+    return [replace(result, vehicles=[next(done) for _ in result.vehicles]) for result in results]

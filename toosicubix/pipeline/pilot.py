@@ -1,0 +1,177 @@
+"""A batch's pilot: fit a sample of its vehicles first and estimate from them what ``fit`` estimates (the click
+noise, each camera's road normal), then put the images on their camera's estimated road
+(:func:`run_pilot`, :func:`on_estimated_roads`). A small batch the pilot fitted whole with nothing changed is
+written from the pilot's own fits."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from toosicubix.annotations.convert import with_ground
+from toosicubix.annotations.stream import AnnotationIndex, index_annotations
+from toosicubix.formats.results import ImageResult
+from toosicubix.model import Image
+from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
+from toosicubix.pipeline.fitting import KeypointCatalogue, add_next_clicks, iter_fit_images, stream_images
+from toosicubix.pipeline.road_normal import (
+    MIN_VEHICLES,
+    RoadNormal,
+    camera_key,
+    describe_without_pilot,
+    estimate_road_normals,
+    ground_block,
+    without_pilot,
+)
+from toosicubix.priors.table import Priors
+from toosicubix.solver import SolverOptions
+
+__all__ = ["PilotFindings", "estimated_grounds", "file_estimates", "on_estimated_roads", "run_pilot"]
+
+
+@dataclass(frozen=True)
+class PilotFindings:
+    """What a batch's pilot fit found (:func:`run_pilot`).
+
+    Attributes
+    ----------
+    options : the solver settings to fit the batch with (the estimated click noise in them)
+    click_noise : the click noise and where it came from ('given' when it was not estimated)
+    road_normals : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the estimated road
+        normal or why there is none; None when not estimated
+    without_pilot : cameras (and their images) the pilot had no vehicle of; empty when not estimated
+    results : the pilot's results, image by image in file order, when they are the batch's own: the pilot fitted
+        every vehicle with the settings the batch is fitted with and estimated no road normal (a small batch with
+        nothing to change); None otherwise. :func:`~toosicubix.pipeline.batch.fitted_batch` then writes them
+        instead of fitting again.
+    next_clicks : how many next clicks per vehicle those results have
+    """
+
+    options: SolverOptions
+    click_noise: ClickNoise
+    road_normals: dict[tuple, RoadNormal] | None = None
+    without_pilot: dict[str, int] = field(default_factory=dict)
+    results: list[ImageResult] | None = None
+    next_clicks: int = 0
+
+    def header(self) -> dict[str, Any]:
+        """What results.json's header (and validate's report) say about the pilot's estimates."""
+        out: dict[str, Any] = {}
+        if self.click_noise.source != "given":
+            out["click_noise"] = self.click_noise.to_json()
+        if self.road_normals is not None:
+            out["road_normal"] = [n.to_json() for n in self.road_normals.values()]
+        if self.without_pilot.get("cameras"):
+            out["road_normal_without_pilot"] = self.without_pilot
+        return out
+
+    def describe(self) -> list[str]:
+        """Summary lines for ``fit`` and ``validate``: the click noise; each camera with a road normal (or one
+        refused for scattered up axes), at most five; one line for the cameras with too few pilot vehicles."""
+        lines = [self.click_noise.describe()]
+        cameras = list((self.road_normals or {}).values())
+        listed = [n for n in cameras if n.spread_deg is not None]
+        few = [n for n in cameras if n.spread_deg is None]
+        lines += [n.describe() for n in listed[:5]]
+        if len(listed) > 5:
+            lines.append(f"  ... and {len(listed) - 5} more cameras (results.json: road_normal)")
+        if few:
+            lines.append(f"road normal: not estimated for {len(few)} camera(s) ({sum(n.images for n in few)} images): "
+                         f"the pilot fitted at most {max(n.vehicles for n in few)} vehicles of each, "
+                         f"{MIN_VEHICLES} needed; their vehicles only kept within 45 deg of upright (--road-normal "
+                         "sets it)")
+        if self.without_pilot:
+            lines.append(describe_without_pilot(self.without_pilot))
+        return [line for line in lines if line]
+
+
+def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
+              jobs: int = 1, progress: Callable[[int], None] | None = None,
+              on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
+              estimate_road_normal: bool = False, next_clicks: int = 0,
+              keypoints: KeypointCatalogue | None = None) -> PilotFindings:
+    """Fit every k-th vehicle of an indexed file (at most :data:`toosicubix.pipeline.click_noise.PILOT_VEHICLES`,
+    held in memory) and estimate from them what was asked: the click noise
+    (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
+    (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot. When the pilot fits every
+    vehicle of the file with the batch's settings, its fits are the batch's (:attr:`PilotFindings.results`), and it
+    then adds the ``next_clicks`` the batch asks for to them (``jobs`` processes). Fits it does not hand on get
+    none: guidance costs about as much as a fit, and would be thrown away.
+
+    ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
+    ``progress`` with each vehicle the pilot finishes.
+    """
+    cameras: Counter = Counter()  # images without their own ground block, per camera
+
+    def counted(images: Iterable[Image]) -> Iterator[Image]:
+        for im in images:
+            if im.ground is None:
+                cameras[camera_key(im.camera)] += 1
+            yield im
+
+    pilot: list[Image] = []
+    if estimate_click_sigma or estimate_road_normal:
+        pilot = list(pilot_images(counted(stream_images(index, ground)), index.vehicles,
+                                  keep=None if estimate_road_normal else telling))
+    n_pilot = sum(len(im.vehicles) for im in pilot)
+    if on_start is not None:
+        on_start(index.vehicles + n_pilot)
+    pilot_options = replace(options, robust_loss="none")
+    every = n_pilot == index.vehicles
+    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs)) if pilot else []
+    noise = ClickNoise(options.click_sigma, "given")
+    if estimate_click_sigma:
+        noise = estimate_from_pilot(results, options.click_sigma)
+        options = replace(options, click_sigma=noise.sigma_px)
+    normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
+    # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
+    # road normal that would give some images a ground block.
+    own = bool(pilot and every and options == pilot_options
+           and not any(n.normal is not None for n in (normals or {}).values()))
+    pilot_next = next_clicks if own else 0
+    if own and next_clicks > 0:
+        results = add_next_clicks(pilot, results, priors, options, next_clicks, keypoints, jobs)
+    if normals is None:
+        return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
+    return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
+                         pilot_next)
+
+
+def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
+                   estimate_road_normal: bool = True, progress: Callable[[int], None] | None = None) -> PilotFindings:
+    """What ``toosicubix fit ANNOTATIONS`` would estimate before fitting, with its default ground settings: the
+    click noise (unless ``estimate_click_sigma`` is False: ``options.click_sigma`` was given) and each camera's
+    road normal (unless ``estimate_road_normal`` is False), by :func:`run_pilot`. For fitting single vehicles of
+    the file as that batch fits them (the annotate page); :func:`estimated_grounds` gives the normals as ground
+    blocks.
+
+    Raises
+    ------
+    InputFileError
+        Bad annotation file, unknown prototype.
+    """
+    index = index_annotations(Path(annotations), known_prototypes=list(priors))
+    return run_pilot(index, None, priors, options, progress=progress, estimate_click_sigma=estimate_click_sigma,
+                     estimate_road_normal=estimate_road_normal)
+
+
+def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, dict[str, object]]:
+    """Per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block its estimated road normal
+    gives the camera's images without one of their own; cameras without an estimate are left out."""
+    return {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
+
+
+def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal] | None) -> Iterator[Image]:
+    """The images, each without a ground block of its own given its camera's estimated road normal
+    (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
+    blocks = estimated_grounds(normals)
+    for im in images:
+        block = blocks.get(camera_key(im.camera)) if im.ground is None and blocks else None
+        if block is None:
+            yield im
+        else:
+            im = with_ground([im], block)[0]
+            yield replace(im, ground=replace(im.ground, from_batch=True))

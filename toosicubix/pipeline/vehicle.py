@@ -1,0 +1,263 @@
+"""One vehicle: fit it and describe it as results.json does (:func:`fit_one`), never raising; guard what cannot
+be written (:func:`checked_result`); and add what to click next, from the fit or from its result as written
+(:func:`with_next_clicks`)."""
+
+from __future__ import annotations
+
+import traceback
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from toosicubix.camera import Camera
+from toosicubix.formats.results import (
+    Cues,
+    Observability,
+    Sigma,
+    SolverStats,
+    VehicleResult,
+    all_finite,
+    non_finite_path,
+)
+from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
+from toosicubix.model import GroundPlane, Vehicle
+from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.priors.table import SizePrior
+from toosicubix.solver import FitResult, SolverOptions, confidence, fit_vehicle
+from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
+from toosicubix.solver.misfit import ResidualTest
+
+__all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_result", "describe_fit", "failed_result",
+           "fit_as_written", "fit_one", "with_next_clicks"]
+
+
+#: Keypoints to suggest for one vehicle: name -> ``(at, spread)``, (3,) fractions of the dimensions.
+Keypoints = Mapping[str, tuple[np.ndarray, np.ndarray]]
+
+
+def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
+            ground: GroundPlane | None = None, next_clicks: int = 0,
+            keypoints: Keypoints | None = None) -> VehicleResult:
+    """Fit one vehicle and describe it as results.json does; never raises.
+
+    ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
+    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name -> ``(at, spread)``).
+    """
+    try:
+        parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
+        fit = fit_vehicle(parts, camera, prior, options, ground)
+        with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
+            return checked_result(describe_fit(vehicle, camera, prior, parts, fit, ground, options, next_clicks,
+                                                  keypoints))
+    except UnusableFit as exc:
+        return failed_result(vehicle, prior, str(exc))
+    except Exception as exc:  # one vehicle must never stop the batch
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return failed_result(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
+                                       f"(at {Path(where.filename).name}:{where.lineno})")
+
+
+class UnusableFit(ValueError):
+    """A vehicle's fit that cannot be written: behind the camera, or with a non-finite number."""
+
+
+def failed_result(vehicle: Vehicle, prior: SizePrior, reason: str) -> VehicleResult:
+    """A vehicle that failed, and why."""
+    return VehicleResult(id=vehicle.id, status="failed", prototype=vehicle.prototype, error=reason,
+                         kitti_type=prior.kitti_type)
+
+
+def checked_result(result: VehicleResult) -> VehicleResult:
+    """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
+    front of the camera or any number in it (pose, box, uncertainty, diagnostics) is not finite. A failed
+    result keeps its reason and loses any diagnostics with a NaN or infinity.
+
+    Raises
+    ------
+    UnusableFit
+        With the reason, e.g. "the fitted cuboid lies behind the camera (depth -3.2 m)".
+    """
+    # Every number finite (the usual case) is seen from the fields; the JSON form, to find where one is not.
+    finite = all_finite(result)
+    if not result.ok:  # keep the reason; drop diagnostics that could not be written
+        if finite or non_finite_path(result.to_json()) is None:
+            return result
+        return VehicleResult(id=result.id, status=result.status, error=result.error, prototype=result.prototype,
+                             kitti_type=result.kitti_type)
+    for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
+        value = getattr(result, name)
+        if value is None or not (finite or np.all(np.isfinite(value))):
+            raise UnusableFit(f"the fit has a non-finite or missing {name}: {value}")
+    if np.any(result.dimensions <= 0):
+        raise UnusableFit(f"the fit has non-positive dimensions {result.dimensions.tolist()}")
+    corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
+    if corners_cam[:, 2].max() <= 0.0:
+        raise UnusableFit(f"the fitted cuboid lies behind the camera (its nearest corner at depth "
+                          f"{corners_cam[:, 2].max():.4g} m)")
+    if result.t_cam_vehicle[2] <= 0.0:
+        raise UnusableFit(f"the fitted cuboid's bottom centre lies behind the camera (depth "
+                          f"{result.t_cam_vehicle[2]:.4g} m)")
+    bad = None if finite else non_finite_path(result.to_json())
+    if bad is not None:
+        raise UnusableFit(f"the fit has a non-finite value at {bad}")
+    return result
+
+
+def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
+    """What besides the clicks shapes a vehicle's fit."""
+    return Cues(size_prior=True, upright=ground is not None,
+                ground_contact=ground is not None and ground.camera_height is not None,
+                known_sizes=tuple(m.label for m in parts.measurements))
+
+
+def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
+                 ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0,
+                 keypoints: Keypoints | None = None) -> VehicleResult:
+    """A vehicle's fit as results.json describes it, with ``next_clicks`` suggestions (0: none); not yet checked
+    (:func:`checked_result`)."""
+    common = {"id": vehicle.id, "prototype": vehicle.prototype, "kitti_type": prior.kitti_type,
+              "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
+              "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
+    if not fit.ok:
+        return VehicleResult(status="failed", error=fit.reason, box2d=vehicle.box2d, **common)
+    R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
+    box2d, truncated = _box2d(vehicle, camera, R, t, d)
+    ry, pitch, roll = ypr_from_R_cam_vehicle(R)
+    suggestions: dict[str, Any] = {}
+    if next_clicks > 0:
+        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks, keypoints)
+    return VehicleResult(
+        status="ok", error=None, R_cam_vehicle=R, t_cam_vehicle=t, dimensions=d, box2d=box2d, **common,
+        box2d_source="annotated" if vehicle.box2d is not None else "projected",
+        truncated=truncated,
+        yaw_pitch_roll_deg=tuple(np.rad2deg([ry, pitch, roll]).tolist()),
+        rms_px=fit.rms_px,
+        residuals_px=fit.residuals_px,
+        click_labels=tuple(parts.click_labels),
+        click_weights=fit.click_weights,
+        downweighted=fit.downweighted,
+        cost=fit.cost,
+        prior_mahalanobis2=fit.cost_prior,
+        parameters={name: float(v) for name, v in zip(parts.param_names[3:], fit.p[3:], strict=True)},
+        scale_from=fit.scale_from,
+        scale_shares=fit.scale_shares,
+        sigma=Sigma.from_json(fit.uncertainty.to_json()) if fit.uncertainty is not None else None,
+        confidence=confidence(fit.uncertainty) if fit.uncertainty is not None else None,
+        observability=Observability.from_json(fit.observability.to_json()) if fit.observability is not None else None,
+        ambiguous=fit.ambiguous,
+        alternatives=tuple(fit.alternatives),
+        residual_test=fit.residual_test,
+        warnings=tuple(fit.warnings),
+        **suggestions,
+    )
+
+
+def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted, options: SolverOptions,
+                 ground: GroundPlane | None, n: int,
+                 keypoints: Keypoints | None = None) -> dict[str, Any]:
+    """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
+    guidance failed); an error here never fails the vehicle."""
+    try:
+        suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
+                                     box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type),
+                                     keypoints=keypoints)
+    except Exception as exc:  # guidance is advice: the fit stands without it
+        return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
+    return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
+
+
+@dataclass(frozen=True)
+class _FitAsWritten:
+    """A fit as results.json keeps it, seen as guidance reads a fit (:class:`toosicubix.solver.guidance.Fitted`)."""
+
+    result: VehicleResult
+
+    @property
+    def ok(self) -> bool:
+        return self.result.ok
+
+    @property
+    def uncertainty(self) -> Sigma | None:
+        return self.result.sigma
+
+    @property
+    def R_cam_vehicle(self) -> np.ndarray:
+        return self.result.R_cam_vehicle
+
+    @property
+    def t_cam_vehicle(self) -> np.ndarray:
+        return self.result.t_cam_vehicle
+
+    @property
+    def dimensions(self) -> np.ndarray:
+        return self.result.dimensions
+
+    @property
+    def p(self) -> np.ndarray:  # (P,): the dimensions, then the auxiliary unknowns in the parts model's order
+        return np.concatenate([self.result.dimensions, np.fromiter(self.result.parameters.values(), float)])
+
+    @property
+    def click_weights(self) -> np.ndarray | None:
+        return self.result.click_weights
+
+    @property
+    def residual_test(self) -> ResidualTest | None:
+        return self.result.residual_test
+
+
+def fit_as_written(result: VehicleResult) -> Fitted:
+    """A vehicle's result as guidance reads a fit: what :func:`fit_one` would have suggested from the fit itself
+    is suggested from its result (the same pose, unknowns, weights and residual test)."""
+    return _FitAsWritten(result)
+
+
+#: What :func:`with_next_clicks` takes, as the batch hands it to a worker.
+SuggestTask = tuple[Vehicle, Camera, SizePrior, VehicleResult, SolverOptions, GroundPlane | None, int,
+                    Keypoints | None]
+
+
+def with_next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, result: VehicleResult,
+                     options: SolverOptions, ground: GroundPlane | None, n: int,
+                     keypoints: Keypoints | None = None) -> VehicleResult:
+    """``result`` (:func:`fit_one`'s, without next clicks) with the ``n`` next clicks that :func:`fit_one` would
+    have given it with ``next_clicks=n``; a failed vehicle is returned as it is. Never raises."""
+    if not result.ok:
+        return result
+    try:
+        with np.errstate(all="ignore"):
+            suggestions = _next_clicks(vehicle, camera, prior, fit_as_written(result), options, ground, n, keypoints)
+            return checked_result(replace(result, **suggestions))
+    except UnusableFit as exc:
+        return failed_result(vehicle, prior, str(exc))
+
+
+def _solver_stats(fit: FitResult) -> SolverStats:
+    return SolverStats(starts=fit.starts, starts_from_lines=fit.starts_from_lines,
+                       descent_iterations=fit.descent_iterations, refine_iterations=fit.refine_iterations,
+                       initial_cost=fit.initial_cost, residual_dof=fit.residual_dof)
+
+
+def _box2d(vehicle: Vehicle, camera: Camera, R: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
+    """The label's 2D box (annotated, else the projected cuboid clipped to the image) and the
+    truncation: the share of the projected cuboid's box outside the image."""
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t)) and np.all(np.isfinite(d))):
+        raise UnusableFit(f"the fit has a non-finite pose: t_cam_vehicle {t.tolist()}, dimensions {d.tolist()}")
+    points_cam = clip_cuboid_to_near_plane(cuboid_corners_cam(R, t, d))
+    if len(points_cam) == 0:
+        raise UnusableFit("the fitted cuboid lies wholly behind the camera (no 2D box)")
+    uv = camera.project(points_cam)
+    if not np.all(np.isfinite(uv)):
+        raise UnusableFit("the fitted cuboid projects to non-finite pixels (no 2D box)")
+    full = box2d_of_points(uv)
+    truncated = 0.0
+    clipped = full
+    if camera.image_size is not None:
+        clipped = box2d_of_points(uv, camera.image_size)
+        area = (full[2] - full[0]) * (full[3] - full[1])
+        inside = max(clipped[2] - clipped[0], 0.0) * max(clipped[3] - clipped[1], 0.0)
+        truncated = float(np.clip(1.0 - inside / area, 0.0, 1.0)) if area > 0 else 0.0
+    box = vehicle.box2d if vehicle.box2d is not None else clipped
+    return np.asarray(box, dtype=float), truncated
