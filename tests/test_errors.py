@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import pickle
+
 import pytest
 
 from toosicubix.annotations.schema import InputFileError
 from toosicubix.errors import InputError, locate
 from toosicubix.evaluation import EvaluationInputError
 from toosicubix.formats import FormatError
-from toosicubix.pipeline.batch import OutputFolderError
+from toosicubix.pipeline.output_folder import OutputFolderError
 from toosicubix.priors.estimation import PriorEstimationError
 from toosicubix.priors.table import UnknownPrototypeError
 
@@ -40,6 +42,10 @@ def test_every_input_exception_is_an_input_error(error, text):
     with pytest.raises(InputError) as info:
         raise error
     assert info.value is error
+    # Raised in a worker process, it reaches the caller as itself (pickled with its attributes).
+    copy = pickle.loads(pickle.dumps(error))
+    assert type(copy) is type(error) and str(copy) == text and copy.problems == error.problems
+    assert copy.file == error.file
 
 
 def test_unknown_prototype_is_still_a_key_error():

@@ -6,7 +6,7 @@ files (:class:`toosicubix.annotations.schema.InputFileError`), KITTI, Cityscapes
 (:class:`toosicubix.evaluation.EvaluationInputError`), unknown prototypes
 (:class:`toosicubix.priors.table.UnknownPrototypeError`), priors estimation
 (:class:`toosicubix.priors.estimation.PriorEstimationError`) and output folders
-(:class:`toosicubix.pipeline.batch.OutputFolderError`). A caller that only reports the problem catches
+(:class:`toosicubix.pipeline.output_folder.OutputFolderError`). A caller that only reports the problem catches
 ``InputError``; the CLI turns it into exit code 2.
 
 Every message is formatted here, one line per problem:
@@ -65,6 +65,18 @@ class InputError(ValueError):
 
     def __str__(self) -> str:
         return self.format()
+
+    def __reduce__(self):
+        # Pickled with its attributes, not through ``__init__`` (whose signature subclasses change): an error
+        # raised in a worker process reaches the caller as itself.
+        return _restored, (type(self), self.args, self.__dict__)
+
+
+def _restored(cls: type[InputError], args: tuple, state: dict) -> InputError:
+    error = cls.__new__(cls, *args)
+    error.args = args
+    error.__dict__.update(state)
+    return error
 
 
 __all__ = ["InputError", "Where", "locate"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +76,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.priors.table import load_priors
     from toosicubix.web.server import serve
     from toosicubix.web.session import ApiError, Session, load_cameras
+    from toosicubix.web.worker import WorkerProcess
 
     estimate_road = road_normal != "none"
     normal = parse_normal(road_normal) if road_normal not in (None, "none") else None
@@ -91,23 +93,30 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}
         options, road_grounds, estimate = _batch_settings(out, priors, click_sigma, estimate_road)
-        session = Session(list(images), out, cameras, priors, prototype, options, ground=ground,
-                          road_grounds=road_grounds, estimate=estimate, mapping=mapping)
     except (InputFileError, ApiError) as exc:
         raise BadInput(str(exc)) from None
-    try:
-        server = serve(session, host, port)
-    except OSError as exc:
-        raise BadInput(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
-    if not server.loopback:
-        click.echo(f"warning: listening on {host}: other machines can read the images and change {out}", err=True)
-    click.echo(f"annotating {len(images)} image(s) into {out}: open {server.url}  (Ctrl-C stops)")
-    try:
-        server.serve_forever()
-    except KeyboardInterrupt:
-        click.echo("stopped", err=True)
-    finally:
-        server.server_close()
+    # The estimates again as the file grows: in a worker process, not competing with the page's requests.
+    with WorkerProcess(estimate) as worker:
+        try:
+            session = Session(list(images), out, cameras, priors, prototype, options, ground=ground,
+                              road_grounds=road_grounds, estimate=worker if estimate is not None else None,
+                              mapping=mapping)
+        except (InputFileError, ApiError) as exc:
+            raise BadInput(str(exc)) from None
+        try:
+            server = serve(session, host, port)
+        except OSError as exc:
+            raise BadInput(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        if not server.loopback:
+            click.echo(f"warning: listening on {host}: other machines can read the images and change {out}",
+                       err=True)
+        click.echo(f"annotating {len(images)} image(s) into {out}: open {server.url}  (Ctrl-C stops)")
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:
+            click.echo("stopped", err=True)
+        finally:
+            server.server_close()
 
 
 def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road: bool):
@@ -116,7 +125,6 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
     them again from the file as it grows (None when nothing is estimated)."""
     from dataclasses import replace
 
-    from toosicubix.pipeline.pilot import estimated_grounds
     from toosicubix.pipeline.road_normal import MIN_VEHICLES
     from toosicubix.solver import SolverOptions
 
@@ -125,10 +133,8 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
         announced_estimates(out, priors, options, False, False)  # nothing to estimate: it says so
         return options, None, None
 
-    def estimate(path: Path):
-        findings = announced_estimates(path, priors, options, click_sigma is None, estimate_road, shown=out)
-        return findings.options, estimated_grounds(findings.road_normals)
-
+    estimate = partial(_estimates, priors=priors, options=options, estimate_click_sigma=click_sigma is None,
+                       estimate_road_normal=estimate_road, shown=out)  # picklable: run in a worker process too
     if not out.is_file():
         source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
         what = "the road normal" if click_sigma is not None else "both"
@@ -137,3 +143,13 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
                    "double)", err=True)
         return options, None, estimate
     return (*estimate(out), estimate)
+
+
+def _estimates(path: Path, priors: Any, options: Any, estimate_click_sigma: bool, estimate_road_normal: bool,
+               shown: Path) -> tuple[Any, dict[tuple, dict[str, Any]]]:
+    """What `fit` would estimate from the file ``path`` (a snapshot of ``shown``), said on stderr: the solver
+    settings with its click noise, and per camera the ground block of its road normal."""
+    from toosicubix.pipeline.pilot import estimated_grounds
+
+    findings = announced_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal, shown=shown)
+    return findings.options, estimated_grounds(findings.road_normals)
