@@ -18,7 +18,8 @@ Auto-naming accuracy is how often the name given to an unnamed click is the true
 ``--apollocar3d`` measures it on ApolloCar3D's real keypoints instead (no replay through the page): every car of
 ``apollocar3d_val_dev.json`` with at least 10 labelled keypoints, imported with the bundled ``apollocar3d-66``
 mapping, its parts in a seeded order (one generator, seed 0, shuffling each car in file order); the first k
-named and fitted as the page fits them (``fit_one`` with the page's options and suggestions); then every other
+named and fitted as the page fits them (``fit_one`` with the click noise and road normals the page estimates from
+a file of the scored images, :func:`loaded_as_the_page`; ``--page-defaults``: 1.5 px and no road); then every other
 click of the car is named by the page's rule (:func:`toosicubix.web.session.naming_candidates` and
 :func:`~toosicubix.web.session.nearest_parts`) among every part of the mapping not in the first k, each
 keypoint at its learned ``at`` fractions of the fitted cuboid (the mapping's positions are learned on these
@@ -37,7 +38,7 @@ keypoints scored). Each car starts from the first 4 of its labelled keypoints in
 gains one labelled keypoint at a time in two orders: ``seeded`` (the rest of that order) and ``guided`` (the
 first of the page's drawn targets, the five best visible ones inside the image, that the person labelled on this
 car, else the next of the seeded order: a labelled keypoint stands for one the person could see). Each fit is
-the page's (``fit_one`` with the page's default options and the mapping's keypoints as candidates). Reported per
+the page's (``fit_one`` with the page's estimates, as above, and the mapping's keypoints as candidates). Reported per
 order and number of clicks: the share of cars validate calls well determined, and mean / median E_R (degrees)
 and E_t (``|t - t_gt| / |t_gt|``, bottom-face centres) against the ground-truth poses.
 """
@@ -174,12 +175,16 @@ def main() -> None:
                              "negative: turned toward the camera by at least that) [default: the page's]")
     parser.add_argument("--guidance", action="store_true",
                         help="with --apollocar3d: the page's targets against a seeded order (out of sample)")
+    parser.add_argument("--page-defaults", action="store_true",
+                        help="with --apollocar3d: fit with the page's defaults (1.5 px, no road normal) instead of "
+                             "the click noise and road normals it estimates from the file (as before they were)")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
-        report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed) if args.guidance else
+        estimates = not args.page_defaults
+        report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed, estimates) if args.guidance else
                   apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample,
-                                     design=args.design, grazing_deg=args.naming_grazing_deg))
+                                     design=args.design, grazing_deg=args.naming_grazing_deg, estimates=estimates))
         if args.out:
             args.out.write_text((_compact_steps(report) if args.guidance else json.dumps(report, indent=1)) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -237,14 +242,39 @@ APOLLO_KS = (4, 6, 8)
 APOLLO_MIN_KEYPOINTS = 10
 
 
+def loaded_as_the_page(document: dict, scored_images: set[str] | None, priors, estimates: bool = True
+                       ) -> tuple[list, SolverOptions, str]:
+    """The scored images of an imported annotation ``document`` (all when ``scored_images`` is None), and the solver
+    settings to fit them with, as the annotate page opened on a file of those images fits them: with the click
+    noise and each camera's road normal that `fit` estimates from that file (the images put on their camera's
+    estimated road). ``estimates`` False: the Session's defaults (1.5 px, no road), as this benchmark fitted
+    before the page estimated. Also says which, for the report."""
+    from toosicubix.pipeline.pilot import file_estimates, on_estimated_roads
+
+    doc = dict(document, images=[im for im in document["images"]
+                                 if scored_images is None or im["id"] in scored_images])
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "annotations.json"
+        path.write_text(json.dumps(doc))
+        images = load_images(path)
+        if not estimates:
+            return images, SolverOptions(), "the page's defaults: click noise 1.5 px, no road normal"
+        findings = file_estimates(path, priors, SolverOptions())
+    normals = [n for n in (findings.road_normals or {}).values() if n.normal is not None]
+    said = (f"the page's estimates from the scored images' file: click noise {findings.options.click_sigma:.3g} px "
+            f"({findings.click_noise.source}), road normals of {len(normals)} camera(s)")
+    return list(on_estimated_roads(images, findings.road_normals)), findings.options, said
+
+
 def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
                        out_of_sample: bool = False, design: bool = False,
-                       grazing_deg: float = NAMING_GRAZING_DEG) -> dict:
+                       grazing_deg: float = NAMING_GRAZING_DEG, estimates: bool = True) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
     keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
-    scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s."""
+    scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s. ``estimates``: as
+    :func:`loaded_as_the_page`."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     scored_images = None
@@ -257,11 +287,8 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
     else:
         mapping, _ = load_mapping("apollocar3d-66")
     document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "annotations.json"
-        path.write_text(json.dumps(document))
-        images = [im for im in load_images(path) if scored_images is None or im.id in scored_images]
-    priors, options = load_priors(), SolverOptions()  # as the page: Session's defaults
+    priors = load_priors()
+    images, options, estimated = loaded_as_the_page(document, scored_images, priors, estimates)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     per_k = {k: Counter() for k in ks}
@@ -315,7 +342,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                         "(design, learning half only)" if design else
                         "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
                         if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
-            "naming_grazing_deg": grazing_deg,
+            "naming_grazing_deg": grazing_deg, "fitted_with": estimated,
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",
@@ -327,9 +354,9 @@ GUIDANCE_SCORED_AT = (4, 5, 6, 7, 8, 10, 12)
 ORDERS = ("seeded", "guided")
 
 
-def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
+def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) -> dict:
     """The page's targets with a keypoint mapping against a seeded order, on ApolloCar3D's real keypoints, out
-    of sample (see the module's docstring)."""
+    of sample (see the module's docstring); ``estimates`` as :func:`loaded_as_the_page`."""
     from toosicubix.formats.apollocar3d import read_apollocar3d, read_car_models
     from toosicubix.geometry import geodesic_angle
     from toosicubix.pipeline.validation import Thresholds, judge
@@ -343,11 +370,8 @@ def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
     truth = {(im.id, car.id): car for im in read_apollocar3d(keypoints_path, read_car_models(
         folder / "car_models.json")) for car in im.cars}
     document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "annotations.json"
-        path.write_text(json.dumps(document))
-        images = [im for im in load_images(path) if im.id in scored_images]
-    priors, options, thresholds = load_priors(), SolverOptions(), Thresholds()
+    priors, thresholds = load_priors(), Thresholds()
+    images, options, estimated = loaded_as_the_page(document, scored_images, priors, estimates)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     cars = []
@@ -410,6 +434,7 @@ def apollocar3d_guidance(folder: Path, seed: int = 0) -> dict:
     summary["reached_by_both"] = len(both)
     return {"benchmark": "annotate --apollocar3d --guidance", "data": "ApolloCar3D apollocar3d_val_dev.json",
             "mapping": "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)",
+            "fitted_with": estimated,
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "start": GUIDANCE_START, "targets": TARGETS,
             "orders": {"seeded": "one numpy generator (seed) permuting each car's keypoints, cars in file order",
                        "guided": "after the start, the first of the page's targets the car has labelled, else "
