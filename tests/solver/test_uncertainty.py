@@ -205,3 +205,27 @@ def test_a_vehicle_clicked_in_keypoints_is_advised_in_keypoints():
     _, _, cuboid = _fit("rear", 0)
     assert not cuboid.observability.keypoints_only
     assert "click a front and a rear part" in " ".join(cuboid.observability.sentences())
+
+
+def test_on_a_road_pitch_and_roll_are_the_roads_not_advice():
+    """The same keypoint view fitted upright on a road of known normal (no camera height): pitch and roll left to
+    the cues are said to be the road's, in one sentence without advice, and the other quantities keep theirs."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
+    from toosicubix.model import LEVEL_NORMAL, GroundPlane
+
+    rear = {name: at for name, at in REAR_LEFT.items() if name.split("-")[0] in ("lamp", "glass", "bumper")}
+    d = np.array([4.6, 1.8, 1.5])
+    parts = build_parts_model(keypoint_parts(d, R_cam_vehicle_from_ypr(np.deg2rad(-120.0)),
+                                             np.array([0.5, 1.6, 40.0]), rear))
+    road = GroundPlane(LEVEL_NORMAL, np.deg2rad(1.0), None, 0.1, np.deg2rad(2.0))
+    free = fit_vehicle(parts, CAMERA, exact_prior(d)).observability
+    upright = fit_vehicle(parts, CAMERA, exact_prior(d), ground=road).observability
+    assert not free.upright and upright.upright
+    on_road = [q for q in ("pitch", "roll") if upright.status[q] != "clicks"]
+    assert on_road  # seen end-on at 40 m, the clicks leave pitch and roll to the road
+    sentences = upright.sentences()
+    assert f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)" in sentences
+    assert not any(s.startswith(("pitch mostly", "roll mostly", "pitch set by the prior", "roll set by the prior"))
+                   for s in sentences)
+    assert any(s.startswith("length mostly set by the prior") for s in sentences)
+    assert not any("set by the road" in s for s in free.sentences())  # off the road the clicks set them

@@ -242,7 +242,8 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     G = ypr_gradient(R)
     u = _uncertainty(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
-    return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only)
+    return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
+                             problem.upright_sigma is not None)
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -304,18 +305,26 @@ class Observability:
     status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
     scale_from : the cue that sets the scale
     keypoints_only : every click is a keypoint (or plate) at a typical position: the advice names keypoints
+    upright : the vehicle stands upright on a road (a ground block): pitch and roll left to it need no click
     """
 
     ratios: dict[str, float]
     status: dict[str, str]
     scale_from: str | None
     keypoints_only: bool = False
+    upright: bool = False
 
     def sentences(self) -> list[str]:
-        """Plain sentences, one per quantity the clicks do not fix, and one on the scale."""
+        """Plain sentences, one per quantity the clicks do not fix, and one on the scale. On a road, pitch and
+        roll left to the cues are one sentence saying the road sets them, with no advice: that is its job."""
         out = []
         hints = _KEYPOINT_HINTS if self.keypoints_only else _HINTS
+        on_road = [q for q in ("pitch", "roll") if self.upright and self.status[q] != "clicks"]
+        if on_road:
+            out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
         for name in QUANTITIES:
+            if name in on_road:
+                continue
             status = self.status[name]
             if status == "cues only":
                 out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
@@ -335,7 +344,7 @@ class Observability:
 
 
 def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
-                   keypoints_only: bool) -> Observability:
+                   keypoints_only: bool, upright: bool) -> Observability:
     ratios, status = {}, {}
     for name, v_full in full.items():
         v_clicks = clicks_only[name]
@@ -343,7 +352,7 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         ratios[name] = ratio
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
-    return Observability(ratios, status, scale_from, keypoints_only)
+    return Observability(ratios, status, scale_from, keypoints_only, upright)
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
