@@ -99,7 +99,7 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot. When the pilot fits every
     vehicle of the file with the batch's settings, its fits are the batch's (:attr:`PilotFindings.results`), and it
     then adds the ``next_clicks`` the batch asks for to them (``jobs`` processes). Fits it does not hand on get
-    none: guidance costs about as much as a fit, and would be thrown away.
+    none: their guidance (a quarter to a half of a fit's time with a mapping's keypoints) would be thrown away.
 
     ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
     ``progress`` with each vehicle the pilot finishes.
