@@ -178,13 +178,18 @@ def main() -> None:
     parser.add_argument("--page-defaults", action="store_true",
                         help="with --apollocar3d: fit with the page's defaults (1.5 px, no road normal) instead of "
                              "the click noise and road normals it estimates from the file (as before they were)")
+    parser.add_argument("--position-faces", action="store_true",
+                        help="with --apollocar3d: a keypoint is seen on the faces its position sits near, not on "
+                             "those it was learned to be seen from (as before rule 13)")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
         estimates = not args.page_defaults
-        report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed, estimates) if args.guidance else
+        report = (apollocar3d_guidance(args.data / "apollocar3d", args.seed, estimates, args.design,
+                                       args.position_faces) if args.guidance else
                   apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample,
-                                     design=args.design, grazing_deg=args.naming_grazing_deg, estimates=estimates))
+                                     design=args.design, grazing_deg=args.naming_grazing_deg, estimates=estimates,
+                                     position_faces=args.position_faces))
         if args.out:
             args.out.write_text((_compact_steps(report) if args.guidance else json.dumps(report, indent=1)) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -268,13 +273,14 @@ def loaded_as_the_page(document: dict, scored_images: set[str] | None, priors, e
 
 def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
                        out_of_sample: bool = False, design: bool = False,
-                       grazing_deg: float = NAMING_GRAZING_DEG, estimates: bool = True) -> dict:
+                       grazing_deg: float = NAMING_GRAZING_DEG, estimates: bool = True,
+                       position_faces: bool = False) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
     keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
     scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s. ``estimates``: as
-    :func:`loaded_as_the_page`."""
+    :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     scored_images = None
@@ -282,10 +288,10 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
         sorted_ = sorted_images(folder)
         if design:
             sorted_ = sorted_[0::2]
-        mapping = learned_on_even(sorted_, cameras)
+        mapping = _faces(learned_on_even(sorted_, cameras), position_faces)
         scored_images = {im.id for im in sorted_[1::2]}
     else:
-        mapping, _ = load_mapping("apollocar3d-66")
+        mapping = _faces(load_mapping("apollocar3d-66")[0], position_faces)
     document, _ = coco_to_annotations(keypoints_path, mapping, cameras)
     priors = load_priors()
     images, options, estimated = loaded_as_the_page(document, scored_images, priors, estimates)
@@ -299,8 +305,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
             if len(clicks) < APOLLO_MIN_KEYPOINTS:
                 continue
             order = [clicks[i] for i in rng.permutation(len(clicks))]
-            keypoints = {p.keypoint: list(p.position_for(vehicle.prototype).at)
-                         for p in mapping.parts if p.kind == "keypoint"}
+            keypoints = mapping.keypoint_candidates(vehicle.prototype)
             points = {p.part for p in mapping.parts if p.kind == "point"}
             row = {"image": image.id, "vehicle": vehicle.id, "keypoints": len(clicks)}
             for k in ks:
@@ -316,7 +321,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                     continue
                 taken = {(p.kind, p.name) for p in named}
                 candidates = naming_candidates(
-                    result, image.camera, {n: at for n, at in keypoints.items() if ("keypoint", n) not in taken},
+                    result, image.camera, {n: k for n, k in keypoints.items() if ("keypoint", n) not in taken},
                     {n for n in points if ("point", n) not in taken}, grazing_deg)
                 right = top2 = 0
                 for part in order[k:]:
@@ -342,11 +347,28 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                         "(design, learning half only)" if design else
                         "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
                         if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
-            "naming_grazing_deg": grazing_deg, "fitted_with": estimated,
+            "naming_grazing_deg": grazing_deg, "fitted_with": estimated, "keypoint_faces": _faces_said(position_faces),
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",
             "seconds": round(time.perf_counter() - t0, 1), "machine": machine(), "summary": summary, "cars": cars}
+
+
+def _faces(mapping, position_faces: bool):
+    """``mapping`` as it is, or with ``position_faces`` without the faces its keypoints were learned to be seen
+    from, so that each is seen on the faces its position sits near (as before rule 13, RESULTS.md)."""
+    if not position_faces:
+        return mapping
+    document = mapping.model_dump(mode="json", exclude_none=True)
+    for part in document["parts"]:
+        for position in [part.get("position", {}), *part.get("by_prototype", {}).values()]:
+            position.pop("seen_from", None)
+    return type(mapping).model_validate(document)
+
+
+def _faces_said(position_faces: bool) -> str:
+    return ("the faces each keypoint's position sits near (--position-faces)" if position_faces else
+            "the faces each keypoint was learned to be seen from (seen_from), else those its position sits near")
 
 
 GUIDANCE_START = 4
@@ -354,9 +376,11 @@ GUIDANCE_SCORED_AT = (4, 5, 6, 7, 8, 10, 12)
 ORDERS = ("seeded", "guided")
 
 
-def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) -> dict:
+def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True, design: bool = False,
+                         position_faces: bool = False) -> dict:
     """The page's targets with a keypoint mapping against a seeded order, on ApolloCar3D's real keypoints, out
-    of sample (see the module's docstring); ``estimates`` as :func:`loaded_as_the_page`."""
+    of sample (see the module's docstring); ``estimates`` as :func:`loaded_as_the_page`; ``design`` as
+    :func:`apollocar3d_naming`'s (the learning half only); ``position_faces`` as :func:`_faces`."""
     from toosicubix.formats.apollocar3d import read_apollocar3d, read_car_models
     from toosicubix.geometry import geodesic_angle
     from toosicubix.pipeline.validation import Thresholds, judge
@@ -365,7 +389,9 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) ->
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     images_sorted = sorted_images(folder)
-    mapping = learned_on_even(images_sorted, cameras)
+    if design:
+        images_sorted = images_sorted[0::2]
+    mapping = _faces(learned_on_even(images_sorted, cameras), position_faces)
     scored_images = {im.id for im in images_sorted[1::2]}
     truth = {(im.id, car.id): car for im in read_apollocar3d(keypoints_path, read_car_models(
         folder / "car_models.json")) for car in im.cars}
@@ -391,7 +417,10 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) ->
                                      options, image.ground, next_clicks=1000, keypoints=keypoints)
                     step = {"clicks": len(named), "ok": result.ok}
                     if result.ok:
-                        step.update({"well_determined": not judge(result, thresholds),
+                        problems = judge(result, thresholds)
+                        step.update({"well_determined": not problems,
+                                     "problems": "".join(sorted({p.split()[0][0] for p in problems})),
+                                     "yaw_sigma_deg": result.sigma.yaw_deg, "depth_sigma_rel": result.sigma.depth_rel,
                                      "e_r_deg": round(float(np.rad2deg(geodesic_angle(result.R_cam_vehicle,
                                                                                      gt.R_cam_vehicle))), 3),
                                      "e_t": round(float(np.linalg.norm(result.t_cam_vehicle - gt.t_cam_vehicle)
@@ -433,8 +462,10 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) ->
             [next(s["clicks"] for s in c[how] if s.get("well_determined")) for c in both])
     summary["reached_by_both"] = len(both)
     return {"benchmark": "annotate --apollocar3d --guidance", "data": "ApolloCar3D apollocar3d_val_dev.json",
-            "mapping": "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)",
-            "fitted_with": estimated,
+            "mapping": ("apollocar3d-66, positions learned on images 0, 4, 8, ...; images 2, 6, 10, ... scored "
+                        "(design, learning half only)" if design else
+                        "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"),
+            "fitted_with": estimated, "keypoint_faces": _faces_said(position_faces),
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "start": GUIDANCE_START, "targets": TARGETS,
             "orders": {"seeded": "one numpy generator (seed) permuting each car's keypoints, cars in file order",
                        "guided": "after the start, the first of the page's targets the car has labelled, else "
@@ -443,7 +474,8 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True) ->
 
 
 #: The fields of a step of ``--guidance``'s cars, as the JSON lists them.
-STEP_FIELDS = ("clicks", "ok", "well_determined", "e_r_deg", "e_t", "target_taken")
+STEP_FIELDS = ("clicks", "ok", "well_determined", "e_r_deg", "e_t", "target_taken", "problems", "yaw_sigma_deg",
+               "depth_sigma_rel")
 
 
 def _compact_steps(report: dict) -> str:

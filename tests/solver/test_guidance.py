@@ -5,7 +5,7 @@ import pytest
 
 from tests.scenes import CAMERA, random_scene
 from toosicubix.model import Part
-from toosicubix.parts.linear import build_parts_model
+from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import suggest_clicks
@@ -122,7 +122,7 @@ def test_a_mappings_keypoints_are_suggested_instead_of_the_vocabulary_at_their_p
     assert fit.ok
     more = {"lamp-front-left": (0.46, 0.36, 0.55), "lamp-front-right": (0.46, -0.36, 0.55),
             "mirror-right": (0.18, -0.5, 0.65)}
-    keypoints = {name: (np.array(at), np.full(3, 0.02)) for name, at in {**REAR_LEFT, **more}.items()}
+    keypoints = {name: TypicalKeypoint(np.array(at), np.full(3, 0.02)) for name, at in {**REAR_LEFT, **more}.items()}
     suggestions = suggest_clicks(tuple(clicked), CAMERA, prior, fit, OPTIONS, keypoints=keypoints)
     assert {s.name for s in suggestions} == set(keypoints) - {p.name for p in clicked}
     assert {s.kind for s in suggestions} == {"keypoint"}
@@ -130,12 +130,40 @@ def test_a_mappings_keypoints_are_suggested_instead_of_the_vocabulary_at_their_p
     # the left front lamp sits near the front and the left face, and the left one is seen.
     assert {s.name for s in suggestions if not s.visible} == {"lamp-front-right", "mirror-right"}
     for s in suggestions:
-        at = keypoints[s.name][0]
+        at = keypoints[s.name].at
         expected_uv = project((at * fit.dimensions)[None], fit.R_cam_vehicle, fit.t_cam_vehicle)
         np.testing.assert_allclose(s.uv, expected_uv, atol=1e-9)
     for s in [s for s in suggestions if s.visible][:3]:
-        at, spread = keypoints[s.name]
+        at, spread, _ = keypoints[s.name]
         refit = fit_vehicle(build_parts_model((*clicked, Part("keypoint", s.name, s.uv, "$", None, at, spread))),
                             CAMERA, prior, OPTIONS)
         assert refit.uncertainty.yaw_deg == pytest.approx(s.yaw_sigma_deg, rel=1e-3)
         assert refit.uncertainty.depth_rel == pytest.approx(s.depth_sigma_rel, rel=1e-3)
+
+
+def test_a_keypoint_is_seen_on_the_faces_it_was_learned_to_be_seen_from():
+    """A rear window's top corner sits on the roof, inside the box's rear end: by its position only the top face
+    shows it, which a camera below the roof does not see. Learned to be seen from the rear (``seen_from``), it is
+    a visible target on a car seen from behind; learned to be seen from the right, not on a car seen from the
+    left."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
+    from tests.parts.test_real_click_kinds import scene as keypoint_scene
+    from toosicubix.solver import faces_turned_to_camera
+
+    d, R, t = keypoint_scene(np.random.default_rng(5))
+    clicked = keypoint_parts(d, R, t)[:6]
+    prior = exact_prior(d)
+    fit = fit_vehicle(build_parts_model(tuple(clicked)), CAMERA, prior, OPTIONS)
+    facing = faces_turned_to_camera(fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions, grazing_deg=-5.0)
+    assert facing["rear"] and facing["left"] and not facing["top"] and not facing["right"]
+    at, spread = np.array([-0.29, -0.3, 0.92]), np.full(3, 0.02)
+    keypoints = {name: TypicalKeypoint(np.array(a), spread) for name, a in REAR_LEFT.items()}
+
+    def visible(**window: TypicalKeypoint) -> bool:
+        suggestions = suggest_clicks(tuple(clicked), CAMERA, prior, fit, OPTIONS, keypoints={**keypoints, **window})
+        return next(s.visible for s in suggestions if s.name in window)
+
+    assert TypicalKeypoint(at, spread).faces == ("top",)
+    assert not visible(window=TypicalKeypoint(at, spread))
+    assert visible(window=TypicalKeypoint(at, spread, ("rear",)))
+    assert not visible(window=TypicalKeypoint(at, spread, ("right", "top")))

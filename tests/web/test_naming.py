@@ -6,10 +6,15 @@ import numpy as np
 
 from tests.web.synthetic import CAMERA, DIMENSIONS, R_CAM_VEHICLE, T_CAM_VEHICLE
 from toosicubix.formats.results import VehicleResult
+from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.web.session import naming_candidates, nearest_parts
 
 FRONT_LEFT = [0.5, 0.4, 0.5]  # on the front and left faces, both turned to the camera
 REAR_RIGHT = [-0.5, -0.4, 0.5]  # on the faces turned away
+
+
+def _at(at: list[float], seen_from: tuple[str, ...] = ()) -> TypicalKeypoint:
+    return TypicalKeypoint(np.array(at), np.full(3, 0.02), seen_from)
 
 
 def _fit(next_clicks: list[dict]) -> VehicleResult:
@@ -24,7 +29,7 @@ def _pixel(at: list[float]) -> list[float]:
 def test_keypoints_projected_at_their_fractions_and_hidden_ones_not_chosen():
     wheel = {"kind": "point", "name": "wheel-front-left", "uv": [[100.0, 300.0]], "visible": True}
     arrow = {"kind": "direction", "name": "forward", "uv": [[1.0, 1.0], [2.0, 2.0]], "visible": True}
-    candidates = naming_candidates(_fit([wheel, arrow]), CAMERA, {"fl": FRONT_LEFT, "rr": REAR_RIGHT})
+    candidates = naming_candidates(_fit([wheel, arrow]), CAMERA, {"fl": _at(FRONT_LEFT), "rr": _at(REAR_RIGHT)})
     by_name = {c["name"]: c for c in candidates}
     assert set(by_name) == {"wheel-front-left", "fl", "rr"}
     assert np.allclose(by_name["fl"]["uv"][0], _pixel(FRONT_LEFT))
@@ -39,6 +44,14 @@ def test_keypoints_projected_at_their_fractions_and_hidden_ones_not_chosen():
 def test_point_parts_only_those_asked_for_and_no_keypoints_by_default():
     wheel = {"kind": "point", "name": "wheel-front-left", "uv": [[100.0, 300.0]], "visible": True}
     assert naming_candidates(_fit([wheel]), CAMERA) == [wheel]
-    assert naming_candidates(_fit([wheel]), CAMERA, {"fl": FRONT_LEFT}, points=set())[0]["name"] == "fl"
+    assert naming_candidates(_fit([wheel]), CAMERA, {"fl": _at(FRONT_LEFT)}, points=set())[0]["name"] == "fl"
     failed = VehicleResult("1", "failed", "degenerate clicks", "Car")
-    assert naming_candidates(failed, CAMERA, {"fl": FRONT_LEFT}) == []
+    assert naming_candidates(failed, CAMERA, {"fl": _at(FRONT_LEFT)}) == []
+
+
+def test_a_keypoint_is_named_among_the_visible_by_the_faces_it_was_learned_to_be_seen_from():
+    """The faces a keypoint was learned to be seen from decide, not those its position sits near."""
+    candidates = naming_candidates(_fit([]), CAMERA, {"rr-seen": _at(REAR_RIGHT, ("front",)),
+                                                      "fl-unseen": _at(FRONT_LEFT, ("rear", "right"))})
+    visible = {c["name"]: c["visible"] for c in candidates}
+    assert visible == {"rr-seen": True, "fl-unseen": False}

@@ -11,6 +11,16 @@ The spread per axis is the RMS of each vehicle's offset from its ray, ``R_i^T Q_
 (fractions), times ``sqrt(3 / 2)``: an offset perpendicular to the ray misses the ray's own component, one of
 three on average.
 
+Where a keypoint is seen from is learned too: at each labelled vehicle's ground-truth pose, the faces of its
+cuboid turned to the camera (the camera beyond the face's plane). A keypoint's ``seen_from`` is the fewest faces,
+taken greedily (the face turned to the camera on most of the vehicles not yet covered first), such that on at least
+:data:`SEEN_FROM_SHARE` of its vehicles one of them was turned to the camera; only faces on the keypoint's half of
+the vehicle count (front or rear by the sign of its length fraction, left or right by its width's, the top for a
+keypoint above half the height): a face on the other half cannot show it, so a ground truth turned around does not
+add one. It is learned over all prototypes pooled (a prototype's few vehicles are too few for a 5 % tail). Its
+position alone can mislead: a rear window's top corner sits on the roof, inside the box's end, yet people click
+it on cars seen from behind.
+
 Ground-truth poses can contradict the clicks (a pose turned 180 degrees, a car model fitted at the wrong
 depth). With ``max_offset`` the positions are learned twice: the second pass leaves out every vehicle whose
 keypoints lie more than ``max_offset`` metres RMS from their rays at the first pass's positions.
@@ -22,6 +32,11 @@ from collections import defaultdict
 from dataclasses import dataclass, replace
 
 import numpy as np
+
+#: The faces of a vehicle's cuboid, in the order ties are broken.
+FACES = ("front", "rear", "left", "right", "top")
+#: ``seen_from`` covers at least this share of the vehicles a keypoint was labelled on.
+SEEN_FROM_SHARE = 0.95
 
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
@@ -50,11 +65,48 @@ class KeypointSample:
 
 @dataclass(frozen=True)
 class LearnedPosition:
-    """``at`` (3,) and ``spread`` (3,), fractions of ``(dx, dy, dz)``, from ``n`` samples."""
+    """``at`` (3,) and ``spread`` (3,), fractions of ``(dx, dy, dz)``, from ``n`` samples; ``seen_from`` the faces
+    it was seen from (see the module's docstring)."""
 
     at: np.ndarray
     spread: np.ndarray
     n: int
+    seen_from: tuple[str, ...] = ()
+
+
+def faces_toward(camera_vehicle: np.ndarray, dimensions: np.ndarray) -> frozenset[str]:
+    """The faces of a cuboid of ``dimensions`` (3,) (origin at its bottom centre) turned to a camera at
+    ``camera_vehicle`` (3,), vehicle frame: those whose plane the camera lies beyond."""
+    (x, y, z), (dx, dy, dz) = camera_vehicle, dimensions
+    beyond = {"front": x > dx / 2, "rear": x < -dx / 2, "left": y > dy / 2, "right": y < -dy / 2, "top": z > dz}
+    return frozenset(face for face, yes in beyond.items() if yes)
+
+
+def halves(at: np.ndarray) -> tuple[str, ...]:
+    """The faces on the half of the vehicle where a keypoint at fractions ``at`` (3,) sits (see the module's
+    docstring)."""
+    x, y, z = at
+    near = {"front": x > 0, "rear": x < 0, "left": y > 0, "right": y < 0, "top": z > 0.5}
+    return tuple(face for face in FACES if near[face])
+
+
+def seen_from(facing: list[frozenset[str]], allowed: tuple[str, ...] = FACES,
+              share: float = SEEN_FROM_SHARE) -> tuple[str, ...]:
+    """The fewest faces of ``allowed``, taken greedily, one of which is in at least ``share`` of the sets
+    ``facing`` (the faces turned to the camera on each vehicle a keypoint was labelled on), or as near to that as
+    ``allowed`` gets; in :data:`FACES`'s order."""
+    chosen: list[str] = []
+    left = list(facing)
+    while left and len(left) > (1.0 - share) * len(facing) + 1e-9:
+        counts = {face: sum(face in f for f in left) for face in allowed if face not in chosen}
+        if not counts:
+            break
+        best = max(counts, key=lambda face: (counts[face], -FACES.index(face)))  # ties: FACES's order
+        if counts[best] == 0:
+            break
+        chosen.append(best)
+        left = [f for f in left if best not in f]
+    return tuple(face for face in FACES if face in chosen)
 
 
 def learn_positions(samples: list[KeypointSample], min_samples: int = 3,
@@ -122,7 +174,9 @@ def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[st
         offsets_cam = A @ f - b  # (n, 3) perpendicular to each ray
         offsets = np.einsum("nji,nj->ni", R, offsets_cam) / d  # vehicle frame, fractions
         spread = np.maximum(np.sqrt(1.5 * np.mean(offsets**2, axis=0)), MIN_SPREAD)
-        out[prototype][name] = LearnedPosition(at=f, spread=spread, n=len(group))
+        facing = [faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions) for s in group]
+        out[prototype][name] = LearnedPosition(at=f, spread=spread, n=len(group),
+                                               seen_from=seen_from(facing, halves(f)))
     return dict(out)
 
 
@@ -133,8 +187,9 @@ def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_o
     pooled = learn_positions([replace(s, prototype="*") for s in samples], max_offset=max_offset).get("*", {})
     per = learn_positions(samples, min_samples=min_samples, max_offset=max_offset)
 
-    def entry(p) -> dict:
-        return {"at": [round(float(v), 4) for v in p.at], "spread": [round(float(v), 4) for v in p.spread], "n": p.n}
+    def entry(p, pooled: bool = False) -> dict:
+        return {"at": [round(float(v), 4) for v in p.at], "spread": [round(float(v), 4) for v in p.spread], "n": p.n,
+                **({"seen_from": list(p.seen_from)} if pooled and p.seen_from else {})}
 
     parts, unused = [], list(base.get("unused", []))
     for part in base["parts"]:
@@ -153,7 +208,7 @@ def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_o
         if name not in pooled:
             unused.append(name)
             continue
-        parts.append({**part, "position": entry(pooled[name]),
+        parts.append({**part, "position": entry(pooled[name], pooled=True),
                       "by_prototype": {proto: entry(d[name]) for proto, d in sorted(per.items()) if name in d}})
     described = base.get("description", "").split(" Positions: ")[0]
     return {**base, "description": f"{described} Positions: {how}.".strip(), "unused": unused,

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -153,6 +154,21 @@ class PartsModel:
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
         return self.A @ p
+
+
+class TypicalKeypoint(NamedTuple):
+    """A keypoint as a candidate to click: ``at`` (3,) its typical position and ``spread`` (3,), fractions of the
+    dimensions, and ``seen_from`` the faces it is seen from (learned, :mod:`toosicubix.parts.learned`; empty:
+    the faces its position sits near, :func:`keypoint_faces`)."""
+
+    at: np.ndarray
+    spread: np.ndarray
+    seen_from: tuple[str, ...] = ()
+
+    @property
+    def faces(self) -> tuple[str, ...] | None:
+        """The faces one of which must be turned to the camera for it to be seen (None: no such face)."""
+        return tuple(self.seen_from) or keypoint_faces(self.at)
 
 
 def keypoint_faces(at) -> tuple[str, ...] | None:

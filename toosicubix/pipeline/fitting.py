@@ -21,7 +21,7 @@ from toosicubix.annotations.stream import AnnotationIndex, iter_image_annotation
 from toosicubix.camera import Camera
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.model import GroundPlane, Image, Vehicle
-from toosicubix.parts.linear import build_parts_model
+from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.pipeline.vehicle import (
     Keypoints,
     SuggestTask,
@@ -71,8 +71,8 @@ class KeypointCatalogue(Protocol):
     """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
     :class:`toosicubix.formats.coco.MappingFile`)."""
 
-    def keypoint_candidates(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Name -> ``(at, spread)``, (3,) fractions of the dimensions, on a vehicle of ``prototype``."""
+    def keypoint_candidates(self, prototype: str) -> dict[str, TypicalKeypoint]:
+        """Name -> where it typically is on a vehicle of ``prototype`` and the faces it is seen from."""
         ...
 
 

@@ -24,7 +24,7 @@ from toosicubix.formats.results import (
 )
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Vehicle
-from toosicubix.parts.linear import PartsModel, build_parts_model
+from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver import FitResult, SolverOptions, confidence, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
@@ -34,8 +34,8 @@ __all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_re
            "fit_as_written", "fit_one", "with_next_clicks"]
 
 
-#: Keypoints to suggest for one vehicle: name -> ``(at, spread)``, (3,) fractions of the dimensions.
-Keypoints = Mapping[str, tuple[np.ndarray, np.ndarray]]
+#: Keypoints to suggest for one vehicle: name -> where it typically is and the faces it is seen from.
+Keypoints = Mapping[str, TypicalKeypoint]
 
 
 def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
@@ -44,7 +44,7 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
     """Fit one vehicle and describe it as results.json does; never raises.
 
     ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
-    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name -> ``(at, spread)``).
+    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name -> :class:`~toosicubix.parts.linear.TypicalKeypoint`).
     """
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)

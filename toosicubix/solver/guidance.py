@@ -32,7 +32,7 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts import vocabulary
-from toosicubix.parts.linear import build_parts_model, keypoint_faces
+from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver import (
     MIN_DEPTH,
@@ -162,7 +162,7 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
                    options: SolverOptions | None = None, ground: GroundPlane | None = None,
                    known_dimensions: dict[str, tuple[float, float]] | None = None,
                    box_shaped: bool = False,
-                   keypoints: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None) -> list[Suggestion]:
+                   keypoints: Mapping[str, TypicalKeypoint] | None = None) -> list[Suggestion]:
     """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty.
 
     Parameters
@@ -170,10 +170,11 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     parts : the vehicle's annotations; fit : its fit (no suggestions when it failed)
     options, ground, known_dimensions : as the fit had them
     box_shaped : suggest the cuboid's corners too (see :func:`is_box_shaped`)
-    keypoints : the candidates instead of the vocabulary's parts: keypoint name -> ``(at, spread)``, each (3,)
-        fractions of the dimensions (a mapping's keypoints, for a person clicking in its vocabulary); each not
-        clicked yet is placed at ``at`` on the fitted cuboid, weighted by its spread as a fit weighs it, and
-        visible when a face it sits near (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera
+    keypoints : the candidates instead of the vocabulary's parts (a mapping's keypoints, for a person clicking in
+        its vocabulary): keypoint name -> its ``at``, ``spread`` (fractions of the dimensions) and ``seen_from``;
+        each not clicked yet is placed at ``at`` on the fitted cuboid, weighted by its spread as a fit weighs it,
+        and visible when one of the faces it is seen from
+        (:attr:`~toosicubix.parts.linear.TypicalKeypoint.faces`) is turned to the camera
 
     Returns
     -------
@@ -196,9 +197,9 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
                    for kind, name in _candidates(parts, box_shaped, camera_side)]
     else:
         clicked = {p.name for p in parts if p.kind == "keypoint"}
-        typical = [(Part("keypoint", name, np.empty((0, 2)), "$", at=np.asarray(at, dtype=float),
-                         spread=np.asarray(spread, dtype=float)), (d * np.asarray(at, dtype=float))[None])
-                   for name, (at, spread) in keypoints.items() if name not in clicked]
+        typical = [(Part("keypoint", name, np.empty((0, 2)), "$", at=np.asarray(k.at, dtype=float),
+                         spread=np.asarray(k.spread, dtype=float)), (d * np.asarray(k.at, dtype=float))[None])
+                   for name, k in keypoints.items() if name not in clicked]
     for part, points_vehicle in typical:
         points_cam = points_vehicle @ R.T + t
         if np.all(points_cam[:, 2] > MIN_DEPTH):
@@ -235,7 +236,7 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
     size = camera.image_size
     out = []
     for part, u in zip(placed, added, strict=True):
-        faces = ([keypoint_faces(part.at)] if part.kind == "keypoint"
+        faces = ([keypoints[part.name].faces] if keypoints is not None and part.kind == "keypoint"
                  else map(vocabulary.faces_of_click, part.click_labels))
         visible = all(f is None or any(facing[x] for x in f) for f in faces)
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))

@@ -36,7 +36,7 @@ import os
 import re
 import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -60,7 +60,7 @@ from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts import vocabulary
-from toosicubix.parts.linear import keypoint_faces
+from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
@@ -324,8 +324,8 @@ class Session:
         return (sum(len(im.vehicles) for im in self.images)
                 + sum(len(d.get("vehicles") or []) for d in self._others))
 
-    def _keypoints(self, prototype: str) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
-        """The mapping's keypoints on a vehicle of ``prototype``: name -> ``(at, spread)``; None without one."""
+    def _keypoints(self, prototype: str) -> dict[str, TypicalKeypoint] | None:
+        """The mapping's keypoints on a vehicle of ``prototype`` (name -> place and faces); None without one."""
         return None if self.mapping is None else self.mapping.keypoint_candidates(prototype)
 
     def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
@@ -507,7 +507,7 @@ class Session:
                 candidates = naming_candidates(result, image.camera)
             else:  # the mapping's vocabulary: its keypoints not clicked yet
                 clicked = {p.name for p in v.parts if p.kind == "keypoint"}
-                candidates = naming_candidates(result, image.camera, {n: at for n, (at, _) in keypoints.items()
+                candidates = naming_candidates(result, image.camera, {n: k for n, k in keypoints.items()
                                                                       if n not in clicked}, points=set())
             choice = nearest_parts(part.uv[0], candidates)
             if not choice:
@@ -834,27 +834,26 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
 
 
 def naming_candidates(result: VehicleResult, camera: Camera,
-                      keypoints: dict[str, Any] | None = None,
+                      keypoints: Mapping[str, TypicalKeypoint] | None = None,
                       points: set[str] | None = None,
                       grazing_deg: float = NAMING_GRAZING_DEG) -> list[dict[str, Any]]:
     """What an unnamed click on a fitted vehicle may be, each as ``next_clicks`` has it (kind, name, uv (1, 2),
     visible): the vocabulary's point parts among the fit's ``next_clicks`` (at their typical positions; only
-    those named in ``points`` when given), then each keypoint of ``keypoints`` (name -> ``at``, fractions of the
-    dimensions) projected from that place on the fitted cuboid, visible when a face it sits near
-    (:func:`~toosicubix.parts.linear.keypoint_faces`) is turned to the camera (``grazing_deg``: turned away by
-    up to that, negative: toward it by at least that; by default as a suggestion's must be), or when it sits
-    near none. A keypoint behind the camera is left out."""
+    those named in ``points`` when given), then each keypoint of ``keypoints`` projected from its typical place
+    (``at``, fractions of the dimensions) on the fitted cuboid, visible when one of the faces it is seen from
+    (:attr:`~toosicubix.parts.linear.TypicalKeypoint.faces`) is turned to the camera (``grazing_deg``: turned
+    away by up to that, negative: toward it by at least that), or when it has none. A keypoint behind the camera
+    is left out."""
     out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
     if not keypoints or not result.ok:
         return out
     R, t, d = (np.asarray(x, dtype=float) for x in (result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions))
     facing = faces_turned_to_camera(R, t, d, grazing_deg=grazing_deg)
-    for name, at in keypoints.items():
-        at = np.asarray(at, dtype=float)
-        point_cam = R @ (d * at) + t
+    for name, k in keypoints.items():
+        point_cam = R @ (d * np.asarray(k.at, dtype=float)) + t
         if point_cam[2] <= MIN_DEPTH:
             continue
-        faces = keypoint_faces(at)
+        faces = k.faces
         out.append({"kind": "keypoint", "name": name, "uv": camera.project(point_cam[None]).tolist(),
                     "visible": faces is None or any(facing[f] for f in faces)})
     return out
