@@ -44,7 +44,8 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
     """Fit one vehicle and describe it as results.json does; never raises.
 
     ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
-    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name -> :class:`~toosicubix.parts.linear.TypicalKeypoint`).
+    none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name ->
+    :class:`~toosicubix.parts.linear.TypicalKeypoint`).
     """
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
