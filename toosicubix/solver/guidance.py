@@ -17,7 +17,8 @@ when the person has clicked a corner already: on a car they are points in the ai
 
 The candidates, their typical positions, the faces they are seen on and the prototypes they suit are the part
 vocabulary's (:mod:`toosicubix.parts.vocabulary`), or, when given, a keypoint mapping's keypoints (at their
-typical positions, weighed by their spread as a fit weighs them).
+typical positions, weighed by their spread as a fit weighs them, seen on the faces they were learned to be seen
+from, :attr:`toosicubix.parts.linear.TypicalKeypoint.faces`).
 """
 
 from __future__ import annotations
