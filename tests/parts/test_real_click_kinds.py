@@ -119,7 +119,9 @@ def test_learned_positions_of_a_synthetic_fleet_come_back():
 def test_the_faces_a_keypoint_is_seen_from_are_learned_from_where_it_was_labelled():
     """A fleet seen from every side by a camera below the roof (1.2 m; the cars are 1.5 m tall). People label a
     rear window's top corner when the rear is turned to the camera, and a headlight's outer corner when the front
-    or the left is: those are the faces learned, although the window's position sits near the top face only."""
+    or the left is: those are the faces learned, although the window's position sits near the top face only. The
+    lamp is clicked on every vehicle it could be seen on, the window on every other one (share 1/2); a badge on
+    every vehicle, so that each one counts (a vehicle without any labelled keypoint is not in the data)."""
     rng = np.random.default_rng(2)
     window, lamp = np.array([-0.3, 0.3, 0.92]), np.array([0.45, 0.38, 0.55])
     samples = []
@@ -129,12 +131,20 @@ def test_the_faces_a_keypoint_is_seen_from_are_learned_from_where_it_was_labelle
         t = np.array([rng.uniform(-5, 5), 1.2, rng.uniform(10, 40)])
         facing = faces_toward(-R.T @ t, d)
         assert "top" not in facing
-        for name, at, seen in (("window", window, {"rear"}), ("lamp", lamp, {"front", "left"})):
-            if facing & seen:
+        for name, at, seen in (("window", window, {"rear"}), ("lamp", lamp, {"front", "left"}),
+                               ("badge", np.array([0.0, 0.0, 0.95]), set(facing))):
+            if (facing & seen or name == "badge") and (name != "window" or v % 2 == 0):
                 samples.append(KeypointSample("Car", name, str(v), R @ (at * d) + t, R, t, d))
     learned = learn_positions(samples)["Car"]
     assert learned["window"].seen_from == ("rear",)
     assert learned["lamp"].seen_from == ("front", "left")
+    # Of the vehicles with the rear turned to the camera, the window was labelled on the even ones.
+    assert learned["lamp"].clicked_share == 1.0
+    rear_seen = {s.vehicle for s in samples if "rear" in faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle,
+                                                                       s.dimensions)}
+    assert learned["window"].clicked_share == pytest.approx(
+        sum(int(v) % 2 == 0 for v in rear_seen) / len(rear_seen), abs=1e-12)
+    assert abs(learned["window"].clicked_share - 0.5) < 0.15  # 141 vehicles show their rear: 3.6 sigmas
 
 
 def test_seen_from_takes_the_fewest_faces_on_the_keypoints_half():

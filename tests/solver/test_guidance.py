@@ -134,7 +134,7 @@ def test_a_mappings_keypoints_are_suggested_instead_of_the_vocabulary_at_their_p
         expected_uv = project((at * fit.dimensions)[None], fit.R_cam_vehicle, fit.t_cam_vehicle)
         np.testing.assert_allclose(s.uv, expected_uv, atol=1e-9)
     for s in [s for s in suggestions if s.visible][:3]:
-        at, spread, _ = keypoints[s.name]
+        at, spread, _, _ = keypoints[s.name]
         refit = fit_vehicle(build_parts_model((*clicked, Part("keypoint", s.name, s.uv, "$", None, at, spread))),
                             CAMERA, prior, OPTIONS)
         assert refit.uncertainty.yaw_deg == pytest.approx(s.yaw_sigma_deg, rel=1e-3)
@@ -167,3 +167,29 @@ def test_a_keypoint_is_seen_on_the_faces_it_was_learned_to_be_seen_from():
     assert not visible(window=TypicalKeypoint(at, spread))
     assert visible(window=TypicalKeypoint(at, spread, ("rear",)))
     assert not visible(window=TypicalKeypoint(at, spread, ("right", "top")))
+
+
+def test_targets_are_ranked_by_the_gain_to_expect_from_how_often_people_click_them():
+    """Two equal keypoints but for how often people click them where they can be seen: the one clicked twice as
+    often ranks first, although its own sigmas are the same; each keeps its score (the shrink if clicked)."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
+    from tests.parts.test_real_click_kinds import scene as keypoint_scene
+
+    d, R, t = keypoint_scene(np.random.default_rng(5))
+    clicked = keypoint_parts(d, R, t)[:6]
+    prior = exact_prior(d)
+    fit = fit_vehicle(build_parts_model(tuple(clicked)), CAMERA, prior, OPTIONS)
+    spread = np.full(3, 0.02)
+    best = suggest_clicks(tuple(clicked), CAMERA, prior, fit, OPTIONS,
+                          keypoints={n: TypicalKeypoint(np.array(a), spread) for n, a in REAR_LEFT.items()})[0]
+    at = np.array(REAR_LEFT[best.name])
+    rest = {n: TypicalKeypoint(np.array(a), spread) for n, a in REAR_LEFT.items() if n != best.name}
+    ranked = suggest_clicks(tuple(clicked), CAMERA, prior, fit, OPTIONS, keypoints={
+        **rest, "rarely": TypicalKeypoint(at, spread, (), 0.01), best.name: TypicalKeypoint(at, spread, (), 0.5)})
+    by_name = {s.name: s for s in ranked}
+    assert by_name["rarely"].score == pytest.approx(by_name[best.name].score, rel=1e-9)
+    assert by_name[best.name].expected_score == pytest.approx(0.5 * by_name[best.name].score, rel=1e-12)
+    names = [s.name for s in ranked]
+    assert names.index(best.name) < names.index("rarely")
+    assert by_name[best.name].to_json()["clicked_share"] == 0.5
+    assert "clicked_share" not in best.to_json()  # 1: not written

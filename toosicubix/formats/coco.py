@@ -97,6 +97,11 @@ class KeypointPosition(_Model):
         description="The faces it is seen from: it counts as visible when one of them is turned to the camera "
                     "(learned: one of them was, on at least 95 % of the vehicles it was labelled on). None: the "
                     "faces its position sits near.")
+    clicked_share: float | None = Field(
+        default=None, gt=0, le=1,
+        description="How often it was clicked where it could be seen (learned: of the vehicles on which one of "
+                    "its seen_from faces was turned to the camera, the share on which it was labelled); the "
+                    "suggested next clicks weigh their gain by it. None: 1.")
 
     @field_validator("spread")
     @classmethod
@@ -118,6 +123,12 @@ class _PositionFor:
         (learned pooled over prototypes), else none (empty: the faces its position sits near)."""
         own = self.position_for(prototype).seen_from
         return tuple(own or self.position.seen_from or ())  # type: ignore[attr-defined]
+
+    def clicked_share_for(self, prototype: str) -> float:
+        """How often it was clicked where it could be seen, on a vehicle of ``prototype``: that prototype's own,
+        else the one for all, else 1."""
+        own = self.position_for(prototype).clicked_share
+        return float(own or self.position.clicked_share or 1.0)  # type: ignore[attr-defined]
 
 
 class MappingKeypoint(_MappingPart, _PositionFor):
@@ -171,10 +182,11 @@ class MappingFile(_Model):
 
     def keypoint_candidates(self, prototype: str) -> dict[str, TypicalKeypoint]:
         """The keypoint parts made without an option, as the solver's guidance and the page's naming take them:
-        name -> where it typically is on a vehicle of ``prototype`` and the faces it is seen from."""
+        name -> where it typically is on a vehicle of ``prototype``, the faces it is seen from and how often it is
+        clicked where it can be seen."""
         return {p.keypoint: TypicalKeypoint(np.asarray(p.position_for(prototype).at, dtype=float),
                                             np.asarray(p.position_for(prototype).spread, dtype=float),
-                                            p.seen_from_for(prototype))
+                                            p.seen_from_for(prototype), p.clicked_share_for(prototype))
                 for p in self.parts if isinstance(p, MappingKeypoint) and p.option is None}
 
     def known_keypoints(self) -> set[str]:

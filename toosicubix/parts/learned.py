@@ -19,7 +19,10 @@ the vehicle count (front or rear by the sign of its length fraction, left or rig
 keypoint above half the height): a face on the other half cannot show it, so a ground truth turned around does not
 add one. It is learned over all prototypes pooled (a prototype's few vehicles are too few for a 5 % tail). Its
 position alone can mislead: a rear window's top corner sits on the roof, inside the box's end, yet people click
-it on cars seen from behind.
+it on cars seen from behind. Its ``clicked_share`` is how often people clicked it where it could be seen: of the
+vehicles (any that has a labelled keypoint) on which one of its ``seen_from`` faces was turned to the camera, the
+share on which it was labelled. Some keypoints are rarely clicked even then: small, low, or hidden by the car's own
+body or by other cars.
 
 Ground-truth poses can contradict the clicks (a pose turned 180 degrees, a car model fitted at the wrong
 depth). With ``max_offset`` the positions are learned twice: the second pass leaves out every vehicle whose
@@ -66,12 +69,14 @@ class KeypointSample:
 @dataclass(frozen=True)
 class LearnedPosition:
     """``at`` (3,) and ``spread`` (3,), fractions of ``(dx, dy, dz)``, from ``n`` samples; ``seen_from`` the faces
-    it was seen from (see the module's docstring)."""
+    it was seen from and ``clicked_share`` how often it was clicked where it could be seen (see the module's
+    docstring)."""
 
     at: np.ndarray
     spread: np.ndarray
     n: int
     seen_from: tuple[str, ...] = ()
+    clicked_share: float | None = None
 
 
 def faces_toward(camera_vehicle: np.ndarray, dimensions: np.ndarray) -> frozenset[str]:
@@ -152,10 +157,25 @@ def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
     return Y - r * (r @ Y)
 
 
+def clicked_share(facing_of: dict[str, frozenset[str]], group: list[KeypointSample],
+                  seen: tuple[str, ...]) -> float | None:
+    """Of the vehicles ``facing_of`` (vehicle -> the faces turned to its camera) on which one of the faces ``seen``
+    was turned to the camera, the share on which the keypoint of ``group`` (its labelled samples) was labelled;
+    None when there is no such vehicle."""
+    could = [v for v, facing in facing_of.items() if facing & set(seen)]
+    if not could:
+        return None
+    labelled = {s.vehicle for s in group}
+    return sum(v in labelled for v in could) / len(could)
+
+
 def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[str, LearnedPosition]]:
     groups: dict[tuple[str, str], list[KeypointSample]] = defaultdict(list)
+    facing_of: dict[str, dict[str, frozenset[str]]] = defaultdict(dict)  # prototype -> vehicle -> faces to the camera
     for s in samples:
         groups[(s.prototype, s.name)].append(s)
+        if s.vehicle not in facing_of[s.prototype]:
+            facing_of[s.prototype][s.vehicle] = faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions)
     out: dict[str, dict[str, LearnedPosition]] = defaultdict(dict)
     for (prototype, name), group in sorted(groups.items()):
         if len(group) < min_samples:
@@ -174,9 +194,9 @@ def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[st
         offsets_cam = A @ f - b  # (n, 3) perpendicular to each ray
         offsets = np.einsum("nji,nj->ni", R, offsets_cam) / d  # vehicle frame, fractions
         spread = np.maximum(np.sqrt(1.5 * np.mean(offsets**2, axis=0)), MIN_SPREAD)
-        facing = [faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions) for s in group]
-        out[prototype][name] = LearnedPosition(at=f, spread=spread, n=len(group),
-                                               seen_from=seen_from(facing, halves(f)))
+        seen = seen_from([facing_of[prototype][s.vehicle] for s in group], halves(f))
+        out[prototype][name] = LearnedPosition(at=f, spread=spread, n=len(group), seen_from=seen,
+                                               clicked_share=clicked_share(facing_of[prototype], group, seen))
     return dict(out)
 
 
@@ -189,7 +209,8 @@ def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_o
 
     def entry(p, pooled: bool = False) -> dict:
         return {"at": [round(float(v), 4) for v in p.at], "spread": [round(float(v), 4) for v in p.spread], "n": p.n,
-                **({"seen_from": list(p.seen_from)} if pooled and p.seen_from else {})}
+                **({"seen_from": list(p.seen_from)} if pooled and p.seen_from else {}),
+                **({"clicked_share": round(p.clicked_share, 3)} if pooled and p.clicked_share else {})}
 
     parts, unused = [], list(base.get("unused", []))
     for part in base["parts"]:

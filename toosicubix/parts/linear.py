@@ -158,12 +158,14 @@ class PartsModel:
 
 class TypicalKeypoint(NamedTuple):
     """A keypoint as a candidate to click: ``at`` (3,) its typical position and ``spread`` (3,), fractions of the
-    dimensions, and ``seen_from`` the faces it is seen from (learned, :mod:`toosicubix.parts.learned`; empty:
-    the faces its position sits near, :func:`keypoint_faces`)."""
+    dimensions, ``seen_from`` the faces it is seen from (learned, :mod:`toosicubix.parts.learned`; empty: the
+    faces its position sits near, :func:`keypoint_faces`), and ``clicked_share`` how often people click it where
+    it can be seen (learned; 1 when not)."""
 
     at: np.ndarray
     spread: np.ndarray
     seen_from: tuple[str, ...] = ()
+    clicked_share: float = 1.0
 
     @property
     def faces(self) -> tuple[str, ...] | None:

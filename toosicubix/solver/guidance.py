@@ -10,7 +10,8 @@ checked: on a face turned toward the camera by at least 5 degrees (stricter than
 expected effect is the uncertainty (:mod:`toosicubix.solver.uncertainty`) of the same fit with that part
 added, exactly where predicted. Candidates are ranked by ``ln(sigma_yaw / sigma_yaw') + ln(sigma_depth /
 sigma_depth')``, the log of the factor by which they would shrink the two (primes: with the part clicked), so
-halving either counts the same whether it starts at 40 degrees or at 2.
+halving either counts the same whether it starts at 40 degrees or at 2; a mapping's keypoint's score is weighed by
+how often people click it where it can be seen (``clicked_share``), the shrink to expect from suggesting it.
 
 The cuboid's corners are suggested only on box-shaped vehicles (vans, trucks, buses, trailers, caravans) or
 when the person has clicked a corner already: on a car they are points in the air that nobody can click.
@@ -88,6 +89,7 @@ class Suggestion:
     visible : on a face turned to the camera and in front of it; inside : within the image (True if unknown)
     yaw_sigma_deg, depth_sigma_rel : the uncertainty with it clicked
     yaw_gain_deg, depth_gain_rel : the reductions; score : ln of the shrink factor of yaw times depth sigma
+    clicked_share : how often people click it where it can be seen (a mapping's keypoint; else 1)
     """
 
     kind: str
@@ -100,6 +102,12 @@ class Suggestion:
     yaw_gain_deg: float
     depth_gain_rel: float
     score: float
+    clicked_share: float = 1.0
+
+    @property
+    def expected_score(self) -> float:
+        """The score to expect from suggesting it: ``clicked_share * score`` (what the ranking uses)."""
+        return self.clicked_share * self.score
 
     @property
     def label(self) -> str:
@@ -111,7 +119,8 @@ class Suggestion:
         return {"kind": self.kind, "name": self.name, "label": self.label, "uv": np.round(self.uv, 1).tolist(),
                 "visible": self.visible, "inside_image": self.inside,
                 **{key: finite_or_none(getattr(self, key)) for key in (
-                    "yaw_sigma_deg", "depth_sigma_rel", "yaw_gain_deg", "depth_gain_rel", "score")}}
+                    "yaw_sigma_deg", "depth_sigma_rel", "yaw_gain_deg", "depth_gain_rel", "score")},
+                **({"clicked_share": self.clicked_share} if self.clicked_share != 1.0 else {})}
 
 
 def _typical_points(kind: str, name: str, d: np.ndarray, wheels: dict[str, float],
@@ -179,7 +188,8 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
 
     Returns
     -------
-    list of Suggestion, best first; visible parts inside the image before the others
+    list of Suggestion, best first (by :attr:`Suggestion.expected_score`); visible parts inside the image before
+    the others
     """
     options = options or SolverOptions()
     if not fit.ok or fit.uncertainty is None:
@@ -243,9 +253,10 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
         score = (math.log(_bounded(now.yaw_deg) / _bounded(u.yaw_deg))
                  + math.log(_bounded(now.depth_rel) / _bounded(u.depth_rel)))
+        share = keypoints[part.name].clicked_share if keypoints is not None else 1.0
         out.append(Suggestion(part.kind, part.name, part.uv, visible, inside, u.yaw_deg, u.depth_rel,
-                              now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score))
-    out.sort(key=lambda s: (not (s.visible and s.inside), -s.score))
+                              now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score, share))
+    out.sort(key=lambda s: (not (s.visible and s.inside), -s.expected_score))
     return out
 
 
