@@ -37,7 +37,8 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
     into its car's frame and finds, per prototype (from the car model's type) and keypoint, the point nearest
     to all the rays; and, pooled over prototypes, the faces each keypoint is seen from (at least one of them was
     turned to the camera on 95 % of the cars it was labelled on), which the page and the suggested next clicks
-    use to say whether it can be seen. Writes a mapping file: the given mapping with these positions.
+    use to say whether it can be seen, and how often each was labelled where it could be seen (the suggestions
+    weigh their gain by it). Writes a mapping file: the given mapping with these positions.
 
     \b
     Example:
