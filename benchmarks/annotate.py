@@ -181,6 +181,9 @@ def main() -> None:
     parser.add_argument("--position-faces", action="store_true",
                         help="with --apollocar3d: a keypoint is seen on the faces its position sits near, not on "
                              "those it was learned to be seen from (as before rule 13)")
+    parser.add_argument("--nearest", action="store_true",
+                        help="with --apollocar3d (naming): the nearest keypoint, not the most probable (as before "
+                             "rule 15)")
     parser.add_argument("-o", "--out", type=Path, default=None)
     args = parser.parse_args()
     if args.apollocar3d:
@@ -189,7 +192,7 @@ def main() -> None:
                                        args.position_faces) if args.guidance else
                   apollocar3d_naming(args.data / "apollocar3d", args.seed, out_of_sample=args.out_of_sample,
                                      design=args.design, grazing_deg=args.naming_grazing_deg, estimates=estimates,
-                                     position_faces=args.position_faces))
+                                     position_faces=args.position_faces, nearest=args.nearest))
         if args.out:
             args.out.write_text((_compact_steps(report) if args.guidance else json.dumps(report, indent=1)) + "\n")
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
@@ -274,13 +277,14 @@ def loaded_as_the_page(document: dict, scored_images: set[str] | None, priors, e
 def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO_KS,
                        out_of_sample: bool = False, design: bool = False,
                        grazing_deg: float = NAMING_GRAZING_DEG, estimates: bool = True,
-                       position_faces: bool = False) -> dict:
+                       position_faces: bool = False, nearest: bool = False) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
     keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
     scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s. ``estimates``: as
-    :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`."""
+    :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`. ``nearest``: name by the nearest keypoint,
+    not the most probable (as before rule 15, RESULTS.md)."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     scored_images = None
@@ -322,7 +326,8 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                 taken = {(p.kind, p.name) for p in named}
                 candidates = naming_candidates(
                     result, image.camera, {n: k for n, k in keypoints.items() if ("keypoint", n) not in taken},
-                    {n for n in points if ("point", n) not in taken}, grazing_deg)
+                    {n for n in points if ("point", n) not in taken}, grazing_deg,
+                    None if nearest else options.click_sigma)
                 right = top2 = 0
                 for part in order[k:]:
                     ranked = [(c["kind"], c["name"]) for c in nearest_parts(part.uv[0].tolist(), candidates)]
@@ -348,6 +353,8 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                         "apollocar3d-66, positions learned on the even images; odd images scored (out of sample)"
                         if out_of_sample else "apollocar3d-66 (bundled; positions learned on these images: in-sample)"),
             "naming_grazing_deg": grazing_deg, "fitted_with": estimated, "keypoint_faces": _faces_said(position_faces),
+            "naming": ("the nearest visible keypoint" if nearest else
+                       "the most probable visible keypoint (spread, click noise and clicked_share; rule 15)"),
             "min_keypoints": APOLLO_MIN_KEYPOINTS, "seed": seed, "ks": list(ks),
             "order": "one numpy generator (seed) permuting each car's mapped parts, cars in file order",
             "candidates": "every part of the mapping not among the first k, visible on the fit (naming_candidates)",

@@ -508,7 +508,8 @@ class Session:
             else:  # the mapping's vocabulary: its keypoints not clicked yet
                 clicked = {p.name for p in v.parts if p.kind == "keypoint"}
                 candidates = naming_candidates(result, image.camera, {n: k for n, k in keypoints.items()
-                                                                      if n not in clicked}, points=set())
+                                                                      if n not in clicked}, points=set(),
+                                               click_sigma=self.options.click_sigma)
             choice = nearest_parts(part.uv[0], candidates)
             if not choice:
                 break
@@ -836,14 +837,17 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
 def naming_candidates(result: VehicleResult, camera: Camera,
                       keypoints: Mapping[str, TypicalKeypoint] | None = None,
                       points: set[str] | None = None,
-                      grazing_deg: float = NAMING_GRAZING_DEG) -> list[dict[str, Any]]:
+                      grazing_deg: float = NAMING_GRAZING_DEG,
+                      click_sigma: float | None = None) -> list[dict[str, Any]]:
     """What an unnamed click on a fitted vehicle may be, each as ``next_clicks`` has it (kind, name, uv (1, 2),
     visible): the vocabulary's point parts among the fit's ``next_clicks`` (at their typical positions; only
     those named in ``points`` when given), then each keypoint of ``keypoints`` projected from its typical place
     (``at``, fractions of the dimensions) on the fitted cuboid, visible when one of the faces it is seen from
     (:attr:`~toosicubix.parts.linear.TypicalKeypoint.faces`) is turned to the camera (``grazing_deg``: turned
     away by up to that, negative: toward it by at least that), or when it has none. A keypoint behind the camera
-    is left out."""
+    is left out. With ``click_sigma`` (pixels), each keypoint also gets ``sigma_px``, how far a click of it may
+    lie from its predicted pixel (the click noise and its spread projected at its depth), and ``prior``, its
+    ``clicked_share``: :func:`nearest_parts` then ranks by probability (RESULTS.md, rule 15)."""
     out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
     if not keypoints or not result.ok:
         return out
@@ -854,20 +858,40 @@ def naming_candidates(result: VehicleResult, camera: Camera,
         if point_cam[2] <= MIN_DEPTH:
             continue
         faces = k.faces
-        out.append({"kind": "keypoint", "name": name, "uv": camera.project(point_cam[None]).tolist(),
-                    "visible": faces is None or any(facing[f] for f in faces)})
+        candidate = {"kind": "keypoint", "name": name, "uv": camera.project(point_cam[None]).tolist(),
+                     "visible": faces is None or any(facing[f] for f in faces)}
+        if click_sigma is not None:
+            candidate["sigma_px"] = _spread_px(camera, point_cam[2], np.asarray(k.spread, dtype=float) * d,
+                                               click_sigma)
+            candidate["prior"] = float(k.clicked_share)
+        out.append(candidate)
     return out
+
+
+def _spread_px(camera: Camera, depth: float, spread_m: np.ndarray, click_sigma: float) -> float:
+    """How far, per image coordinate, a click of a keypoint at ``depth`` (metres) with ``spread_m`` (3,) (its
+    spread, metres per vehicle axis) may lie from its predicted pixel: the click noise and the spread projected,
+    two of its three axes lying in the image on average."""
+    f = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
+    return float(math.sqrt(click_sigma**2 + (f / depth) ** 2 * float(spread_m @ spread_m) / 3.0))
 
 
 def nearest_parts(uv: list[float], suggestions: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The point parts and keypoints among ``suggestions`` (:func:`naming_candidates`: kind, name, uv, visible)
-    that are visible, nearest to the pixel ``uv`` first, each with its ``kind`` and ``distance_px``."""
-    out = []
+    that are visible, each with its ``kind`` and ``distance_px`` to the pixel ``uv``: the most probable first
+    when every one has a ``sigma_px`` and a ``prior`` (the negative log of prior times a 2D Gaussian of the
+    distance, ``-ln prior + r^2 / (2 s^2) + 2 ln s``), else the nearest first."""
+    out, costs = [], []
     for s in suggestions:
         if s["kind"] not in ("point", "keypoint") or not s["visible"]:
             continue
         distance = math.dist(uv, s["uv"][0])
         out.append({"kind": s["kind"], "name": s["name"], "distance_px": round(distance, 2), "uv": s["uv"][0]})
+        if "sigma_px" in s and "prior" in s:
+            sigma = s["sigma_px"]
+            costs.append(-math.log(s["prior"]) + distance**2 / (2 * sigma**2) + 2 * math.log(sigma))
+    if out and len(costs) == len(out):
+        return [o for _, o in sorted(zip(costs, out, strict=True), key=lambda co: co[0])]
     return sorted(out, key=lambda s: s["distance_px"])
 
 
