@@ -63,7 +63,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     name of the nearest predicted part once the named clicks fix a cuboid. The file is written after every
     change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
     after a reload). With --mapping, the page offers that mapping's keypoints too (a filter box above them),
-    names unnamed clicks among them and suggests them as the next clicks.
+    names unnamed clicks among them (the most probable visible one, given its spread and how often people click
+    it) and suggests them as the next clicks.
 
     \b
     Example:
