@@ -177,8 +177,11 @@ class MappingFile(_Model):
     def keypoint_positions(self, prototype: str) -> dict[str, KeypointPosition]:
         """The keypoint parts made without an option, by keypoint name, at their positions on a vehicle of
         ``prototype`` (what the annotate page offers)."""
-        return {p.keypoint: p.position_for(prototype) for p in self.parts
-                if isinstance(p, MappingKeypoint) and p.option is None}
+        return {p.keypoint: p.position_for(prototype) for p in self._plain_keypoints()}
+
+    def _plain_keypoints(self) -> list[MappingKeypoint]:
+        """The keypoint parts made without an option."""
+        return [p for p in self.parts if isinstance(p, MappingKeypoint) and p.option is None]
 
     def keypoint_candidates(self, prototype: str) -> dict[str, TypicalKeypoint]:
         """The keypoint parts made without an option, as the solver's guidance and the page's naming take them:
@@ -187,7 +190,7 @@ class MappingFile(_Model):
         return {p.keypoint: TypicalKeypoint(np.asarray(p.position_for(prototype).at, dtype=float),
                                             np.asarray(p.position_for(prototype).spread, dtype=float),
                                             p.seen_from_for(prototype), p.clicked_share_for(prototype))
-                for p in self.parts if isinstance(p, MappingKeypoint) and p.option is None}
+                for p in self._plain_keypoints()}
 
     def known_keypoints(self) -> set[str]:
         names = set(self.unused) | set(self.keypoints or ())

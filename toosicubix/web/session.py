@@ -325,7 +325,8 @@ class Session:
                 + sum(len(d.get("vehicles") or []) for d in self._others))
 
     def _keypoints(self, prototype: str) -> dict[str, TypicalKeypoint] | None:
-        """The mapping's keypoints on a vehicle of ``prototype`` (name -> place and faces); None without one."""
+        """The mapping's keypoints on a vehicle of ``prototype`` (name -> place, faces and clicked share); None
+        without one."""
         return None if self.mapping is None else self.mapping.keypoint_candidates(prototype)
 
     def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
