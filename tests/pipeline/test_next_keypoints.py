@@ -87,5 +87,14 @@ def test_validate_names_keypoints_to_click_next(keypoint_file, tmp_path):
     listed = [line.split(". ", 1)[1].split(" near ")[0] for line in result.output.splitlines()
               if line.startswith("    ") and " near (" in line]
     assert listed and set(listed) <= set(TWELVE) | set(MORE)
+    # With learned clicked shares, each suggestion says how often people click it (the ranking weighs it).
+    shared = _mapping().model_dump(mode="json", exclude_none=True)
+    for part in shared["parts"]:
+        part["position"]["clicked_share"] = 0.5
+    mapping_file.write_text(json.dumps(shared))
+    result = CliRunner().invoke(main, ["validate", str(keypoint_file), "--mapping", str(mapping_file), "--all", "-q"])
+    assert "click next (ranked by each one's shrink of the sigmas times how often people click it):" in result.output
+    listed = [line for line in result.output.splitlines() if line.startswith("    ") and " near (" in line]
+    assert listed and all(line.endswith("; people click it on 50 % of the cars that show it") for line in listed)
     bad = CliRunner().invoke(main, ["validate", str(keypoint_file), "--mapping", "apollocar3d-66-paper"])
     assert bad.exit_code == 2 and "has no keypoint parts" in bad.output

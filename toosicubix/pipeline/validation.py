@@ -197,16 +197,19 @@ def describe(check: VehicleCheck) -> str:
         lines.append(f"  warning: {warning}")
     suggestions = r.next_clicks or []
     if suggestions:
-        lines.append("  click next:")
+        lines.append("  click next:" if not any("clicked_share" in s for s in suggestions) else
+                     "  click next (ranked by each one's shrink of the sigmas times how often people click it):")
     for k, s in enumerate(suggestions, 1):
         where = ", ".join(f"({u:.0f}, {v:.0f})" for u, v in s["uv"])
         caveat = "" if s["visible"] and s["inside_image"] else (
             " [on a face turned away]" if not s["visible"] else " [outside the image]")
         yaw_now = None if sigma is None else sigma.yaw_deg
         depth_now = None if sigma is None else sigma.depth_rel
+        share = s.get("clicked_share")
+        often = "" if share is None else f"; people click it on {100 * share:.0f} % of the cars that show it"
         lines.append(f"    {k}. {s['label']} near {where}: yaw sigma {_show(yaw_now)} -> "
                      f"{_show(s['yaw_sigma_deg'])} deg, depth {_show(100 * _value(depth_now))} -> "
-                     f"{_show(100 * _value(s['depth_sigma_rel']))} %{caveat}")
+                     f"{_show(100 * _value(s['depth_sigma_rel']))} %{often}{caveat}")
     return "\n".join(lines)
 
 
