@@ -129,7 +129,7 @@ def test_the_faces_a_keypoint_is_seen_from_are_learned_from_where_it_was_labelle
         d = np.array([4.6, 1.8, 1.5])
         R = R_cam_vehicle_from_ypr(rng.uniform(-np.pi, np.pi), 0.0, 0.0)
         t = np.array([rng.uniform(-5, 5), 1.2, rng.uniform(10, 40)])
-        facing = faces_toward(-R.T @ t, d)
+        facing = faces_toward(KeypointSample("Car", "-", str(v), np.zeros(3), R, t, d))
         assert "top" not in facing
         for name, at, seen in (("window", window, {"rear"}), ("lamp", lamp, {"front", "left"}),
                                ("badge", np.array([0.0, 0.0, 0.95]), set(facing))):
@@ -140,8 +140,7 @@ def test_the_faces_a_keypoint_is_seen_from_are_learned_from_where_it_was_labelle
     assert learned["lamp"].seen_from == ("front", "left")
     # Of the vehicles with the rear turned to the camera, the window was labelled on the even ones.
     assert learned["lamp"].clicked_share == 1.0
-    rear_seen = {s.vehicle for s in samples if "rear" in faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle,
-                                                                       s.dimensions)}
+    rear_seen = {s.vehicle for s in samples if "rear" in faces_toward(s)}
     assert learned["window"].clicked_share == pytest.approx(
         sum(int(v) % 2 == 0 for v in rear_seen) / len(rear_seen), abs=1e-12)
     assert abs(learned["window"].clicked_share - 0.5) < 0.15  # 141 vehicles show their rear: 3.6 sigmas

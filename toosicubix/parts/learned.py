@@ -36,8 +36,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-#: The faces of a vehicle's cuboid, in the order ties are broken.
-FACES = ("front", "rear", "left", "right", "top")
+from toosicubix.parts.vocabulary import FACES, faces_seen_from
+
 #: ``seen_from`` covers at least this share of the vehicles a keypoint was labelled on.
 SEEN_FROM_SHARE = 0.95
 
@@ -79,12 +79,11 @@ class LearnedPosition:
     clicked_share: float | None = None
 
 
-def faces_toward(camera_vehicle: np.ndarray, dimensions: np.ndarray) -> frozenset[str]:
-    """The faces of a cuboid of ``dimensions`` (3,) (origin at its bottom centre) turned to a camera at
-    ``camera_vehicle`` (3,), vehicle frame: those whose plane the camera lies beyond."""
-    (x, y, z), (dx, dy, dz) = camera_vehicle, dimensions
-    beyond = {"front": x > dx / 2, "rear": x < -dx / 2, "left": y > dy / 2, "right": y < -dy / 2, "top": z > dz}
-    return frozenset(face for face, yes in beyond.items() if yes)
+def faces_toward(s: KeypointSample) -> frozenset[str]:
+    """The faces of a sample's vehicle (its ground-truth cuboid) turned to the camera: those whose plane the
+    camera lies beyond (:func:`~toosicubix.parts.vocabulary.faces_seen_from`)."""
+    seen = faces_seen_from(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions)
+    return frozenset(face for face, yes in seen.items() if yes)
 
 
 def halves(at: np.ndarray) -> tuple[str, ...]:
@@ -175,7 +174,7 @@ def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[st
     for s in samples:
         groups[(s.prototype, s.name)].append(s)
         if s.vehicle not in facing_of[s.prototype]:
-            facing_of[s.prototype][s.vehicle] = faces_toward(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions)
+            facing_of[s.prototype][s.vehicle] = faces_toward(s)
     out: dict[str, dict[str, LearnedPosition]] = defaultdict(dict)
     for (prototype, name), group in sorted(groups.items()):
         if len(group) < min_samples:

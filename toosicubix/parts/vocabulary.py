@@ -51,8 +51,14 @@ from functools import lru_cache
 from importlib import resources
 from typing import Any
 
+import numpy as np
+
 #: Faces of the cuboid a click can be seen on (the bottom never is).
 FACES = ("front", "rear", "left", "right", "top")
+#: Outward normals of the faces (in :data:`FACES` order), vehicle frame: (5, 3).
+_FACE_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+#: Face centres as fractions of (dx, dy, dz), vehicle frame (origin at the bottom centre): (5, 3).
+_FACE_CENTRES = np.array([[0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [0.0, 0.5, 0.5], [0.0, -0.5, 0.5], [0.0, 0.0, 1.0]])
 #: The type names ``fields_extra`` may use.
 EXTRA_FIELD_TYPES = ("row3", "positive_row3", "bool_default_true")
 #: The terms a typical position's linear forms may use.
@@ -201,6 +207,17 @@ def click(label: str) -> Click:
             if label.startswith(head) and label.endswith(tail) and len(label) > len(head) + len(tail):
                 return Click(kind.kind, label[len(head):len(label) - len(tail)], index, label)
     raise KeyError(label)
+
+
+def faces_seen_from(camera_vehicle: np.ndarray, dimensions: np.ndarray, grazing_deg: float = 0.0) -> dict[str, bool]:
+    """For each face of :data:`FACES`: is it turned to a camera at ``camera_vehicle`` (3,), vehicle frame, on a
+    cuboid of ``dimensions`` (3,)? With ``grazing_deg`` 0, when the camera lies beyond the face's plane; a face
+    turned away by up to ``grazing_deg`` counts too (negative: it must be turned toward the camera by that much)."""
+    to_camera = np.asarray(camera_vehicle, dtype=float) - _FACE_CENTRES * np.asarray(dimensions, dtype=float)
+    along = np.einsum("fi,fi->f", _FACE_NORMALS, to_camera)  # (5,)
+    distance = np.sqrt(np.einsum("fi,fi->f", to_camera, to_camera))
+    seen = along > -np.sin(np.deg2rad(grazing_deg)) * distance
+    return dict(zip(FACES, seen.tolist(), strict=True))
 
 
 def faces_of_click(label: str) -> tuple[str, ...] | None:

@@ -16,15 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from toosicubix.parts.vocabulary import FACES, faces_of_click
+from toosicubix.parts.vocabulary import faces_of_click, faces_seen_from
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
 GRAZING_DEG = 15.0
 
-#: Outward normals of the faces (in :data:`FACES` order), vehicle frame: (5, 3).
-_FACE_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
-#: Face centres as fractions of (dx, dy, dz), vehicle frame (origin at the bottom centre): (5, 3).
-_FACE_CENTRES = np.array([[0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [0.0, 0.5, 0.5], [0.0, -0.5, 0.5], [0.0, 0.0, 1.0]])
 
 
 def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
@@ -38,11 +34,7 @@ def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
     """For each face but the bottom: is it turned to the camera? A face seen edge-on counts, and one
     turned away by up to ``grazing_deg`` (negative: it must be turned toward the camera by that much)."""
     camera_vehicle = -np.asarray(t_cam_vehicle, dtype=float) @ R_cam_vehicle  # R^T (-t): (3,)
-    to_camera = camera_vehicle - _FACE_CENTRES * np.asarray(dimensions, dtype=float)  # (5, 3)
-    along = np.einsum("fi,fi->f", _FACE_NORMALS, to_camera)
-    distance = np.sqrt(np.einsum("fi,fi->f", to_camera, to_camera))
-    seen = along > -np.sin(np.deg2rad(grazing_deg)) * distance
-    return dict(zip(FACES, seen.tolist(), strict=True))
+    return faces_seen_from(camera_vehicle, dimensions, grazing_deg)
 
 
 def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
