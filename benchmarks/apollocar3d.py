@@ -44,7 +44,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import default_data_dir, machine
 
-from toosicubix.annotations.schema import SCHEMA_VERSION
+from toosicubix.annotations.schema import SCHEMA_VERSION, load_priors_file
 from toosicubix.evaluation import EvalOptions, evaluate, load_predictions
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
@@ -52,6 +52,14 @@ from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
 from toosicubix.parts.learned import contradicting, learn_positions, learned_mapping
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.priors.estimation import (
+    DimensionSamples,
+    default_method,
+    estimate_priors,
+    priors_document,
+    write_priors_file,
+)
+from toosicubix.priors.table import bundled_priors_path
 from toosicubix.solver import SolverOptions
 
 PAPER_KITTI = {"iou": 0.29, "siou": 0.77, "e_r_deg": 3.16, "e_t": 0.10, "e_d": 0.14, "e_comb": 0.10}
@@ -77,10 +85,12 @@ class Row:
     ground: bool = False  # the camera's road normal (learned, see road_normal) as every image's ground block
     batch_normal: bool = False  # the road normal estimated from the batch's own fits (rule 7)
     misfit_level: float | None = None  # the chi-square test of each fit's residuals (rule 8)
+    own_priors: bool = False  # each car type its own prototype, size priors measured on the learning images (rule 16)
 
 
 ROWS = (
     Row("keypoints, default settings", "apollocar3d-66", batch_normal=True),
+    Row("keypoints, car types' own priors", "apollocar3d-66", batch_normal=True, own_priors=True),
     Row("keypoints, --misfit-level 0.99", "apollocar3d-66", batch_normal=True, misfit_level=0.99),
     Row("keypoints, --road-normal none", "apollocar3d-66"),
     Row("keypoints + plate width", "apollocar3d-66", ("plates",), batch_normal=True),
@@ -88,6 +98,19 @@ ROWS = (
     Row("paper vocabulary (symmetry pairs)", "apollocar3d-66-paper", batch_normal=True),
     Row("paper vocabulary + wheel hubs", "apollocar3d-66-paper", ("hubs",), batch_normal=True),
 )
+
+#: Rule 16's prototypes: each car-model type its own, its size prior measured on the learning images' cars.
+OWN_PROTOTYPES = {"2x": "ApolloCar3D hatchback", "3x": "ApolloCar3D saloon", "SUV": "ApolloCar3D SUV"}
+
+
+@dataclass(frozen=True)
+class Half:
+    """Which images a set of rows learns positions (and rule 16's priors) on, and which it scores."""
+
+    name: str  # 'odd' (comparison half), 'all' (the bundled positions, in sample) or 'design' (rule 16)
+    learn: list
+    score: list
+    bundled: bool  # the default rows take the bundled positions (learned on all 100 images) as they are
 
 
 #: The road normal's uncertainty in the ground block of the row with it (degrees), fixed before that row was
@@ -126,7 +149,8 @@ def stats(objects: list[dict]) -> dict:
 
 def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: MappingFile, cameras,
             image_ids: set[str], scored: set[str], counts: dict[str, int], jobs: int, options: SolverOptions,
-            estimate_sigma: bool, contradicting: dict[str, str], normal: tuple[float, float, float]) -> dict:
+            estimate_sigma: bool, contradicting: dict[str, str], normal: tuple[float, float, float],
+            priors: Path | None = None) -> dict:
     work = folder / f"{half}-{row.label.replace(' ', '_')}"
     work.mkdir(parents=True)
     document, summary = coco_to_annotations(keypoints_path, mapping, cameras, row.options)
@@ -136,7 +160,8 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     ground = {"normal": normal, "normal_sigma_deg": NORMAL_SIGMA_DEG, "upright_sigma_deg": 2.0} if row.ground else None
     if row.misfit_level is not None:
         options = replace(options, misfit_level=row.misfit_level)
-    fit_file(annotations, work / "out", options=options, jobs=jobs, estimate_click_sigma=estimate_sigma, ground=ground,
+    fit_file(annotations, work / "out", priors_path=priors, options=options, jobs=jobs,
+             estimate_click_sigma=estimate_sigma, ground=ground,
              estimate_road_normal=row.batch_normal)
     seconds = time.perf_counter() - start
     result = evaluate(load_predictions(work / "out"), ApolloCar3DGroundTruth(keypoints_path),
@@ -170,7 +195,9 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     depth_within = calibration(objects, "depth")
     agreeing = [o for o in objects if o["id"] not in contradicting]
     return {
-        "row": row.label, "half": half, "mapping": mapping.name, "options": list(row.options), "ground": ground,
+        "row": row.label, "half": half, "mapping": mapping.name, "priors": None if priors is None else {
+            name: entry for name, entry in json.loads(priors.read_text())["prototypes"].items()
+            if name in OWN_PROTOTYPES.values()}, "options": list(row.options), "ground": ground,
         "cars": n_cars, "fitted": len(objects), "fitted_share": len(objects) / n_cars if n_cars else None,
         "seconds": seconds, "import": summary.lines(), **stats(objects),
         "by_keypoints": by_kp, "by_depth": by_depth,
@@ -357,14 +384,34 @@ def _names_digest(names: list[str]) -> str:
     return hashlib.sha256("\n".join(names).encode()).hexdigest()
 
 
-def learned_on_even(images: list, cameras) -> MappingFile:
-    """``apollocar3d-66`` with its keypoint positions learned on the even images only (out of sample for the
-    odd ones); ``images`` from :func:`sorted_images`."""
+def learned_on(images: list, cameras, how: str, car_models: dict | None = None) -> MappingFile:
+    """``apollocar3d-66`` with its keypoint positions learned on ``images`` only (:func:`sorted_images`'s); with
+    ``car_models`` each car model's type gets its own prototype (:data:`OWN_PROTOTYPES`, rule 16)."""
     bundled, _ = load_mapping("apollocar3d-66")
+    base = bundled.model_dump(mode="json", exclude_none=True)
+    of_type = None
+    if car_models is not None:
+        of_type = OWN_PROTOTYPES
+        base["prototypes"] = {str(k): OWN_PROTOTYPES.get(m.type, "Car") for k, m in sorted(car_models.items())}
     K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in images}
-    even = learned_mapping(bundled.model_dump(mode="json", exclude_none=True),
-                           keypoint_samples(images[0::2], bundled.keypoints, K_of), 5, "even images", 0.5)
-    return MappingFile.model_validate(even)
+    learned = learned_mapping(base, keypoint_samples(images, bundled.keypoints, K_of, of_type), 5, how, 0.5)
+    return MappingFile.model_validate(learned)
+
+
+def own_priors(images: list, keypoints_path: Path, out: Path) -> Path:
+    """Rule 16's priors file: the bundled table with each car type's own prototype (:data:`OWN_PROTOTYPES`),
+    its size prior estimated as ``toosicubix priors --apollocar3d`` does, from the cars of ``images``."""
+    rows: dict[str, list[np.ndarray]] = {}
+    for im in images:
+        for car in im.cars:
+            if car.model.type in OWN_PROTOTYPES:
+                rows.setdefault(OWN_PROTOTYPES[car.model.type], []).append(car.model.dimensions)
+    samples = DimensionSamples(dimensions={name: np.array(d) for name, d in sorted(rows.items())},
+                               kind="apollocar3d", root=keypoints_path, unit="car")
+    estimates = estimate_priors(samples, method=default_method("apollocar3d"),
+                                command=f"benchmarks/apollocar3d.py, {len(images)} images of")
+    write_priors_file(priors_document(estimates, load_priors_file(bundled_priors_path())), out)
+    return out
 
 
 def main() -> int:
@@ -374,6 +421,8 @@ def main() -> int:
                         help="another ApolloCar3D keypoint file, e.g. the held-out half's, with its cameras.json and "
                              "car_models.json beside it (default DATA/apollocar3d/apollocar3d_val_dev.json)")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--design", action="store_true",
+                        help="rule 16's design run: learn on images 0, 4, 8, ..., score images 2, 6, 10, ...")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     parser.add_argument("--robust-loss", default=SolverOptions.robust_loss, choices=("auto", "cauchy", "none"))
     parser.add_argument("--click-sigma", type=float, default=None,
@@ -391,40 +440,49 @@ def main() -> int:
     counts = labelled_counts(coco)
     scored = {k for k, n in counts.items() if n >= MIN_KEYPOINTS}
     images = sorted_images(folder, keypoints_path)
-    halves = {"all": {im.id for im in images}, "odd": {im.id for im in images[1::2]}}
     cameras = load_cameras(folder / "cameras.json")
-    learned_even = learned_on_even(images, cameras)
+    car_models = read_car_models(folder / "car_models.json")
     names = load_mapping("apollocar3d-66")[0].keypoints
-    bundled = bundled_positions_are(images, args.data or default_data_dir())
-    print(f"all    rows: the bundled positions on {len(images)} images, {bundled} (odd rows: positions learned on "
-          f"this folder's even images, out of sample)", flush=True)
-    normal_of = {"odd": road_normal(images[0::2]), "all": road_normal(images)}
-    contradicting_of = {"odd": contradicting_cars(images[1::2], images[0::2], cameras, names),
-                        "all": contradicting_cars(images, images, cameras, names)}
-    ends_of = {half: ends_named(images[1::2] if half == "odd" else images, coco, names, contradicting_of[half])
-               for half in ("odd", "all")}
+    if args.design:
+        halves = [Half("design", images[0::4], images[2::4], bundled=False)]
+        rows_of = [row for row in ROWS if row.label in (ROWS[0].label, ROWS[1].label)]
+        print("design rows: positions and priors learned on images 0, 4, 8, ..., cars of images 2, 6, 10, ... "
+              "scored (rule 16's design run; decides nothing)", flush=True)
+    else:
+        halves = [Half("odd", images[0::2], images[1::2], bundled=False), Half("all", images, images, bundled=True)]
+        rows_of = list(ROWS)
+        bundled = bundled_positions_are(images, args.data or default_data_dir())
+        print(f"all    rows: the bundled positions on {len(images)} images, {bundled} (odd rows: positions learned "
+              f"on this folder's even images, out of sample)", flush=True)
+    normal_of = {h.name: road_normal(h.learn) for h in halves}
+    contradicting_of = {h.name: contradicting_cars(h.score, h.learn, cameras, names) for h in halves}
+    ends_of = {h.name: ends_named(h.score, coco, names, contradicting_of[h.name]) for h in halves}
     for half, ends in ends_of.items():
         told = "; ".join(f"{k} {v['shown end']} / {v['hidden end']}" for k, v in sorted(ends.items()))
         print(f"{half:<6} cars seen end-on whose labels name the end their ground truth shows / hides (a diagnostic "
               f"of the data): {told}", flush=True)
-    depth_of = {half: contradicting_by_depth(images[1::2] if half == "odd" else images, scored, contradicting_of[half])
-                for half in ("odd", "all")}
+    depth_of = {h.name: contradicting_by_depth(h.score, scored, contradicting_of[h.name]) for h in halves}
     for half, bins in depth_of.items():
         told = "; ".join(f"{b} {v['contradicting']} of {v['cars']}" for b, v in bins.items())
         print(f"{half:<6} cars whose ground truth contradicts their clicks, by ground-truth depth: {told}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for half in ("odd", "all"):
-            for row in ROWS:
-                if half == "odd" and row.mapping == "apollocar3d-66":
-                    mapping = learned_even
+        for half in halves:
+            learned = None if half.bundled else learned_on(half.learn, cameras, f"{half.name} learning images")
+            own = learned_on(half.learn, cameras, f"{half.name} learning images", car_models)
+            own_priors_path = own_priors(half.learn, keypoints_path, Path(tmp) / f"{half.name}-priors.json")
+            for row in rows_of:
+                if row.own_priors:
+                    mapping = own
+                elif row.mapping == "apollocar3d-66" and learned is not None:
+                    mapping = learned
                 else:
                     mapping = load_mapping(row.mapping)[0]
-                ids = {im.id for im in images if im.id in halves[half]}
-                cars = {str(c.id) for im in images if im.id in ids for c in im.cars} & scored
-                result = run_row(row, half, keypoints_path, Path(tmp), mapping, cameras, ids, cars, counts,
-                                 args.jobs, options, args.click_sigma is None, contradicting_of[half],
-                                 normal_of[half])
+                ids = {im.id for im in half.score}
+                cars = {str(c.id) for im in half.score for c in im.cars} & scored
+                result = run_row(row, half.name, keypoints_path, Path(tmp), mapping, cameras, ids, cars, counts,
+                                 args.jobs, options, args.click_sigma is None, contradicting_of[half.name],
+                                 normal_of[half.name], own_priors_path if row.own_priors else None)
                 rows.append(result)
                 print(format_row(result), flush=True)
                 if result["yaw_within_1_sigma"] is not None:
@@ -459,7 +517,7 @@ def main() -> int:
           + " ".join(f"{PAPER_KITTI[m]:>7}" for m in METRICS))
     doc = {"generator": "benchmarks/apollocar3d.py", "machine": machine(), "min_keypoints": MIN_KEYPOINTS,
            "robust_loss": args.robust_loss, "click_sigma": args.click_sigma, "paper_kitti": PAPER_KITTI,
-           "bundled_positions": bundled,
+           "bundled_positions": None if args.design else bundled, "design": args.design,
            "ends_named": ends_of, "contradicting_by_depth": depth_of,
            "contradicting_cars": {half: listed_cars(images, found, scored) for half, found in contradicting_of.items()},
            "rows": rows}

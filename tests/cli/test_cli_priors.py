@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -11,6 +12,7 @@ from tests.eval_scenes import write_cityscapes
 from tests.priors.test_prior_estimation import small_tracking, tracking_line, write_tracking
 from toosicubix.annotations.schema import load_priors_file
 from toosicubix.cli import main
+from toosicubix.priors.estimation import make_positive_definite
 from toosicubix.priors.table import bundled_priors_path, load_priors
 
 
@@ -79,8 +81,8 @@ def test_cityscapes_prototypes_map_to_kitti_types(tmp_path):
 
 
 def test_apollocar3d_cars_give_priors_per_prototype_of_their_type(tmp_path):
-    # Three saloons of model 0 and two of model 1 (the geometric median is model 0's extents: a majority there),
-    # two hatchbacks of model 2; each labelled car counts once, with its car model's extents.
+    # Three saloons of model 0 and two of model 1, two hatchbacks of model 2; each labelled car counts once,
+    # with its car model's extents.
     models = {"0": {"type": "3x", "length": 4.8, "width_body": 1.8, "height": 1.45},
               "1": {"type": "3x", "length": 4.6, "width_body": 1.75, "height": 1.5},
               "2": {"type": "2x", "length": 4.2, "width_body": 1.72, "height": 1.52}}
@@ -99,12 +101,28 @@ def test_apollocar3d_cars_give_priors_per_prototype_of_their_type(tmp_path):
     assert sorted(doc.prototypes) == ["Car", "Sedan"]
     sedan = doc.prototypes["Sedan"]
     assert sedan.n == 5 and sedan.kitti_type == "Car"
-    # The geometric median is the majority point, found as a data point by its optimality test (exact; the file
-    # keeps what JSON rounds to).
-    assert sedan.mean == pytest.approx([4.8, 1.8, 1.45], abs=1e-9)
+    # Exact CAD extents: the samples' own mean and covariance (n - 1), not medians, which would sit on model 0.
+    sizes = np.array([[4.8, 1.8, 1.45]] * 3 + [[4.6, 1.75, 1.5]] * 2)
+    assert sedan.mean == pytest.approx(sizes.mean(axis=0), abs=1e-4)  # the file keeps 0.1 mm
+    # Two sizes span one direction: the others are raised to the positive-definite floor, as every method's are.
+    expected, floored = make_positive_definite(np.cov(sizes, rowvar=False))
+    assert floored == 2
+    np.testing.assert_allclose(sedan.cov, expected, rtol=1e-8, atol=1e-15)  # 9 significant digits in the file
     assert doc.prototypes["Car"].n == 2
     assert sedan.source.startswith(f"toosicubix priors --apollocar3d {keypoints} --car-models {car_models}: ")
+    assert "cov = sample covariance (n - 1)" in sedan.source
     assert "Sedan: n=5 cars" in result.stderr
+    assert "repeated size" not in result.stderr
+
+    # The paper's estimator, asked for, sits on the majority model (found as a data point by its optimality
+    # test, exact) and is warned about: 60 % of the saloons are one size.
+    result = run("--apollocar3d", keypoints, "--car-models", car_models, "--min-samples", "2",
+                 "--covariance", "paper", "-o", out)
+    assert result.exit_code == 0, result.output
+    sedan = load_priors_file(out).prototypes["Sedan"]
+    assert sedan.mean == pytest.approx([4.8, 1.8, 1.45], abs=1e-9)
+    assert "--covariance paper" in sedan.source
+    assert "warning: Sedan: 60 % of its samples are one repeated size" in result.stderr
 
 
 def test_quiet_prints_nothing(tmp_path, tracking):

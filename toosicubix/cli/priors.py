@@ -30,13 +30,16 @@ from toosicubix.cli.options import (
               help="Classes with fewer samples are written but named in a warning; fewer than 2 are skipped.")
 @click.option("--base", "base_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Start from this priors file: replace or add only the estimated classes, keep every other entry.")
-@click.option("--covariance", "method", type=click.Choice(["paper", "whitened"]), default="paper",
-              show_default=True,
+@click.option("--covariance", "method", type=click.Choice(["paper", "whitened", "sample"]), default=None,
               help="paper: geometric median of the outer products divided by c (Gaussian-consistent for isotropic "
-                   "spread); whitened: its fixed point in whitened coordinates (consistent for any Gaussian).")
+                   "spread); whitened: its fixed point in whitened coordinates (consistent for any Gaussian); "
+                   "sample: arithmetic mean and sample covariance, for exact sizes without outliers, on which "
+                   "medians collapse when one size repeats. [default: sample for ApolloCar3D, whose sizes are a "
+                   "few dozen CAD models' extents; paper otherwise]")
 @click.option("-q", "--quiet", is_flag=True, help="No summary or warnings on stderr.")
 def priors_command(ground_truth: GroundTruth, car_models_path: Path | None, out_path: Path, classes: str | None,
-                   sequences: str | None, min_samples: int, base_path: Path | None, method: str, quiet: bool) -> None:
+                   sequences: str | None, min_samples: int, base_path: Path | None, method: str | None,
+                   quiet: bool) -> None:
     """Estimate Gaussian size priors per class from ground-truth cuboids, as the paper does.
 
     Per class (KITTI type, Cityscapes 3D prototype type, ApolloCar3D prototype): mean = geometric median of
@@ -45,6 +48,8 @@ def priors_command(ground_truth: GroundTruth, car_models_path: Path | None, out_
     count every object once, KITTI tracking every track once, Cityscapes 3D groups boxes by their prototype
     `type` name (e.g. 'Mid Size Car'), ApolloCar3D counts every labelled car once with its car model's
     extents, grouped by the prototype its car-model type gets on import (hatchback Car, saloon Sedan, SUV).
+    Those extents repeat exactly (a few dozen CAD models), so for ApolloCar3D the mean and covariance are the
+    samples' own (--covariance sample): medians would collapse onto the commonest model.
     Writes a priors file for `toosicubix fit --priors`; every entry records its data, its sample count and
     the method. Per-class counts and means go to stderr, with a warning naming every class with fewer than
     --min-samples samples.
@@ -60,12 +65,15 @@ def priors_command(ground_truth: GroundTruth, car_models_path: Path | None, out_
     from toosicubix.annotations.schema import load_priors_file
     from toosicubix.priors.estimation import (
         collect_dimensions,
+        default_method,
         estimate_priors,
         priors_command_line,
         priors_document,
         write_priors_file,
     )
 
+    if method is None:
+        method = default_method(ground_truth.kind)
     if sequences is not None and ground_truth.kind != "kitti-tracking":
         raise click.UsageError("--sequences applies to --kitti-tracking only")
     sequence_names = parse_sequences(sequences)

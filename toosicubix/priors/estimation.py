@@ -15,6 +15,14 @@ largest variance (by about a quarter for KITTI cars) and overestimates the small
 until the median of the whitened outer products is ``c I``, a fixed point that every Gaussian's own
 covariance satisfies. ``method="paper"`` (the default) keeps the paper's formula.
 
+Medians suit labelled sizes, which carry a few gross errors; they fail on sizes that repeat exactly. ApolloCar3D's
+cars take their extents from a few dozen CAD models, and one model can be 40 % of a type's cars: the geometric
+median then sits on that model, nearly half of the outer products are zero, and their median collapses toward
+zero (an SUV's width spread came out 1.3 cm against the 5.8 cm its cars show). ``method="sample"`` takes the
+arithmetic mean and the sample covariance (``n - 1``), right for exact sizes without outliers, and the default
+for ApolloCar3D (:func:`default_method`); :func:`estimate_priors` warns when a median-based method meets a class
+whose samples repeat one vector (:data:`REPEAT_SHARE`).
+
 Samples: KITTI object labels count every object once, KITTI tracking labels every track once (its
 dimensions are the same in every frame), Cityscapes 3D every box once, grouped by its prototype ``type``.
 
@@ -43,8 +51,10 @@ from toosicubix.formats.cityscapes import read_gtbbox3d
 from toosicubix.formats.datasets import KITTI_VEHICLE_CLASSES, CityscapesFolder, KittiObjectFolder, KittiTrackingFolder
 from toosicubix.priors.geometric_median import GeometricMedianOptions, GeometricMedianResult, geometric_median
 
-Method = Literal["paper", "whitened"]
-METHODS: tuple[str, ...] = ("paper", "whitened")
+Method = Literal["paper", "whitened", "sample"]
+METHODS: tuple[str, ...] = ("paper", "whitened", "sample")
+#: A median-based estimate is warned about when this share of a class's samples are one repeated vector.
+REPEAT_SHARE = 0.2
 
 #: Classes estimated from KITTI labels when none are asked for.
 KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
@@ -109,15 +119,16 @@ class RobustGaussian:
 
     Attributes
     ----------
-    mean : (k,) geometric median of the samples
+    mean : (k,) geometric median of the samples (arithmetic mean for 'sample')
     cov : (k, k) symmetric positive definite covariance, consistent for Gaussian data (see the module)
     cov_median : (k, k) the paper's raw figure: geometric median of ``(x_i - mean)(x_i - mean)^T``,
         symmetrized; ``cov_median / c`` is ``cov`` for ``method="paper"`` (before any eigenvalue floor)
     n : number of samples
     consistency_factor : ``c``, see :func:`outer_product_median_factor`
-    method : 'paper' or 'whitened'
+    method : 'paper', 'whitened' or 'sample' (then ``cov_median`` is the sample covariance and ``c`` is 1)
     floored_eigenvalues : how many eigenvalues were raised to the floor to make ``cov`` positive definite
-    mean_fit, cov_fit : diagnostics of the two geometric medians (for 'whitened', of the last whitened one)
+    mean_fit, cov_fit : diagnostics of the two geometric medians (for 'whitened', of the last whitened one;
+        None for 'sample')
     whitening_iterations : fixed-point steps of 'whitened' (0 for 'paper')
     converged : every geometric median converged (and, for 'whitened', the fixed point)
     """
@@ -129,8 +140,8 @@ class RobustGaussian:
     consistency_factor: float
     method: str
     floored_eigenvalues: int
-    mean_fit: GeometricMedianResult
-    cov_fit: GeometricMedianResult
+    mean_fit: GeometricMedianResult | None
+    cov_fit: GeometricMedianResult | None
     whitening_iterations: int = 0
     converged: bool = True
 
@@ -172,8 +183,9 @@ def robust_gaussian(samples: np.ndarray, method: Method = "paper", options: Geom
     Parameters
     ----------
     samples : (n, k) with n >= 2, e.g. dimension vectors ``(dx, dy, dz)`` in metres
-    method : 'paper' (raw median of the outer products divided by ``c``) or 'whitened' (its equivariant
-        fixed point, consistent for any Gaussian; see the module docstring)
+    method : 'paper' (raw median of the outer products divided by ``c``), 'whitened' (its equivariant
+        fixed point, consistent for any Gaussian) or 'sample' (mean and sample covariance, not robust); see the
+        module docstring
     options : stopping rule of the geometric medians
     max_whitening_iterations, whitening_tol : 'whitened' stops when ``|median / c - I|_F <= whitening_tol``
 
@@ -192,6 +204,14 @@ def robust_gaussian(samples: np.ndarray, method: Method = "paper", options: Geom
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
     k = X.shape[1]
+    if method == "sample":
+        if not np.all(np.isfinite(X)):
+            raise ValueError("samples must be finite")
+        mean = X.mean(axis=0)
+        cov_sample = np.atleast_2d(np.cov(X, rowvar=False, ddof=1))
+        cov, floored = make_positive_definite(0.5 * (cov_sample + cov_sample.T))
+        return RobustGaussian(mean=mean, cov=cov, cov_median=cov_sample, n=X.shape[0], consistency_factor=1.0,
+                              method=method, floored_eigenvalues=floored, mean_fit=None, cov_fit=None)
     c = outer_product_median_factor(k)
     mean_fit = geometric_median(X, options=options)
     V = X - mean_fit.median
@@ -285,7 +305,7 @@ def priors_command_line(kind: str, root: str | Path, classes: Sequence[str] | No
         command += f" --sequences {format_sequences(sequences)}"
     if classes is not None:
         command += f" --classes {','.join(classes)}"
-    if method != "paper":
+    if method != default_method(kind):
         command += f" --covariance {method}"
     return command
 
@@ -504,19 +524,40 @@ def estimate_priors(samples: DimensionSamples, min_samples: int = 20, method: Me
                             f"poorly determined")
         if not gaussian.converged:
             warnings.append(f"{name}: a geometric median did not converge within the iteration cap")
+        share = repeated_share(dims)
+        if method != "sample" and share >= REPEAT_SHARE:
+            warnings.append(f"{name}: {100 * share:.0f} % of its samples are one repeated size, on which the "
+                            f"geometric medians collapse (its spread is underestimated); sizes that repeat exactly "
+                            f"are better estimated with --covariance sample")
         classes[name] = ClassPrior(name=name, gaussian=gaussian, kitti_type=kitti_type_for(name, samples.kind),
                                    source=_source(samples, gaussian, c, few, min_samples, command), few_samples=few)
     return PriorEstimates(classes=classes, warnings=warnings, skipped=tuple(skipped))
 
 
+def repeated_share(samples: np.ndarray) -> float:
+    """The largest share of ``samples`` (n, k) equal to one another (to 0.1 mm): 1 / n when none repeats."""
+    _, counts = np.unique(np.round(np.asarray(samples, dtype=float), 4), axis=0, return_counts=True)
+    return float(counts.max() / len(samples))
+
+
+def default_method(kind: str) -> Method:
+    """The covariance method :func:`estimate_priors` is given by default for a ground-truth ``kind``: 'sample'
+    for ApolloCar3D (exact CAD extents, a few models repeated), the paper's for labelled sizes."""
+    return "sample" if kind == "apollocar3d" else "paper"
+
+
 def _source(samples: DimensionSamples, g: RobustGaussian, c: float, few: bool, min_samples: int,
             command: str | None) -> str:
     text = f"{command}: " if command else ""
-    text += f"{samples.describe()}; n={g.n}; mean = geometric median of the dimension vectors; "
+    if g.method == "sample":
+        text += (f"{samples.describe()}; n={g.n}; mean = arithmetic mean of the dimension vectors; cov = sample "
+                 f"covariance (n - 1)")
+    else:
+        text += f"{samples.describe()}; n={g.n}; mean = geometric median of the dimension vectors; "
     if g.method == "paper":
         text += (f"cov = geometric median of the outer products (d_i - mean)(d_i - mean)^T divided by c={c:.6f} "
                  f"(Gaussian consistency; multiply by c for the paper's raw figure)")
-    else:
+    elif g.method == "whitened":
         raw = np.array2string(g.cov_median, precision=6, separator=", ", suppress_small=True).replace("\n", "")
         text += (f"cov = whitened fixed point: the S whose whitened outer products L^-1 (d_i - mean)(d_i - mean)^T "
                  f"L^-T (S = L L^T) have geometric median c I, c={c:.6f} (Gaussian consistency for any covariance); "
@@ -560,8 +601,8 @@ def write_priors_file(document: schemas.PriorsFile, path: str | Path) -> None:
 
 __all__ = [
     "CITYSCAPES_KITTI_TYPES", "CITYSCAPES_VEHICLE_LABELS", "DEFAULT_DESCRIPTION", "KITTI_DEFAULT_CLASSES", "METHODS",
-    "MIN_EIGENVALUE_RATIO", "MIN_VARIANCE", "ClassPrior", "DimensionSamples", "PriorEstimates", "PriorEstimationError",
-    "RobustGaussian", "collect_dimensions", "estimate_priors", "format_sequences", "kitti_type_for",
-    "make_positive_definite", "outer_product_median_factor", "outer_products", "priors_command_line", "priors_document",
-    "robust_gaussian", "write_priors_file",
+    "MIN_EIGENVALUE_RATIO", "MIN_VARIANCE", "REPEAT_SHARE", "ClassPrior", "DimensionSamples", "PriorEstimates",
+    "PriorEstimationError", "RobustGaussian", "collect_dimensions", "default_method", "estimate_priors",
+    "format_sequences", "kitti_type_for", "make_positive_definite", "outer_product_median_factor", "outer_products",
+    "priors_command_line", "priors_document", "repeated_share", "robust_gaussian", "write_priors_file",
 ]
