@@ -14,17 +14,20 @@ row. The rules that fixed every choice before any result was seen are in ``bench
 
 Rows: the keypoints with ``fit``'s default settings (the targets' row: the size prior, the click noise and the
 camera's road normal estimated from the batch, rule 7); the same with the chi-square test of each fit's residuals
-widening the misfits' sigmas (``--misfit-level 0.99``, rule 8); without the road normal (``--road-normal none``, the
-default before rule 7); with the licence plates' width (``--option plates``); with the camera's road normal taken
+widening the misfits' sigmas (``--misfit-level 0.99``, rule 8); with each car type its own prototype, its size
+prior measured on the learning images' cars (rule 16: not a default, see RESULTS.md); without the road normal
+(``--road-normal none``, the default before rule 7); with the licence plates' width (``--option plates``); with
+the camera's road normal taken
 from the ground truth (the median up axis of the learning half's cars, or of all for the in-sample half) instead
 of the batch: a ground block without camera height, vehicles upright on a road of that normal within 2 degrees,
 the normal known within 3; and the paper's part vocabulary (``apollocar3d-66-paper``: mirror pairs as symmetry
 pairs), alone and with the wheel centres as hubs, the configuration that failed in issue 14.
 
-Run from the repository root (about two minutes on 2 cores):
+Run from the repository root (about four minutes on 2 cores):
 
     python benchmarks/apollocar3d.py [--jobs 2] [--json benchmarks/results/apollocar3d.json]
     python benchmarks/apollocar3d.py --keypoints OTHER/apollocar3d_val_test.json   # another folder, same layout
+    python benchmarks/apollocar3d.py --design   # rule 16's design run: learning half only, in quarters
 """
 
 from __future__ import annotations
