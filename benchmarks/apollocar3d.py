@@ -57,6 +57,7 @@ from toosicubix.parts.learned import contradicting, learn_positions, learned_map
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.priors.estimation import (
     DimensionSamples,
+    apollocar3d_rows,
     default_method,
     estimate_priors,
     priors_document,
@@ -405,10 +406,9 @@ def own_priors(images: list, keypoints_path: Path, out: Path) -> Path:
     """Rule 16's priors file: the bundled table with each car type's own prototype (:data:`OWN_PROTOTYPES`),
     its size prior estimated as ``toosicubix priors --apollocar3d`` does, from the cars of ``images``."""
     rows: dict[str, list[np.ndarray]] = {}
-    for im in images:
-        for car in im.cars:
-            if car.model.type in OWN_PROTOTYPES:
-                rows.setdefault(OWN_PROTOTYPES[car.model.type], []).append(car.model.dimensions)
+    for name, dimensions in apollocar3d_rows(images, OWN_PROTOTYPES):
+        if name in OWN_PROTOTYPES.values():  # never re-estimate a bundled prototype from a type without its own
+            rows.setdefault(name, []).append(dimensions)
     samples = DimensionSamples(dimensions={name: np.array(d) for name, d in sorted(rows.items())},
                                kind="apollocar3d", root=keypoints_path, unit="car")
     estimates = estimate_priors(samples, method=default_method("apollocar3d"),

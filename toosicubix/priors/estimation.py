@@ -425,11 +425,20 @@ def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
 
 
 def _apollocar3d_rows(path: Path, car_models: str | Path | None) -> list[tuple[str, np.ndarray]]:
-    from toosicubix.formats.apollocar3d import car_models_file, prototype_of, read_apollocar3d, read_car_models
+    from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
 
-    models = read_car_models(car_models_file(path, car_models))
-    return [(prototype_of(car.model.type), car.model.dimensions)
-            for image in read_apollocar3d(path, models) for car in image.cars]
+    return apollocar3d_rows(read_apollocar3d(path, read_car_models(car_models_file(path, car_models))))
+
+
+def apollocar3d_rows(images: Sequence, prototype_of_type: dict[str, str] | None = None
+                     ) -> list[tuple[str, np.ndarray]]:
+    """``(prototype, (3,) dimensions)`` of every car of ApolloCar3D ``images``
+    (:class:`toosicubix.formats.apollocar3d.ApolloImage`): its car model's extents, under the prototype of its
+    car-model type (``prototype_of_type``, default :data:`toosicubix.formats.apollocar3d.PROTOTYPE_OF_TYPE`)."""
+    from toosicubix.formats.apollocar3d import prototype_of
+
+    return [(prototype_of(car.model.type, prototype_of_type), car.model.dimensions)
+            for image in images for car in image.cars]
 
 
 # --- priors per class --------------------------------------------------------------------------------------
@@ -602,7 +611,8 @@ def write_priors_file(document: schemas.PriorsFile, path: str | Path) -> None:
 __all__ = [
     "CITYSCAPES_KITTI_TYPES", "CITYSCAPES_VEHICLE_LABELS", "DEFAULT_DESCRIPTION", "KITTI_DEFAULT_CLASSES", "METHODS",
     "MIN_EIGENVALUE_RATIO", "MIN_VARIANCE", "REPEAT_SHARE", "ClassPrior", "DimensionSamples", "PriorEstimates",
-    "PriorEstimationError", "RobustGaussian", "collect_dimensions", "default_method", "estimate_priors",
-    "format_sequences", "kitti_type_for", "make_positive_definite", "outer_product_median_factor", "outer_products",
-    "priors_command_line", "priors_document", "repeated_share", "robust_gaussian", "write_priors_file",
+    "PriorEstimationError", "RobustGaussian", "apollocar3d_rows", "collect_dimensions", "default_method",
+    "estimate_priors", "format_sequences", "kitti_type_for", "make_positive_definite", "outer_product_median_factor",
+    "outer_products", "priors_command_line", "priors_document", "repeated_share", "robust_gaussian",
+    "write_priors_file",
 ]
