@@ -17,7 +17,7 @@ covariance satisfies. ``method="paper"`` (the default) keeps the paper's formula
 
 Medians suit labelled sizes, which carry a few gross errors; they fail on sizes that repeat exactly. ApolloCar3D's
 cars take their extents from a few dozen CAD models, and one model can be 40 % of a type's cars: the geometric
-median then sits on that model, nearly half of the outer products are zero, and their median collapses toward
+median then sits on that model, two fifths of the outer products are zero, and their median collapses toward
 zero (the shared folder's SUVs: a width sd of 2.0 cm against the 6.1 cm their sizes show). ``method="sample"`` takes the
 arithmetic mean and the sample covariance (``n - 1``), right for exact sizes without outliers, and the default
 for ApolloCar3D (:func:`default_method`); :func:`estimate_priors` warns when a median-based method meets a class
@@ -558,19 +558,19 @@ def default_method(kind: str) -> Method:
 def _source(samples: DimensionSamples, g: RobustGaussian, c: float, few: bool, min_samples: int,
             command: str | None) -> str:
     text = f"{command}: " if command else ""
+    text += f"{samples.describe()}; n={g.n}; "
     if g.method == "sample":
-        text += (f"{samples.describe()}; n={g.n}; mean = arithmetic mean of the dimension vectors; cov = sample "
-                 f"covariance (n - 1)")
+        text += "mean = arithmetic mean of the dimension vectors; cov = sample covariance (n - 1)"
+    elif g.method == "paper":
+        text += (f"mean = geometric median of the dimension vectors; cov = geometric median of the outer products "
+                 f"(d_i - mean)(d_i - mean)^T divided by c={c:.6f} (Gaussian consistency; multiply by c for the "
+                 f"paper's raw figure)")
     else:
-        text += f"{samples.describe()}; n={g.n}; mean = geometric median of the dimension vectors; "
-    if g.method == "paper":
-        text += (f"cov = geometric median of the outer products (d_i - mean)(d_i - mean)^T divided by c={c:.6f} "
-                 f"(Gaussian consistency; multiply by c for the paper's raw figure)")
-    elif g.method == "whitened":
         raw = np.array2string(g.cov_median, precision=6, separator=", ", suppress_small=True).replace("\n", "")
-        text += (f"cov = whitened fixed point: the S whose whitened outer products L^-1 (d_i - mean)(d_i - mean)^T "
-                 f"L^-T (S = L L^T) have geometric median c I, c={c:.6f} (Gaussian consistency for any covariance); "
-                 f"the paper's raw figure (geometric median of the outer products) is {raw}")
+        text += (f"mean = geometric median of the dimension vectors; cov = whitened fixed point: the S whose "
+                 f"whitened outer products L^-1 (d_i - mean)(d_i - mean)^T L^-T (S = L L^T) have geometric median "
+                 f"c I, c={c:.6f} (Gaussian consistency for any covariance); the paper's raw figure (geometric median "
+                 f"of the outer products) is {raw}")
     if g.floored_eigenvalues:
         text += f"; {g.floored_eigenvalues} eigenvalue(s) raised to the positive-definite floor"
     if few:
