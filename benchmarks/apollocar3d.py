@@ -10,7 +10,9 @@ row. The rules that fixed every choice before any result was seen are in ``bench
   the positions, and said so; on any other folder laid out the same way (such as the held-out half of the split)
   the same rows score the bundled positions out of sample, and the benchmark says which it is
   (:data:`BUNDLED_LEARNED_ON`);
-- scored cars: at least 10 labelled keypoints; a car that fails to fit counts as not fitted.
+- scored cars: at least 10 labelled keypoints; a car that fails to fit counts as not fitted. Beside the figures,
+  the cars whose ground truth contradicts their clicks (rule 6: keypoints off their rays at it) or hides them
+  (rule 17: labelled keypoints on faces it turns away from the camera) are counted, and scored apart.
 
 Rows: the keypoints with ``fit``'s default settings (the targets' row: the size prior, the click noise and the
 camera's road normal estimated from the batch, rule 7); the same with the chi-square test of each fit's residuals
@@ -53,7 +55,7 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
-from toosicubix.parts.learned import contradicting, learn_positions, learned_mapping
+from toosicubix.parts.learned import contradicting, hidden_by_ground_truth, learn_positions, learned_mapping
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.priors.estimation import (
     DimensionSamples,
@@ -77,6 +79,9 @@ CONTRADICTION_M = 0.5  # rule 6: keypoints this far (RMS, metres) from their ray
 #: A contradicting car's clicks are explained by another pose when they lie this close (RMS, metres) to their rays
 #: at it: half of rule 6's threshold (a diagnostic written after looking at those cars; it changes no figure).
 EXPLAINED_M = 0.25
+#: Rule 17: a car's ground truth hides its clicks when it turns at least this many of its labelled keypoints, and
+#: at least this share of them, away from the camera (none of their learned ``seen_from`` faces toward it).
+HIDES_MIN, HIDES_SHARE = 3, 0.25
 KEYPOINT_BINS = ((10, 15), (15, 20), (20, 30), (30, 67))
 DEPTH_BINS = ((0, 20), (20, 40), (40, 60), (60, np.inf))
 
@@ -130,6 +135,16 @@ def road_normal(images: list) -> tuple[float, float, float]:
     return tuple(float(v) for v in n / np.linalg.norm(n))
 
 
+def up_axis_scatter(images: list, normal: tuple[float, float, float], scored: set[str]) -> dict[str, float]:
+    """Degrees between each scored car's ground-truth up axis and the camera's road ``normal`` (:func:`road_normal`),
+    mean, median and 90th percentile: what a fit that stood every car upright on that road would leave of E_R's
+    up-axis part. A diagnostic of the data that looks at no fit."""
+    up = np.array([c.R_cam_vehicle[:, 2] for im in images for c in im.cars if str(c.id) in scored])
+    angles = np.degrees(np.arccos(np.clip(up @ np.asarray(normal), -1.0, 1.0)))
+    return {"cars": len(angles), "mean_deg": float(np.mean(angles)), "median_deg": float(np.median(angles)),
+            "p90_deg": float(np.percentile(angles, 90))}
+
+
 def labelled_counts(coco: dict) -> dict[str, int]:
     return {str(a["id"]): sum(1 for v in a["keypoints"][2::3] if v > 0) for a in coco["annotations"]}
 
@@ -154,7 +169,7 @@ def stats(objects: list[dict]) -> dict:
 def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: MappingFile, cameras,
             image_ids: set[str], scored: set[str], counts: dict[str, int], jobs: int, options: SolverOptions,
             estimate_sigma: bool, contradicting: dict[str, str], normal: tuple[float, float, float],
-            priors: Path | None = None) -> dict:
+            priors: Path | None = None, hiding: frozenset[str] = frozenset()) -> dict:
     work = folder / f"{half}-{row.label.replace(' ', '_')}"
     work.mkdir(parents=True)
     document, summary = coco_to_annotations(keypoints_path, mapping, cameras, row.options)
@@ -198,6 +213,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     within = calibration(objects)
     depth_within = calibration(objects, "depth")
     agreeing = [o for o in objects if o["id"] not in contradicting]
+    consistent = [o for o in agreeing if o["id"] not in hiding]
     return {
         "row": row.label, "half": half, "mapping": mapping.name, "priors": None if priors is None else {
             name: entry for name, entry in json.loads(priors.read_text())["prototypes"].items()
@@ -213,6 +229,12 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
                                 **stats(agreeing), "yaw_within_1_sigma": calibration(agreeing)[0],
                                 "yaw_within_2_sigma": calibration(agreeing)[1],
                                 "rotation_parts": rotation_parts(agreeing)},
+        "ground_truth_consistent": {"cars": len(consistent), "hiding": sum(o["id"] in hiding for o in objects),
+                                    "hiding_not_contradicting": len(agreeing) - len(consistent), **stats(consistent),
+                                    "yaw_within_1_sigma": calibration(consistent)[0],
+                                    "yaw_within_2_sigma": calibration(consistent)[1],
+                                    "rotation_parts": rotation_parts(consistent),
+                                    "e_r_over_30_deg": int(sum(o["e_r_deg"] > 30 for o in consistent))},
         "e_r_over_30_deg": int(sum(o["e_r_deg"] > 30 for o in objects)),
         "e_r_over_30_deg_by_ground_truth": dict(Counter(contradicting.get(o["id"], "agrees with the clicks")
                                                         for o in objects if o["e_r_deg"] > 30)),
@@ -239,7 +261,12 @@ def listed_cars(images: list, found: dict[str, str], scored: set[str]) -> dict[s
     ground-truth depth and whether it is scored, for a reader to look at them one by one."""
     where = {str(c.id): (im.file_name, float(c.t_cam_vehicle[2])) for im in images for c in im.cars}
     return {cid: {"kind": kind, "image": where[cid][0], "depth_m": round(where[cid][1], 1), "scored": cid in scored}
-            for cid, kind in sorted(found.items(), key=lambda item: int(item[0]) if item[0].isdigit() else 0)}
+            for cid, kind in sorted(found.items(), key=lambda item: _car_order(item[0]))}
+
+
+def _car_order(car_id: str) -> int:
+    """Cars listed by their numeric id (ApolloCar3D's annotation ids); others first."""
+    return int(car_id) if car_id.isdigit() else 0
 
 
 def depth_bias(objects: list[dict]) -> dict[str, float]:
@@ -267,9 +294,7 @@ def contradicting_cars(images: list, learn_on: list, cameras, names: list[str]) 
     swapped' when they lie within :data:`EXPLAINED_M` RMS of their rays at the car's own ground-truth pose with
     every keypoint's lateral position negated (its left for its right); 'another car's pose' when at the pose
     of another car of the same image (with or without the swap); else 'neither'."""
-    K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in [*images, *learn_on]}
-    learned = learn_positions(keypoint_samples(learn_on, names, K_of), 5, CONTRADICTION_M)
-    samples = keypoint_samples(images, names, K_of)
+    learned, samples = _learned_and_samples(images, learn_on, cameras, names)
     bad = contradicting(samples, learned, CONTRADICTION_M)
     of_car: dict[str, list] = {}
     for sample in samples:
@@ -288,6 +313,24 @@ def contradicting_cars(images: list, learn_on: list, cameras, names: list[str]) 
         else:
             kinds[car_id] = "neither"
     return kinds
+
+
+def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict[str, tuple[int, int]]:
+    """The cars of ``images`` whose ground truth hides their clicks by rule 17 (RESULTS.md), each with how many of
+    its labelled keypoints have learned ``seen_from`` faces and how many of those its ground-truth pose turns away
+    from the camera; positions and faces learned (second pass) on ``learn_on``. Every keypoint of ApolloCar3D is
+    labelled as seen (v = 2). A diagnostic of the data that looks at no fit; no car is left out of any figure."""
+    learned, samples = _learned_and_samples(images, learn_on, cameras, names)
+    counts = hidden_by_ground_truth(samples, learned)
+    return {key.split("/", 1)[1]: (n, hidden) for key, (n, hidden) in counts.items()
+            if hidden >= HIDES_MIN and hidden >= HIDES_SHARE * n}
+
+
+def _learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:
+    """Keypoint positions learned (second pass, rule 6) on ``learn_on``, and the labelled keypoints of ``images``."""
+    K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in [*images, *learn_on]}
+    learned = learn_positions(keypoint_samples(learn_on, names, K_of), 5, CONTRADICTION_M)
+    return learned, keypoint_samples(images, names, K_of)
 
 
 def ends_named(images: list, coco: dict, names: list[str], kinds: dict[str, str]) -> dict[str, dict[str, int]]:
@@ -464,6 +507,16 @@ def main() -> int:
         told = "; ".join(f"{k} {v['shown end']} / {v['hidden end']}" for k, v in sorted(ends.items()))
         print(f"{half:<6} cars seen end-on whose labels name the end their ground truth shows / hides (a diagnostic "
               f"of the data): {told}", flush=True)
+    scatter_of = {h.name: up_axis_scatter(h.score, normal_of[h.name], scored) for h in halves}
+    for half, scatter in scatter_of.items():
+        print(f"{half:<6} scored cars' ground-truth up axes from the camera's road normal (a diagnostic of the data): "
+              f"mean {scatter['mean_deg']:.2f} deg, median {scatter['median_deg']:.2f}, 90 % {scatter['p90_deg']:.2f}",
+              flush=True)
+    hiding_of = {h.name: hiding_cars(h.score, h.learn, cameras, names) for h in halves}
+    for half, found in hiding_of.items():
+        flagged = set(found) & scored
+        print(f"{half:<6} scored cars whose ground truth hides their clicks (rule 17, a diagnostic of the data): "
+              f"{len(flagged)}, of which rule 6 names {len(flagged & set(contradicting_of[half]))}", flush=True)
     depth_of = {h.name: contradicting_by_depth(h.score, scored, contradicting_of[h.name]) for h in halves}
     for half, bins in depth_of.items():
         told = "; ".join(f"{b} {v['contradicting']} of {v['cars']}" for b, v in bins.items())
@@ -485,7 +538,8 @@ def main() -> int:
                 cars = {str(c.id) for im in half.score for c in im.cars} & scored
                 result = run_row(row, half.name, keypoints_path, Path(tmp), mapping, cameras, ids, cars, counts,
                                  args.jobs, options, args.click_sigma is None, contradicting_of[half.name],
-                                 normal_of[half.name], own_priors_path if row.own_priors else None)
+                                 normal_of[half.name], own_priors_path if row.own_priors else None,
+                                 frozenset(hiding_of[half.name]))
                 rows.append(result)
                 print(format_row(result), flush=True)
                 if result["yaw_within_1_sigma"] is not None:
@@ -507,6 +561,13 @@ def main() -> int:
                       f"{agree['e_r_deg']['median']:.2f}), mean E_comb {agree['e_comb']['mean']:.3f}, yaw within 1 / 2 "
                       f"sigmas {100 * agree['yaw_within_1_sigma']:.1f} % / {100 * agree['yaw_within_2_sigma']:.1f} %",
                       flush=True)
+                both = result["ground_truth_consistent"]
+                if both["cars"] and both["yaw_within_1_sigma"] is not None:
+                    print(f"{'':<6} cars that neither rule 6 nor rule 17 flags: {both['cars']} of {result['fitted']}"
+                          f": mean E_R {both['e_r_deg']['mean']:.2f} deg (median {both['e_r_deg']['median']:.2f}), "
+                          f"mean E_comb {both['e_comb']['mean']:.3f}, yaw within 1 / 2 sigmas "
+                          f"{100 * both['yaw_within_1_sigma']:.1f} % / {100 * both['yaw_within_2_sigma']:.1f} %; "
+                          f"E_R > 30 deg: {both['e_r_over_30_deg']}", flush=True)
                 parts = {k: agree["rotation_parts"][k]["mean"] for k in ("abs_yaw_error_deg", "tilt_error_deg")}
                 every = {k: result["rotation_parts"][k]["mean"] for k in parts}
                 print(f"{'':<6} E_R's parts, means: |yaw error| {every['abs_yaw_error_deg']:.2f} deg, up-axis error "
@@ -521,8 +582,12 @@ def main() -> int:
     doc = {"generator": "benchmarks/apollocar3d.py", "machine": machine(), "min_keypoints": MIN_KEYPOINTS,
            "robust_loss": args.robust_loss, "click_sigma": args.click_sigma, "paper_kitti": PAPER_KITTI,
            "bundled_positions": None if args.design else bundled, "design": args.design,
-           "ends_named": ends_of, "contradicting_by_depth": depth_of,
+           "ends_named": ends_of, "contradicting_by_depth": depth_of, "up_axis_scatter": scatter_of,
            "contradicting_cars": {half: listed_cars(images, found, scored) for half, found in contradicting_of.items()},
+           "hiding_cars": {half: {car: {"labelled_with_faces": n, "hidden": hidden, "scored": car in scored,
+                                        "rule_6": contradicting_of[half].get(car)}
+                                  for car, (n, hidden) in sorted(found.items(), key=lambda item: _car_order(item[0]))}
+                           for half, found in hiding_of.items()},
            "rows": rows}
     if args.json is not None:
         args.json.write_text(json.dumps(doc, indent=1) + "\n")

@@ -9,7 +9,15 @@ import pytest
 from tests.scenes import CAMERA
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle
 from toosicubix.model import Part
-from toosicubix.parts.learned import KeypointSample, faces_toward, halves, learn_positions, seen_from
+from toosicubix.parts.learned import (
+    KeypointSample,
+    LearnedPosition,
+    faces_toward,
+    halves,
+    hidden_by_ground_truth,
+    learn_positions,
+    seen_from,
+)
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.priors.table import SizePrior
 from toosicubix.solver import SolverOptions, fit_vehicle
@@ -179,6 +187,22 @@ def test_second_pass_leaves_out_a_contradicting_pose():
     assert np.abs(one_pass - at).max() > 0.01
     np.testing.assert_allclose(two_pass, at, atol=1e-9)  # the 29 exact vehicles alone: algebra tier
 
+
+def test_ground_truth_that_hides_its_own_clicks_is_counted():
+    """A rear lamp labelled as seen on a car whose ground truth shows the camera its front is hidden there; on the
+    same car seen from behind it is not. Keypoints without learned faces, or not learned, are not counted."""
+    d, t = np.array([4.6, 1.8, 1.5]), np.array([1.0, 1.6, 25.0])
+    lamp, mirror = np.array([-0.45, 0.38, 0.62]), np.array([0.2, 0.55, 0.7])
+    learned = {"Car": {"lamp": LearnedPosition(lamp, np.full(3, 0.02), 50, seen_from=("rear",)),
+                       "mirror": LearnedPosition(mirror, np.full(3, 0.02), 50)}}
+    R_away = R_cam_vehicle_from_ypr(-np.pi / 2, 0.0, 0.0)  # its front away from the camera
+    R_toward = R_away @ R_cam_vehicle_from_ypr(np.pi, 0.0, 0.0)  # turned end for end about its up axis
+    samples = []
+    for vehicle, R in (("away", R_away), ("toward", R_toward)):
+        for name, at in (("lamp", lamp), ("mirror", mirror), ("unknown", lamp)):
+            samples.append(KeypointSample("Car", name, vehicle, R @ (at * d) + t, R, t, d))
+    assert "rear" in faces_toward(samples[0]) and "rear" not in faces_toward(samples[3])  # the scene is as meant
+    assert hidden_by_ground_truth(samples, learned) == {"away": (1, 0), "toward": (1, 1)}
 
 @pytest.fixture
 def rng():

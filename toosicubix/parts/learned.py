@@ -149,6 +149,22 @@ def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, Le
     return {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
 
 
+def hidden_by_ground_truth(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]]
+                           ) -> dict[str, tuple[int, int]]:
+    """Per vehicle: how many of its labelled keypoints have learned ``seen_from`` faces, and how many of those have
+    none of them turned to the camera at the vehicle's ground-truth pose. A keypoint labelled as seen there
+    contradicts its ground truth (up to the 1 - :data:`SEEN_FROM_SHARE` of labels outside ``seen_from`` by
+    construction, and views edge-on to a face). Reads the ground truth and ``learned`` only, never a fit."""
+    counts: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    for s in samples:
+        position = learned.get(s.prototype, {}).get(s.name)
+        if position is None or not position.seen_from:
+            continue
+        count = counts[s.vehicle]
+        count[0] += 1
+        count[1] += not (faces_toward(s) & set(position.seen_from))
+    return {v: (n, hidden) for v, (n, hidden) in counts.items()}
+
 def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
     """The keypoint's offset from its ray (3,), camera frame, metres, were it at fractions ``at``."""
     r = s.ray_cam / np.linalg.norm(s.ray_cam)
