@@ -55,7 +55,13 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
-from toosicubix.parts.learned import contradicting, hidden_by_ground_truth, learn_positions, learned_mapping
+from toosicubix.parts.learned import (
+    contradicting,
+    hidden_by_ground_truth,
+    hides_clicks,
+    learn_positions,
+    learned_mapping,
+)
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.priors.estimation import (
     DimensionSamples,
@@ -79,9 +85,6 @@ CONTRADICTION_M = 0.5  # rule 6: keypoints this far (RMS, metres) from their ray
 #: A contradicting car's clicks are explained by another pose when they lie this close (RMS, metres) to their rays
 #: at it: half of rule 6's threshold (a diagnostic written after looking at those cars; it changes no figure).
 EXPLAINED_M = 0.25
-#: Rule 17: a car's ground truth hides its clicks when it turns at least this many of its labelled keypoints, and
-#: at least this share of them, away from the camera (none of their learned ``seen_from`` faces toward it).
-HIDES_MIN, HIDES_SHARE = 3, 0.25
 KEYPOINT_BINS = ((10, 15), (15, 20), (20, 30), (30, 67))
 DEPTH_BINS = ((0, 20), (20, 40), (40, 60), (60, np.inf))
 
@@ -323,7 +326,7 @@ def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict
     learned, samples = _learned_and_samples(images, learn_on, cameras, names)
     counts = hidden_by_ground_truth(samples, learned)
     return {key.split("/", 1)[1]: (n, hidden) for key, (n, hidden) in counts.items()
-            if hidden >= HIDES_MIN and hidden >= HIDES_SHARE * n}
+            if hides_clicks(n, hidden)}
 
 
 def _learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:

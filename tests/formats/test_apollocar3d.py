@@ -16,8 +16,9 @@ from toosicubix.annotations.schema import InputFileError
 from toosicubix.cli import main
 from toosicubix.evaluation import evaluate_folder, format_report, result_to_csv, result_to_json
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
-from toosicubix.evaluation.report import keypoint_breakdown
+from toosicubix.evaluation.report import hidden_breakdown, keypoint_breakdown
 from toosicubix.formats.apollocar3d import pose_to_vehicle, read_apollocar3d, read_car_models
+from toosicubix.formats.coco import load_mapping
 
 MODELS = {"0": {"name": "a", "type": "3x", "length": 4.8, "width_body": 1.8, "width_with_mirrors": 2.0,
                 "height": 1.5}}
@@ -76,9 +77,40 @@ def test_eval_breaks_down_by_labelled_keypoints_and_states_no_occlusion(tmp_path
     text = format_report(result)
     assert "By keypoints labelled on the ground-truth object" in text and "occlusion" not in text
     doc = result_to_json(result)
-    assert set(doc["breakdowns"]) == {"depth", "keypoints"}
+    assert set(doc["breakdowns"]) == {"depth", "keypoints", "ground_truth_shows_keypoints"}
     assert [o["keypoints"] for o in doc["objects"]] == [12, 31]
     assert [r["keypoints"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["12", "31"]
+
+
+def test_eval_scores_apart_a_ground_truth_that_hides_its_labelled_keypoints(tmp_path):
+    # Two cars facing the camera, 2 m to its right: it sees their fronts and right sides. One has its front lamps
+    # labelled (seen from the front, or the front and the right); the other its left rear lamps and left rear wheel
+    # (seen from the rear, or the rear and the left): its pose hides all 5, so it contradicts its labels.
+    names = load_mapping("apollocar3d-66")[0].keypoints
+    faces = load_mapping("apollocar3d-66")[0].keypoint_candidates("Sedan")
+    shown, hidden = (0, 1, 54, 55, 56, 57), (20, 22, 23, 25, 26)
+    assert all(set(faces[names[j]].seen_from) <= {"front", "right"} for j in shown)
+    assert all(set(faces[names[j]].seen_from) <= {"rear", "left"} for j in hidden)
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [], "annotations": []}
+    for k, (labelled, z) in enumerate(((shown, 15.0), (hidden, 30.0))):
+        kp = np.zeros((66, 3))
+        kp[list(labelled)] = (100.0, 100.0, 2)
+        coco["annotations"].append({"id": 9 + k, "image_id": 1, "category_id": 0, "bbox": [100 + 800 * k, 20, 300, 200],
+                                    "keypoints": kp.ravel().tolist(), "pose": [np.pi, 0.0, 0.0, 2.0, 2.0, z]})
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    gts = ApolloCar3DGroundTruth(tmp_path / "kp.json").load("x_Camera_5").objects
+    assert [(g.keypoints, g.keypoints_hidden) for g in gts] == [(6, 0), (5, 5)]
+    poses = {"x_Camera_5": [Pose(g.cuboid_rect.R_cam_vehicle, g.cuboid_rect.t_cam_vehicle, g.cuboid_rect.dimensions,
+                                 g.box2d, "Car") for g in gts]}
+    result = evaluate_folder(write_results(tmp_path / "out", poses, K_KITTI, np.zeros(3), (3384, 2710)),
+                             "apollocar3d", tmp_path / "kp.json")
+    assert [row["n"] for row in hidden_breakdown(result.matched)] == [1, 1]
+    assert "hides the labelled keypoints" in format_report(result)
+    doc = result_to_json(result)
+    assert [row["n"] for row in doc["breakdowns"]["ground_truth_shows_keypoints"]] == [1, 1]
+    assert [o["keypoints_hidden"] for o in doc["objects"]] == [0, 5]
+    assert [r["keypoints_hidden"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["0", "5"]
 
 
 def test_bad_pose_names_the_json_path(tmp_path):

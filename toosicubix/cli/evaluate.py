@@ -38,8 +38,9 @@ def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | N
     else label_2/*.txt read as yaw only. Pairs each predicted image with its ground truth by id (file stem),
     matches objects by 2D box IoU (Hungarian), and reports per metric the mean and median: exact 3D IoU with
     full rotations, sIoU, E_R (degrees), E_t, E_d, E_comb, plus KITTI's yaw-only IoU for comparison; then
-    breakdowns by depth, by occlusion (KITTI, Cityscapes) or by labelled keypoints (ApolloCar3D), and the
-    unmatched objects. Poses are compared in the camera frame of
+    breakdowns by depth, by occlusion (KITTI, Cityscapes) or by labelled keypoints (ApolloCar3D, with the cars
+    whose ground-truth pose hides 3 or more, and a quarter, of their labelled keypoints from the camera scored
+    apart: such a pose contradicts the clicks), and the unmatched objects. Poses are compared in the camera frame of
     the prediction's K. The table goes to stdout, warnings to stderr.
 
     Exit code 0 on success, 2 for a missing folder, a malformed file or a predicted image without ground truth.

@@ -142,7 +142,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
                 truncation=g.truncation, depth=float(gt_cuboid.t_cam_vehicle[2]), iou_2d=iou_2d,
                 metrics=object_metrics(pred_cuboid, gt_cuboid), pred=pred_cuboid, gt=gt_cuboid,
                 yaw_only=pred_image.frame == "rect", pred_source=p.source, gt_source=g.source,
-                keypoints=g.keypoints,
+                keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
             ))
         reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
         unmatched_pred.extend(

@@ -60,6 +60,8 @@ class GtObject:
     source : where it was read: ``file:line`` or ``file $.objects[i]``
     subtype : Cityscapes ``3d.type`` (e.g. 'Mid Size Car'), else ''
     keypoints : how many keypoints people labelled on it (ApolloCar3D), else None
+    keypoints_hidden : how many of those its pose turns away from the camera (ApolloCar3D: none of the faces the
+        bundled ``apollocar3d-66`` mapping learned each keypoint is seen from turned to it), else None
     """
 
     index: int
@@ -73,6 +75,7 @@ class GtObject:
     source: str
     subtype: str = ""
     keypoints: int | None = None
+    keypoints_hidden: int | None = None
 
 
 @dataclass(frozen=True)
@@ -295,7 +298,10 @@ class CityscapesGroundTruth(GroundTruthSource):
 class ApolloCar3DGroundTruth(GroundTruthSource):
     """ApolloCar3D: a keypoint file (COCO with a 6-DoF ``pose`` per car) and ``car_models.json`` (by default
     beside it); image id = the file name's stem, every car of class 'Car', frames as
-    :mod:`toosicubix.formats.apollocar3d` says. Poses are in the camera frame of ``K`` (``t_cam_rect`` zero)."""
+    :mod:`toosicubix.formats.apollocar3d` says. Poses are in the camera frame of ``K`` (``t_cam_rect`` zero).
+    Each car also counts the labelled keypoints its pose turns away from the camera
+    (:func:`toosicubix.formats.apollocar3d.keypoints_hidden`, with the faces the bundled ``apollocar3d-66``
+    mapping learned): a pose that hides its own clicks contradicts them."""
 
     kind = "apollocar3d"
     default_classes = ("Car",)
@@ -315,11 +321,25 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         except InputFileError as exc:
             raise FormatError(exc.file, "; ".join(f"{p}: {m}" for p, m in exc.problems)) from None
         self._images = {im.id: im for im in images}
+        self._seen_from: dict[str, list[tuple[str, ...]]] = {}
+
+    def _seen_from_of(self, prototype: str) -> list[tuple[str, ...]]:
+        """Per keypoint index, the faces the bundled ``apollocar3d-66`` mapping learned it is seen from."""
+        if prototype not in self._seen_from:
+            from toosicubix.formats.coco import load_mapping
+
+            mapping, _ = load_mapping("apollocar3d-66")
+            candidates = mapping.keypoint_candidates(prototype)
+            self._seen_from[prototype] = [tuple(candidates[name].seen_from) if name in candidates else ()
+                                          for name in mapping.keypoints or ()]
+        return self._seen_from[prototype]
 
     def image_ids(self) -> list[str]:
         return sorted(self._images)
 
     def load(self, image_id: str) -> GtImage:
+        from toosicubix.formats.apollocar3d import keypoints_hidden, prototype_of
+
         im = self._images.get(image_id)
         if im is None:
             raise EvaluationInputError(f"no ground truth for image {image_id!r}: not in {self.root}")
@@ -327,7 +347,9 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
             index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
             box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None, track_id=int(car.id)
             if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
-            keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0))) for k, car in enumerate(im.cars))
+            keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0)),
+            keypoints_hidden=keypoints_hidden(car, self._seen_from_of(prototype_of(car.model.type))))
+            for k, car in enumerate(im.cars))
         return GtImage(id=image_id, objects=objects, t_cam_rect=np.zeros(3), K=None, source=str(self.root))
 
     def describe(self) -> str:

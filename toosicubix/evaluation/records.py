@@ -31,6 +31,7 @@ class MatchedObject:
     yaw_only : the prediction came from a KITTI label file (no pitch or roll)
     pred_source, gt_source : where each was read
     keypoints : how many keypoints people labelled on the ground-truth object (ApolloCar3D), else None
+    keypoints_hidden : how many of those the ground-truth pose turns away from the camera (ApolloCar3D), else None
     """
 
     image_id: str
@@ -52,6 +53,7 @@ class MatchedObject:
     pred_source: str
     gt_source: str
     keypoints: int | None = None
+    keypoints_hidden: int | None = None
 
     def row(self) -> dict[str, Any]:
         """The flat record (one CSV row): identifiers, conditions, then the metrics."""
@@ -64,6 +66,7 @@ class MatchedObject:
             "iou": m.iou, "siou": m.siou, "e_r_deg": m.e_r_deg, "e_t": m.e_t, "e_d": m.e_d, "e_comb": m.e_comb,
             "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
             "pred_source": self.pred_source, "gt_source": self.gt_source, "keypoints": self.keypoints,
+            "keypoints_hidden": self.keypoints_hidden,
         }
 
 

@@ -3,7 +3,10 @@
 Every metric is reported as mean (as the paper does) and median, over all matched objects and per
 bin of ground-truth depth (z in the camera frame), of occlusion where the ground truth states it (KITTI level;
 Cityscapes occlusion fraction binned, see :data:`OCCLUSION_FRACTION_BINS`), and of the number of keypoints people
-labelled where it counts them (ApolloCar3D, :data:`KEYPOINT_BINS`).
+labelled where it counts them (ApolloCar3D, :data:`KEYPOINT_BINS`), and of whether the ground-truth pose hides
+them (ApolloCar3D: turns at least 3 of them, and a quarter, away from the camera,
+:func:`toosicubix.parts.learned.hides_clicks`): such a pose contradicts the clicks, and scores the fit against
+something the clicks do not show.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import numpy as np
 from toosicubix import __version__
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject
 from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.parts.learned import HIDES_MIN, hides_clicks
 
 #: Depth bins over the ground truth's z, metres: [lo, hi).
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 50.0), (50.0, math.inf))
@@ -123,6 +127,24 @@ def _counts_keypoints(result: EvaluationResult) -> bool:
     return any(r.keypoints is not None for r in result.matched)
 
 
+#: The two bins of :func:`hidden_breakdown`.
+AGREES, HIDES = "shows them", f"hides >= {HIDES_MIN} and 1/4"
+
+
+def hidden_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
+    """Statistics of the objects whose ground-truth pose shows its labelled keypoints, and of those whose pose hides
+    them (:func:`toosicubix.parts.learned.hides_clicks`), over the records that count them."""
+    def hides(r: MatchedObject) -> bool:
+        return hides_clicks(r.keypoints or 0, r.keypoints_hidden or 0)
+
+    return _breakdown(records, [(AGREES, lambda r: r.keypoints_hidden is not None and not hides(r)),
+                                (HIDES, lambda r: r.keypoints_hidden is not None and hides(r))])
+
+
+def _counts_hidden(result: EvaluationResult) -> bool:
+    return any(r.keypoints_hidden is not None for r in result.matched)
+
+
 def breakdowns(result: EvaluationResult) -> dict[str, Any]:
     """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``;
     ``occlusion`` and ``occlusion_kind`` only where the ground truth states occlusion, ``keypoints`` (rows per
@@ -133,6 +155,8 @@ def breakdowns(result: EvaluationResult) -> dict[str, Any]:
         out["occlusion_kind"] = _OCCLUSION_TITLES[result.occlusion_kind]
     if _counts_keypoints(result):
         out["keypoints"] = keypoint_breakdown(result.matched)
+    if _counts_hidden(result):
+        out["ground_truth_shows_keypoints"] = hidden_breakdown(result.matched)
     return out
 
 
@@ -188,6 +212,9 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
     if _counts_keypoints(result):
         lines += ["By keypoints labelled on the ground-truth object (means):",
                   *_table([(r["bin"], r["n"], r, "mean") for r in keypoint_breakdown(result.matched)], 20), ""]
+    if _counts_hidden(result):
+        lines += ["By whether the ground-truth pose hides the labelled keypoints from the camera (means):",
+                  *_table([(r["bin"], r["n"], r, "mean") for r in hidden_breakdown(result.matched)], 20), ""]
     lines += [
         f"images scored: {result.n_images}; ground-truth images without predictions (not scored): "
         f"{result.n_gt_images_without_pred} of {result.n_gt_images}",
@@ -252,7 +279,7 @@ def result_to_json(result: EvaluationResult) -> dict[str, Any]:
 CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
-    "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints",
+    "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints", "keypoints_hidden",
 )
 
 

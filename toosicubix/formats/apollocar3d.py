@@ -171,6 +171,16 @@ def prototype_of(car_type: str, prototype_of_type: dict[str, str] | None = None)
     return (PROTOTYPE_OF_TYPE if prototype_of_type is None else prototype_of_type).get(car_type, "Car")
 
 
+def keypoints_hidden(car: ApolloCar, seen_from: list[tuple[str, ...]]) -> int:
+    """How many of ``car``'s labelled keypoints its ground-truth pose turns away from the camera: none of the faces
+    it is seen from turned to the camera. ``seen_from``: per keypoint index, those faces (learned, e.g. the bundled
+    ``apollocar3d-66`` mapping's); an empty entry never counts. Every keypoint of ApolloCar3D is labelled as seen."""
+    from toosicubix.parts.learned import facing_camera, turned_away
+
+    facing = facing_camera(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions)
+    return sum(turned_away(seen_from[j], facing) for j in np.flatnonzero(car.keypoints[:, 2] > 0))
+
+
 def car_models_file(keypoints: str | Path, car_models: str | Path | None = None) -> Path:
     """``car_models`` if given, else the ``car_models.json`` beside the keypoint file."""
     return Path(car_models) if car_models is not None else Path(keypoints).parent / "car_models.json"

@@ -41,6 +41,10 @@ from toosicubix.parts.vocabulary import FACES, faces_seen_from
 #: ``seen_from`` covers at least this share of the vehicles a keypoint was labelled on.
 SEEN_FROM_SHARE = 0.95
 
+#: A ground-truth pose *hides its clicks* when it turns at least this many of a vehicle's labelled keypoints, and at
+#: least this share of them, away from the camera (:func:`hides_clicks`; benchmarks/RESULTS.md, rule 17).
+HIDES_MIN, HIDES_SHARE = 3, 0.25
+
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
 
@@ -80,9 +84,14 @@ class LearnedPosition:
 
 
 def faces_toward(s: KeypointSample) -> frozenset[str]:
-    """The faces of a sample's vehicle (its ground-truth cuboid) turned to the camera: those whose plane the
-    camera lies beyond (:func:`~toosicubix.parts.vocabulary.faces_seen_from`)."""
-    seen = faces_seen_from(-s.R_cam_vehicle.T @ s.t_cam_vehicle, s.dimensions)
+    """The faces of a sample's vehicle (its ground-truth cuboid) turned to the camera (:func:`facing_camera`)."""
+    return facing_camera(s.R_cam_vehicle, s.t_cam_vehicle, s.dimensions)
+
+
+def facing_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> frozenset[str]:
+    """The faces of a cuboid (pose ``R_cam_vehicle`` (3, 3), ``t_cam_vehicle`` (3,), ``dimensions`` (3,)) turned to
+    the camera: those whose plane the camera lies beyond (:func:`~toosicubix.parts.vocabulary.faces_seen_from`)."""
+    seen = faces_seen_from(-R_cam_vehicle.T @ t_cam_vehicle, dimensions)
     return frozenset(face for face, yes in seen.items() if yes)
 
 
@@ -162,8 +171,21 @@ def hidden_by_ground_truth(samples: list[KeypointSample], learned: dict[str, dic
             continue
         count = counts[s.vehicle]
         count[0] += 1
-        count[1] += not (faces_toward(s) & set(position.seen_from))
+        count[1] += turned_away(position.seen_from, faces_toward(s))
     return {v: (n, hidden) for v, (n, hidden) in counts.items()}
+
+
+def turned_away(seen_from: tuple[str, ...], facing: frozenset[str]) -> bool:
+    """A keypoint seen from the faces ``seen_from`` cannot be seen when none of them is among ``facing`` (the faces
+    turned to the camera); False when ``seen_from`` is empty (nothing learned)."""
+    return bool(seen_from) and not (facing & set(seen_from))
+
+
+def hides_clicks(labelled: int, hidden: int) -> bool:
+    """Whether a pose that turns ``hidden`` of a vehicle's ``labelled`` keypoints away from the camera hides its
+    clicks: at least :data:`HIDES_MIN` of them and at least :data:`HIDES_SHARE` of them. The thresholds allow for
+    the labels outside ``seen_from`` by construction and for views nearly edge-on to a face."""
+    return hidden >= HIDES_MIN and hidden >= HIDES_SHARE * labelled
 
 def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
     """The keypoint's offset from its ray (3,), camera frame, metres, were it at fractions ``at``."""
