@@ -444,7 +444,7 @@ def learned_on(images: list, cameras, how: str, car_models: dict | None = None) 
         of_type = OWN_PROTOTYPES
         base["prototypes"] = {str(k): OWN_PROTOTYPES.get(m.type, "Car") for k, m in sorted(car_models.items())}
     K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in images}
-    learned = learned_mapping(base, keypoint_samples(images, bundled.keypoints, K_of, of_type), 5, how, 0.5)
+    learned, _ = learned_mapping(base, keypoint_samples(images, bundled.keypoints, K_of, of_type), 5, how, 0.5)
     return MappingFile.model_validate(learned)
 
 

@@ -16,6 +16,7 @@ from toosicubix.parts.learned import (
     halves,
     hidden_by_ground_truth,
     learn_positions,
+    learned_mapping,
     seen_from,
 )
 from toosicubix.parts.linear import build_parts_model
@@ -203,6 +204,28 @@ def test_ground_truth_that_hides_its_own_clicks_is_counted():
             samples.append(KeypointSample("Car", name, vehicle, R @ (at * d) + t, R, t, d))
     assert "rear" in faces_toward(samples[0]) and "rear" not in faces_toward(samples[3])  # the scene is as meant
     assert hidden_by_ground_truth(samples, learned) == {"away": (1, 0), "toward": (1, 1)}
+
+def test_learning_a_mapping_reports_the_poses_it_left_out_and_those_that_hide_their_clicks():
+    """30 cars driving away, three rear keypoints labelled on each; car 0's ground truth is turned end for end, so
+    its keypoints lie off their rays (left out by the second pass) and on its far side (its pose hides them)."""
+    rng = np.random.default_rng(2)
+    names = {"lamp-l": (-0.48, 0.35, 0.6), "lamp-r": (-0.48, -0.35, 0.6), "badge": (-0.5, 0.0, 0.45)}
+    base = {"toosicubix_mapping": 1, "name": "t", "keypoints": list(names), "unused": [],
+            "parts": [{"kind": "keypoint", "keypoint": n, "position": {"at": [0, 0, 0.5], "spread": [0.1] * 3}}
+                      for n in names]}
+    samples = []
+    for v in range(30):
+        d = np.array([4.6, 1.8, 1.5])
+        R = R_cam_vehicle_from_ypr(-np.pi / 2 + rng.uniform(-0.8, 0.8), 0.0, 0.0)  # its front away from the camera
+        t = np.array([rng.uniform(-4, 4), 1.6, rng.uniform(10, 40)])
+        R_gt = R @ R_cam_vehicle_from_ypr(np.pi, 0.0, 0.0) if v == 0 else R
+        for name, at in names.items():
+            samples.append(KeypointSample("Car", name, str(v), R @ (np.array(at) * d) + t, R_gt, t, d))
+    document, report = learned_mapping(base, samples, 5, "test", max_offset=0.5)
+    assert report.vehicles == 30 and report.left_out == {"0"} and report.hiding == {"0": (3, 3)}
+    lamp = next(p for p in document["parts"] if p["keypoint"] == "lamp-l")["position"]
+    np.testing.assert_allclose(lamp["at"], names["lamp-l"], atol=1e-4)  # the 29 exact cars: rounded to 4 places
+    assert lamp["seen_from"] == ["rear"]
 
 @pytest.fixture
 def rng():

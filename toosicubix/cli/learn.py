@@ -66,7 +66,7 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
             raise BadInput(f"{cameras_path}: no camera matches image {im.file_name!r}")
         K_of[im.id] = np.array(camera["K"], dtype=float)
     samples = keypoint_samples(images, mapping.keypoints, K_of)
-    document = learned_mapping(mapping.model_dump(mode="json", exclude_none=True), samples, min_samples,
+    document, report = learned_mapping(mapping.model_dump(mode="json", exclude_none=True), samples, min_samples,
                                f"toosicubix learn-parts {keypoints.name} --images {which} --max-offset {max_offset:g}",
                                max_offset)
     try:
@@ -76,3 +76,17 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
     n = sum(1 for p in document["parts"] if p["kind"] == "keypoint")
     click.echo(f"learned {n} keypoint positions from {len(samples)} labelled keypoints on "
                f"{sum(len(im.cars) for im in images)} cars in {len(images)} images; wrote {out_path}", err=True)
+    click.echo(f"left out {len(report.left_out)} of {report.vehicles} cars whose keypoints lie more than "
+               f"{max_offset:g} m (RMS) from their rays at their ground-truth pose{_listed(report.left_out)}", err=True)
+    click.echo(f"{len(report.hiding)} cars have a ground-truth pose that hides their own clicks (3 or more, and a "
+               f"quarter, of their labelled keypoints on faces turned away from the camera; `eval --apollocar3d` "
+               f"scores them apart){_listed(report.hiding)}", err=True)
+
+
+def _listed(vehicles, most: int = 10) -> str:
+    """': image/car, ...' for up to ``most`` vehicles (sorted), then how many more; '' for none."""
+    names = sorted(vehicles)
+    if not names:
+        return ""
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ": " + ", ".join(names[:most]) + more

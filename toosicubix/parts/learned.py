@@ -139,11 +139,17 @@ def learn_positions(samples: list[KeypointSample], min_samples: int = 3,
     ``{prototype: {name: LearnedPosition}}``; a keypoint whose rays leave its position undetermined (all
     parallel) is left out.
     """
+    return _two_passes(samples, min_samples, max_offset)[0]
+
+
+def _two_passes(samples: list[KeypointSample], min_samples: int, max_offset: float | None
+                ) -> tuple[dict[str, dict[str, LearnedPosition]], set[str]]:
+    """:func:`learn_positions`, and the vehicles its second pass left out."""
     learned = _learn(samples, min_samples)
     if max_offset is None:
-        return learned
+        return learned, set()
     bad = contradicting(samples, learned, max_offset)
-    return _learn([s for s in samples if s.vehicle not in bad], min_samples)
+    return _learn([s for s in samples if s.vehicle not in bad], min_samples), bad
 
 
 def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]],
@@ -237,11 +243,36 @@ def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[st
     return dict(out)
 
 
-def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_offset: float | None = None) -> dict:
+@dataclass(frozen=True)
+class LearningReport:
+    """What learning a mapping left out and noticed, by vehicle (the samples' ``vehicle``), over all prototypes
+    pooled, as the mapping's ``position`` and ``seen_from`` were learned.
+
+    Attributes
+    ----------
+    vehicles : how many vehicles had a labelled keypoint
+    left_out : the vehicles the second pass left out (keypoints off their rays at the ground-truth pose)
+    hiding : the vehicles whose ground-truth pose hides their clicks (:func:`hides_clicks`, by the learned
+        ``seen_from``), each with (its labelled keypoints that have learned faces, those turned away); their
+        keypoints were learned from unless ``left_out`` has them
+    """
+
+    vehicles: int
+    left_out: frozenset[str]
+    hiding: dict[str, tuple[int, int]]
+
+
+def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_offset: float | None = None
+                    ) -> tuple[dict, LearningReport]:
     """The mapping document ``base`` with every keypoint part's position learned from ``samples``: pooled over
-    prototypes in ``position``, per prototype (with at least ``min_samples`` vehicles) in ``by_prototype``.
-    Keypoint parts without any sample are dropped (their keypoints are then counted as unused on import)."""
-    pooled = learn_positions([replace(s, prototype="*") for s in samples], max_offset=max_offset).get("*", {})
+    prototypes in ``position``, per prototype (with at least ``min_samples`` vehicles) in ``by_prototype``; and
+    what the pooled learning left out and noticed. Keypoint parts without any sample are dropped (their keypoints
+    are then counted as unused on import)."""
+    pooled_samples = [replace(s, prototype="*") for s in samples]
+    pooled_all, left_out = _two_passes(pooled_samples, 3, max_offset)
+    pooled = pooled_all.get("*", {})
+    hiding = {v: c for v, c in hidden_by_ground_truth(pooled_samples, pooled_all).items() if hides_clicks(*c)}
+    report = LearningReport(len({s.vehicle for s in samples}), frozenset(left_out), hiding)
     per = learn_positions(samples, min_samples=min_samples, max_offset=max_offset)
 
     def entry(p, pooled: bool = False) -> dict:
@@ -270,7 +301,7 @@ def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_o
                       "by_prototype": {proto: entry(d[name]) for proto, d in sorted(per.items()) if name in d}})
     described = base.get("description", "").split(" Positions: ")[0]
     return {**base, "description": f"{described} Positions: {how}.".strip(), "unused": unused,
-            "parts": parts}
+            "parts": parts}, report
 
 
 def _centre(ends: list) -> dict:
