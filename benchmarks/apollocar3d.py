@@ -55,6 +55,7 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
+from toosicubix.geometry import geodesic_angle
 from toosicubix.parts.learned import (
     contradicting,
     hidden_by_ground_truth,
@@ -206,6 +207,9 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         o["depth_error_m"], o["depth_sigma_m"] = abs(z_pred - z_gt), (fit.get("sigma") or {}).get("depth_m")
         up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
         o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
+        if m.pred_id in hiding:
+            R_twin, _ = twin_pose(m.gt.R_cam_vehicle, m.gt.t_cam_vehicle, m.gt.dimensions)
+            o["fit_from_twin_deg"] = float(np.degrees(geodesic_angle(m.pred.R_cam_vehicle, R_twin)))
         o["downweighted"] = len(fit.get("downweighted", []))
         o["misfit"] = bool((fit.get("residual_test") or {}).get("misfit"))
         objects.append(o)
@@ -217,6 +221,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     depth_within = calibration(objects, "depth")
     agreeing = [o for o in objects if o["id"] not in contradicting]
     consistent = [o for o in agreeing if o["id"] not in hiding]
+    hidden = [o for o in objects if o["id"] in hiding]
     return {
         "row": row.label, "half": half, "mapping": mapping.name, "priors": None if priors is None else {
             name: entry for name, entry in json.loads(priors.read_text())["prototypes"].items()
@@ -232,6 +237,9 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
                                 **stats(agreeing), "yaw_within_1_sigma": calibration(agreeing)[0],
                                 "yaw_within_2_sigma": calibration(agreeing)[1],
                                 "rotation_parts": rotation_parts(agreeing)},
+        "ground_truth_hides": {"cars": len(hidden), "e_r_deg": stats(hidden)["e_r_deg"],
+                               "fit_within_10_deg_of_twin": sum(o["fit_from_twin_deg"] <= 10 for o in hidden),
+                               "fit_from_twin_deg": sorted(round(o["fit_from_twin_deg"], 1) for o in hidden)},
         "ground_truth_consistent": {"cars": len(consistent), "hiding": sum(o["id"] in hiding for o in objects),
                                     "hiding_not_contradicting": len(agreeing) - len(consistent), **stats(consistent),
                                     "yaw_within_1_sigma": calibration(consistent)[0],
@@ -318,15 +326,58 @@ def contradicting_cars(images: list, learn_on: list, cameras, names: list[str]) 
     return kinds
 
 
-def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict[str, tuple[int, int]]:
+def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict[str, dict]:
     """The cars of ``images`` whose ground truth hides their clicks by rule 17 (RESULTS.md), each with how many of
-    its labelled keypoints have learned ``seen_from`` faces and how many of those its ground-truth pose turns away
-    from the camera; positions and faces learned (second pass) on ``learn_on``. Every keypoint of ApolloCar3D is
-    labelled as seen (v = 2). A diagnostic of the data that looks at no fit; no car is left out of any figure."""
+    its labelled keypoints have learned ``seen_from`` faces (``labelled_with_faces``) and how many of those its
+    ground-truth pose turns away from the camera (``hidden``); and, at the ground truth's depth-reversed twin
+    (:func:`twin_pose`), the keypoints' RMS distance from their rays (``twin_off_rays_m``; ``off_rays_m`` at the
+    ground truth) and how many it turns away (``twin_hidden``). Positions and faces learned (second pass) on
+    ``learn_on``. Every keypoint of ApolloCar3D is labelled as seen (v = 2). A diagnostic of the data that looks
+    at no fit; no car is left out of any figure."""
     learned, samples = _learned_and_samples(images, learn_on, cameras, names)
     counts = hidden_by_ground_truth(samples, learned)
-    return {key.split("/", 1)[1]: (n, hidden) for key, (n, hidden) in counts.items()
-            if hides_clicks(n, hidden)}
+    of_car: dict[str, list] = {}
+    for sample in samples:
+        of_car.setdefault(sample.vehicle, []).append(sample)
+    out = {}
+    for key, (n, hidden) in counts.items():
+        if not hides_clicks(n, hidden):
+            continue
+        car_samples = of_car[key]
+        R, t, d = car_samples[0].R_cam_vehicle, car_samples[0].t_cam_vehicle, car_samples[0].dimensions
+        R_twin, t_twin = twin_pose(R, t, d)
+        twin = [replace(s, R_cam_vehicle=R_twin, t_cam_vehicle=t_twin) for s in car_samples]
+        out[key.split("/", 1)[1]] = {
+            "labelled_with_faces": n, "hidden": hidden,
+            "off_rays_m": round(_off_rays(car_samples, learned), 3),
+            "twin_off_rays_m": round(_off_rays(twin, learned), 3),
+            "twin_hidden": hidden_by_ground_truth(twin, learned).get(key, (0, 0))[1]}
+    return out
+
+
+def twin_pose(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """A pose's depth-reversed twin, ``(R_cam_vehicle (3, 3), t_cam_vehicle (3,))``: the cuboid reflected across the
+    plane through its centre perpendicular to the line of sight, then mirrored left for right (two reflections
+    make a rotation). Seen from afar the two project nearly alike, except that each keypoint of one lands where
+    its mirror partner lands on the other, and the faces turned to the camera become those turned away."""
+    centre = t_cam_vehicle + R_cam_vehicle[:, 2] * dimensions[2] / 2
+    sight = centre / np.linalg.norm(centre)
+    R_twin = (np.eye(3) - 2.0 * np.outer(sight, sight)) @ R_cam_vehicle @ np.diag([1.0, -1.0, 1.0])
+    return R_twin, centre - R_twin[:, 2] * dimensions[2] / 2
+
+
+def _off_rays(samples: list, learned: dict) -> float:
+    """RMS distance (m) of the keypoints ``samples`` (one car, at the pose they carry) from their rays, at the
+    ``learned`` positions of their prototype."""
+    squares = []
+    for s in samples:
+        position = learned.get(s.prototype, {}).get(s.name)
+        if position is not None:
+            r = s.ray_cam / np.linalg.norm(s.ray_cam)
+            Y = s.R_cam_vehicle @ (s.dimensions * position.at) + s.t_cam_vehicle
+            squares.append(float(np.sum((Y - r * (r @ Y)) ** 2)))
+    return float(np.sqrt(np.mean(squares))) if squares else float("nan")
 
 
 def _learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:
@@ -518,8 +569,12 @@ def main() -> int:
     hiding_of = {h.name: hiding_cars(h.score, h.learn, cameras, names) for h in halves}
     for half, found in hiding_of.items():
         flagged = set(found) & scored
+        twins = {car for car in flagged if found[car]["twin_hidden"] == 0
+                 and found[car]["twin_off_rays_m"] <= EXPLAINED_M}
         print(f"{half:<6} scored cars whose ground truth hides their clicks (rule 17, a diagnostic of the data): "
-              f"{len(flagged)}, of which rule 6 names {len(flagged & set(contradicting_of[half]))}", flush=True)
+              f"{len(flagged)}, of which rule 6 names {len(flagged & set(contradicting_of[half]))}; the clicks fit "
+              f"the ground truth's depth-reversed twin (within {EXPLAINED_M:g} m of their rays, none hidden) for "
+              f"{len(twins)}", flush=True)
     depth_of = {h.name: contradicting_by_depth(h.score, scored, contradicting_of[h.name]) for h in halves}
     for half, bins in depth_of.items():
         told = "; ".join(f"{b} {v['contradicting']} of {v['cars']}" for b, v in bins.items())
@@ -564,6 +619,11 @@ def main() -> int:
                       f"{agree['e_r_deg']['median']:.2f}), mean E_comb {agree['e_comb']['mean']:.3f}, yaw within 1 / 2 "
                       f"sigmas {100 * agree['yaw_within_1_sigma']:.1f} % / {100 * agree['yaw_within_2_sigma']:.1f} %",
                       flush=True)
+                hides = result["ground_truth_hides"]
+                if hides["cars"]:
+                    print(f"{'':<6} cars whose ground truth hides their clicks (rule 17): {hides['cars']}, mean E_R "
+                          f"{hides['e_r_deg']['mean']:.1f} deg; fitted within 10 deg of the ground truth's "
+                          f"depth-reversed twin: {hides['fit_within_10_deg_of_twin']}", flush=True)
                 both = result["ground_truth_consistent"]
                 if both["cars"] and both["yaw_within_1_sigma"] is not None:
                     print(f"{'':<6} cars that neither rule 6 nor rule 17 flags: {both['cars']} of {result['fitted']}"
@@ -587,9 +647,8 @@ def main() -> int:
            "bundled_positions": None if args.design else bundled, "design": args.design,
            "ends_named": ends_of, "contradicting_by_depth": depth_of, "up_axis_scatter": scatter_of,
            "contradicting_cars": {half: listed_cars(images, found, scored) for half, found in contradicting_of.items()},
-           "hiding_cars": {half: {car: {"labelled_with_faces": n, "hidden": hidden, "scored": car in scored,
-                                        "rule_6": contradicting_of[half].get(car)}
-                                  for car, (n, hidden) in sorted(found.items(), key=lambda item: _car_order(item[0]))}
+           "hiding_cars": {half: {car: {**counts, "scored": car in scored, "rule_6": contradicting_of[half].get(car)}
+                                  for car, counts in sorted(found.items(), key=lambda item: _car_order(item[0]))}
                            for half, found in hiding_of.items()},
            "rows": rows}
     if args.json is not None:
