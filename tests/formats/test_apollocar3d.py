@@ -113,6 +113,34 @@ def test_eval_scores_apart_a_ground_truth_that_hides_its_labelled_keypoints(tmp_
     assert [r["keypoints_hidden"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["0", "5"]
 
 
+@pytest.mark.parametrize("n_keypoints", [10, 70])
+def test_a_file_with_other_keypoints_than_apollocar3d_66_counts_none_hidden(tmp_path, n_keypoints):
+    # The bundled mapping names 66 keypoints; for a file with another count nothing is known of their faces.
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [],
+            "annotations": [{"id": 9, "image_id": 1, "category_id": 0, "bbox": [10, 20, 30, 40],
+                             "keypoints": [100, 100, 2] * n_keypoints, "pose": [np.pi, 0.0, 0.0, 1.0, 2.0, 20.0]}]}
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    (obj,) = ApolloCar3DGroundTruth(tmp_path / "kp.json").load("x_Camera_5").objects
+    assert obj.keypoints == n_keypoints and obj.keypoints_hidden is None
+
+
+def test_learn_parts_names_a_car_with_other_keypoints_than_its_mapping(tmp_path):
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [],
+            "annotations": [{"id": 9, "image_id": 1, "category_id": 0, "bbox": [10, 20, 30, 40],
+                             "keypoints": [100, 100, 2] * 70, "pose": [np.pi, 0.0, 0.0, 1.0, 2.0, 20.0]}]}
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    (tmp_path / "cameras.json").write_text(json.dumps({"cameras": [{"match": "*", "K": K_KITTI.tolist()}]}))
+    out = tmp_path / "mapping.json"
+    result = CliRunner().invoke(main, ["learn-parts", str(tmp_path / "kp.json"), "--car-models",
+                                       str(tmp_path / "car_models.json"), "--cameras", str(tmp_path / "cameras.json"),
+                                       "-o", str(out)])
+    assert result.exit_code == 2 and not out.exists()
+    assert "kp.json: $.annotations[0].keypoints: expected 198 numbers (x, y, v for 66 keypoints), got 210" \
+        in result.output
+
+
 def test_bad_pose_names_the_json_path(tmp_path):
     path = write_dataset(tmp_path, pose=(0.0, 0.0, 0.0))
     with pytest.raises(InputFileError, match=r"kp.json: \$.annotations\[0\].pose: expected 6 numbers"):

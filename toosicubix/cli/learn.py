@@ -65,7 +65,10 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
         if camera is None:
             raise BadInput(f"{cameras_path}: no camera matches image {im.file_name!r}")
         K_of[im.id] = np.array(camera["K"], dtype=float)
-    samples = keypoint_samples(images, mapping.keypoints, K_of)
+    try:
+        samples = keypoint_samples(images, mapping.keypoints, K_of)
+    except InputError as exc:
+        raise BadInput(str(exc)) from None
     document, report = learned_mapping(mapping.model_dump(mode="json", exclude_none=True), samples, min_samples,
                                f"toosicubix learn-parts {keypoints.name} --images {which} --max-offset {max_offset:g}",
                                max_offset)

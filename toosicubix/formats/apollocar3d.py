@@ -171,12 +171,15 @@ def prototype_of(car_type: str, prototype_of_type: dict[str, str] | None = None)
     return (PROTOTYPE_OF_TYPE if prototype_of_type is None else prototype_of_type).get(car_type, "Car")
 
 
-def keypoints_hidden(car: ApolloCar, seen_from: list[tuple[str, ...]]) -> int:
+def keypoints_hidden(car: ApolloCar, seen_from: list[tuple[str, ...]]) -> int | None:
     """How many of ``car``'s labelled keypoints its ground-truth pose turns away from the camera: none of the faces
     it is seen from turned to the camera. ``seen_from``: per keypoint index, those faces (learned, e.g. the bundled
-    ``apollocar3d-66`` mapping's); an empty entry never counts. Every keypoint of ApolloCar3D is labelled as seen."""
+    ``apollocar3d-66`` mapping's); an empty entry never counts. Every keypoint of ApolloCar3D is labelled as seen.
+    None when the car has not one keypoint per entry of ``seen_from`` (a file with other keypoints)."""
     from toosicubix.parts.learned import facing_camera, turned_away
 
+    if len(car.keypoints) != len(seen_from):
+        return None
     facing = facing_camera(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions)
     return sum(turned_away(seen_from[j], facing) for j in np.flatnonzero(car.keypoints[:, 2] > 0))
 
@@ -195,6 +198,11 @@ def keypoint_samples(images: list[ApolloImage], names: list[str], K_of: dict[str
     names : the keypoint names by index
     K_of : (3, 3) intrinsics per image id
     prototype_of_type : car-model type -> prototype (default :data:`PROTOTYPE_OF_TYPE`; others 'Car')
+
+    Raises
+    ------
+    InputFileError
+        A car with another number of keypoints than ``names``, naming the file and its JSON path.
     """
     from toosicubix.parts.learned import KeypointSample
 
@@ -202,6 +210,10 @@ def keypoint_samples(images: list[ApolloImage], names: list[str], K_of: dict[str
     for im in images:
         K_inv = np.linalg.inv(K_of[im.id])
         for car in im.cars:
+            if len(car.keypoints) != len(names):
+                file, _, where = car.source.rpartition(" $")
+                expected = f"expected {3 * len(names)} numbers (x, y, v for {len(names)} keypoints)"
+                raise InputFileError(file, [(f"${where}.keypoints", f"{expected}, got {car.keypoints.size}")])
             prototype = prototype_of(car.model.type, prototype_of_type)
             for j in np.flatnonzero(car.keypoints[:, 2] > 0):
                 ray = K_inv @ np.array([car.keypoints[j, 0], car.keypoints[j, 1], 1.0])
