@@ -55,7 +55,7 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
-from toosicubix.geometry import geodesic_angle
+from toosicubix.geometry import depth_reversed_twin, geodesic_angle
 from toosicubix.parts.learned import (
     contradicting,
     hidden_by_ground_truth,
@@ -208,7 +208,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
         o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
         if m.pred_id in hiding:
-            R_twin, _ = twin_pose(m.gt.R_cam_vehicle, m.gt.t_cam_vehicle, m.gt.dimensions)
+            R_twin, _ = depth_reversed_twin(m.gt.R_cam_vehicle, m.gt.t_cam_vehicle, m.gt.dimensions)
             o["fit_from_twin_deg"] = float(np.degrees(geodesic_angle(m.pred.R_cam_vehicle, R_twin)))
         o["downweighted"] = len(fit.get("downweighted", []))
         o["misfit"] = bool((fit.get("residual_test") or {}).get("misfit"))
@@ -345,7 +345,7 @@ def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict
             continue
         car_samples = of_car[key]
         R, t, d = car_samples[0].R_cam_vehicle, car_samples[0].t_cam_vehicle, car_samples[0].dimensions
-        R_twin, t_twin = twin_pose(R, t, d)
+        R_twin, t_twin = depth_reversed_twin(R, t, d)
         twin = [replace(s, R_cam_vehicle=R_twin, t_cam_vehicle=t_twin) for s in car_samples]
         out[key.split("/", 1)[1]] = {
             "labelled_with_faces": n, "hidden": hidden,
@@ -353,18 +353,6 @@ def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict
             "twin_off_rays_m": round(_off_rays(twin, learned), 3),
             "twin_hidden": hidden_by_ground_truth(twin, learned).get(key, (0, 0))[1]}
     return out
-
-
-def twin_pose(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """A pose's depth-reversed twin, ``(R_cam_vehicle (3, 3), t_cam_vehicle (3,))``: the cuboid reflected across the
-    plane through its centre perpendicular to the line of sight, then mirrored left for right (two reflections
-    make a rotation). Seen from afar the two project nearly alike, except that each keypoint of one lands where
-    its mirror partner lands on the other, and the faces turned to the camera become those turned away."""
-    centre = t_cam_vehicle + R_cam_vehicle[:, 2] * dimensions[2] / 2
-    sight = centre / np.linalg.norm(centre)
-    R_twin = (np.eye(3) - 2.0 * np.outer(sight, sight)) @ R_cam_vehicle @ np.diag([1.0, -1.0, 1.0])
-    return R_twin, centre - R_twin[:, 2] * dimensions[2] / 2
 
 
 def _off_rays(samples: list, learned: dict) -> float:

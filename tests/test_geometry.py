@@ -9,6 +9,7 @@ from toosicubix.geometry import (
     clip_cuboid_to_near_plane,
     cuboid_corners_cam,
     cuboid_corners_vehicle,
+    depth_reversed_twin,
     geodesic_angle,
     hat,
     nearest_rotation,
@@ -139,3 +140,26 @@ def test_box2d_iou_known_values():
     assert box2d_iou(a, np.array([1.0, 0.0, 3.0, 2.0])) == pytest.approx(2.0 / 6.0)
     assert box2d_iou(a, np.array([2.0, 0.0, 4.0, 2.0])) == 0.0  # touching
     assert box2d_iou(a, np.array([1.0, 1.0, 1.0, 3.0])) == 0.0  # degenerate partner
+
+
+def test_depth_reversed_twin():
+    """A rotation; each mirrored point of the twin is the pose's point reflected across the plane through the box
+    centre perpendicular to the line of sight (exact); the twin of the twin is the pose; and seen from 60 m a
+    keypoint and its mirror partner on the twin project within a few pixels."""
+    R = R_cam_vehicle_from_ypr(0.7, 0.05, -0.03)
+    t, d = np.array([3.0, 1.5, 60.0]), np.array([4.6, 1.8, 1.5])
+    R_twin, t_twin = depth_reversed_twin(R, t, d)
+    np.testing.assert_allclose(R_twin.T @ R_twin, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R_twin) == pytest.approx(1.0)
+    centre = t + R[:, 2] * d[2] / 2
+    sight = centre / np.linalg.norm(centre)
+    points = d * np.array([[-0.46, 0.33, 0.51], [0.5, -0.3, 0.4], [0.1, 0.45, 0.95]])
+    on_pose = points @ R.T + t
+    reflected = on_pose - 2.0 * np.outer((on_pose - centre) @ sight, sight)
+    np.testing.assert_allclose((points * [1.0, -1.0, 1.0]) @ R_twin.T + t_twin, reflected, atol=1e-12)
+    R_back, t_back = depth_reversed_twin(R_twin, t_twin, d)
+    np.testing.assert_allclose(R_back, R, atol=1e-12)
+    np.testing.assert_allclose(t_back, t, atol=1e-12)
+    K = np.array([[2300.0, 0.0, 1700.0], [0.0, 2300.0, 1350.0], [0.0, 0.0, 1.0]])
+    apart = project_pinhole(K, on_pose) - project_pinhole(K, reflected)
+    assert np.max(np.linalg.norm(apart, axis=1)) < 5.0  # the depth offsets are a few % of 60 m: a few px

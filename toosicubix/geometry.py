@@ -246,6 +246,32 @@ def cuboid_corners_cam(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dim
     return cuboid_corners_vehicle(dimensions) @ np.asarray(R_cam_vehicle).T + np.asarray(t_cam_vehicle)
 
 
+def depth_reversed_twin(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """A posed cuboid's depth-reversed twin: reflected across the plane through its centre perpendicular to the
+    line of sight, then mirrored left for right in its own frame. Two reflections make a rotation.
+
+    Each point ``(x, y, z)`` of the twin (vehicle frame) sits where the pose's point ``(x, -y, z)``, reflected across
+    that plane, sits: seen from afar the two project nearly alike, with each part's left and right exchanged and
+    the faces turned to the camera turned away. Clicks whose left and right were read the other way fit the twin
+    about as well as the pose. The twin of the twin is the pose.
+
+    Parameters
+    ----------
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) the bottom-face centre, camera frame; dimensions : (3,)
+
+    Returns
+    -------
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) of the twin (same dimensions, same box centre)
+    """
+    R_cam_vehicle = np.asarray(R_cam_vehicle, dtype=float)
+    half_height = float(np.asarray(dimensions, dtype=float)[2]) / 2.0
+    centre_cam = np.asarray(t_cam_vehicle, dtype=float) + R_cam_vehicle[:, 2] * half_height
+    sight = centre_cam / np.linalg.norm(centre_cam)
+    R_twin = (np.eye(3) - 2.0 * np.outer(sight, sight)) @ R_cam_vehicle @ np.diag([1.0, -1.0, 1.0])
+    return R_twin, centre_cam - R_twin[:, 2] * half_height
+
+
 def project_pinhole(K: np.ndarray, points_cam: np.ndarray) -> np.ndarray:
     """Project camera-frame points with an ideal pinhole ``K`` (no distortion).
 

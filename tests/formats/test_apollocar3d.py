@@ -19,6 +19,7 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.evaluation.report import hidden_breakdown, keypoint_breakdown
 from toosicubix.formats.apollocar3d import pose_to_vehicle, read_apollocar3d, read_car_models
 from toosicubix.formats.coco import load_mapping
+from toosicubix.geometry import depth_reversed_twin
 
 MODELS = {"0": {"name": "a", "type": "3x", "length": 4.8, "width_body": 1.8, "width_with_mirrors": 2.0,
                 "height": 1.5}}
@@ -77,7 +78,7 @@ def test_eval_breaks_down_by_labelled_keypoints_and_states_no_occlusion(tmp_path
     text = format_report(result)
     assert "By keypoints labelled on the ground-truth object" in text and "occlusion" not in text
     doc = result_to_json(result)
-    assert set(doc["breakdowns"]) == {"depth", "keypoints", "ground_truth_shows_keypoints"}
+    assert set(doc["breakdowns"]) == {"depth", "keypoints", "ground_truth_shows_keypoints", "ground_truth_twin"}
     assert [o["keypoints"] for o in doc["objects"]] == [12, 31]
     assert [r["keypoints"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["12", "31"]
 
@@ -85,7 +86,8 @@ def test_eval_breaks_down_by_labelled_keypoints_and_states_no_occlusion(tmp_path
 def test_eval_scores_apart_a_ground_truth_that_hides_its_labelled_keypoints(tmp_path):
     # Two cars facing the camera, 2 m to its right: it sees their fronts and right sides. One has its front lamps
     # labelled (seen from the front, or the front and the right); the other its left rear lamps and left rear wheel
-    # (seen from the rear, or the rear and the left): its pose hides all 5, so it contradicts its labels.
+    # (seen from the rear, or the rear and the left): its pose hides all 5, so it contradicts its labels. The first
+    # is predicted at its ground truth, the second at its ground truth's depth-reversed twin.
     names = load_mapping("apollocar3d-66")[0].keypoints
     faces = load_mapping("apollocar3d-66")[0].keypoint_candidates("Sedan")
     shown, hidden = (0, 1, 54, 55, 56, 57), (20, 22, 23, 25, 26)
@@ -101,14 +103,19 @@ def test_eval_scores_apart_a_ground_truth_that_hides_its_labelled_keypoints(tmp_
     (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
     gts = ApolloCar3DGroundTruth(tmp_path / "kp.json").load("x_Camera_5").objects
     assert [(g.keypoints, g.keypoints_hidden) for g in gts] == [(6, 0), (5, 5)]
-    poses = {"x_Camera_5": [Pose(g.cuboid_rect.R_cam_vehicle, g.cuboid_rect.t_cam_vehicle, g.cuboid_rect.dimensions,
-                                 g.box2d, "Car") for g in gts]}
+    shown_gt, hidden_gt = (g.cuboid_rect for g in gts)
+    twin = depth_reversed_twin(hidden_gt.R_cam_vehicle, hidden_gt.t_cam_vehicle, hidden_gt.dimensions)
+    poses = {"x_Camera_5": [Pose(shown_gt.R_cam_vehicle, shown_gt.t_cam_vehicle, shown_gt.dimensions, gts[0].box2d,
+                                 "Car"), Pose(*twin, hidden_gt.dimensions, gts[1].box2d, "Car")]}
     result = evaluate_folder(write_results(tmp_path / "out", poses, K_KITTI, np.zeros(3), (3384, 2710)),
                              "apollocar3d", tmp_path / "kp.json")
     assert [row["n"] for row in hidden_breakdown(result.matched)] == [1, 1]
-    assert "hides the labelled keypoints" in format_report(result)
+    assert result.matched[1].e_r_twin_deg == pytest.approx(0.0, abs=1e-5)  # as written to results.json and read
+    assert result.matched[1].metrics.e_r_deg > 30  # the twin of a car seen from 30 m, 2 m aside, is turned far
+    assert "1 fits lie within 10 deg of the ground truth's depth-reversed twin" in format_report(result)
     doc = result_to_json(result)
     assert [row["n"] for row in doc["breakdowns"]["ground_truth_shows_keypoints"]] == [1, 1]
+    assert doc["breakdowns"]["ground_truth_twin"] == {"hides": 1, "fit_within_10_deg_of_twin": 1}
     assert [o["keypoints_hidden"] for o in doc["objects"]] == [0, 5]
     assert [r["keypoints_hidden"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["0", "5"]
 

@@ -21,7 +21,7 @@ import numpy as np
 from toosicubix.evaluation.errors import EvaluationInputError
 from toosicubix.evaluation.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
 from toosicubix.evaluation.matching import box_iou_matrix, match_boxes
-from toosicubix.evaluation.metrics import object_metrics
+from toosicubix.evaluation.metrics import object_metrics, twin_rotation_error_deg
 from toosicubix.evaluation.predictions import Predictions, PredImage, PredObject, load_predictions
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
 
@@ -143,6 +143,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
                 metrics=object_metrics(pred_cuboid, gt_cuboid), pred=pred_cuboid, gt=gt_cuboid,
                 yaw_only=pred_image.frame == "rect", pred_source=p.source, gt_source=g.source,
                 keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
+                e_r_twin_deg=None if g.keypoints_hidden is None else twin_rotation_error_deg(pred_cuboid, gt_cuboid),
             ))
         reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
         unmatched_pred.extend(

@@ -12,7 +12,7 @@ import numpy as np
 
 from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.iou import iou_3d, iou_bev_height_yaw
-from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
+from toosicubix.geometry import depth_reversed_twin, geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 
 
 def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
@@ -27,6 +27,14 @@ def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
     float, degrees in [0, 180]
     """
     return float(np.degrees(geodesic_angle(R_pred, R_gt)))
+
+
+def twin_rotation_error_deg(pred: Cuboid, gt: Cuboid) -> float:
+    """E_R (degrees) against the ground truth's depth-reversed twin
+    (:func:`toosicubix.geometry.depth_reversed_twin`): small when the prediction is the pose the clicks show and
+    the ground truth its mirror image in depth."""
+    R_twin, _ = depth_reversed_twin(gt.R_cam_vehicle, gt.t_cam_vehicle, gt.dimensions)
+    return rotation_error_deg(pred.R_cam_vehicle, R_twin)
 
 
 def yaw_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:

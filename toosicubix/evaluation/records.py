@@ -32,6 +32,8 @@ class MatchedObject:
     pred_source, gt_source : where each was read
     keypoints : how many keypoints people labelled on the ground-truth object (ApolloCar3D), else None
     keypoints_hidden : how many of those the ground-truth pose turns away from the camera (ApolloCar3D), else None
+    e_r_twin_deg : the geodesic angle (degrees) between the prediction and the ground truth's depth-reversed twin
+        (:func:`toosicubix.geometry.depth_reversed_twin`) where ``keypoints_hidden`` is given, else None
     """
 
     image_id: str
@@ -54,6 +56,7 @@ class MatchedObject:
     gt_source: str
     keypoints: int | None = None
     keypoints_hidden: int | None = None
+    e_r_twin_deg: float | None = None
 
     def row(self) -> dict[str, Any]:
         """The flat record (one CSV row): identifiers, conditions, then the metrics."""
@@ -66,7 +69,7 @@ class MatchedObject:
             "iou": m.iou, "siou": m.siou, "e_r_deg": m.e_r_deg, "e_t": m.e_t, "e_d": m.e_d, "e_comb": m.e_comb,
             "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
             "pred_source": self.pred_source, "gt_source": self.gt_source, "keypoints": self.keypoints,
-            "keypoints_hidden": self.keypoints_hidden,
+            "keypoints_hidden": self.keypoints_hidden, "e_r_twin_deg": self.e_r_twin_deg,
         }
 
 

@@ -141,6 +141,19 @@ def hidden_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
                                 (HIDES, lambda r: r.keypoints_hidden is not None and hides(r))])
 
 
+#: A fit this close (degrees, E_R) to the ground truth's depth-reversed twin counts as that twin.
+TWIN_DEG = 10.0
+
+
+def twin_summary(records: Sequence[MatchedObject]) -> dict[str, int]:
+    """Of the objects whose ground-truth pose hides their labelled keypoints, how many there are and how many fits
+    lie within :data:`TWIN_DEG` of the ground truth's depth-reversed twin."""
+    hiding = [r for r in records if r.keypoints_hidden is not None
+              and hides_clicks(r.keypoints or 0, r.keypoints_hidden)]
+    return {"hides": len(hiding), "fit_within_10_deg_of_twin": sum(
+        r.e_r_twin_deg is not None and r.e_r_twin_deg <= TWIN_DEG for r in hiding)}
+
+
 def _counts_hidden(result: EvaluationResult) -> bool:
     return any(r.keypoints_hidden is not None for r in result.matched)
 
@@ -157,6 +170,7 @@ def breakdowns(result: EvaluationResult) -> dict[str, Any]:
         out["keypoints"] = keypoint_breakdown(result.matched)
     if _counts_hidden(result):
         out["ground_truth_shows_keypoints"] = hidden_breakdown(result.matched)
+        out["ground_truth_twin"] = twin_summary(result.matched)
     return out
 
 
@@ -214,7 +228,15 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
                   *_table([(r["bin"], r["n"], r, "mean") for r in keypoint_breakdown(result.matched)], 20), ""]
     if _counts_hidden(result):
         lines += ["By whether the ground-truth pose hides the labelled keypoints from the camera (means):",
-                  *_table([(r["bin"], r["n"], r, "mean") for r in hidden_breakdown(result.matched)], 20), ""]
+                  *_table([(r["bin"], r["n"], r, "mean") for r in hidden_breakdown(result.matched)], 20)]
+        twins = twin_summary(result.matched)
+        if twins["hides"]:
+            near = twins["fit_within_10_deg_of_twin"]
+            lines.append(f"of the {twins['hides']} whose pose hides them, {near} fits lie "
+                         f"within {TWIN_DEG:g} deg of the ground truth's depth-reversed twin (the car reflected in "
+                         "depth and mirrored left for right: the pose the clicks show when the ground truth is its "
+                         "mirror image)")
+        lines.append("")
     lines += [
         f"images scored: {result.n_images}; ground-truth images without predictions (not scored): "
         f"{result.n_gt_images_without_pred} of {result.n_gt_images}",
@@ -280,6 +302,7 @@ CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
     "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints", "keypoints_hidden",
+    "e_r_twin_deg",
 )
 
 
