@@ -58,7 +58,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from apollocar3d import learned_on_even, sorted_images
+from apollocar3d import learned_on, sorted_images
 from common import SPLITS, default_data_dir, machine
 
 from toosicubix.annotations.convert import load_images
@@ -280,7 +280,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
                        position_faces: bool = False, nearest: bool = False) -> dict:
     """Auto-naming on ApolloCar3D's real keypoints (see the module's docstring): per k, how often the nearest
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
-    keypoint positions learned on the even images only (:func:`apollocar3d.learned_on_even`), the odd images'
+    keypoint positions learned on the even images only (:func:`apollocar3d.learned_on`), the odd images'
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
     scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s. ``estimates``: as
     :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`. ``nearest``: name by the nearest keypoint,
@@ -292,7 +292,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
         sorted_ = sorted_images(folder)
         if design:
             sorted_ = sorted_[0::2]
-        mapping = _faces(learned_on_even(sorted_, cameras), position_faces)
+        mapping = _faces(learned_on(sorted_[0::2], cameras, "even images"), position_faces)
         scored_images = {im.id for im in sorted_[1::2]}
     else:
         mapping = _faces(load_mapping("apollocar3d-66")[0], position_faces)
@@ -398,7 +398,7 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True, de
     images_sorted = sorted_images(folder)
     if design:
         images_sorted = images_sorted[0::2]
-    mapping = _faces(learned_on_even(images_sorted, cameras), position_faces)
+    mapping = _faces(learned_on(images_sorted[0::2], cameras, "even images"), position_faces)
     scored_images = {im.id for im in images_sorted[1::2]}
     truth = {(im.id, car.id): car for im in read_apollocar3d(keypoints_path, read_car_models(
         folder / "car_models.json")) for car in im.cars}
