@@ -17,6 +17,7 @@ from toosicubix.cli import main
 from toosicubix.formats.coco import MappingFile
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.validation import validate_file
+from toosicubix.solver import SolverOptions
 
 #: Keypoints the twelve clicked ones leave: the front and right side (turned away from these rear-left views)
 #: and two more on the left side.
@@ -61,10 +62,18 @@ def test_fit_suggests_the_mappings_keypoints_not_clicked_yet(keypoint_file, tmp_
     assert (tmp_path / "two" / "results.json").read_bytes() == (tmp_path / "one" / "results.json").read_bytes()
     summary = fit_file(keypoint_file, tmp_path / "pilot", next_clicks=20, keypoints=mapping,
                        estimate_road_normal=True)
-    assert summary.pilot.results is not None  # reused
-    assert _suggested(tmp_path / "pilot") == suggested
+    assert summary.pilot.results is None  # the pilot fits without the robust loss, keypoint vehicles get it
     a, b = (json.loads((d / "results.json").read_text())["images"] for d in (tmp_path / "pilot", tmp_path / "one"))
     assert a == b  # every vehicle as fitted without a pilot, suggestions included
+    plain = SolverOptions(robust_loss="none")
+    fit_file(keypoint_file, tmp_path / "plain-one", next_clicks=20, keypoints=mapping, options=plain)
+    summary = fit_file(keypoint_file, tmp_path / "plain-pilot", next_clicks=20, keypoints=mapping,
+                       estimate_road_normal=True, options=plain)
+    assert summary.pilot.results is not None  # without the robust loss the pilot fits as the batch: reused
+    assert _suggested(tmp_path / "plain-pilot") == _suggested(tmp_path / "plain-one")
+    a, b = (json.loads((d / "results.json").read_text())["images"]
+            for d in (tmp_path / "plain-pilot", tmp_path / "plain-one"))
+    assert a == b
     # Refined together with the ground plane, the vehicles keep keypoint suggestions.
     ground = {"normal": [0.0, -float(np.cos(np.deg2rad(9.0))), -float(np.sin(np.deg2rad(9.0)))]}
     fit_file(keypoint_file, tmp_path / "joint", next_clicks=20, keypoints=mapping, ground=ground, joint_ground=True)

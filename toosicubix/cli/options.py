@@ -221,7 +221,7 @@ _FITTING_OPTIONS = [
     click.option("--robust-loss", type=click.Choice(["auto", "cauchy", "none"]), default=SolverOptions.robust_loss,
                  show_default=True,
                  help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
-                      " auto: for vehicles with keypoint or plate clicks only."),
+                      " auto: for vehicles with keypoint or plate clicks only (real clicks), the others as with none."),
     click.option("--misfit-level", type=click.FloatRange(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
                  help="Test each fit's residuals against the click noise (chi-square at this level, e.g. 0.99): a "
                       "fit that fails is warned about ('misfit: ...', `residual_test` in results.json) and its sigmas "

@@ -15,6 +15,7 @@ from toosicubix.annotations.convert import with_ground
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
 from toosicubix.model import Image
+from toosicubix.parts.vocabulary import KINDS
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.fitting import KeypointCatalogue, add_next_clicks, iter_fit_images, stream_images
 from toosicubix.pipeline.road_normal import (
@@ -129,7 +130,7 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
     # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
     # road normal that would give some images a ground block.
-    own = bool(pilot and every and options == pilot_options
+    own = bool(pilot and every and _fitted_alike(pilot, options, pilot_options)
            and not any(n.normal is not None for n in (normals or {}).values()))
     pilot_next = next_clicks if own else 0
     if own and next_clicks > 0:
@@ -138,6 +139,15 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
         return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
                          pilot_next)
+
+
+def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: SolverOptions) -> bool:
+    """Whether the pilot's settings fit its vehicles as ``options`` do: the same settings, or ``options``' robust
+    loss is 'auto' and no pilot vehicle has a keypoint or plate click (which 'auto' alone would reweight)."""
+    if options == pilot_options:
+        return True
+    return replace(options, robust_loss="none") == pilot_options and options.robust_loss == "auto" and not any(
+        KINDS[part.kind].soft for im in pilot for v in im.vehicles for part in v.parts)
 
 
 def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
