@@ -163,3 +163,5 @@ def test_depth_reversed_twin():
     K = np.array([[2300.0, 0.0, 1700.0], [0.0, 2300.0, 1350.0], [0.0, 0.0, 1.0]])
     apart = project_pinhole(K, on_pose) - project_pinhole(K, reflected)
     assert np.max(np.linalg.norm(apart, axis=1)) < 5.0  # the depth offsets are a few % of 60 m: a few px
+    R_none, t_none = depth_reversed_twin(np.eye(3), np.array([0.0, 0.0, -0.75]), d)  # the box centre at the camera
+    assert np.isnan(R_none).all() and np.isnan(t_none).all()

@@ -262,12 +262,16 @@ def depth_reversed_twin(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, di
 
     Returns
     -------
-    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) of the twin (same dimensions, same box centre)
+    R_cam_vehicle : (3, 3); t_cam_vehicle : (3,) of the twin (same dimensions, same box centre); NaN when the box
+    centre is at the camera (no line of sight)
     """
     R_cam_vehicle = np.asarray(R_cam_vehicle, dtype=float)
     half_height = float(np.asarray(dimensions, dtype=float)[2]) / 2.0
     centre_cam = np.asarray(t_cam_vehicle, dtype=float) + R_cam_vehicle[:, 2] * half_height
-    sight = centre_cam / np.linalg.norm(centre_cam)
+    distance = float(np.linalg.norm(centre_cam))
+    if not distance > 0.0:
+        return np.full((3, 3), np.nan), np.full(3, np.nan)
+    sight = centre_cam / distance
     R_twin = (np.eye(3) - 2.0 * np.outer(sight, sight)) @ R_cam_vehicle @ np.diag([1.0, -1.0, 1.0])
     return R_twin, centre_cam - R_twin[:, 2] * half_height
 

@@ -193,6 +193,7 @@ def hides_clicks(labelled: int, hidden: int) -> bool:
     the labels outside ``seen_from`` by construction and for views nearly edge-on to a face."""
     return hidden >= HIDES_MIN and hidden >= HIDES_SHARE * labelled
 
+
 def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
     """The keypoint's offset from its ray (3,), camera frame, metres, were it at fractions ``at``."""
     r = s.ray_cam / np.linalg.norm(s.ray_cam)
