@@ -62,6 +62,7 @@ from toosicubix.parts.learned import (
     hides_clicks,
     learn_positions,
     learned_mapping,
+    offset_from_ray,
 )
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.priors.estimation import (
@@ -296,16 +297,16 @@ def calibration(objects: list[dict], of: str = "yaw") -> tuple[float | None, flo
     return float(np.mean(ratio <= 1)), float(np.mean(ratio <= 2))
 
 
-def contradicting_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict[str, str]:
+def contradicting_cars(images: list, learned: dict, samples: list) -> dict[str, str]:
     """The cars of ``images`` whose ground truth contradicts their clicks by rule 6 (RESULTS.md): at the
-    ground-truth pose their keypoints lie more than 0.5 m RMS from their rays, keypoints at the positions
-    learned (second pass) on ``learn_on``. For a report beside the figures; no car is left out of them.
+    ground-truth pose their keypoints (``samples``) lie more than 0.5 m RMS from their rays, keypoints at the
+    ``learned`` positions (:func:`learned_and_samples`). For a report beside the figures; no car is left out of
+    them.
 
     Each maps to what its clicks do fit, a diagnostic of the data that looks at no fit: 'left and right
     swapped' when they lie within :data:`EXPLAINED_M` RMS of their rays at the car's own ground-truth pose with
     every keypoint's lateral position negated (its left for its right); 'another car's pose' when at the pose
     of another car of the same image (with or without the swap); else 'neither'."""
-    learned, samples = _learned_and_samples(images, learn_on, cameras, names)
     bad = contradicting(samples, learned, CONTRADICTION_M)
     of_car: dict[str, list] = {}
     for sample in samples:
@@ -315,26 +316,25 @@ def contradicting_cars(images: list, learn_on: list, cameras, names: list[str]) 
     kinds = {}
     for key, car_samples in of_car.items():
         image_id, car_id = key.split("/", 1)
-        fits = {(str(c.id) == car_id, swapped): _rms_off_rays(car_samples, learned, c, swapped)
+        fits = {(str(c.id), swapped): _off_rays(_at_pose(car_samples, c), learned, swapped)
                 for c in cars[image_id] for swapped in (False, True)}
-        if fits.get((True, True), np.inf) <= EXPLAINED_M:
+        if fits.get((car_id, True), np.inf) <= EXPLAINED_M:
             kinds[car_id] = "left and right swapped"
-        elif min([v for (own, _), v in fits.items() if not own], default=np.inf) <= EXPLAINED_M:
+        elif min([v for (other, _), v in fits.items() if other != car_id], default=np.inf) <= EXPLAINED_M:
             kinds[car_id] = "another car's pose"
         else:
             kinds[car_id] = "neither"
     return kinds
 
 
-def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict[str, dict]:
-    """The cars of ``images`` whose ground truth hides their clicks by rule 17 (RESULTS.md), each with how many of
+def hiding_cars(learned: dict, samples: list) -> dict[str, dict]:
+    """The cars whose ground truth hides their clicks (``samples``) by rule 17 (RESULTS.md), each with how many of
     its labelled keypoints have learned ``seen_from`` faces (``labelled_with_faces``) and how many of those its
     ground-truth pose turns away from the camera (``hidden``); and, at the ground truth's depth-reversed twin
-    (:func:`twin_pose`), the keypoints' RMS distance from their rays (``twin_off_rays_m``; ``off_rays_m`` at the
-    ground truth) and how many it turns away (``twin_hidden``). Positions and faces learned (second pass) on
-    ``learn_on``. Every keypoint of ApolloCar3D is labelled as seen (v = 2). A diagnostic of the data that looks
-    at no fit; no car is left out of any figure."""
-    learned, samples = _learned_and_samples(images, learn_on, cameras, names)
+    (:func:`toosicubix.geometry.depth_reversed_twin`), the keypoints' RMS distance from their rays
+    (``twin_off_rays_m``; ``off_rays_m`` at the ground truth) and how many it turns away (``twin_hidden``).
+    Positions and faces ``learned`` (:func:`learned_and_samples`). Every keypoint of ApolloCar3D is labelled as
+    seen (v = 2). A diagnostic of the data that looks at no fit; no car is left out of any figure."""
     counts = hidden_by_ground_truth(samples, learned)
     of_car: dict[str, list] = {}
     for sample in samples:
@@ -355,20 +355,24 @@ def hiding_cars(images: list, learn_on: list, cameras, names: list[str]) -> dict
     return out
 
 
-def _off_rays(samples: list, learned: dict) -> float:
-    """RMS distance (m) of the keypoints ``samples`` (one car, at the pose they carry) from their rays, at the
-    ``learned`` positions of their prototype."""
-    squares = []
-    for s in samples:
-        position = learned.get(s.prototype, {}).get(s.name)
-        if position is not None:
-            r = s.ray_cam / np.linalg.norm(s.ray_cam)
-            Y = s.R_cam_vehicle @ (s.dimensions * position.at) + s.t_cam_vehicle
-            squares.append(float(np.sum((Y - r * (r @ Y)) ** 2)))
-    return float(np.sqrt(np.mean(squares))) if squares else float("nan")
+def _off_rays(samples: list, learned: dict, swapped: bool = False) -> float:
+    """RMS distance (m) of the keypoints ``samples`` (one car, at the pose and size they carry) from their rays, at
+    the ``learned`` positions of their prototype, lateral positions negated when ``swapped``; inf when none of
+    them is learned."""
+    flip = np.array([1.0, -1.0, 1.0]) if swapped else np.ones(3)
+    squares = [float(np.sum(offset_from_ray(s, learned[s.prototype][s.name].at * flip) ** 2))
+               for s in samples if s.name in learned.get(s.prototype, {})]
+    return float(np.sqrt(np.mean(squares))) if squares else np.inf
 
 
-def _learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:
+def _at_pose(samples: list, car) -> list:
+    """The keypoint samples of one car as if it stood at ``car``'s ground-truth pose and size (``car``: another car
+    of the image, or its own), with the prototype of ``car``'s type."""
+    return [replace(s, prototype=PROTOTYPE_OF_TYPE.get(car.model.type, "Car"), R_cam_vehicle=car.R_cam_vehicle,
+                    t_cam_vehicle=car.t_cam_vehicle, dimensions=car.model.dimensions) for s in samples]
+
+
+def learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:
     """Keypoint positions learned (second pass, rule 6) on ``learn_on``, and the labelled keypoints of ``images``."""
     K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in [*images, *learn_on]}
     learned = learn_positions(keypoint_samples(learn_on, names, K_of), 5, CONTRADICTION_M)
@@ -414,22 +418,6 @@ def contradicting_by_depth(images: list, scored: set[str], kinds: dict[str, str]
         out[f"{lo:g}+ m" if np.isinf(hi) else f"{lo:g}-{hi:g} m"] = {
             "cars": len(cars), "contradicting": sum(c in kinds for c in cars)}
     return out
-
-
-def _rms_off_rays(samples: list, learned: dict, car, swapped: bool) -> float:
-    """RMS distance (m) of a car's keypoints from their rays, were the car at ``car``'s ground-truth pose and
-    size (``car``: another car of the image, or its own), lateral positions negated when ``swapped``."""
-    prototype = PROTOTYPE_OF_TYPE.get(car.model.type, "Car")
-    squares = []
-    for s in samples:
-        position = learned.get(prototype, {}).get(s.name)
-        if position is None:
-            continue
-        at = position.at * np.array([1.0, -1.0, 1.0]) if swapped else position.at
-        r = s.ray_cam / np.linalg.norm(s.ray_cam)
-        Y = car.R_cam_vehicle @ (car.model.dimensions * at) + car.t_cam_vehicle
-        squares.append(float(np.sum((Y - r * (r @ Y)) ** 2)))
-    return float(np.sqrt(np.mean(squares))) if squares else np.inf
 
 
 def format_row(r: dict) -> str:
@@ -543,7 +531,8 @@ def main() -> int:
         print(f"all    rows: the bundled positions on {len(images)} images, {bundled} (odd rows: positions learned "
               f"on this folder's even images, out of sample)", flush=True)
     normal_of = {h.name: road_normal(h.learn) for h in halves}
-    contradicting_of = {h.name: contradicting_cars(h.score, h.learn, cameras, names) for h in halves}
+    data_of = {h.name: learned_and_samples(h.score, h.learn, cameras, names) for h in halves}
+    contradicting_of = {h.name: contradicting_cars(h.score, *data_of[h.name]) for h in halves}
     ends_of = {h.name: ends_named(h.score, coco, names, contradicting_of[h.name]) for h in halves}
     for half, ends in ends_of.items():
         told = "; ".join(f"{k} {v['shown end']} / {v['hidden end']}" for k, v in sorted(ends.items()))
@@ -554,7 +543,7 @@ def main() -> int:
         print(f"{half:<6} scored cars' ground-truth up axes from the camera's road normal (a diagnostic of the data): "
               f"mean {scatter['mean_deg']:.2f} deg, median {scatter['median_deg']:.2f}, 90 % {scatter['p90_deg']:.2f}",
               flush=True)
-    hiding_of = {h.name: hiding_cars(h.score, h.learn, cameras, names) for h in halves}
+    hiding_of = {h.name: hiding_cars(*data_of[h.name]) for h in halves}
     for half, found in hiding_of.items():
         flagged = set(found) & scored
         twins = {car for car in flagged if found[car]["twin_hidden"] == 0

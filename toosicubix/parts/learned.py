@@ -160,7 +160,7 @@ def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, Le
     for s in samples:
         position = learned.get(s.prototype, {}).get(s.name)
         if position is not None:
-            squares[s.vehicle].append(float(np.sum(_offset_cam(s, position.at) ** 2)))
+            squares[s.vehicle].append(float(np.sum(offset_from_ray(s, position.at) ** 2)))
     return {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
 
 
@@ -194,7 +194,7 @@ def hides_clicks(labelled: int, hidden: int) -> bool:
     return hidden >= HIDES_MIN and hidden >= HIDES_SHARE * labelled
 
 
-def _offset_cam(s: KeypointSample, at: np.ndarray) -> np.ndarray:
+def offset_from_ray(s: KeypointSample, at: np.ndarray) -> np.ndarray:
     """The keypoint's offset from its ray (3,), camera frame, metres, were it at fractions ``at``."""
     r = s.ray_cam / np.linalg.norm(s.ray_cam)
     Y = s.R_cam_vehicle @ (s.dimensions * at) + s.t_cam_vehicle
