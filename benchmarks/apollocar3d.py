@@ -55,7 +55,7 @@ from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
-from toosicubix.geometry import depth_reversed_twin, geodesic_angle
+from toosicubix.geometry import depth_reversed_twin
 from toosicubix.parts.learned import (
     contradicting,
     hidden_by_ground_truth,
@@ -209,8 +209,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         up_pred, up_gt = m.pred.R_cam_vehicle[:, 2], m.gt.R_cam_vehicle[:, 2]
         o["tilt_error_deg"] = float(np.degrees(np.arccos(np.clip(up_pred @ up_gt, -1.0, 1.0))))
         if m.pred_id in hiding:
-            R_twin, _ = depth_reversed_twin(m.gt.R_cam_vehicle, m.gt.t_cam_vehicle, m.gt.dimensions)
-            o["fit_from_twin_deg"] = float(np.degrees(geodesic_angle(m.pred.R_cam_vehicle, R_twin)))
+            o["fit_from_twin_deg"] = m.e_r_twin_deg  # evaluate's E_R against the ground truth's twin
         o["downweighted"] = len(fit.get("downweighted", []))
         o["misfit"] = bool((fit.get("residual_test") or {}).get("misfit"))
         objects.append(o)

@@ -131,14 +131,16 @@ def _counts_keypoints(result: EvaluationResult) -> bool:
 AGREES, HIDES = "shows them", f"hides >= {HIDES_MIN} and 1/4"
 
 
+def _hides(r: MatchedObject) -> bool | None:
+    """Whether the object's ground-truth pose hides its labelled keypoints
+    (:func:`toosicubix.parts.learned.hides_clicks`); None where the ground truth does not count them."""
+    return None if r.keypoints_hidden is None else hides_clicks(r.keypoints or 0, r.keypoints_hidden)
+
+
 def hidden_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
     """Statistics of the objects whose ground-truth pose shows its labelled keypoints, and of those whose pose hides
-    them (:func:`toosicubix.parts.learned.hides_clicks`), over the records that count them."""
-    def hides(r: MatchedObject) -> bool:
-        return hides_clicks(r.keypoints or 0, r.keypoints_hidden or 0)
-
-    return _breakdown(records, [(AGREES, lambda r: r.keypoints_hidden is not None and not hides(r)),
-                                (HIDES, lambda r: r.keypoints_hidden is not None and hides(r))])
+    them (:func:`_hides`), over the records that count them."""
+    return _breakdown(records, [(AGREES, lambda r: _hides(r) is False), (HIDES, lambda r: _hides(r) is True)])
 
 
 #: A fit this close (degrees, E_R) to the ground truth's depth-reversed twin counts as that twin.
@@ -148,8 +150,7 @@ TWIN_DEG = 10.0
 def twin_summary(records: Sequence[MatchedObject]) -> dict[str, int]:
     """Of the objects whose ground-truth pose hides their labelled keypoints, how many there are and how many fits
     lie within :data:`TWIN_DEG` of the ground truth's depth-reversed twin."""
-    hiding = [r for r in records if r.keypoints_hidden is not None
-              and hides_clicks(r.keypoints or 0, r.keypoints_hidden)]
+    hiding = [r for r in records if _hides(r)]
     return {"hides": len(hiding), "fit_within_10_deg_of_twin": sum(
         r.e_r_twin_deg is not None and r.e_r_twin_deg <= TWIN_DEG for r in hiding)}
 
