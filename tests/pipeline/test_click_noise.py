@@ -15,6 +15,7 @@ from toosicubix.model import Image, Part, Vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.click_noise import (
     MIN_DOF,
+    ClickNoise,
     Redundancy,
     estimate_from_pilot,
     pilot_images,
@@ -124,3 +125,13 @@ def test_fit_says_where_its_click_noise_came_from(tmp_path):
     header = json.loads((tmp_path / "given" / "results.json").read_text())
     assert "click_noise" not in header and header["settings"]["click_sigma"] == 0.7
     assert summary.pilot.click_noise.source == "given"
+
+
+def test_an_estimate_says_it_is_on_top_of_the_learned_spread():
+    """The estimate is the noise the keypoints' learned spread leaves unexplained: 0.4 px on real clicks is no
+    claim that people click to 0.4 px, and the summary says so; at the lower bound it asks why."""
+    line = ClickNoise(0.39, "estimated", 0.39, 10632.0, 345, 345).describe()
+    assert line.startswith("click noise: 0.39 px on top of each keypoint's learned spread, estimated from the "
+                           "residuals of 345 vehicles")
+    assert "its lower bound" in ClickNoise(0.1, "estimated", 0.1, 10632.0, 345, 345).describe()
+    assert ClickNoise(0.7, "given").describe() == "click noise: 0.7 px (given)"

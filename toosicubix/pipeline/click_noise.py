@@ -86,9 +86,9 @@ class ClickNoise:
                            "positions learned on these very clicks?)")
             elif self.sigma_px >= SIGMA_BOUNDS[1]:
                 bounded = " (its upper bound: are the clicks on their parts?)"
-            return (f"click noise: {self.sigma_px:.2f} px{bounded}, estimated from the residuals of "
-                    f"{self.redundant_vehicles} vehicles with redundant clicks ({self.dof:.0f} degrees of freedom; "
-                    f"pilot fit of {self.pilot_vehicles}); --click-sigma sets it")
+            return (f"click noise: {self.sigma_px:.2f} px on top of each keypoint's learned spread{bounded}, "
+                    f"estimated from the residuals of {self.redundant_vehicles} vehicles with redundant clicks "
+                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}); --click-sigma sets it")
         if not self.redundant_vehicles:
             return (f"click noise: {self.sigma_px:g} px (default: no vehicle has redundant clicks that are all "
                     f"keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
