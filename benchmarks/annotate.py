@@ -20,8 +20,8 @@ Auto-naming accuracy is how often the name given to an unnamed click is the true
 mapping, its parts in a seeded order (one generator, seed 0, shuffling each car in file order); the first k
 named and fitted as the page fits them (``fit_one`` with the click noise and road normals the page estimates from
 a file of the scored images, :func:`loaded_as_the_page`; ``--page-defaults``: 1.5 px and no road); then every other
-click of the car is named by the page's rule (:func:`toosicubix.web.session.naming_candidates` and
-:func:`~toosicubix.web.session.nearest_parts`) among every part of the mapping not in the first k, each
+click of the car is named by the page's rule (:func:`toosicubix.web.naming.naming_candidates` and
+:func:`~toosicubix.web.naming.nearest_parts`) among every part of the mapping not in the first k, each
 keypoint at its learned ``at`` fractions of the fitted cuboid (the mapping's positions are learned on these
 same 100 images: in-sample for the positions; ``--out-of-sample`` learns them on the even images, as
 ``benchmarks/apollocar3d.py`` does, and scores the odd images' cars).
@@ -75,8 +75,9 @@ from toosicubix.simulate.annotator import (
 )
 from toosicubix.solver import SolverOptions
 from toosicubix.web.client import Client
+from toosicubix.web.naming import NAMING_GRAZING_DEG, naming_candidates, nearest_parts
 from toosicubix.web.server import serve_in_thread
-from toosicubix.web.session import NAMING_GRAZING_DEG, Session, naming_candidates, nearest_parts
+from toosicubix.web.session import Session
 
 STRATEGIES = ("named", "auto", "guided")
 
@@ -282,7 +283,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
     candidate is the true part, and how often the true part is among the nearest two. ``out_of_sample``: the
     keypoint positions learned on the even images only (:func:`apollocar3d.learned_on`), the odd images'
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
-    scored). ``grazing_deg``: :func:`~toosicubix.web.session.naming_candidates`'s. ``estimates``: as
+    scored). ``grazing_deg``: :func:`~toosicubix.web.naming.naming_candidates`'s. ``estimates``: as
     :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`. ``nearest``: name by the nearest keypoint,
     not the most probable (as before rule 15, RESULTS.md)."""
     keypoints_path = folder / "apollocar3d_val_dev.json"

@@ -104,13 +104,14 @@ def test_unknown_prototype_in_the_file(scene, tmp_path):
 def _ground_given(monkeypatch, scene, tmp_path, *options: str):
     """The ground block `annotate` hands the session with ``options`` (the session stops the command)."""
     from toosicubix.web import session
+    from toosicubix.web.request_fields import ApiError
 
     given = {}
 
     class Recording:
         def __init__(self, *args, ground=None, **kwargs):
             given["ground"] = ground
-            raise session.ApiError("stop here")
+            raise ApiError("stop here")
 
     monkeypatch.setattr(session, "Session", Recording)
     image, cameras = scene

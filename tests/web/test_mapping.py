@@ -14,7 +14,8 @@ from tests.web.conftest import make_session
 from tests.web.synthetic import CAMERA, DIMENSIONS, R_CAM_VEHICLE, T_CAM_VEHICLE
 from toosicubix.formats.coco import MappingFile
 from toosicubix.priors.table import load_priors
-from toosicubix.web.session import ApiError, Session, load_cameras
+from toosicubix.web.request_fields import ApiError
+from toosicubix.web.session import Session, load_cameras
 
 #: Keypoints on the synthetic car's front and left side (it shows its front-left corner to the camera), and two
 #: on faces turned away. Fractions of (dx, dy, dz).

@@ -8,7 +8,7 @@ import pytest
 from tests.web.synthetic import CAMERA, DIMENSIONS, R_CAM_VEHICLE, T_CAM_VEHICLE
 from toosicubix.formats.results import VehicleResult
 from toosicubix.parts.linear import TypicalKeypoint
-from toosicubix.web.session import naming_candidates, nearest_parts
+from toosicubix.web.naming import naming_candidates, nearest_parts
 
 FRONT_LEFT = [0.5, 0.4, 0.5]  # on the front and left faces, both turned to the camera
 REAR_RIGHT = [-0.5, -0.4, 0.5]  # on the faces turned away

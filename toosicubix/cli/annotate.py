@@ -75,8 +75,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.annotations.schema import InputFileError, parse_ground_block
     from toosicubix.pipeline.settings import ground_overrides
     from toosicubix.priors.table import load_priors
+    from toosicubix.web.request_fields import ApiError
     from toosicubix.web.server import serve
-    from toosicubix.web.session import ApiError, Session, load_cameras
+    from toosicubix.web.session import Session, load_cameras
     from toosicubix.web.worker import WorkerProcess
 
     estimate_road = road_normal != "none"

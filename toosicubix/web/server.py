@@ -31,7 +31,8 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from toosicubix.annotations.schema import InputFileError
-from toosicubix.web.session import ApiError, Session
+from toosicubix.web.request_fields import ApiError
+from toosicubix.web.session import Session
 
 #: Largest request body, bytes.
 MAX_BODY = 1 << 20

@@ -14,10 +14,10 @@ the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a seco
 ``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
 (unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
 
-Auto-naming: a click made without a name is named as soon as the vehicle's named clicks fix a cuboid (its fit
-succeeds): it takes the name of the point part whose predicted position is nearest, among the parts not yet
-clicked on a face turned to the camera (:func:`toosicubix.solver.guidance.suggest_clicks` places each at its
-typical position on the fitted cuboid). The response names the choice and the runner-up.
+Auto-naming (:mod:`toosicubix.web.naming`): a click made without a name is named as soon as the vehicle's named
+clicks fix a cuboid (its fit succeeds), after the part most probably clicked there among those not yet clicked on
+a face turned to the camera. The response names the choice and the runner-up. The requests' fields are checked by
+:mod:`toosicubix.web.request_fields`.
 
 A keypoint mapping (``--mapping``, :class:`toosicubix.formats.coco.MappingFile`) adds its keypoints to what the
 page makes: a click named one is a ``keypoint`` part with the mapping's position for the vehicle's prototype,
@@ -36,7 +36,7 @@ import os
 import re
 import tempfile
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -67,7 +67,16 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.priors.table import Priors
-from toosicubix.solver import MIN_DEPTH, SolverOptions, faces_turned_to_camera
+from toosicubix.solver import SolverOptions
+from toosicubix.web.naming import naming_candidates, nearest_parts
+from toosicubix.web.request_fields import (
+    ApiError,
+    Conflict,
+    checked_box2d,
+    checked_kind_name,
+    checked_known,
+    checked_pixels,
+)
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -75,29 +84,8 @@ UNDO_DEPTH = 500
 TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
-#: How far past edge-on (degrees) a face a keypoint sits near may be turned for an unnamed click to be named that
-#: keypoint; negative: turned toward the camera by at least that. 0: any face turned toward the camera (a click
-#: shows its part is seen), chosen by RESULTS.md's rule 12 over the targets' -5 (VISIBLE_MIN_DEG).
-NAMING_GRAZING_DEG = 0.0
 #: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
 FRONT_FACE = (0, 3, 7, 4)
-
-
-class ApiError(Exception):
-    """A request the session refuses: ``status`` is the HTTP status, the message says why."""
-
-    status = 400
-
-    def __init__(self, message: str, status: int | None = None):
-        super().__init__(message)
-        if status is not None:
-            self.status = status
-
-
-class Conflict(ApiError):
-    """A change made on a stale revision, or over a file changed on disk by someone else (HTTP 409)."""
-
-    status = 409
 
 
 @dataclass
@@ -461,7 +449,8 @@ class Session:
                     extra = vehicles.get(v.id)
                     if extra is not None:
                         v.done = bool(extra["done"])
-                        v.parts.extend(ClickedPart(None, None, _pixels([uv], 1, "uv")) for uv in extra["unnamed"])
+                        v.parts.extend(ClickedPart(None, None, checked_pixels([uv], 1, "uv"))
+                                       for uv in extra["unnamed"])
         except (KeyError, TypeError, AttributeError, ApiError) as exc:
             raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
 
@@ -686,7 +675,7 @@ class Session:
     def _op_add_vehicle(self, image: ImageState, r: dict) -> dict[str, Any]:
         prototype = r.get("prototype", self.prototype)
         self._check_prototype(prototype)
-        box = _box(r.get("box2d"))
+        box = checked_box2d(r.get("box2d"))
         used = {int(v.id) for v in image.vehicles if v.id.isdigit()}
         vehicle_id = str(max(used, default=0) + 1)
         image.vehicles.append(VehicleState(vehicle_id, prototype, box))
@@ -702,7 +691,7 @@ class Session:
                     extra = self._keypoint_extra(v.prototype, part.name, (part.extra or {}).get("visible"))
                     part.extra = extra or part.extra
         if "box2d" in r:
-            v.box2d = _box(r["box2d"])
+            v.box2d = checked_box2d(r["box2d"])
         if "done" in r:
             if not isinstance(r["done"], bool):
                 raise ApiError(f"done: expected true or false, got {r['done']!r}")
@@ -715,20 +704,20 @@ class Session:
         v = self._vehicle(image, r)
         kind, name = r.get("kind"), r.get("name")
         if kind is None and name is None:
-            uv = _pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv")
             v.parts.append(ClickedPart(None, None, uv))
         elif kind == "keypoint" and (extra := self._keypoint_extra(v.prototype, name)) is not None:
-            uv = _pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv")
             self._check_not_clicked(v, kind, name)
             v.parts.append(ClickedPart(kind, name, uv, extra=extra))
         else:
             self._check_page_made(kind, name)
-            kind, name = _kind_name(kind, name)
-            uv = _pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
+            kind, name = checked_kind_name(kind, name)
+            uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
             self._check_not_clicked(v, kind, name)
             known = None
             if vocabulary.KINDS[kind].known:
-                known = _known(r.get("known"))
+                known = checked_known(r.get("known"))
             v.parts.append(ClickedPart(kind, name, uv, known))
         return {"part": len(v.parts) - 1}
 
@@ -738,7 +727,7 @@ class Session:
         click = r.get("click", 0)
         if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
             raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r}")
-        part.uv[click] = _pixels([r.get("uv")], 1, "uv")[0]
+        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv")[0]
 
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -757,7 +746,7 @@ class Session:
             raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
                            f"import the clicks again to rename it{other}")
         self._check_page_made(r.get("kind"), r.get("name"))
-        kind, name = _kind_name(r.get("kind"), r.get("name"))
+        kind, name = checked_kind_name(r.get("kind"), r.get("name"))
         if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
             raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
                            f"{len(part.uv)}")
@@ -801,7 +790,8 @@ class Session:
     def _check_page_made(self, kind: Any, name: Any) -> None:
         """A kind whose annotations need a typical position (keypoints, plates: from a mapping) is made on the
         page only for the given mapping's keypoints (the caller's case): anything else of such a kind is refused
-        (ApiError); other kinds, known or not, pass (:func:`_kind_name` checks them)."""
+        (ApiError); other kinds, known or not, pass
+        (:func:`~toosicubix.web.request_fields.checked_kind_name` checks them)."""
         entry = vocabulary.KINDS.get(kind) if isinstance(kind, str) else None
         if entry is None or not any(key == "at" for key, _ in entry.fields_extra):
             return
@@ -835,112 +825,5 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
     return "estimated" if ground.from_batch else "given"
 
 
-def naming_candidates(result: VehicleResult, camera: Camera,
-                      keypoints: Mapping[str, TypicalKeypoint] | None = None,
-                      points: set[str] | None = None,
-                      grazing_deg: float = NAMING_GRAZING_DEG,
-                      click_sigma: float | None = None) -> list[dict[str, Any]]:
-    """What an unnamed click on a fitted vehicle may be, each as ``next_clicks`` has it (kind, name, uv (1, 2),
-    visible): the vocabulary's point parts among the fit's ``next_clicks`` (at their typical positions; only
-    those named in ``points`` when given), then each keypoint of ``keypoints`` projected from its typical place
-    (``at``, fractions of the dimensions) on the fitted cuboid, visible when one of the faces it is seen from
-    (:attr:`~toosicubix.parts.linear.TypicalKeypoint.faces`) is turned to the camera (``grazing_deg``: turned
-    away by up to that, negative: toward it by at least that), or when it has none. A keypoint behind the camera
-    is left out. With ``click_sigma`` (pixels), each keypoint also gets ``sigma_px``, how far a click of it may
-    lie from its predicted pixel (the click noise and its spread projected at its depth), and ``prior``, its
-    ``clicked_share``: :func:`nearest_parts` then ranks by probability (RESULTS.md, rule 15)."""
-    out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
-    if not keypoints or not result.ok:
-        return out
-    R, t, d = (np.asarray(x, dtype=float) for x in (result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions))
-    facing = faces_turned_to_camera(R, t, d, grazing_deg=grazing_deg)
-    for name, k in keypoints.items():
-        point_cam = R @ (d * np.asarray(k.at, dtype=float)) + t
-        if point_cam[2] <= MIN_DEPTH:
-            continue
-        faces = k.faces
-        candidate = {"kind": "keypoint", "name": name, "uv": camera.project(point_cam[None]).tolist(),
-                     "visible": faces is None or any(facing[f] for f in faces)}
-        if click_sigma is not None:
-            candidate["sigma_px"] = _spread_px(camera, point_cam[2], np.asarray(k.spread, dtype=float) * d,
-                                               click_sigma)
-            candidate["prior"] = float(k.clicked_share)
-        out.append(candidate)
-    return out
-
-
-def _spread_px(camera: Camera, depth: float, spread_m: np.ndarray, click_sigma: float) -> float:
-    """How far, per image coordinate, a click of a keypoint at ``depth`` (metres) with ``spread_m`` (3,) (its
-    spread, metres per vehicle axis) may lie from its predicted pixel: the click noise and the spread projected,
-    two of its three axes lying in the image on average."""
-    f = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
-    return float(math.sqrt(click_sigma**2 + (f / depth) ** 2 * float(spread_m @ spread_m) / 3.0))
-
-
-def nearest_parts(uv: list[float], suggestions: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The point parts and keypoints among ``suggestions`` (:func:`naming_candidates`: kind, name, uv, visible)
-    that are visible, each with its ``kind`` and ``distance_px`` to the pixel ``uv``: the most probable first
-    when every one has a ``sigma_px`` and a ``prior`` (the negative log of prior times a 2D Gaussian of the
-    distance, ``-ln prior + r^2 / (2 s^2) + 2 ln s``), else the nearest first."""
-    out, costs = [], []
-    for s in suggestions:
-        if s["kind"] not in ("point", "keypoint") or not s["visible"]:
-            continue
-        distance = math.dist(uv, s["uv"][0])
-        out.append({"kind": s["kind"], "name": s["name"], "distance_px": round(distance, 2), "uv": s["uv"][0]})
-        if "sigma_px" in s and "prior" in s:
-            sigma = s["sigma_px"]
-            costs.append(-math.log(s["prior"]) + distance**2 / (2 * sigma**2) + 2 * math.log(sigma))
-    if out and len(costs) == len(out):
-        return [o for _, o in sorted(zip(costs, out, strict=True), key=lambda co: co[0])]
-    return sorted(out, key=lambda s: s["distance_px"])
-
-
 def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
-
-
-def _number(value: Any, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ApiError(f"{what}: expected a finite number, got {json.dumps(value)}")
-    return float(value)
-
-
-def _pixels(value: Any, count: int, what: str) -> list[list[float]]:
-    if not isinstance(value, list) or len(value) != count:
-        raise ApiError(f"{what}: expected {count} pixel{'s' if count > 1 else ''} [[x, y], ...], got "
-                       f"{json.dumps(value)[:60]}")
-    out = []
-    for k, row in enumerate(value):
-        if not isinstance(row, list) or len(row) != 2:
-            raise ApiError(f"{what}[{k}]: expected [x, y], got {json.dumps(row)[:60]}")
-        out.append([_number(row[0], f"{what}[{k}][0]"), _number(row[1], f"{what}[{k}][1]")])
-    return out
-
-
-def _box(value: Any) -> list[float] | None:
-    if value is None:
-        return None
-    if not isinstance(value, list) or len(value) != 4:
-        raise ApiError(f"box2d: expected [x1, y1, x2, y2] or null, got {json.dumps(value)[:60]}")
-    box = [_number(x, f"box2d[{k}]") for k, x in enumerate(value)]
-    if not (box[2] > box[0] and box[3] > box[1]):
-        raise ApiError(f"box2d: expected x1 < x2 and y1 < y2, got {box}")
-    return box
-
-
-def _known(value: Any) -> tuple[float, float]:
-    if not isinstance(value, list) or len(value) != 2:
-        raise ApiError(f"known: expected [metres, sigma] for a length, got {json.dumps(value)[:60]}")
-    metres, sigma = _number(value[0], "known[0]"), _number(value[1], "known[1]")
-    if metres <= 0 or sigma <= 0:
-        raise ApiError(f"known: expected positive metres and sigma, got {[metres, sigma]}")
-    return metres, sigma
-
-
-def _kind_name(kind: Any, name: Any) -> tuple[str, str]:
-    if not isinstance(kind, str) or kind not in vocabulary.KINDS:
-        raise ApiError(f"kind: expected one of {', '.join(vocabulary.KINDS)}, got {kind!r:.60}")
-    if not isinstance(name, str) or name not in vocabulary.KINDS[kind].names:
-        raise ApiError(f"name: expected a {kind} name ({', '.join(vocabulary.KINDS[kind].names)}), got {name!r}")
-    return kind, name
