@@ -9,7 +9,7 @@ from tests.conftest import REPO
 from toosicubix.camera import Camera
 from toosicubix.formats.results import read_results
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.solver import MAX_DEPTH_M, MIN_CLICK_SPREAD_PX, _absurd_depth, _degenerate_spread
+from toosicubix.solver.degenerate import MAX_DEPTH_M, MIN_CLICK_SPREAD_PX, absurd_depth, degenerate_spread
 
 SAMPLE = REPO / "samples" / "annotations.json"
 KEYS = ("xy", "left", "right", "tail", "head")
@@ -46,20 +46,20 @@ def test_degenerate_clicks_fail_with_the_reason_and_the_batch_goes_on(tmp_path, 
 
 def test_spread_checks_know_a_real_vehicle_from_a_blob(rng):
     uv_vehicle = np.array([[825.8, 272.9], [834.8, 258.1], [728.0, 268.8], [732.3, 223.4], [807.0, 224.9]])
-    assert _degenerate_spread(uv_vehicle) is None
+    assert degenerate_spread(uv_vehicle) is None
     blob = 500.0 + rng.uniform(-1.0, 1.0, size=(8, 2))  # RMS spread about 0.6 px
-    assert "one cluster" in _degenerate_spread(blob)
+    assert "one cluster" in degenerate_spread(blob)
     line = np.column_stack([np.linspace(0, 100, 8), np.linspace(0, 50, 8)])  # exactly collinear
-    assert "one line" in _degenerate_spread(line)
-    assert _degenerate_spread(line[:2]) is None  # too few clicks is judged elsewhere
+    assert "one line" in degenerate_spread(line)
+    assert degenerate_spread(line[:2]) is None  # too few clicks is judged elsewhere
 
 
 def test_absurd_depth():
     camera = Camera(K=np.array([[720.0, 0, 620], [0, 720, 180], [0, 0, 1]]))
     d = np.array([4.0, 1.7, 1.5])
-    assert _absurd_depth(camera, np.array([1.0, 1.5, 20.0]), d) is None
-    assert "absurd depth (3500 m" in _absurd_depth(camera, np.array([0.0, 1.5, 3500.0]), d)
+    assert absurd_depth(camera, np.array([1.0, 1.5, 20.0]), d) is None
+    assert "absurd depth (3500 m" in absurd_depth(camera, np.array([0.0, 1.5, 3500.0]), d)
     # 720 px * 4 m / depth < MIN_CLICK_SPREAD_PX beyond 720 m: the vehicle would be a dot.
     far = 720.0 * 4.0 / MIN_CLICK_SPREAD_PX + 1.0
-    assert far < MAX_DEPTH_M and "spans 4 px" not in _absurd_depth(camera, np.array([0.0, 0.0, far]), d)
-    assert _absurd_depth(camera, np.array([0.0, 0.0, np.nan]), d) is not None
+    assert far < MAX_DEPTH_M and "spans 4 px" not in absurd_depth(camera, np.array([0.0, 0.0, far]), d)
+    assert absurd_depth(camera, np.array([0.0, 0.0, np.nan]), d) is not None

@@ -11,6 +11,7 @@ ranked by the pixel cost. The best few with distinct rotations are refined (the 
 first few found nothing plausible, or only a misfit), and the lowest final pixel cost wins among the
 plausible answers (:mod:`.plausibility`: roughly upright, every clicked part on a face turned to the
 camera); an implausible answer is returned only when no plausible one was found, with a warning.
+Clicks that cannot give a cuboid, and answers no one can believe, fail with a reason (:mod:`.degenerate`).
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, yp
 from toosicubix.model import GroundPlane
 from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import PartsModel
-from toosicubix.parts.vocabulary import click
 from toosicubix.priors.table import SizePrior
+from toosicubix.solver.degenerate import absurd_depth, degeneracy, degenerate_spread, short_arrows, too_few
 from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
@@ -266,8 +267,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_start = time.perf_counter()
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
     if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
-        return FitResult("failed", _too_few(parts, options.min_constraints), **counts)
-    short = _short_arrows(parts) or _degenerate_spread(parts.uv)
+        return FitResult("failed", too_few(parts, options.min_constraints), **counts)
+    short = short_arrows(parts) or degenerate_spread(parts.uv)
     if short:
         return FitResult("failed", f"degenerate clicks: {short}", **counts)
 
@@ -321,7 +322,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         extra_converged, extra_iterations = _refine_batch(problem, further, options, max_tilt, parts.click_labels,
                                                           click_faces)
         if checked is not None:  # searching past a misfit: an answer at an absurd depth is no better answer
-            extra_converged = [(r, why or _absurd_depth(camera, r.t_cam_vehicle, r.p[:3]))
+            extra_converged = [(r, why or absurd_depth(camera, r.t_cam_vehicle, r.p[:3]))
                                for r, why in extra_converged]
         converged += extra_converged
         refine_iterations += extra_iterations
@@ -345,12 +346,12 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     else:
         _, J_best = residuals_and_jacobian(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
         dof = residual_dof(J_best, 2 * parts.n_clicks)
-    degenerate = _degeneracy(problem, J_best, options.rank_tolerance)
+    degenerate = degeneracy(problem, J_best, options.rank_tolerance)
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
                   timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings)
-    degenerate = degenerate or _absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
+    degenerate = degenerate or absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
     if degenerate:
         return FitResult("failed", degenerate, **common)
     shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
@@ -567,92 +568,13 @@ def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...]
     return plausible + implausible
 
 
-_BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")
-
-
-def _degeneracy(problem: Problem, J: np.ndarray, tolerance: float) -> str | None:
-    """A reason when the clicks and the prior leave a direction of the unknowns undetermined, else None.
-    ``J`` : (M, 6 + P) the Jacobian at the answer (:func:`.refine.residuals_and_jacobian`)."""
-    norms = np.linalg.norm(J, axis=0)
-    if np.any(norms == 0.0):
-        names = _unknown_names(problem)
-        missing = [names[i] for i in np.flatnonzero(norms == 0.0)]
-        return f"degenerate clicks: nothing constrains {', '.join(missing)}"
-    _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
-    if s[-1] >= tolerance * s[0]:
-        return None
-    names = _unknown_names(problem)
-    null = np.abs(Vt[-1])
-    involved = sorted({names[i] for i in np.flatnonzero(null > 0.3 * null.max())})
-    return f"degenerate clicks: they do not determine {', '.join(involved)} (Jacobian rank deficient)"
-
-
-def _unknown_names(problem: Problem) -> list[str]:
-    return [*_BLOCKS, *problem.parts.param_names]
-
-
 #: A first batch's answer that fails the chi-square test of its residuals at this level (:mod:`.misfit`, the level
 #: ``--misfit-level`` suggests) sends the next batch of starts to refinement too: car 907 of ApolloCar3D's
 #: comparison half fitted 105 degrees off at 29 px RMS while its fifth start led to a lower cost.
 SEARCH_LEVEL = 0.99
-#: An arrow shorter than this (pixels) has no direction.
-MIN_ARROW_PX = 1.0
 #: A fit reached only from typical part positions (every descent start collapsed onto the camera) is kept only
 #: when its relative depth sigma is at most this: twice the spread the size prior alone gives the scale.
 COLLAPSED_MAX_DEPTH_REL = 0.2
-
-
-def _short_arrows(parts: PartsModel) -> str | None:
-    """A description of the direction arrows whose tail and head are less than MIN_ARROW_PX apart."""
-    found = []
-    for i in parts.arrow_tails:
-        length = float(np.linalg.norm(parts.uv[i + 1] - parts.uv[i]))
-        if length < MIN_ARROW_PX:
-            axis = click(parts.click_labels[i]).name
-            found.append(f"the {axis} arrow of annotation parts[{parts.click_part[i]}] is {length:.2f} px long")
-    return "; ".join(found) + f" (an arrow needs at least {MIN_ARROW_PX:g} px)" if found else None
-
-
-#: Clicks whose spread (root mean square distance from their centroid along their main direction) is below
-#: this many pixels are one blob: a vehicle that small in the image cannot be annotated part by part.
-MIN_CLICK_SPREAD_PX = 4.0
-#: Clicks whose root mean square distance from their best-fitting line is below this many pixels lie on one
-#: line (clicks on a real vehicle's wheels, lights and edges span an area).
-MIN_CLICK_THICKNESS_PX = 0.5
-#: A fit this far away (metres) is absurd for a vehicle whose parts were clicked.
-MAX_DEPTH_M = 1000.0
-
-
-def _degenerate_spread(uv: np.ndarray) -> str | None:
-    """Why the clicks ``uv`` (N, 2), pixels, cannot determine a cuboid (clustered or collinear), else None."""
-    if len(uv) < 3:
-        return None
-    spread = np.linalg.svd(uv - uv.mean(axis=0), compute_uv=False) / np.sqrt(len(uv))  # RMS along the axes
-    if spread[0] < MIN_CLICK_SPREAD_PX:
-        return (f"all {len(uv)} clicks lie in one cluster ({spread[0]:.2f} px RMS spread; at least "
-                f"{MIN_CLICK_SPREAD_PX:g} px needed)")
-    if spread[1] < MIN_CLICK_THICKNESS_PX:
-        return (f"all {len(uv)} clicks lie on one line ({spread[1]:.2f} px RMS off it; at least "
-                f"{MIN_CLICK_THICKNESS_PX:g} px needed)")
-    return None
-
-
-def _absurd_depth(camera: Camera, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> str | None:
-    """Why a fit at ``t_cam_vehicle`` (3,), metres, with ``dimensions`` (3,) is too far to be believed, else None:
-    beyond ``MAX_DEPTH_M``, or so far that the vehicle spans fewer than ``MIN_CLICK_SPREAD_PX`` pixels."""
-    depth = float(t_cam_vehicle[2])
-    focal = float(max(camera.K[0, 0], camera.K[1, 1]))
-    extent_px = focal * float(np.max(dimensions)) / depth if depth > 0 else np.inf
-    if not (np.isfinite(depth) and depth <= MAX_DEPTH_M and extent_px >= MIN_CLICK_SPREAD_PX):
-        return (f"degenerate clicks: the fit is at an absurd depth ({depth:.4g} m, where the vehicle spans "
-                f"{extent_px:.3g} px; at most {MAX_DEPTH_M:g} m and {MIN_CLICK_SPREAD_PX:g} px)")
-    return None
-
-
-def _too_few(parts: PartsModel, needed: int) -> str:
-    return (f"too few constraints: {parts.n_clicks} clicked points give {parts.constraints} "
-            f"(2 per point minus {parts.n_aux} auxiliary unknowns); at least {needed} are needed to place "
-            f"the cuboid with its size prior, 8 to fix its shape from the clicks alone")
 
 
 #: What :mod:`toosicubix.pipeline` and :mod:`toosicubix.solver.guidance` use; nothing past it.
