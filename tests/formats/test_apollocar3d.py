@@ -16,8 +16,8 @@ from toosicubix.annotations.schema import InputFileError
 from toosicubix.cli import main
 from toosicubix.evaluation import evaluate_folder, format_report, result_to_csv, result_to_json
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
-from toosicubix.evaluation.report import hidden_breakdown, keypoint_breakdown
-from toosicubix.formats.apollocar3d import pose_to_vehicle, read_apollocar3d, read_car_models
+from toosicubix.evaluation.report import hidden_breakdown, keypoint_breakdown, off_rays_breakdown
+from toosicubix.formats.apollocar3d import keypoints_off_rays, pose_to_vehicle, read_apollocar3d, read_car_models
 from toosicubix.formats.coco import load_mapping
 from toosicubix.geometry import depth_reversed_twin
 
@@ -120,6 +120,101 @@ def test_eval_scores_apart_a_ground_truth_that_hides_its_labelled_keypoints(tmp_
     assert [r["keypoints_hidden"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["0", "5"]
 
 
+#: ApolloCar3D's Camera_5 intrinsics (its README), for the off-the-rays tests.
+K_APOLLO = np.array([[2304.54786556982, 0.0, 1686.23787612802], [0.0, 2305.875668062, 1354.98486439791],
+                     [0.0, 0.0, 1.0]])
+
+
+def _labelled_at(pose, labelled, shift_cam=(0.0, 0.0, 0.0)):
+    """Keypoints (66, 3) of a car of MODELS at ``pose`` whose ``labelled`` indices are the bundled Sedan positions
+    projected by K_APOLLO from the car moved by ``shift_cam`` (metres, camera frame); and the labelled points' camera
+    coordinates at the unmoved pose (the ground truth's), (n, 3)."""
+    mapping = load_mapping("apollocar3d-66")[0]
+    typical = mapping.keypoint_candidates("Sedan")
+    d = np.array([4.8, 1.8, 1.5])
+    R, t = pose_to_vehicle(np.asarray(pose, dtype=float), d)
+    Y = np.array([R @ (d * typical[mapping.keypoints[j]].at) + t for j in labelled])  # (n, 3) camera frame
+    uvw = (Y + np.asarray(shift_cam)) @ K_APOLLO.T
+    kp = np.zeros((66, 3))
+    kp[list(labelled), :2] = uvw[:, :2] / uvw[:, 2:]
+    kp[list(labelled), 2] = 2
+    return kp, Y
+
+
+def test_keypoints_off_rays_is_zero_on_the_rays_and_the_perpendicular_shift_off_them(tmp_path):
+    # A car facing the camera 2 m to its right, its front lamps and right-side keypoints labelled. Projected from
+    # its ground-truth pose they lie on their rays (0 m); projected from the car moved 0.6 m sideways, each ground-
+    # truth point lies off its ray by the shift's part perpendicular to that ray, computed here on its own.
+    labelled = (0, 1, 54, 55, 56, 57)
+    pose = (np.pi, 0.0, 0.0, 2.0, 2.0, 15.0)
+    path = write_dataset(tmp_path, pose)
+    (car,) = read_apollocar3d(path, read_car_models(tmp_path / "car_models.json"))[0].cars
+    at = [None] * 66
+    mapping = load_mapping("apollocar3d-66")[0]
+    for j in labelled:
+        at[j] = mapping.keypoint_candidates("Sedan")[mapping.keypoints[j]].at
+    on, _ = _labelled_at(pose, labelled)
+    assert keypoints_off_rays(car.__class__(**{**car.__dict__, "keypoints": on}), K_APOLLO, at) == \
+        pytest.approx(0.0, abs=1e-9)
+    shift = np.array([0.6, 0.0, 0.0])
+    off, Y = _labelled_at(pose, labelled, shift)
+    rays = (Y + shift) / np.linalg.norm(Y + shift, axis=1, keepdims=True)
+    perpendicular = shift - rays * (rays @ shift)[:, None]
+    expected = np.sqrt(np.mean(np.sum(perpendicular**2, axis=1)))
+    got = keypoints_off_rays(car.__class__(**{**car.__dict__, "keypoints": off}), K_APOLLO, at)
+    assert got == pytest.approx(expected, rel=1e-6) and 0.55 < got < 0.6
+    assert keypoints_off_rays(car, K_APOLLO, at[:10]) is None  # another keypoint count than the places given
+    assert keypoints_off_rays(car, K_APOLLO, at) is None  # no keypoint labelled
+
+
+def test_eval_with_cameras_scores_apart_a_ground_truth_off_its_keypoints_rays(tmp_path):
+    # Two cars facing the camera, their front and right keypoints labelled (none hidden): the first's projected from
+    # its ground truth, the second's from its ground truth moved 1.5 m sideways (its pose contradicts them). Both are
+    # predicted at their ground truth; the cameras file beside the keypoint file gives the rays.
+    labelled = (0, 1, 54, 55, 56, 57)
+    coco = {"images": [{"id": 1, "file_name": "x_Camera_5.jpg"}], "categories": [], "annotations": []}
+    for k, (x, shift) in enumerate(((2.0, 0.0), (-4.0, 1.5))):
+        pose = (np.pi, 0.0, 0.0, x, 2.0, 15.0)
+        kp, _ = _labelled_at(pose, labelled, (shift, 0.0, 0.0))
+        coco["annotations"].append({"id": 9 + k, "image_id": 1, "category_id": 0, "bbox": [100 + 800 * k, 20, 300, 200],
+                                    "keypoints": kp.ravel().tolist(), "pose": list(pose)})
+    (tmp_path / "kp.json").write_text(json.dumps(coco))
+    (tmp_path / "car_models.json").write_text(json.dumps(MODELS))
+    (tmp_path / "cameras.json").write_text(json.dumps({"cameras": [{"match": "*_Camera_5.jpg",
+                                                                    "K": K_APOLLO.tolist()}]}))
+    gts = ApolloCar3DGroundTruth(tmp_path / "kp.json").load("x_Camera_5").objects
+    assert [g.keypoints_hidden for g in gts] == [0, 0]
+    assert gts[0].keypoints_off_rays_m == pytest.approx(0.0, abs=1e-9) and gts[1].keypoints_off_rays_m > 1.0
+    poses = {"x_Camera_5": [Pose(g.cuboid_rect.R_cam_vehicle, g.cuboid_rect.t_cam_vehicle, g.cuboid_rect.dimensions,
+                                 g.box2d, "Car") for g in gts]}
+    out = write_results(tmp_path / "out", poses, K_APOLLO, np.zeros(3), (3384, 2710))
+    result = evaluate_folder(out, "apollocar3d", tmp_path / "kp.json")
+    assert not result.warnings  # the same K on both sides: no mismatch to warn of
+    rows = off_rays_breakdown(result.matched)
+    assert [(row["bin"], row["n"]) for row in rows] == [
+        ("on them <= 0.5 m", 1), ("off them > 0.5 m", 1), ("neither off nor hiding", 1)]
+    assert "By how far the labelled keypoints lie from their rays at the ground-truth pose" in format_report(result)
+    doc = result_to_json(result)
+    assert [row["n"] for row in doc["breakdowns"]["ground_truth_on_keypoint_rays"]] == [1, 1, 1]
+    column = [r["keypoints_off_rays_m"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))]
+    assert float(column[0]) == pytest.approx(0.0, abs=1e-9) and float(column[1]) > 1.0
+    # Without a cameras file nothing is measured, and the breakdown is left out; --cameras names one elsewhere.
+    moved = tmp_path / "elsewhere.json"
+    (tmp_path / "cameras.json").rename(moved)
+    bare = evaluate_folder(out, "apollocar3d", tmp_path / "kp.json")
+    assert all(r.keypoints_off_rays_m is None for r in bare.matched)
+    assert "ground_truth_on_keypoint_rays" not in result_to_json(bare)["breakdowns"]
+    runner = CliRunner()
+    given = runner.invoke(main, ["eval", str(out), "--apollocar3d", str(tmp_path / "kp.json"), "--cameras", str(moved)])
+    assert given.exit_code == 0, given.output
+    assert "off them > 0.5 m" in given.output
+    missing = runner.invoke(main, ["eval", str(out), "--apollocar3d", str(tmp_path / "kp.json"), "--cameras",
+                                   str(tmp_path / "nope.json")])
+    assert missing.exit_code == 2 and "nope.json: cameras file not found" in missing.output
+    wrong = runner.invoke(main, ["eval", str(out), "--kitti", str(tmp_path), "--cameras", str(moved)])
+    assert wrong.exit_code == 2 and "--cameras goes with --apollocar3d only" in wrong.output
+
+
 @pytest.mark.parametrize("n_keypoints", [10, 70])
 def test_a_file_with_other_keypoints_than_apollocar3d_66_counts_none_hidden(tmp_path, n_keypoints):
     # The bundled mapping names 66 keypoints; for a file with another count nothing is known of their faces.
@@ -181,6 +276,7 @@ def test_eval_and_learn_parts_on_the_real_folder(tmp_path):
     result = runner.invoke(main, ["eval", str(out), "--apollocar3d", kp, "--car-models", models])
     assert result.exit_code == 0, result.output
     assert "mean" in result.output and "ApolloCar3D" in result.output
+    assert "By how far the labelled keypoints lie from their rays" in result.output  # cameras.json beside it
     result = runner.invoke(main, ["eval", str(out), "--kitti", str(tmp_path), "--car-models", models])
     assert result.exit_code == 2 and "--car-models goes with --apollocar3d only" in result.output
     # The robust loss names the clicks it down-weighted; render reads them, with ApolloCar3D's poses drawn.

@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput, GroundTruth, car_models_option, ground_truth_options, parse_classes
+from toosicubix.cli.options import (
+    BadInput,
+    GroundTruth,
+    apollocar3d_cameras_option,
+    car_models_option,
+    ground_truth_options,
+    parse_classes,
+)
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -14,6 +21,7 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.argument("out", required=False, default=DEFAULT_OUTPUT_DIR, type=click.Path(file_okay=False, path_type=Path))
 @ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d")
 @car_models_option
+@apollocar3d_cameras_option
 @click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
 @click.option("--classes", default=None,
@@ -28,7 +36,8 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
               help="Also write PNG plots into this folder: errors against depth, each metric's distribution, and "
                    "the calibration of the predicted sigmas. Example: --plots eval-plots")
 @click.option("-q", "--quiet", is_flag=True, help="No warnings or notes on stderr; the table still goes to stdout.")
-def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | None, min_iou: float,
+def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | None, cameras_path: Path | None,
+                 min_iou: float,
                  classes: str | None, json_path: Path | None, csv_path: Path | None, plots_dir: Path | None,
                  quiet: bool) -> None:
     """Score fitted cuboids against KITTI, Cityscapes 3D or ApolloCar3D ground truth, as the paper's Evaluation
@@ -39,8 +48,9 @@ def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | N
     matches objects by 2D box IoU (Hungarian), and reports per metric the mean and median: exact 3D IoU with
     full rotations, sIoU, E_R (degrees), E_t, E_d, E_comb, plus KITTI's yaw-only IoU for comparison; then
     breakdowns by depth, by occlusion (KITTI, Cityscapes) or by labelled keypoints (ApolloCar3D, with the cars
-    whose ground-truth pose hides 3 or more, and a quarter, of their labelled keypoints from the camera scored
-    apart: such a pose contradicts the clicks), and the unmatched objects. Poses are compared in the camera frame of
+    whose ground-truth pose contradicts their clicks scored apart: it hides 3 or more, and a quarter, of their
+    labelled keypoints from the camera, or, with the cameras file, puts them more than 0.5 m RMS from their rays),
+    and the unmatched objects. Poses are compared in the camera frame of
     the prediction's K. The table goes to stdout, warnings to stderr.
 
     Exit code 0 on success, 2 for a missing folder, a malformed file or a predicted image without ground truth.
@@ -54,7 +64,8 @@ def eval_command(out: Path, ground_truth: GroundTruth, car_models_path: Path | N
     from toosicubix.evaluation import EvalOptions, evaluate_folder, format_report, write_csv, write_json
 
     options = EvalOptions(min_iou=min_iou, classes=parse_classes(classes))
-    source_options = {"car_models": car_models_path} if car_models_path is not None else {}
+    source_options = {key: path for key, path in (("car_models", car_models_path), ("cameras", cameras_path))
+                      if path is not None}
     result = evaluate_folder(out, ground_truth.kind, ground_truth.root, options, **source_options)
     if not quiet:
         for warning in result.warnings:

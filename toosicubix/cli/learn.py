@@ -10,6 +10,7 @@ import numpy as np
 
 from toosicubix.cli.options import BadInput
 from toosicubix.errors import InputError
+from toosicubix.parts.learned import CONTRADICTION_M
 
 
 @click.command("learn-parts")
@@ -24,7 +25,8 @@ from toosicubix.errors import InputError
               help="Learn from all images, or those at even or odd positions when sorted by file name.")
 @click.option("--min-samples", type=click.IntRange(min=3), default=5, show_default=True,
               help="Keypoints seen on fewer vehicles of a prototype keep only the pooled position.")
-@click.option("--max-offset", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
+@click.option("--max-offset", type=click.FloatRange(min=0.0, min_open=True), default=CONTRADICTION_M,
+              show_default=True,
               help="Metres: a second pass leaves out cars whose keypoints lie farther than this (RMS) from the "
                    "first pass's positions at their ground-truth pose (poses that contradict the clicks).")
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,

@@ -153,16 +153,30 @@ def car_models_option(command: Callable) -> Callable:
     """Add ``--car-models`` (ApolloCar3D's ``car_models.json``) to a command with ``--apollocar3d``; put it right
     below :func:`ground_truth_options`. The command receives ``car_models_path``, refused with another ground
     truth."""
+    return _apollocar3d_file_option(
+        command, "--car-models", "car_models_path",
+        "With --apollocar3d: ApolloCar3D's car_models.json [default: beside the keypoint file].")
 
+
+def apollocar3d_cameras_option(command: Callable) -> Callable:
+    """Add ``--cameras`` (the cameras file of ApolloCar3D's images) to a command with ``--apollocar3d``, below
+    :func:`ground_truth_options`. The command receives ``cameras_path``, refused with another ground truth."""
+    return _apollocar3d_file_option(
+        command, "--cameras", "cameras_path",
+        "With --apollocar3d: the cameras file of its images (see `toosicubix import coco --help`), for how far each "
+        "car's labelled keypoints lie from their rays at its ground-truth pose [default: cameras.json beside the "
+        "keypoint file, if there is one].")
+
+
+def _apollocar3d_file_option(command: Callable, flag: str, parameter: str, help_text: str) -> Callable:
     @functools.wraps(command)
-    def wrapper(*args: Any, ground_truth: GroundTruth | None, car_models_path: Path | None, **kwargs: Any) -> Any:
-        if car_models_path is not None and (ground_truth is None or ground_truth.kind != "apollocar3d"):
-            raise click.UsageError("--car-models goes with --apollocar3d only")
-        return command(*args, ground_truth=ground_truth, car_models_path=car_models_path, **kwargs)
+    def wrapper(*args: Any, ground_truth: GroundTruth | None, **kwargs: Any) -> Any:
+        if kwargs[parameter] is not None and (ground_truth is None or ground_truth.kind != "apollocar3d"):
+            raise click.UsageError(f"{flag} goes with --apollocar3d only")
+        return command(*args, ground_truth=ground_truth, **kwargs)
 
-    return click.option("--car-models", "car_models_path", type=click.Path(dir_okay=False, path_type=Path),
-                        default=None, help="With --apollocar3d: ApolloCar3D's car_models.json [default: beside the "
-                                           "keypoint file].")(wrapper)
+    return click.option(flag, parameter, type=click.Path(dir_okay=False, path_type=Path), default=None,
+                        help=help_text)(wrapper)
 
 
 def keypoint_mapping_option(help_text: str) -> Callable:

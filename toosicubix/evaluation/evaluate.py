@@ -144,6 +144,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
                 yaw_only=pred_image.frame == "rect", pred_source=p.source, gt_source=g.source,
                 keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
                 e_r_twin_deg=None if g.keypoints_hidden is None else twin_rotation_error_deg(pred_cuboid, gt_cuboid),
+                keypoints_off_rays_m=g.keypoints_off_rays_m,
             ))
         reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
         unmatched_pred.extend(
@@ -217,7 +218,8 @@ def evaluate_folder(out_dir: str | Path, gt_kind: str, gt_dir: str | Path,
     gt_kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
     gt_dir : the ground-truth folder (ApolloCar3D: its keypoint file)
     options : threshold and class filter
-    source_options : further arguments of the ground-truth source (``car_models`` for 'apollocar3d')
+    source_options : further arguments of the ground-truth source (``car_models``, ``cameras`` for
+        'apollocar3d')
 
     Raises
     ------

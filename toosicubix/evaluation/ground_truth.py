@@ -62,6 +62,9 @@ class GtObject:
     keypoints : how many keypoints people labelled on it (ApolloCar3D), else None
     keypoints_hidden : how many of those its pose turns away from the camera (ApolloCar3D: none of the faces the
         bundled ``apollocar3d-66`` mapping learned each keypoint is seen from turned to it), else None
+    keypoints_off_rays_m : the RMS distance (metres) of those from their rays, each at its learned place on the
+        ground-truth cuboid (ApolloCar3D with its cameras, :func:`toosicubix.formats.apollocar3d.keypoints_off_rays`),
+        else None
     """
 
     index: int
@@ -76,6 +79,7 @@ class GtObject:
     subtype: str = ""
     keypoints: int | None = None
     keypoints_hidden: int | None = None
+    keypoints_off_rays_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -301,59 +305,80 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
     :mod:`toosicubix.formats.apollocar3d` says. Poses are in the camera frame of ``K`` (``t_cam_rect`` zero).
     Each car also counts the labelled keypoints its pose turns away from the camera
     (:func:`toosicubix.formats.apollocar3d.keypoints_hidden`, with the faces the bundled ``apollocar3d-66``
-    mapping learned): a pose that hides its own clicks contradicts them."""
+    mapping learned): a pose that hides its own clicks contradicts them. With a cameras file (``cameras``, by
+    default the ``cameras.json`` beside the keypoint file when there is one) each car also gets how far its labelled
+    keypoints lie from their rays at its pose (:func:`toosicubix.formats.apollocar3d.keypoints_off_rays`): a pose
+    far off them contradicts them too. An image its cameras file has no camera for gets no such distance."""
 
     kind = "apollocar3d"
     default_classes = ("Car",)
     occlusion_kind = None
 
-    def __init__(self, root: str | Path, car_models: str | Path | None = None):
+    def __init__(self, root: str | Path, car_models: str | Path | None = None, cameras: str | Path | None = None):
         from toosicubix.annotations.schema import InputFileError
         from toosicubix.formats import FormatError
         from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
+        from toosicubix.formats.cameras import load_cameras
 
         self.root = Path(root)
         if not self.root.is_file():
             raise EvaluationInputError(f"{self.root}: ApolloCar3D keypoint file not found")
         self.car_models = car_models_file(self.root, car_models)
+        beside = self.root.parent / "cameras.json"
+        self.cameras = Path(cameras) if cameras is not None else beside if beside.is_file() else None
+        if self.cameras is not None and not self.cameras.is_file():
+            raise EvaluationInputError(f"{self.cameras}: cameras file not found")
         try:
             images = read_apollocar3d(self.root, read_car_models(self.car_models))
         except InputFileError as exc:
             raise FormatError(exc.file, "; ".join(f"{p}: {m}" for p, m in exc.problems)) from None
         self._images = {im.id: im for im in images}
-        self._seen_from: dict[str, list[tuple[str, ...]]] = {}
+        self._camera_table = None if self.cameras is None else load_cameras(self.cameras)
+        self._candidates: dict[str, list] = {}
 
-    def _seen_from_of(self, prototype: str) -> list[tuple[str, ...]]:
-        """Per keypoint index, the faces the bundled ``apollocar3d-66`` mapping learned it is seen from."""
-        if prototype not in self._seen_from:
+    def _keypoints_of(self, prototype: str) -> list:
+        """Per keypoint index, the bundled ``apollocar3d-66`` mapping's keypoint on a car of ``prototype``
+        (:class:`toosicubix.parts.linear.TypicalKeypoint`: its place and the faces it is seen from), or None."""
+        if prototype not in self._candidates:
             from toosicubix.formats.coco import load_mapping
 
             mapping, _ = load_mapping("apollocar3d-66")
             candidates = mapping.keypoint_candidates(prototype)
-            self._seen_from[prototype] = [tuple(candidates[name].seen_from) if name in candidates else ()
-                                          for name in mapping.keypoints or ()]
-        return self._seen_from[prototype]
+            self._candidates[prototype] = [candidates.get(name) for name in mapping.keypoints or ()]
+        return self._candidates[prototype]
+
+    def _K(self, file_name: str) -> np.ndarray | None:
+        camera = None if self._camera_table is None else self._camera_table.camera_for(file_name)
+        return None if camera is None else np.array(camera["K"], dtype=float)
 
     def image_ids(self) -> list[str]:
         return sorted(self._images)
 
     def load(self, image_id: str) -> GtImage:
-        from toosicubix.formats.apollocar3d import keypoints_hidden, prototype_of
+        from toosicubix.formats.apollocar3d import keypoints_hidden, keypoints_off_rays, prototype_of
 
         im = self._images.get(image_id)
         if im is None:
             raise EvaluationInputError(f"no ground truth for image {image_id!r}: not in {self.root}")
-        objects = tuple(GtObject(
-            index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
-            box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None, track_id=int(car.id)
-            if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
-            keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0)),
-            keypoints_hidden=keypoints_hidden(car, self._seen_from_of(prototype_of(car.model.type))))
-            for k, car in enumerate(im.cars))
-        return GtImage(id=image_id, objects=objects, t_cam_rect=np.zeros(3), K=None, source=str(self.root))
+        K = self._K(im.file_name)
+        objects = []
+        for k, car in enumerate(im.cars):
+            typical = self._keypoints_of(prototype_of(car.model.type))
+            seen_from = [() if t is None else tuple(t.seen_from) for t in typical]
+            objects.append(GtObject(
+                index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
+                box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None,
+                track_id=int(car.id) if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
+                keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0)),
+                keypoints_hidden=keypoints_hidden(car, seen_from),
+                keypoints_off_rays_m=None if K is None else keypoints_off_rays(
+                    car, K, [None if t is None else t.at for t in typical])))
+        return GtImage(id=image_id, objects=tuple(objects), t_cam_rect=np.zeros(3), K=K, source=str(self.root))
 
     def describe(self) -> str:
-        return f"ApolloCar3D keypoints {self.root} with car models {self.car_models} ({len(self._images)} images)"
+        cameras = "" if self.cameras is None else f" and cameras {self.cameras}"
+        return (f"ApolloCar3D keypoints {self.root} with car models {self.car_models}{cameras} "
+                f"({len(self._images)} images)")
 
 
 #: The ``--kitti``, ``--kitti-tracking``, ``--cityscapes`` and ``--apollocar3d`` sources by kind.

@@ -34,6 +34,8 @@ class MatchedObject:
     keypoints_hidden : how many of those the ground-truth pose turns away from the camera (ApolloCar3D), else None
     e_r_twin_deg : the geodesic angle (degrees) between the prediction and the ground truth's depth-reversed twin
         (:func:`toosicubix.geometry.depth_reversed_twin`) where ``keypoints_hidden`` is given, else None
+    keypoints_off_rays_m : how far (metres, RMS) the labelled keypoints lie from their rays at the ground-truth pose
+        (ApolloCar3D with its cameras), else None
     """
 
     image_id: str
@@ -57,6 +59,7 @@ class MatchedObject:
     keypoints: int | None = None
     keypoints_hidden: int | None = None
     e_r_twin_deg: float | None = None
+    keypoints_off_rays_m: float | None = None
 
     def row(self) -> dict[str, Any]:
         """The flat record (one CSV row): identifiers, conditions, then the metrics."""
@@ -70,6 +73,7 @@ class MatchedObject:
             "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
             "pred_source": self.pred_source, "gt_source": self.gt_source, "keypoints": self.keypoints,
             "keypoints_hidden": self.keypoints_hidden, "e_r_twin_deg": self.e_r_twin_deg,
+            "keypoints_off_rays_m": self.keypoints_off_rays_m,
         }
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from toosicubix import __version__
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject
 from toosicubix.formats.atomic import atomic_write_text
-from toosicubix.parts.learned import HIDES_MIN, hides_clicks
+from toosicubix.parts.learned import CONTRADICTION_M, HIDES_MIN, hides_clicks
 
 #: Depth bins over the ground truth's z, metres: [lo, hi).
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 50.0), (50.0, math.inf))
@@ -159,10 +159,36 @@ def _counts_hidden(result: EvaluationResult) -> bool:
     return any(r.keypoints_hidden is not None for r in result.matched)
 
 
+#: The two bins of :func:`off_rays_breakdown`, and the objects neither it nor :func:`hidden_breakdown` flags.
+ON_RAYS, OFF_RAYS = f"on them <= {CONTRADICTION_M:g} m", f"off them > {CONTRADICTION_M:g} m"
+CONSISTENT = "neither off nor hiding"
+
+
+def _off_rays(r: MatchedObject) -> bool | None:
+    """Whether the object's labelled keypoints lie more than :data:`~toosicubix.parts.learned.CONTRADICTION_M` (RMS)
+    from their rays at its ground-truth pose; None where the ground truth does not measure it."""
+    return None if r.keypoints_off_rays_m is None else r.keypoints_off_rays_m > CONTRADICTION_M
+
+
+def off_rays_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
+    """Statistics of the objects whose labelled keypoints lie on their rays at the ground-truth pose, of those off
+    them (:func:`_off_rays`), and of those whose ground truth neither lies off its keypoints' rays nor hides them
+    (:func:`_hides`): the ground truth that agrees with the clicks."""
+    return _breakdown(records, [(ON_RAYS, lambda r: _off_rays(r) is False),
+                                (OFF_RAYS, lambda r: _off_rays(r) is True),
+                                (CONSISTENT, lambda r: _off_rays(r) is False and _hides(r) is False)])
+
+
+def _counts_off_rays(result: EvaluationResult) -> bool:
+    return any(r.keypoints_off_rays_m is not None for r in result.matched)
+
+
 def breakdowns(result: EvaluationResult) -> dict[str, Any]:
     """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``;
     ``occlusion`` and ``occlusion_kind`` only where the ground truth states occlusion, ``keypoints`` (rows per
-    bin of labelled keypoints) only where it counts them."""
+    bin of labelled keypoints) only where it counts them, ``ground_truth_shows_keypoints`` and
+    ``ground_truth_twin`` where it counts those its pose hides, ``ground_truth_on_keypoint_rays`` where it measures
+    how far they lie from their rays (:func:`off_rays_breakdown`)."""
     out: dict[str, Any] = {"depth": depth_breakdown(result.matched)}
     if result.occlusion_kind is not None:
         out["occlusion"] = occlusion_breakdown(result.matched, result.occlusion_kind)
@@ -172,6 +198,8 @@ def breakdowns(result: EvaluationResult) -> dict[str, Any]:
     if _counts_hidden(result):
         out["ground_truth_shows_keypoints"] = hidden_breakdown(result.matched)
         out["ground_truth_twin"] = twin_summary(result.matched)
+    if _counts_off_rays(result):
+        out["ground_truth_on_keypoint_rays"] = off_rays_breakdown(result.matched)
     return out
 
 
@@ -238,6 +266,9 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
                          "depth and mirrored left for right: the pose the clicks show when the ground truth is its "
                          "mirror image)")
         lines.append("")
+    if _counts_off_rays(result):
+        lines += ["By how far the labelled keypoints lie from their rays at the ground-truth pose (RMS; means):",
+                  *_table([(r["bin"], r["n"], r, "mean") for r in off_rays_breakdown(result.matched)], 22), ""]
     lines += [
         f"images scored: {result.n_images}; ground-truth images without predictions (not scored): "
         f"{result.n_gt_images_without_pred} of {result.n_gt_images}",
@@ -303,7 +334,7 @@ CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
     "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints", "keypoints_hidden",
-    "e_r_twin_deg",
+    "e_r_twin_deg", "keypoints_off_rays_m",
 )
 
 

@@ -184,6 +184,27 @@ def keypoints_hidden(car: ApolloCar, seen_from: list[tuple[str, ...]]) -> int | 
     return sum(turned_away(seen_from[j], facing) for j in np.flatnonzero(car.keypoints[:, 2] > 0))
 
 
+def keypoints_off_rays(car: ApolloCar, K: np.ndarray, at: list[np.ndarray | None]) -> float | None:
+    """The RMS distance (metres) of ``car``'s labelled keypoints from their rays through ``K`` (3, 3), each put at
+    its typical place on the ground-truth cuboid: ``at`` per keypoint index, fractions of the dimensions (learned,
+    e.g. the bundled ``apollocar3d-66`` mapping's), None where unknown. More than
+    :data:`toosicubix.parts.learned.CONTRADICTION_M` says the pose contradicts the clicks. None when the car has
+    not one keypoint per entry of ``at``, or no labelled keypoint with a place."""
+    from toosicubix.parts.learned import KeypointSample, offset_from_ray
+
+    if len(car.keypoints) != len(at):
+        return None
+    K_inv = np.linalg.inv(K)
+    squares = []
+    for j in np.flatnonzero(car.keypoints[:, 2] > 0):
+        if at[j] is None:
+            continue
+        ray = K_inv @ np.array([car.keypoints[j, 0], car.keypoints[j, 1], 1.0])
+        sample = KeypointSample("", "", car.id, ray, car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions)
+        squares.append(float(np.sum(offset_from_ray(sample, at[j]) ** 2)))
+    return float(np.sqrt(np.mean(squares))) if squares else None
+
+
 def car_models_file(keypoints: str | Path, car_models: str | Path | None = None) -> Path:
     """``car_models`` if given, else the ``car_models.json`` beside the keypoint file."""
     return Path(car_models) if car_models is not None else Path(keypoints).parent / "car_models.json"

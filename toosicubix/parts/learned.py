@@ -45,6 +45,12 @@ SEEN_FROM_SHARE = 0.95
 #: least this share of them, away from the camera (:func:`hides_clicks`; benchmarks/RESULTS.md, rule 17).
 HIDES_MIN, HIDES_SHARE = 3, 0.25
 
+#: Metres: a vehicle whose labelled keypoints, at their learned positions on its ground-truth cuboid, lie farther
+#: than this (RMS) from their rays has a ground truth that contradicts its clicks (:func:`contradicting`):
+#: ``learn-parts``' second pass leaves it out by default and ``eval --apollocar3d`` scores it apart
+#: (benchmarks/RESULTS.md, rule 6).
+CONTRADICTION_M = 0.5
+
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
 
@@ -156,12 +162,19 @@ def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, Le
                   max_offset: float) -> set[str]:
     """The vehicles whose ground truth contradicts their clicks: at their ground-truth pose their labelled
     keypoints, put at the ``learned`` positions, lie more than ``max_offset`` metres RMS from their rays."""
+    return {v for v, rms in rms_offsets(samples, learned).items() if rms > max_offset}
+
+
+def rms_offsets(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]]) -> dict[str, float]:
+    """Per vehicle, the RMS distance (metres) of its labelled keypoints from their rays, each at its ``learned``
+    position on the vehicle's ground-truth cuboid; keypoints without a learned position are left out, and so are
+    vehicles with none."""
     squares: dict[str, list[float]] = defaultdict(list)
     for s in samples:
         position = learned.get(s.prototype, {}).get(s.name)
         if position is not None:
             squares[s.vehicle].append(float(np.sum(offset_from_ray(s, position.at) ** 2)))
-    return {v for v, sq in squares.items() if np.sqrt(np.mean(sq)) > max_offset}
+    return {v: float(np.sqrt(np.mean(sq))) for v, sq in squares.items()}
 
 
 def hidden_by_ground_truth(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]]
