@@ -213,6 +213,12 @@ def test_eval_with_cameras_scores_apart_a_ground_truth_off_its_keypoints_rays(tm
     assert missing.exit_code == 2 and "nope.json: cameras file not found" in missing.output
     wrong = runner.invoke(main, ["eval", str(out), "--kitti", str(tmp_path), "--cameras", str(moved)])
     assert wrong.exit_code == 2 and "--cameras goes with --apollocar3d only" in wrong.output
+    # A broken cameras.json beside the keypoint file is named, with why it was read.
+    (tmp_path / "cameras.json").write_text('{"cameras": [{"K": 3}]}')
+    broken = runner.invoke(main, ["eval", str(out), "--apollocar3d", str(tmp_path / "kp.json")])
+    assert broken.exit_code == 2
+    assert "cameras.json: $.cameras[0].match: missing (read as the cameras of kp.json's images because it lies " \
+           "beside it; --cameras names another)" in broken.output
 
 
 @pytest.mark.parametrize("n_keypoints", [10, 70])

@@ -333,7 +333,13 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         except InputFileError as exc:
             raise FormatError(exc.file, "; ".join(f"{p}: {m}" for p, m in exc.problems)) from None
         self._images = {im.id: im for im in images}
-        self._camera_table = None if self.cameras is None else load_cameras(self.cameras)
+        try:
+            self._camera_table = None if self.cameras is None else load_cameras(self.cameras)
+        except FormatError as exc:
+            if cameras is not None:
+                raise
+            raise FormatError(exc.file, f"{exc.message} (read as the cameras of {self.root.name}'s images because it "
+                                        "lies beside it; --cameras names another)", exc.line) from None
         self._candidates: dict[str, list] = {}
 
     def _keypoints_of(self, prototype: str) -> list:
