@@ -185,7 +185,8 @@ def keypoints_hidden(car: ApolloCar, seen_from: list[tuple[str, ...]]) -> int | 
 
 
 def keypoints_off_rays(car: ApolloCar, K: np.ndarray, at: list[np.ndarray | None]) -> float | None:
-    """The RMS distance (metres) of ``car``'s labelled keypoints from their rays through ``K`` (3, 3), each put at
+    """The RMS distance (metres) of ``car``'s labelled keypoints from their pinhole rays through ``K`` (3, 3; lens
+    distortion, which ApolloCar3D's cameras do not have, is not undone, as in :func:`keypoint_samples`), each put at
     its typical place on the ground-truth cuboid: ``at`` per keypoint index, fractions of the dimensions (learned,
     e.g. the bundled ``apollocar3d-66`` mapping's), None where unknown. More than
     :data:`toosicubix.parts.learned.CONTRADICTION_M` says the pose contradicts the clicks. None when the car has
