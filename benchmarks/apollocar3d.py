@@ -50,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import default_data_dir, machine
 
 from toosicubix.annotations.schema import SCHEMA_VERSION, load_priors_file
+from toosicubix.errors import InputError
 from toosicubix.evaluation import EvalOptions, evaluate, load_predictions
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
@@ -508,15 +509,25 @@ def main() -> int:
     if not keypoints_path.is_file():
         print(f"no ApolloCar3D keypoint file at {keypoints_path}", file=sys.stderr)
         return 2
+    missing = [name for name in ("cameras.json", "car_models.json") if not (folder / name).is_file()]
+    if missing:
+        print(f"{folder}: expected {' and '.join(missing)} beside {keypoints_path.name} (the images' intrinsics as "
+              f"`toosicubix import coco --cameras` reads them; ApolloCar3D's car models)", file=sys.stderr)
+        return 2
     options = SolverOptions(robust_loss=args.robust_loss)
     if args.click_sigma is not None:
         options = replace(options, click_sigma=args.click_sigma)
+    images = sorted_images(folder, keypoints_path)  # reads and checks the keypoint file (InputError naming it)
     coco = json.loads(keypoints_path.read_text())
     counts = labelled_counts(coco)
     scored = {k for k, n in counts.items() if n >= MIN_KEYPOINTS}
-    images = sorted_images(folder, keypoints_path)
     cameras = load_cameras(folder / "cameras.json")
     car_models = read_car_models(folder / "car_models.json")
+    uncovered = [im.file_name for im in images if cameras.camera_for(im.file_name) is None]
+    if uncovered:
+        print(f"{folder / 'cameras.json'}: no camera matches {len(uncovered)} image(s) of {keypoints_path.name}, e.g. "
+              f"{uncovered[0]}", file=sys.stderr)
+        return 2
     names = load_mapping("apollocar3d-66")[0].keypoints
     if args.design:
         halves = [Half("design", images[0::4], images[2::4], bundled=False)]
@@ -633,4 +644,8 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except InputError as exc:  # a malformed keypoint, cameras or car-models file: named, with its JSON path
+        print(exc.format(), file=sys.stderr)
+        sys.exit(2)
