@@ -96,6 +96,8 @@ def test_validate_names_keypoints_to_click_next(keypoint_file, tmp_path):
     listed = [line.split(". ", 1)[1].split(" near ")[0] for line in result.output.splitlines()
               if line.startswith("    ") and " near (" in line]
     assert listed and set(listed) <= set(TWELVE) | set(MORE)
+    # Keypoints carry their learned spread, not the cuboid parts' part sigma: the summary says so.
+    assert "px on top of each keypoint's learned spread)" in result.output and "cuboid model" not in result.output
     # With learned clicked shares, each suggestion says how often people click it (the ranking weighs it).
     shared = _mapping().model_dump(mode="json", exclude_none=True)
     for part in shared["parts"]:

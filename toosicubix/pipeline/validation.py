@@ -18,6 +18,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
+from toosicubix.parts import vocabulary
 from toosicubix.pipeline.batch import pilot_and_fits
 from toosicubix.pipeline.fitting import KeypointCatalogue
 from toosicubix.pipeline.pilot import PilotFindings
@@ -161,9 +162,19 @@ class ValidationReport:
         tail = (f"{self.source}: {s['vehicles']} vehicles: {s['well_determined']} well determined, "
                 f"{s['not_well_determined']} not, {s['failed']} failed (well determined: yaw sigma <= "
                 f"{t.max_yaw_sigma_deg:g} deg, depth sigma <= {100 * t.max_depth_sigma_rel:g} %"
-                f"{'' if t.allow_ambiguous else ', not ambiguous'}; for clicks off by {self.click_sigma:.3g} px on "
-                f"parts {self.part_sigma:g} m off the cuboid model)")
+                f"{'' if t.allow_ambiguous else ', not ambiguous'}; {self._noise_phrase()})")
         return "\n\n".join([*blocks, tail]) + "\n"
+
+    def _noise_phrase(self) -> str:
+        """What the sigmas were computed for: the click noise, on cuboid parts ``part_sigma`` off the model, and on
+        keypoints and plates on top of their learned spread (whichever of the two the file's vehicles have)."""
+        labels = {label for v in self.vehicles for label in v.result.click_labels}
+        where = []
+        if any(vocabulary.on_body(label) and not vocabulary.soft(label) for label in labels):
+            where.append(f"on parts {self.part_sigma:g} m off the cuboid model")
+        if any(vocabulary.soft(label) for label in labels):
+            where.append("on top of each keypoint's learned spread")
+        return " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
 
 
 def describe(check: VehicleCheck) -> str:
