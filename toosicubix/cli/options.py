@@ -231,7 +231,8 @@ _FITTING_OPTIONS = [
                       "few to tell)."),
     click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
-                      "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box."),
+                      "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box. "
+                      "Keypoints and plates carry their learned spread instead."),
     click.option("--robust-loss", type=click.Choice(["auto", "cauchy", "none"]), default=SolverOptions.robust_loss,
                  show_default=True,
                  help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
