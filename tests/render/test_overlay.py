@@ -145,3 +145,19 @@ def test_labels_asked_for_the_same_place_are_moved_apart():
         for b in placer.placed[k + 1:]:
             assert min(a[2], b[2]) <= max(a[0], b[0]) or min(a[3], b[3]) <= max(a[1], b[1]), (a, b)
     assert (placer.canvas == 0).any()  # drawn on dark boxes
+
+
+def test_a_ground_truth_note_is_written_in_white_above_its_cuboid():
+    from toosicubix.render.overlay import GROUND_TRUTH_BGR, DrawnCuboid
+
+    camera = Camera(K=K, image_size=SIZE)
+    R, t, d = R_cam_vehicle_from_ypr(0.6), np.array([0.5, 1.2, 12.0]), np.array([4.0, 1.7, 1.5])
+    options = OverlayOptions(birds_eye=False)
+    bare = draw_overlay(blank_canvas(SIZE), camera, [], [DrawnCuboid(R, t, d)], options)
+    noted = draw_overlay(blank_canvas(SIZE), camera, [], [DrawnCuboid(R, t, d, "GT 7: hides 4 of its 9 keypoints")],
+                         options)
+    top = camera.project(cuboid_corners_cam(R, t, d))[:, 1].min()
+    differ = np.any(bare != noted, axis=2)
+    rows = np.flatnonzero(differ.any(axis=1))
+    assert rows.size and rows.max() < top  # the note, and nothing else, is added above the cuboid
+    assert np.all(noted[differ] == np.array(GROUND_TRUTH_BGR, dtype=np.uint8), axis=1).any()  # white text

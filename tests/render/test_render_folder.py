@@ -187,3 +187,19 @@ def test_only_misfit_keeps_the_images_with_a_misfit(fitted):
     assert selected(replace(first, vehicles=tuple(vehicles)), "misfit")
     only = next(p for p in render.params if p.name == "only")
     assert tuple(only.type.choices) == ONLY_CHOICES  # the command offers what the folder renderer knows
+
+
+def test_a_ground_truth_that_contradicts_its_clicks_is_noted_by_its_id():
+    from dataclasses import replace
+
+    from toosicubix.evaluation.ground_truth import GtObject
+    from toosicubix.render.folder import ground_truth_note
+
+    obj = GtObject(index=0, cls="Car", cuboid_rect=None, box2d=np.zeros(4), truncation=None, occlusion=None,
+                   occlusion_fraction=None, track_id=1653, source="", keypoints=9, keypoints_hidden=4,
+                   keypoints_off_rays_m=1.94)
+    assert ground_truth_note(obj) == "GT 1653: hides 4 of its 9 keypoints; 1.9 m off their rays"
+    assert ground_truth_note(replace(obj, keypoints_hidden=2)) == "GT 1653: 1.9 m off its keypoints' rays"
+    assert ground_truth_note(replace(obj, keypoints_off_rays_m=0.3)) == "GT 1653: hides 4 of its 9 keypoints"
+    assert ground_truth_note(replace(obj, keypoints_hidden=2, keypoints_off_rays_m=0.5)) == ""  # 0.5 m is not off
+    assert ground_truth_note(replace(obj, keypoints=None, keypoints_hidden=None, keypoints_off_rays_m=None)) == ""

@@ -41,7 +41,8 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
     behind the camera; its front face is filled, it has a colour and a label (id, prototype, dimensions,
     depth, yaw sigma, confidence). Every click is a dot with a yellow line to where the fit puts it; clicks
     the robust loss down-weighted (results.json `downweighted`) are crossed in red; failed vehicles are boxed
-    in red with their reason. Ground truth, when given, is drawn dashed in white. Beside each overlay a
+    in red with their reason. Ground truth, when given, is drawn dashed in white (an ApolloCar3D car whose pose
+    contradicts its clicks, as `eval` flags it, with a note of why, by its id). Beside each overlay a
     bird's-eye view shows the footprints in metres with heading, depth and yaw sigmas.
 
     Images come from each image's `file` relative to the annotation file, or from --images; a missing image

@@ -288,8 +288,27 @@ def ground_truth_cuboids(source: Any, result: ImageResult, warnings: list[str]) 
     for obj in gt.objects:
         if obj.cuboid_rect is not None and obj.cls.lower() in wanted:
             c = obj.cuboid_rect.translated(offset)
-            out.append(DrawnCuboid(c.R_cam_vehicle, c.t_cam_vehicle, c.dimensions))
+            out.append(DrawnCuboid(c.R_cam_vehicle, c.t_cam_vehicle, c.dimensions, ground_truth_note(obj)))
     return out
+
+
+def ground_truth_note(obj: Any) -> str:
+    """What a ground-truth object (:class:`toosicubix.evaluation.GtObject`) says against its own clicks, for its
+    note on the overlay, named by its id (ApolloCar3D's car id, which the fitted vehicle's label shows too): that its
+    pose hides its labelled keypoints, or puts them more than :data:`toosicubix.parts.learned.CONTRADICTION_M` from
+    their rays (as ``eval`` scores them apart); empty otherwise."""
+    from toosicubix.parts.learned import CONTRADICTION_M, hides_clicks
+
+    notes = []
+    if obj.keypoints_hidden is not None and hides_clicks(obj.keypoints or 0, obj.keypoints_hidden):
+        notes.append(f"hides {obj.keypoints_hidden} of its {obj.keypoints} keypoints")
+    if obj.keypoints_off_rays_m is not None and obj.keypoints_off_rays_m > CONTRADICTION_M:
+        notes.append(f"{obj.keypoints_off_rays_m:.1f} m off their rays" if notes else
+                     f"{obj.keypoints_off_rays_m:.1f} m off its keypoints' rays")
+    if not notes:
+        return ""
+    name = "GT" if obj.track_id is None else f"GT {obj.track_id}"
+    return f"{name}: {'; '.join(notes)}"
 
 
 def resolve_annotations(results_path: Path, header_value: Any, given: Path | None) -> Path:

@@ -105,11 +105,13 @@ class DrawnVehicle:
 @dataclass(frozen=True)
 class DrawnCuboid:
     """A ground-truth cuboid in the camera frame of the overlay's ``K`` (``R_cam_vehicle`` (3, 3),
-    ``t_cam_vehicle`` (3,) bottom centre, ``dimensions`` (3,)), drawn dashed in white."""
+    ``t_cam_vehicle`` (3,) bottom centre, ``dimensions`` (3,)), drawn dashed in white; ``note``, when not empty, is
+    written in white above it (e.g. that its pose contradicts the clicks)."""
 
     R_cam_vehicle: np.ndarray
     t_cam_vehicle: np.ndarray
     dimensions: np.ndarray
+    note: str = ""
 
 
 def colour_of(index: int) -> tuple[int, int, int]:
@@ -356,7 +358,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     canvas : (H, W, 3) uint8 BGR, drawn on in place and returned
     camera : the camera the poses and clicks refer to (lens distortion is applied)
     vehicles : the vehicles in image order; the ``i``-th gets :func:`colour_of` ``(i)``
-    ground_truth : cuboids in the same camera frame, drawn dashed in white
+    ground_truth : cuboids in the same camera frame, drawn dashed in white, each with its note
 
     Returns
     -------
@@ -401,10 +403,15 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
                 labels.put(v.label, anchor, colour_of(i), scale)
         else:
             _draw_failed(canvas, v, scale, thick, labels)
+    for g in ground_truth:  # after the fits' labels, which keep their places
+        anchor = _label_anchor(camera, g, max_radius, options.z_near) if g.note else None
+        if anchor is not None:
+            labels.put(g.note, anchor, GROUND_TRUTH_BGR, scale)
     return canvas
 
 
-def _label_anchor(camera: Camera, v: DrawnVehicle, max_radius: float, z_near: float) -> tuple[float, float] | None:
+def _label_anchor(camera: Camera, v: DrawnVehicle | DrawnCuboid, max_radius: float,
+                  z_near: float) -> tuple[float, float] | None:
     """Above the projected cuboid's top-left, or None when no corner is in view."""
     corners_cam = cuboid_corners_vehicle(v.dimensions) @ v.R_cam_vehicle.T + v.t_cam_vehicle
     seen = corners_cam[(corners_cam[:, 2] >= z_near)
