@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from toosicubix import __version__
+from toosicubix.evaluation.ground_truth import GtObject
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject
 from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.parts.learned import CONTRADICTION_M, HIDES_MIN, hides_clicks
@@ -131,7 +132,7 @@ def _counts_keypoints(result: EvaluationResult) -> bool:
 AGREES, HIDES = "shows them", f"hides >= {HIDES_MIN} and 1/4"
 
 
-def _hides(r: MatchedObject) -> bool | None:
+def hides_keypoints(r: MatchedObject | GtObject) -> bool | None:
     """Whether the object's ground-truth pose hides its labelled keypoints
     (:func:`toosicubix.parts.learned.hides_clicks`); None where the ground truth does not count them."""
     return None if r.keypoints_hidden is None else hides_clicks(r.keypoints or 0, r.keypoints_hidden)
@@ -139,8 +140,9 @@ def _hides(r: MatchedObject) -> bool | None:
 
 def hidden_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
     """Statistics of the objects whose ground-truth pose shows its labelled keypoints, and of those whose pose hides
-    them (:func:`_hides`), over the records that count them."""
-    return _breakdown(records, [(AGREES, lambda r: _hides(r) is False), (HIDES, lambda r: _hides(r) is True)])
+    them (:func:`hides_keypoints`), over the records that count them."""
+    return _breakdown(records, [(AGREES, lambda r: hides_keypoints(r) is False),
+                                (HIDES, lambda r: hides_keypoints(r) is True)])
 
 
 #: A fit this close (degrees, E_R) to the ground truth's depth-reversed twin counts as that twin.
@@ -150,7 +152,7 @@ TWIN_DEG = 10.0
 def twin_summary(records: Sequence[MatchedObject]) -> dict[str, int]:
     """Of the objects whose ground-truth pose hides their labelled keypoints, how many there are and how many fits
     lie within :data:`TWIN_DEG` of the ground truth's depth-reversed twin."""
-    hiding = [r for r in records if _hides(r)]
+    hiding = [r for r in records if hides_keypoints(r)]
     return {"hides": len(hiding), "fit_within_10_deg_of_twin": sum(
         r.e_r_twin_deg is not None and r.e_r_twin_deg <= TWIN_DEG for r in hiding)}
 
@@ -164,7 +166,7 @@ ON_RAYS, OFF_RAYS = f"on them <= {CONTRADICTION_M:g} m", f"off them > {CONTRADIC
 CONSISTENT = "neither off nor hiding"
 
 
-def _off_rays(r: MatchedObject) -> bool | None:
+def off_keypoint_rays(r: MatchedObject | GtObject) -> bool | None:
     """Whether the object's labelled keypoints lie more than :data:`~toosicubix.parts.learned.CONTRADICTION_M` (RMS)
     from their rays at its ground-truth pose; None where the ground truth does not measure it."""
     return None if r.keypoints_off_rays_m is None else r.keypoints_off_rays_m > CONTRADICTION_M
@@ -172,11 +174,11 @@ def _off_rays(r: MatchedObject) -> bool | None:
 
 def off_rays_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
     """Statistics of the objects whose labelled keypoints lie on their rays at the ground-truth pose, of those off
-    them (:func:`_off_rays`), and of those whose ground truth neither lies off its keypoints' rays nor hides them
-    (:func:`_hides`): the ground truth that agrees with the clicks."""
-    return _breakdown(records, [(ON_RAYS, lambda r: _off_rays(r) is False),
-                                (OFF_RAYS, lambda r: _off_rays(r) is True),
-                                (CONSISTENT, lambda r: _off_rays(r) is False and _hides(r) is False)])
+    them (:func:`off_keypoint_rays`), and of those whose ground truth neither lies off its keypoints' rays nor hides
+    them (:func:`hides_keypoints`): the ground truth that agrees with the clicks."""
+    return _breakdown(records, [(ON_RAYS, lambda r: off_keypoint_rays(r) is False),
+                                (OFF_RAYS, lambda r: off_keypoint_rays(r) is True),
+                                (CONSISTENT, lambda r: off_keypoint_rays(r) is False and hides_keypoints(r) is False)])
 
 
 def _counts_off_rays(result: EvaluationResult) -> bool:

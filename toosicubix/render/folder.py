@@ -296,13 +296,14 @@ def ground_truth_note(obj: Any) -> str:
     """What a ground-truth object (:class:`toosicubix.evaluation.GtObject`) says against its own clicks, for its
     note on the overlay, named by its id (ApolloCar3D's car id, which the fitted vehicle's label shows too): that its
     pose hides its labelled keypoints, or puts them more than :data:`toosicubix.parts.learned.CONTRADICTION_M` from
-    their rays (as ``eval`` scores them apart); empty otherwise."""
-    from toosicubix.parts.learned import CONTRADICTION_M, hides_clicks
+    their rays (:func:`toosicubix.evaluation.report.hides_keypoints`, :func:`~toosicubix.evaluation.report.
+    off_keypoint_rays`: as ``eval`` scores them apart); empty otherwise."""
+    from toosicubix.evaluation.report import hides_keypoints, off_keypoint_rays
 
     notes = []
-    if obj.keypoints_hidden is not None and hides_clicks(obj.keypoints or 0, obj.keypoints_hidden):
+    if hides_keypoints(obj):
         notes.append(f"hides {obj.keypoints_hidden} of its {obj.keypoints} keypoints")
-    if obj.keypoints_off_rays_m is not None and obj.keypoints_off_rays_m > CONTRADICTION_M:
+    if off_keypoint_rays(obj):
         notes.append(f"{obj.keypoints_off_rays_m:.1f} m off their rays" if notes else
                      f"{obj.keypoints_off_rays_m:.1f} m off its keypoints' rays")
     if not notes:
