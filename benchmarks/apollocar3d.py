@@ -57,7 +57,8 @@ from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, 
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
 from toosicubix.geometry import depth_reversed_twin
-from toosicubix.parts.learned import (
+from toosicubix.parts.learned import (  # CONTRADICTION_M: rule 6's 0.5 m
+    CONTRADICTION_M,
     contradicting,
     hidden_by_ground_truth,
     hides_clicks,
@@ -84,7 +85,6 @@ MIN_KEYPOINTS = 10
 #: were learned from (``../shared/data/apollocar3d``, 100 images). The "all" rows of any other folder score those
 #: positions out of sample.
 BUNDLED_LEARNED_ON = "de6252f8c68cb029f01f438d7487fec6c0515c6a08f5727645a365e06c0ac3f7"
-CONTRADICTION_M = 0.5  # rule 6: keypoints this far (RMS, metres) from their rays at the ground-truth pose
 #: A contradicting car's clicks are explained by another pose when they lie this close (RMS, metres) to their rays
 #: at it: half of rule 6's threshold (a diagnostic written after looking at those cars; it changes no figure).
 EXPLAINED_M = 0.25
