@@ -36,11 +36,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.evaluation import evaluate_folder, summarize
 from toosicubix.formats.results import read_results
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,

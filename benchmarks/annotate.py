@@ -62,11 +62,12 @@ from apollocar3d import learned_on, sorted_images
 from common import SPLITS, default_data_dir, machine
 
 from toosicubix.annotations.convert import load_images
+from toosicubix.annotations.mapping import load_mapping
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.formats.cameras import load_cameras
-from toosicubix.formats.coco import coco_to_annotations, load_mapping
+from toosicubix.formats.coco import coco_to_annotations
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,

@@ -49,13 +49,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import default_data_dir, machine
 
-from toosicubix.annotations.schema import SCHEMA_VERSION, load_priors_file
+from toosicubix.annotations.mapping import MappingFile, load_mapping
+from toosicubix.annotations.priors_file import load_priors_file
+from toosicubix.annotations.schema import SCHEMA_VERSION
 from toosicubix.errors import InputError
 from toosicubix.evaluation import EvalOptions, evaluate, load_predictions
 from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
-from toosicubix.formats.coco import MappingFile, coco_to_annotations, load_mapping
+from toosicubix.formats.coco import coco_to_annotations
 from toosicubix.geometry import depth_reversed_twin
 from toosicubix.parts.learned import (  # CONTRADICTION_M: rule 6's 0.5 m
     CONTRADICTION_M,
@@ -75,7 +77,7 @@ from toosicubix.priors.estimation import (
     priors_document,
     write_priors_file,
 )
-from toosicubix.priors.table import bundled_priors_path
+from toosicubix.size_priors import bundled_priors_path
 from toosicubix.solver import SolverOptions
 
 PAPER_KITTI = {"iou": 0.29, "siou": 0.77, "e_r_deg": 3.16, "e_t": 0.10, "e_d": 0.14, "e_comb": 0.10}

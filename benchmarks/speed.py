@@ -35,9 +35,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.model import Vehicle
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,

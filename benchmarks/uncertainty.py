@@ -43,13 +43,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
 from toosicubix.annotations.convert import ground_from_schema, load_images
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.schema import parse_ground_block
 from toosicubix.formats.results import dumps
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import KITTI_GROUND
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,

@@ -6,13 +6,11 @@ import pickle
 
 import pytest
 
-from toosicubix.annotations.schema import InputFileError
-from toosicubix.errors import InputError, locate
+from toosicubix.errors import FormatError, InputError, InputFileError, locate
 from toosicubix.evaluation import EvaluationInputError
-from toosicubix.formats import FormatError
 from toosicubix.pipeline.output_folder import OutputFolderError
 from toosicubix.priors.estimation import PriorEstimationError
-from toosicubix.priors.table import UnknownPrototypeError
+from toosicubix.size_priors import UnknownPrototypeError
 
 
 def test_message_names_file_and_place():

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from tests.conftest import REPO
 from toosicubix.cli import main
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.kitti import MAX_FRAME, MAX_SIZE_M, parse_label_line, read_calib
 
 SAMPLE = REPO / "samples" / "annotations.json"

@@ -1,10 +1,10 @@
 """The one base of every input error: a file (or folder, or option) that cannot be used, and where in it.
 
 Every exception that reports bad input derives from :class:`InputError`: annotation, priors and settings
-files (:class:`toosicubix.annotations.schema.InputFileError`), KITTI, Cityscapes 3D and results files
-(:class:`toosicubix.formats.FormatError`), ground-truth and prediction folders
+files (:class:`InputFileError`), KITTI, Cityscapes 3D and results files
+(:class:`FormatError`), ground-truth and prediction folders
 (:class:`toosicubix.evaluation.EvaluationInputError`), unknown prototypes
-(:class:`toosicubix.priors.table.UnknownPrototypeError`), priors estimation
+(:class:`toosicubix.size_priors.UnknownPrototypeError`), priors estimation
 (:class:`toosicubix.priors.estimation.PriorEstimationError`) and output folders
 (:class:`toosicubix.pipeline.output_folder.OutputFolderError`). A caller that only reports the problem catches
 ``InputError``; the CLI turns it into exit code 2.
@@ -72,6 +72,30 @@ class InputError(ValueError):
         return _restored, (type(self), self.args, self.__dict__)
 
 
+class FormatError(InputError):
+    """A file that cannot be read, naming the file and, where there is one, the line (1-based)."""
+
+    def __init__(self, file: str | Path, message: str, line: int | None = None):
+        self.line = line
+        self.message = message
+        super().__init__(file, [(line, message)])
+
+
+class InputFileError(InputError):
+    """An input file (annotations, priors, settings, mappings) that cannot be used, with every problem found.
+
+    Attributes
+    ----------
+    file : str
+        The file, as given.
+    problems : list of (json_path, message)
+        ``json_path`` is like ``$.images[0].vehicles[2].parts[1].part``.
+    """
+
+    def __init__(self, file: str | Path, problems: list[tuple[str, str]]):
+        super().__init__(file, problems)
+
+
 def _restored(cls: type[InputError], args: tuple, state: dict) -> InputError:
     error = cls.__new__(cls, *args)
     error.args = args
@@ -79,4 +103,4 @@ def _restored(cls: type[InputError], args: tuple, state: dict) -> InputError:
     return error
 
 
-__all__ = ["InputError", "Where", "locate"]
+__all__ = ["FormatError", "InputError", "InputFileError", "Where", "locate"]

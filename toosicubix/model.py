@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from toosicubix.camera import Camera
-from toosicubix.parts.vocabulary import click_labels
+from toosicubix.vocabulary import click_labels
 
 
 @dataclass(frozen=True)

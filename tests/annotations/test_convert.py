@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import REPO
+from toosicubix import vocabulary
 from toosicubix.annotations.convert import (
     document_json,
     images_from_schema,
@@ -18,7 +19,6 @@ from toosicubix.annotations.convert import (
 )
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.model import Image, Part, Vehicle
-from toosicubix.parts import vocabulary
 
 
 def _every_part(rng: np.random.Generator) -> list[dict]:

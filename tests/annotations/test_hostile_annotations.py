@@ -7,16 +7,11 @@ import pytest
 from click.testing import CliRunner
 
 from tests.conftest import REPO
-from toosicubix.annotations.schema import (
-    MAX_ID_LENGTH,
-    MAX_PIXEL,
-    InputFileError,
-    check_intrinsics,
-    load_annotations,
-)
+from toosicubix.annotations.schema import MAX_ID_LENGTH, MAX_PIXEL, check_intrinsics, load_annotations
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.cli import main
-from toosicubix.formats import MAX_JSON_DEPTH, json_nesting
+from toosicubix.errors import InputFileError
+from toosicubix.jsonfile import MAX_JSON_DEPTH, json_nesting
 
 SAMPLE = REPO / "samples" / "annotations.json"
 
@@ -180,7 +175,7 @@ def test_nesting_is_the_same_scanned_in_blocks(monkeypatch):
     import random
     import re
 
-    import toosicubix.formats as formats
+    import toosicubix.jsonfile as formats
 
     rng = random.Random(0)
     texts = ['{"a": [[1, {"b": "[[[["}], 2]]}', '[\n[\n[\n]]]', "[]" * 50 + "[[[[]]]]", "7", "]]]", "",

@@ -4,17 +4,16 @@ import json
 import pytest
 
 from tests.conftest import REPO
+from toosicubix.annotations.priors_file import load_priors_file
 from toosicubix.annotations.schema import (
-    DIRECTION_AXES,
     MAX_CLICKS_PER_VEHICLE,
-    POINT_PARTS,
     AnnotationFile,
-    InputFileError,
     json_schema,
     load_annotations,
-    load_priors_file,
     parse_annotations,
 )
+from toosicubix.errors import InputFileError
+from toosicubix.vocabulary import DIRECTION_AXES, POINT_PARTS
 
 # The example of DESIGN section 3, verbatim.
 DESIGN_EXAMPLE = {

@@ -9,11 +9,12 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import image_from_schema, load_images
-from toosicubix.annotations.schema import InputFileError, load_annotations
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.annotations.schema import load_annotations
 from toosicubix.annotations.stream import index_annotations, iter_image_annotations
+from toosicubix.errors import InputFileError
 from toosicubix.formats.results import dumps, results_to_json, write_results_stream
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"

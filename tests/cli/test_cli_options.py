@@ -7,8 +7,7 @@ from click.testing import CliRunner
 
 from toosicubix.cli import main
 from toosicubix.cli.options import BadInput, CommandGroup, GroundTruth, ground_truth_options
-from toosicubix.errors import InputError
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError, InputError
 
 
 def _group() -> click.Group:

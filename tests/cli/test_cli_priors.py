@@ -10,10 +10,10 @@ from click.testing import CliRunner
 
 from tests.eval_scenes import write_cityscapes
 from tests.priors.test_prior_estimation import small_tracking, tracking_line, write_tracking
-from toosicubix.annotations.schema import load_priors_file
+from toosicubix.annotations.priors_file import load_priors, load_priors_file
 from toosicubix.cli import main
 from toosicubix.priors.estimation import make_positive_definite
-from toosicubix.priors.table import bundled_priors_path, load_priors
+from toosicubix.size_priors import bundled_priors_path
 
 
 def run(*args):

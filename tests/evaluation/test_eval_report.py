@@ -38,6 +38,7 @@ from tests.eval_scenes import (
     write_results,
 )
 from toosicubix.camera import Camera
+from toosicubix.errors import FormatError
 from toosicubix.evaluation import (
     EvalOptions,
     EvaluationInputError,
@@ -53,7 +54,6 @@ from toosicubix.evaluation import (
     write_json,
 )
 from toosicubix.evaluation.report import CSV_COLUMNS, depth_breakdown, occlusion_breakdown
-from toosicubix.formats import FormatError
 from toosicubix.formats.kitti import format_label_line, object_from_pose
 
 SUMMARY_KEYS = {"n_matched", "n_unmatched_pred", "n_unmatched_gt", "iou_mean", "iou_median", "siou_mean",

@@ -16,6 +16,7 @@ from tests.eval_scenes import (
     write_kitti_object,
     write_kitti_tracking,
 )
+from toosicubix.errors import FormatError
 from toosicubix.evaluation.errors import EvaluationInputError
 from toosicubix.evaluation.ground_truth import (
     CityscapesGroundTruth,
@@ -23,7 +24,6 @@ from toosicubix.evaluation.ground_truth import (
     KittiTrackingGroundTruth,
     open_ground_truth,
 )
-from toosicubix.formats import FormatError
 from toosicubix.formats.kitti import read_calib
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 

@@ -9,8 +9,8 @@ from click.testing import CliRunner
 
 from tests.conftest import REPO
 from toosicubix.cli import main
+from toosicubix.errors import FormatError
 from toosicubix.evaluation.report import _cell, metric_stats
-from toosicubix.formats import FormatError
 from toosicubix.formats.kitti import MAX_FRAME, KittiObject, format_label_line, read_calib, read_label_file
 
 SAMPLE_GT = REPO / "samples" / "ground_truth"

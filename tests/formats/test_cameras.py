@@ -5,7 +5,7 @@ import json
 import pytest
 
 from tests.conftest import shared_data_dir
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import load_cameras
 
 K = [[700.0, 0.0, 600.0], [0.0, 700.0, 180.0], [0.0, 0.0, 1.0]]

@@ -14,7 +14,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tests.eval_scenes import CITYSCAPES_SCENE, K_CS, R_SENSOR_EGO, M, cs_box_json, cs_document
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cityscapes import R_CAM_SENSOR, parse_gtbbox3d, quaternion_to_matrix, read_gtbbox3d
 from toosicubix.geometry import box2d_of_points, cuboid_corners_cam, geodesic_angle, project_pinhole
 

@@ -8,8 +8,9 @@ import json
 import pytest
 
 from tests.eval_scenes import CITYSCAPES_SCENE, cs_document
-from toosicubix.formats import MAX_JSON_DEPTH, FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cityscapes import read_gtbbox3d
+from toosicubix.jsonfile import MAX_JSON_DEPTH
 
 BOXES = CITYSCAPES_SCENE["aachen_000000_000019"]
 

@@ -8,10 +8,12 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from toosicubix.annotations.schema import InputFileError, parse_annotations
+from toosicubix.annotations.mapping import load_mapping, mapping_json_schema
+from toosicubix.annotations.schema import parse_annotations
 from toosicubix.cli import main
+from toosicubix.errors import InputFileError
 from toosicubix.formats.cameras import load_cameras as read_cameras
-from toosicubix.formats.coco import coco_to_annotations, load_mapping, mapping_json_schema
+from toosicubix.formats.coco import coco_to_annotations
 
 REPO = Path(__file__).resolve().parents[2]
 K = [[1000.0, 0.0, 640.0], [0.0, 1000.0, 360.0], [0.0, 0.0, 1.0]]

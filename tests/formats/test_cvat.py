@@ -17,7 +17,7 @@ from tests.formats.tool_fixtures import (
     sample_fit,
     write_json,
 )
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.cvat import read_cvat
 from toosicubix.formats.cvat_export import EDGE_WALK, review_xml

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from toosicubix.camera import Camera
-from toosicubix.errors import InputError
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError, InputError
 from toosicubix.formats.datasets import (
     DEFAULT_IMAGE_SIZE,
     KITTI_VEHICLE_CLASSES,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.kitti import format_label_line, object_from_pose, parse_label_line, read_calib, read_label_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, wrap_angle
 

@@ -15,7 +15,7 @@ from tests.formats.tool_fixtures import (
     sample_fit,
     write_json,
 )
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.labelstudio import read_label_studio
 

@@ -7,7 +7,8 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import load_images, with_ground
-from toosicubix.formats import FormatError
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.errors import FormatError
 from toosicubix.formats.results import (
     Alternative,
     Cues,
@@ -20,7 +21,6 @@ from toosicubix.formats.results import (
 )
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"

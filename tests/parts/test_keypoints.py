@@ -5,7 +5,7 @@ import json
 import pytest
 
 from tests.formats.tool_fixtures import sample_doc
-from toosicubix.annotations.schema import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS, parse_annotations
+from toosicubix.annotations.schema import parse_annotations
 from toosicubix.parts.keypoints import (
     KEYPOINTS,
     SLOTS,
@@ -17,6 +17,7 @@ from toosicubix.parts.keypoints import (
     parts_from_keypoints,
     skeleton_edges,
 )
+from toosicubix.vocabulary import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS
 
 
 def _canonical(parts):

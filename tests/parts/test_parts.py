@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from toosicubix.annotations.schema import POINT_PARTS
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.parts.synthesis import PartSpec, true_parameters
+from toosicubix.vocabulary import POINT_PARTS
 
 D = np.array([4.0, 1.8, 1.5])  # dx, dy, dz
 WHEELS = (1.3, -1.2)  # Xwf, Xwr

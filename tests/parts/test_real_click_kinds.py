@@ -20,7 +20,7 @@ from toosicubix.parts.learned import (
     seen_from,
 )
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.priors.table import SizePrior
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import SolverOptions, fit_vehicle
 
 #: Keypoints on the rear and the left side of a car (fractions of dx, dy, dz), as real ones sit.

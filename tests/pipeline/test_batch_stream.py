@@ -6,10 +6,10 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import load_images
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.pipeline import batch, fitting, vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.fitting import fit_images, iter_fit_images
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"

@@ -13,8 +13,8 @@ from click.testing import CliRunner
 from tests.pipeline.test_road_normal import _pitched_batch
 from tests.solver.test_robust import TWELVE
 from toosicubix.annotations.convert import document_json
+from toosicubix.annotations.mapping import MappingFile
 from toosicubix.cli import main
-from toosicubix.formats.coco import MappingFile
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.validation import validate_file
 from toosicubix.solver import SolverOptions

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from toosicubix.annotations.schema import InputFileError
+from toosicubix.errors import InputFileError
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.settings import ground_overrides, settings_document, solver_options, write_settings_file
 from toosicubix.solver import SolverOptions

@@ -16,7 +16,7 @@ from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, cuboid_
 from toosicubix.model import Image, Part, Vehicle
 from toosicubix.parts.synthesis import render_parts
 from toosicubix.pipeline.tuning import GridPoint, grid_search, tune
-from toosicubix.priors.table import Priors, SizePrior
+from toosicubix.size_priors import Priors, SizePrior
 
 VIEWS = ["front", "rear", "side", "oblique-front-left", "oblique-rear-right"]
 
@@ -140,10 +140,10 @@ def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
 
     from tests.pipeline.test_road_normal import _pitched_batch
     from toosicubix.annotations.convert import document_json, load_images
+    from toosicubix.annotations.priors_file import load_priors
     from toosicubix.pipeline.batch import fit_file
     from toosicubix.pipeline.fitting import fit_images
     from toosicubix.pipeline.pilot import file_estimates, on_estimated_roads
-    from toosicubix.priors.table import load_priors
     from toosicubix.solver import SolverOptions
 
     path = tmp_path / "pitched.json"

@@ -11,8 +11,9 @@ import pytest
 from scipy import stats
 
 from tests.eval_scenes import write_cityscapes
-from toosicubix.annotations import schema as schemas
-from toosicubix.formats import FormatError
+from toosicubix.annotations import priors_file
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.errors import FormatError
 from toosicubix.priors.estimation import (
     CITYSCAPES_KITTI_TYPES,
     DimensionSamples,
@@ -29,7 +30,7 @@ from toosicubix.priors.estimation import (
     write_priors_file,
 )
 from toosicubix.priors.geometric_median import geometric_median
-from toosicubix.priors.table import bundled_priors_path, load_priors
+from toosicubix.size_priors import bundled_priors_path
 
 # A realistic car: KITTI-like mean and spread (length, width, height), with correlated axes.
 CAR_MEAN = np.array([3.9, 1.62, 1.51])
@@ -299,14 +300,14 @@ def test_estimates_warn_about_small_classes_and_record_provenance(tmp_path):
 def test_document_keeps_base_entries_and_round_trips(tmp_path):
     samples = collect_dimensions("kitti-tracking", small_tracking(tmp_path / "gt"))
     estimates = estimate_priors(samples, min_samples=2)
-    base = schemas.load_priors_file(bundled_priors_path())
+    base = priors_file.load_priors_file(bundled_priors_path())
     doc = priors_document(estimates, base)
     assert list(doc.prototypes) == list(base.prototypes)  # Car replaced in place, nothing added
     assert doc.prototypes["Sedan"] == base.prototypes["Sedan"]
     assert doc.prototypes["Car"].n == 5 and not doc.prototypes["Car"].approximate
     path = tmp_path / "priors.json"
     write_priors_file(doc, path)
-    assert schemas.load_priors_file(path) == doc
+    assert priors_file.load_priors_file(path) == doc
     priors = load_priors(path)
     np.testing.assert_allclose(priors["Car"].mean, np.round(estimates.classes["Car"].gaussian.mean, 4))
     assert json.loads(path.read_text())["description"] == base.description

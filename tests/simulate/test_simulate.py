@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.cli import main
 from toosicubix.formats.kitti import format_label_line, object_from_pose, read_label_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.priors.table import load_priors
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     GroundTruthVehicle,

@@ -8,9 +8,9 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import images_from_schema
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import descent
 from toosicubix.solver.descent import solve_shapes
 from toosicubix.solver.problem import Problem

@@ -15,13 +15,15 @@ from click.testing import CliRunner
 from tests.annotations.test_schemas import DESIGN_EXAMPLE
 from tests.conftest import REPO
 from tests.scenes import CAMERA
-from toosicubix.annotations.schema import InputFileError, parse_annotations
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.annotations.schema import parse_annotations
 from toosicubix.cli import main
+from toosicubix.errors import InputFileError
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.parts.synthesis import PartSpec, render_parts, true_parameters
-from toosicubix.priors.table import SizePrior, load_priors
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.joint import JointVehicle, fit_jointly
 from toosicubix.solver.problem import Problem

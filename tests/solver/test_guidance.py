@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from tests.scenes import CAMERA, random_scene
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.model import Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import suggest_clicks
 

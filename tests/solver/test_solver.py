@@ -13,12 +13,13 @@ import pytest
 
 import toosicubix.solver as solver_module
 from tests.scenes import CAMERA, VIEW_YAW, random_scene
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.camera import Camera
 from toosicubix.evaluation import Cuboid, iou_3d, scaled_iou
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle, so3_exp
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.priors.table import SizePrior, load_priors
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.descent import DescentResult, descend, solve_pose, solve_shape
 from toosicubix.solver.init import YAW_SWEEP, line_rows, yaw_candidates, yaw_from_lines

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from tests.scenes import CAMERA, VIEW_YAW, _specs, random_scene
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.parts.synthesis import render_parts
-from toosicubix.priors.table import SizePrior, load_priors
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.plausibility import unseen_clicks
 from toosicubix.solver.uncertainty import UNDETERMINED_RATIO, Uncertainty, confidence

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from tests.web.synthetic import write_scene
-from toosicubix.priors.table import load_priors
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.web.client import Client
 from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras

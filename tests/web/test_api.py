@@ -12,10 +12,10 @@ import pytest
 from tests.web.conftest import make_session
 from tests.web.synthetic import DIMENSIONS, NAMED, R_CAM_VEHICLE, T_CAM_VEHICLE, UNNAMED, clicks
 from toosicubix.annotations.convert import load_images
-from toosicubix.annotations.schema import InputFileError
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.errors import InputFileError
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import KITTI_GROUND
-from toosicubix.priors.table import load_priors
 from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras
 

@@ -231,7 +231,7 @@ def test_the_page_estimates_again_when_the_vehicles_double(scene, tmp_path):
     """The rule, with a stand-in estimate: from 30 vehicles on, each time they double, up to the pilot's 400."""
     from dataclasses import replace
 
-    from toosicubix.priors.table import load_priors
+    from toosicubix.annotations.priors_file import load_priors
     from toosicubix.solver import SolverOptions
     from toosicubix.web.session import Session, load_cameras
 

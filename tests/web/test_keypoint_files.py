@@ -14,7 +14,7 @@ import pytest
 
 from tests.pipeline.test_road_normal import _pitched_batch
 from toosicubix.annotations.convert import document_json, load_images
-from toosicubix.priors.table import load_priors
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.web.request_fields import ApiError
 from toosicubix.web.session import Session
 

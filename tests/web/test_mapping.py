@@ -12,8 +12,8 @@ import pytest
 
 from tests.web.conftest import make_session
 from tests.web.synthetic import CAMERA, DIMENSIONS, R_CAM_VEHICLE, T_CAM_VEHICLE
-from toosicubix.formats.coco import MappingFile
-from toosicubix.priors.table import load_priors
+from toosicubix.annotations.mapping import MappingFile
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.web.request_fields import ApiError
 from toosicubix.web.session import Session, load_cameras
 

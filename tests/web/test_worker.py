@@ -9,8 +9,8 @@ from functools import partial
 
 import pytest
 
-from toosicubix.annotations.schema import InputFileError
-from toosicubix.priors.table import load_priors
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.errors import InputFileError
 from toosicubix.web.worker import WorkerProcess
 
 

@@ -17,7 +17,7 @@ from toosicubix.annotations import schema as schemas
 from toosicubix.camera import Camera
 from toosicubix.geometry import rot_x, rot_z
 from toosicubix.model import LEVEL_NORMAL, GroundPlane, Image, Part, Vehicle
-from toosicubix.parts.vocabulary import KINDS
+from toosicubix.vocabulary import KINDS
 
 # -- file -> model ---------------------------------------------------------------------------------------------------
 
@@ -85,7 +85,7 @@ def load_images(path: str | Path) -> list[Image]:
 
     Raises
     ------
-    schemas.AnnotationError
+    toosicubix.errors.InputFileError
     """
     return images_from_schema(schemas.load_annotations(path))
 
@@ -96,7 +96,7 @@ def with_ground(images: list[Image], overrides: dict[str, object]) -> list[Image
 
     Raises
     ------
-    schemas.InputFileError
+    toosicubix.errors.InputFileError
         When the resulting block is invalid (e.g. a negative height), naming the field.
     """
     if not overrides:

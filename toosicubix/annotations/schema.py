@@ -22,19 +22,13 @@ from pydantic import (
     model_validator,
 )
 
-from toosicubix import formats
-from toosicubix.errors import InputError
-from toosicubix.parts import vocabulary
+from toosicubix import vocabulary
+from toosicubix.errors import InputFileError
+from toosicubix.jsonfile import read_json
+from toosicubix.vocabulary import DIMENSION_AXES
 
 SCHEMA_VERSION = 1
 
-#: Every name a ``point`` annotation may carry (the part vocabulary's, :mod:`toosicubix.parts.vocabulary`).
-POINT_PARTS: tuple[str, ...] = vocabulary.names("point")
-SYMMETRY_FACES = vocabulary.names("symmetry")
-DIRECTION_AXES = vocabulary.names("direction")
-#: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
-LENGTH_FEATURES = {name: vocabulary.entry("length", name).get("description") for name in vocabulary.names("length")}
-DIMENSION_AXES = ("dx", "dy", "dz")
 #: The most clicked points one vehicle may have (a point part is one, a pair or an arrow two). The flat keypoint
 #: vocabulary of the labelling tools has 65 and ApolloCar3D's 66; the solver's work grows with the square of
 #: the clicks and more, so a vehicle past this is refused rather than left to run for minutes.
@@ -94,23 +88,6 @@ SigmaMetres = Annotated[float, AfterValidator(_ensure_sigma_metres),
 ImageSide = Annotated[int, Field(gt=0, le=int(MAX_PIXEL))]
 
 
-class InputFileError(InputError):
-    """An input file (annotations, priors, settings) that cannot be used, with every problem found.
-
-    Attributes
-    ----------
-    file : str
-        The file, as given.
-    problems : list of (json_path, message)
-        ``json_path`` is like ``$.images[0].vehicles[2].parts[1].part``.
-    """
-
-    def __init__(self, file: str | Path, problems: list[tuple[str, str]]):
-        super().__init__(file, problems)
-
-
-#: The name used for annotation files.
-AnnotationError = InputFileError
 
 
 class _Model(BaseModel):
@@ -421,20 +398,6 @@ def _validate(model: type[_M], data: Any, source: str | Path) -> _M:
         raise InputFileError(source, problems) from None
 
 
-def read_json(path: str | Path) -> Any:
-    """Decoded JSON of a file, by :func:`toosicubix.formats.read_json`, its problem reported at ``$``.
-
-    Raises
-    ------
-    InputFileError
-        The file is missing, unreadable or not JSON (with line and column).
-    """
-    try:
-        return formats.read_json(path)
-    except formats.FormatError as exc:
-        raise InputFileError(path, [("$", exc.message)]) from None
-
-
 def parse_annotations(data: Any, source: str | Path = "<annotations>") -> AnnotationFile:
     """Validate already-decoded JSON data.
 
@@ -454,76 +417,7 @@ def load_annotations(path: str | Path) -> AnnotationFile:
     InputFileError
         The file is missing, not JSON, or not a valid annotation file v1.
     """
-    return parse_annotations(read_json(path), path)
-
-
-class PriorEntry(_Model):
-    """The Gaussian size prior of one prototype, dimensions ordered (dx, dy, dz) = (length, width, height)."""
-
-    mean: Row3 = Field(description="Mean (dx, dy, dz) in metres.")
-    cov: tuple[Row3, Row3, Row3] = Field(description="Covariance of (dx, dy, dz), m^2; symmetric positive definite.")
-    kitti_type: str = Field(pattern=r"^\S+$", description="Type written to KITTI label files, e.g. 'Car'.")
-    n: int | None = Field(default=None, ge=0, description="Number of vehicles it was estimated from.")
-    approximate: bool = Field(default=False, description="True when not estimated from measured data.")
-    source: str = Field(min_length=1, description="Where the figures come from.")
-
-    @field_validator("mean")
-    @classmethod
-    def _ensure_positive_mean(cls, mean: Row3) -> Row3:
-        if min(mean) <= 0:
-            raise ValueError(f"expected positive dimensions, got {list(mean)}")
-        return mean
-
-    @field_validator("cov")
-    @classmethod
-    def _ensure_spd(cls, cov: tuple[Row3, Row3, Row3]) -> tuple[Row3, Row3, Row3]:
-        C = np.array(cov)
-        if not np.allclose(C, C.T, rtol=1e-9, atol=1e-12):
-            raise ValueError("expected a symmetric covariance")
-        if np.linalg.eigvalsh(C).min() <= 0:
-            raise ValueError(f"expected a positive definite covariance, eigenvalues {np.linalg.eigvalsh(C).tolist()}")
-        return cov
-
-
-class PriorsFile(_Model):
-    """A table of size priors per prototype."""
-
-    model_config = ConfigDict(title="ToosiCubix size priors v1")
-
-    toosicubix_priors: Literal[1]
-    description: str = ""
-    prototypes: dict[str, PriorEntry] = Field(min_length=1)
-
-
-def load_priors_file(path: str | Path) -> PriorsFile:
-    """Read and validate a priors file.
-
-    Raises
-    ------
-    InputFileError
-    """
-    return _validate(PriorsFile, read_json(path), path)
-
-
-class SettingsFile(_Model):
-    """Solver settings for ``toosicubix fit --config`` (written by ``toosicubix tune``)."""
-
-    model_config = ConfigDict(title="ToosiCubix settings v1")
-
-    toosicubix_settings: Literal[1]
-    lambda_3d: float | None = Field(default=None, gt=0, description="Prior weight in the descent's 3D cost.")
-    lambda_px: float | None = Field(default=None, gt=0, description="Prior weight in the pixel cost (px^2).")
-    tuned: dict[str, Any] | None = Field(default=None, description="How the values were chosen (free form).")
-
-
-def load_settings_file(path: str | Path) -> SettingsFile:
-    """Read and validate a settings file.
-
-    Raises
-    ------
-    InputFileError
-    """
-    return _validate(SettingsFile, read_json(path), path)
+    return parse_annotations(read_json(path, at_root=True), path)
 
 
 def parse_ground_block(data: Any, source: str | Path = "command line") -> GroundModel:

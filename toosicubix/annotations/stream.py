@@ -18,8 +18,9 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, InputFileError, _describe, _json_path
-from toosicubix.formats import FormatError, read_json_text
+from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, _describe, _json_path
+from toosicubix.errors import FormatError, InputFileError
+from toosicubix.jsonfile import read_json_text
 
 _WHITESPACE = re.compile(r"[ \t\n\r]*")
 #: At most this many problems are listed for one file.

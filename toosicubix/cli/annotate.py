@@ -72,9 +72,10 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
       toosicubix annotate frames/*.jpg --cameras cameras.json --road-normal 0.04,-0.99,0.15
       toosicubix annotate frames/*.jpg --cameras cameras.json --mapping apollocar3d-66
     """
-    from toosicubix.annotations.schema import InputFileError, parse_ground_block
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.annotations.schema import parse_ground_block
+    from toosicubix.errors import InputFileError
     from toosicubix.pipeline.settings import ground_overrides
-    from toosicubix.priors.table import load_priors
     from toosicubix.web.request_fields import ApiError
     from toosicubix.web.server import serve
     from toosicubix.web.session import Session, load_cameras

@@ -37,7 +37,7 @@ def _common(command):
 
 
 def _load(out: Path, annotations_path: Path | None):
-    from toosicubix.formats import FormatError
+    from toosicubix.errors import FormatError
     from toosicubix.formats.fitted import load_fitted
 
     try:

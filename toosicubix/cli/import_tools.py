@@ -14,7 +14,7 @@ from toosicubix.errors import InputError
 
 
 def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:
-    from toosicubix.annotations.schema import LENGTH_FEATURES
+    from toosicubix.vocabulary import LENGTH_FEATURES
 
     out = {}
     for value in values:
@@ -53,8 +53,8 @@ def _common(command):
 
 
 def _run(read, source: Path, cameras_path: Path | None, out_path: Path, strict: bool, quiet: bool) -> None:
-    from toosicubix.annotations.schema import InputFileError, parse_annotations
-    from toosicubix.formats import FormatError
+    from toosicubix.annotations.schema import parse_annotations
+    from toosicubix.errors import FormatError, InputFileError
     from toosicubix.formats.cameras import load_cameras
 
     try:
@@ -163,8 +163,9 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     Example:
       toosicubix import coco apollo_val.json --mapping apollocar3d-66 --cameras cameras.json -o ann.json
     """
+    from toosicubix.annotations.mapping import load_mapping
     from toosicubix.formats.cameras import load_cameras
-    from toosicubix.formats.coco import coco_to_annotations, load_mapping
+    from toosicubix.formats.coco import coco_to_annotations
 
     try:
         mapping, _ = load_mapping(mapping_name)

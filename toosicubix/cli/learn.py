@@ -46,10 +46,10 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
     Example:
       toosicubix learn-parts apollo_val.json --car-models car_models.json --cameras cameras.json -o mine.json
     """
+    from toosicubix.annotations.mapping import load_mapping
     from toosicubix.formats.apollocar3d import keypoint_samples, read_apollocar3d, read_car_models
     from toosicubix.formats.atomic import atomic_write_json
     from toosicubix.formats.cameras import load_cameras
-    from toosicubix.formats.coco import load_mapping
     from toosicubix.parts.learned import learned_mapping
 
     try:

@@ -181,7 +181,7 @@ def _apollocar3d_file_option(command: Callable, flag: str, parameter: str, help_
 
 def keypoint_mapping_option(help_text: str) -> Callable:
     """Add ``--mapping NAME|FILE`` (a bundled keypoint mapping or a mapping file, with keypoint parts) to a
-    command; it receives ``mapping``, the loaded :class:`toosicubix.formats.coco.MappingFile` or None. A mapping
+    command; it receives ``mapping``, the loaded :class:`toosicubix.annotations.mapping.MappingFile` or None. A mapping
     that does not load, or has no keypoint parts, is bad input naming it (exit 2)."""
 
     def decorate(command: Callable) -> Callable:
@@ -197,8 +197,8 @@ def keypoint_mapping_option(help_text: str) -> Callable:
 def _keypoint_mapping(name: str | None) -> Any:
     if name is None:
         return None
-    from toosicubix.annotations.schema import InputFileError
-    from toosicubix.formats.coco import load_mapping
+    from toosicubix.annotations.mapping import load_mapping
+    from toosicubix.errors import InputFileError
 
     try:
         mapping, _ = load_mapping(name)

@@ -62,7 +62,7 @@ def priors_command(ground_truth: GroundTruth, car_models_path: Path | None, out_
       toosicubix priors --cityscapes gtBbox3d/train --base priors.json -o priors.json
       toosicubix priors --apollocar3d apollo_train.json --car-models car_models.json -o apollo-priors.json
     """
-    from toosicubix.annotations.schema import load_priors_file
+    from toosicubix.annotations.priors_file import load_priors_file
     from toosicubix.priors.estimation import (
         collect_dimensions,
         default_method,

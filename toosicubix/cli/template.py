@@ -35,10 +35,10 @@ def template_command(tool: str, prototypes: str, priors_path: Path | None, out_p
       toosicubix template cvat --prototypes Car,Van -o labels.json
       toosicubix template label-studio > config.xml
     """
-    from toosicubix.annotations.schema import InputFileError
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.errors import InputFileError
     from toosicubix.formats.atomic import atomic_write_text
     from toosicubix.formats.templates import template_text
-    from toosicubix.priors.table import load_priors
 
     names = tuple(p.strip() for p in prototypes.split(",") if p.strip())
     if not names:

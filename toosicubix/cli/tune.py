@@ -55,12 +55,12 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     from dataclasses import replace
 
     from toosicubix.annotations.convert import load_images
+    from toosicubix.annotations.priors_file import load_priors
     from toosicubix.evaluation import EvalOptions, open_ground_truth
     from toosicubix.pipeline.fitting import check_prototypes
     from toosicubix.pipeline.pilot import on_estimated_roads
     from toosicubix.pipeline.settings import settings_document, write_settings_file
     from toosicubix.pipeline.tuning import tune
-    from toosicubix.priors.table import load_priors
     from toosicubix.solver import SolverOptions
 
     grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")

@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix.errors import FormatError
 from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.errors import EvaluationInputError
-from toosicubix.formats import FormatError, kitti
+from toosicubix.formats import kitti
 from toosicubix.formats.cityscapes import read_gtbbox3d
 from toosicubix.formats.datasets import (
     GTBBOX3D_SUFFIX,
@@ -315,8 +316,7 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
     occlusion_kind = None
 
     def __init__(self, root: str | Path, car_models: str | Path | None = None, cameras: str | Path | None = None):
-        from toosicubix.annotations.schema import InputFileError
-        from toosicubix.formats import FormatError
+        from toosicubix.errors import FormatError, InputFileError
         from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
         from toosicubix.formats.cameras import load_cameras
 
@@ -346,7 +346,7 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         """Per keypoint index, the bundled ``apollocar3d-66`` mapping's keypoint on a car of ``prototype``
         (:class:`toosicubix.parts.linear.TypicalKeypoint`: its place and the faces it is seen from), or None."""
         if prototype not in self._candidates:
-            from toosicubix.formats.coco import load_mapping
+            from toosicubix.annotations.mapping import load_mapping
 
             mapping, _ = load_mapping("apollocar3d-66")
             candidates = mapping.keypoint_candidates(prototype)

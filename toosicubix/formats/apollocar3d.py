@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from toosicubix.annotations.schema import InputFileError, read_json
+from toosicubix.errors import InputFileError
 from toosicubix.geometry import rot_x, rot_y, rot_z
+from toosicubix.jsonfile import read_json
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ def read_car_models(path: str | Path) -> dict[int, CarModel]:
     InputFileError
         Naming the file and the JSON path of a missing or non-positive field.
     """
-    data = read_json(path)
+    data = read_json(path, at_root=True)
     if not isinstance(data, dict) or not data:
         raise InputFileError(path, [("$", "expected an object of car models by id")])
     out = {}
@@ -115,7 +116,7 @@ def read_apollocar3d(path: str | Path, car_models: dict[int, CarModel]) -> list[
     InputFileError
         Naming the file and the JSON path: a missing or malformed pose, bbox or keypoints, an unknown car model.
     """
-    data = read_json(path)
+    data = read_json(path, at_root=True)
     if not isinstance(data, dict) or not isinstance(data.get("images"), list) \
             or not isinstance(data.get("annotations"), list):
         raise InputFileError(path, [("$", "expected a COCO object with 'images' and 'annotations' lists")])

@@ -19,7 +19,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from toosicubix.annotations.schema import CameraModel
-from toosicubix.formats import FormatError, json_field, read_json
+from toosicubix.errors import FormatError
+from toosicubix.jsonfile import json_field, read_json
 
 
 @dataclass(frozen=True)

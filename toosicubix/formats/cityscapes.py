@@ -29,8 +29,9 @@ import numpy as np
 
 from toosicubix.annotations.schema import check_intrinsics
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError, json_field, json_numbers, read_json
+from toosicubix.errors import FormatError
 from toosicubix.formats.kitti import MAX_DISTANCE_M, MAX_PIXEL, MAX_SIZE_M
+from toosicubix.jsonfile import json_field, json_numbers, read_json
 
 #: Sensor axes (x forward, y left, z up) to camera axes (x right, y down, z forward); ``get_K_multiplier()``
 #: in cityscapesScripts.

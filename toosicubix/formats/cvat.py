@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.templates import PROTOTYPE_ATTRIBUTE
 from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolKeypoint, ToolVehicle

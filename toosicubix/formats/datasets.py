@@ -13,7 +13,7 @@ Layouts:
 - Cityscapes 3D: ``*_gtBbox3d.json`` anywhere under ``DIR`` (other ``*.json`` files count too, a
   ``_gtBbox3d`` file wins over another of the same stem); image id = file stem without ``_gtBbox3d``.
 
-Every walker raises :class:`toosicubix.formats.FormatError` (an :class:`toosicubix.errors.InputError`)
+Every walker raises :class:`toosicubix.errors.FormatError` (an :class:`toosicubix.errors.InputError`)
 naming the folder when it is missing or holds none of the expected files.
 """
 
@@ -23,7 +23,8 @@ import re
 from pathlib import Path
 
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError, kitti
+from toosicubix.errors import FormatError
+from toosicubix.formats import kitti
 
 #: KITTI's vehicle types: the classes simulated, scored and given priors unless others are asked for.
 KITTI_VEHICLE_CLASSES = ("Car", "Van", "Truck")
@@ -206,7 +207,8 @@ class KittiTrackingFolder(KittiFolder):
 
         Raises FormatError for a frame number past ``kitti.MAX_FRAME``, before any caller allocates an id per frame.
         """
-        from toosicubix.formats import FormatError, kitti
+        from toosicubix.errors import FormatError
+        from toosicubix.formats import kitti
 
         last = -1
         path = self.label_file(sequence)

@@ -13,10 +13,11 @@ from pathlib import Path
 from typing import Any
 
 from toosicubix.annotations.convert import camera_from_schema
-from toosicubix.annotations.schema import InputFileError, load_annotations
+from toosicubix.annotations.schema import load_annotations
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError, read_json
+from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.results import RESULTS_FILENAME, VehicleResult, read_results
+from toosicubix.jsonfile import read_json
 
 
 @dataclass(frozen=True)

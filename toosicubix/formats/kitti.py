@@ -20,7 +20,7 @@ import numpy as np
 
 from toosicubix.annotations.schema import check_projection
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.geometry import R_cam_vehicle_from_ypr, wrap_angle, ypr_from_R_cam_vehicle
 
 #: KITTI's code for "occlusion unknown", written for fitted objects.

@@ -21,9 +21,10 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlparse
 
-from toosicubix.formats import FormatError, read_json
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolKeypoint, ToolVehicle
+from toosicubix.jsonfile import read_json
 
 #: How far a box is grown, as a share of its size each way, when keypoints are grouped by containment.
 CONTAINMENT_MARGIN = 0.1

@@ -22,7 +22,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from toosicubix.formats import FormatError, json_field, json_numbers, read_json
+from toosicubix.errors import FormatError
+from toosicubix.jsonfile import json_field, json_numbers, read_json
 from toosicubix.solver import Alternative  # the solver's type: results.json's ``alternatives``
 from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
 

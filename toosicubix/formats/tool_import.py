@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.parts.keypoints import parts_from_keypoints
 

@@ -26,8 +26,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from toosicubix.annotations.schema import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS, SYMMETRY_FACES
-from toosicubix.parts import vocabulary
+from toosicubix import vocabulary
+from toosicubix.vocabulary import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS, SYMMETRY_FACES
 
 #: How many symmetric pairs a face may carry (``rear-pair1-left`` .. ``rear-pair3-right``).
 PAIRS_PER_FACE = 3

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from toosicubix.parts.vocabulary import FACES, faces_seen_from
+from toosicubix.vocabulary import FACES, faces_seen_from
 
 #: ``seen_from`` covers at least this share of the vehicles a keypoint was labelled on.
 SEEN_FROM_SHARE = 0.95
@@ -96,7 +96,7 @@ def faces_toward(s: KeypointSample) -> frozenset[str]:
 
 def facing_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray) -> frozenset[str]:
     """The faces of a cuboid (pose ``R_cam_vehicle`` (3, 3), ``t_cam_vehicle`` (3,), ``dimensions`` (3,)) turned to
-    the camera: those whose plane the camera lies beyond (:func:`~toosicubix.parts.vocabulary.faces_seen_from`)."""
+    the camera: those whose plane the camera lies beyond (:func:`~toosicubix.vocabulary.faces_seen_from`)."""
     seen = faces_seen_from(-R_cam_vehicle.T @ t_cam_vehicle, dimensions)
     return frozenset(face for face, yes in seen.items() if yes)
 

@@ -31,7 +31,7 @@ A ``length`` annotation also gives a *measurement*, a linear equation on ``p`` w
 the plate's width ``2 Y``, the wheelbase ``Xwf - Xwr``, the tyre's diameter ``Zt``. Known dimensions of the
 vehicle are measurements too. Unlike the clicks, measurements fix the scale.
 
-The names and their attributes come from the part vocabulary (:mod:`toosicubix.parts.vocabulary`); each kind's
+The names and their attributes come from the part vocabulary (:mod:`toosicubix.vocabulary`); each kind's
 linear form is a function here registered with ``@linear_form(kind)``.
 """
 
@@ -44,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from toosicubix.model import Part
-from toosicubix.parts.vocabulary import KINDS, click, click_labels, entry, faces_of_click
+from toosicubix.vocabulary import KINDS, click, click_labels, entry, faces_of_click
 
 DX, DY, DZ = 0, 1, 2
 #: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.

@@ -14,7 +14,7 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.parts.vocabulary import KINDS
+from toosicubix.vocabulary import KINDS
 
 
 @dataclass(frozen=True)

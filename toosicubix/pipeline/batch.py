@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from toosicubix import __version__
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
@@ -39,7 +40,7 @@ from toosicubix.pipeline.output_folder import (
 )
 from toosicubix.pipeline.pilot import PilotFindings, on_estimated_roads, run_pilot
 from toosicubix.pipeline.road_normal import refuse_with_ground
-from toosicubix.priors.table import Priors, load_priors
+from toosicubix.size_priors import Priors
 from toosicubix.solver import SolverOptions
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",

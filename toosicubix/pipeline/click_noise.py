@@ -35,7 +35,7 @@ import numpy as np
 
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.model import Image, Vehicle
-from toosicubix.parts.vocabulary import KINDS
+from toosicubix.vocabulary import KINDS
 
 #: Vehicles the pilot fit takes at most, every k-th of the batch.
 PILOT_VEHICLES = 400

@@ -16,9 +16,9 @@ import cv2
 import numpy as np
 
 from toosicubix.annotations.convert import image_from_schema, with_ground
-from toosicubix.annotations.schema import InputFileError
 from toosicubix.annotations.stream import AnnotationIndex, iter_image_annotations
 from toosicubix.camera import Camera
+from toosicubix.errors import InputFileError
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.model import GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
@@ -32,7 +32,7 @@ from toosicubix.pipeline.vehicle import (
     fit_one,
     with_next_clicks,
 )
-from toosicubix.priors.table import Priors, SizePrior
+from toosicubix.size_priors import Priors, SizePrior
 from toosicubix.solver import (
     MISFIT_WARNING,
     FitResult,
@@ -69,7 +69,7 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
 
 class KeypointCatalogue(Protocol):
     """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
-    :class:`toosicubix.formats.coco.MappingFile`)."""
+    :class:`toosicubix.annotations.mapping.MappingFile`)."""
 
     def keypoint_candidates(self, prototype: str) -> dict[str, TypicalKeypoint]:
         """Name -> where it typically is on a vehicle of ``prototype`` and the faces it is seen from."""
@@ -114,7 +114,7 @@ def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
         ground block); the camera height may be unknown
     next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
     keypoints : suggest these keypoints instead of the vocabulary's parts (a keypoint mapping,
-        :class:`toosicubix.formats.coco.MappingFile`: its keypoints at their positions for each prototype)
+        :class:`toosicubix.annotations.mapping.MappingFile`: its keypoints at their positions for each prototype)
     """
     n = sum(len(im.vehicles) for im in images)
     return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks, keypoints))

@@ -15,7 +15,6 @@ from toosicubix.annotations.convert import with_ground
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
 from toosicubix.model import Image
-from toosicubix.parts.vocabulary import KINDS
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.fitting import KeypointCatalogue, add_next_clicks, iter_fit_images, stream_images
 from toosicubix.pipeline.road_normal import (
@@ -27,8 +26,9 @@ from toosicubix.pipeline.road_normal import (
     ground_block,
     without_pilot,
 )
-from toosicubix.priors.table import Priors
+from toosicubix.size_priors import Priors
 from toosicubix.solver import SolverOptions
+from toosicubix.vocabulary import KINDS
 
 __all__ = ["PilotFindings", "estimated_grounds", "file_estimates", "on_estimated_roads", "run_pilot"]
 

@@ -23,12 +23,12 @@ def solver_options(config_path: str | Path | None = None, **explicit: Any) -> So
 
     Raises
     ------
-    toosicubix.annotations.schema.InputFileError
+    toosicubix.errors.InputFileError
         The settings file cannot be read or is not a settings file v1 (file and JSON path).
     """
     options = SolverOptions()
     if config_path is not None:
-        from toosicubix.annotations.schema import load_settings_file
+        from toosicubix.annotations.settings_file import load_settings_file
 
         settings = load_settings_file(config_path)
         from_file = {k: getattr(settings, k) for k in SETTINGS_FIELDS if getattr(settings, k) is not None}

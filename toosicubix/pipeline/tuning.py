@@ -19,7 +19,7 @@ import numpy as np
 from toosicubix.evaluation import EvalOptions, GroundTruthSource, evaluate, predictions_from_results, summarize
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.priors.table import Priors
+from toosicubix.size_priors import Priors
 from toosicubix.solver import SolverOptions
 
 #: Default grids (the refinement then tries the half-decades around the best).

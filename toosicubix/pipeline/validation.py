@@ -16,14 +16,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from toosicubix import vocabulary
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.parts import vocabulary
 from toosicubix.pipeline.batch import pilot_and_fits
 from toosicubix.pipeline.fitting import KeypointCatalogue
 from toosicubix.pipeline.pilot import PilotFindings
 from toosicubix.pipeline.road_normal import refuse_with_ground
-from toosicubix.priors.table import load_priors
 from toosicubix.solver import SolverOptions
 
 VALIDATION_VERSION = 1

@@ -25,7 +25,7 @@ from toosicubix.formats.results import (
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Vehicle
 from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
-from toosicubix.priors.table import SizePrior
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import FitResult, SolverOptions, confidence, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
 from toosicubix.solver.misfit import ResidualTest

@@ -28,7 +28,7 @@ dimensions are the same in every frame), Cityscapes 3D every box once, grouped b
 
 Layers: :func:`collect_dimensions` (ground truth -> samples per class), :func:`robust_gaussian`
 (samples -> mean and covariance), :func:`estimate_priors` (per class, with warnings and provenance),
-:func:`priors_document` and :func:`write_priors_file` (the priors file, ``schemas.PriorsFile``).
+:func:`priors_document` and :func:`write_priors_file` (the priors file, ``priors_file.PriorsFile``).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from typing import Literal
 import numpy as np
 from scipy import integrate, linalg, optimize, stats
 
-from toosicubix.annotations import schema as schemas
+from toosicubix.annotations import priors_file
 from toosicubix.errors import InputError
 from toosicubix.formats import kitti
 from toosicubix.formats.atomic import atomic_write_text
@@ -334,7 +334,7 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
 
     Raises
     ------
-    toosicubix.formats.FormatError
+    toosicubix.errors.FormatError
         Missing folder, no label files, or a malformed label line or file (file and line, or JSON path).
     PriorEstimationError
         ``sequences`` for a source other than tracking, or a requested sequence without a label file.
@@ -473,12 +473,12 @@ class ClassPrior:
     source: str
     few_samples: bool
 
-    def entry(self) -> schemas.PriorEntry:
+    def entry(self) -> priors_file.PriorEntry:
         """The priors-file entry: mean to 0.1 mm, covariance to 9 significant digits (keeps it positive
         definite for condition numbers up to the floor's 1e6)."""
         mean = tuple(round(float(v), 4) for v in self.gaussian.mean)
         cov = tuple(tuple(float(f"{float(v):.9g}") for v in row) for row in self.gaussian.cov)
-        return schemas.PriorEntry(mean=mean, cov=cov, kitti_type=self.kitti_type, n=self.gaussian.n,  # type: ignore[arg-type]
+        return priors_file.PriorEntry(mean=mean, cov=cov, kitti_type=self.kitti_type, n=self.gaussian.n,  # type: ignore[arg-type]
                                   approximate=False, source=self.source)
 
 
@@ -581,7 +581,7 @@ def _source(samples: DimensionSamples, g: RobustGaussian, c: float, few: bool, m
 # --- the priors file ---------------------------------------------------------------------------------------
 
 
-def priors_document(estimates: PriorEstimates, base: schemas.PriorsFile | None = None) -> schemas.PriorsFile:
+def priors_document(estimates: PriorEstimates, base: priors_file.PriorsFile | None = None) -> priors_file.PriorsFile:
     """A validated priors file: ``base``'s entries (in order) with the estimated classes replaced or added.
 
     Raises
@@ -593,10 +593,10 @@ def priors_document(estimates: PriorEstimates, base: schemas.PriorsFile | None =
     for name, prior in estimates.classes.items():
         prototypes[name] = prior.entry()
     description = base.description if base is not None and base.description else DEFAULT_DESCRIPTION
-    return schemas.PriorsFile(toosicubix_priors=1, description=description, prototypes=prototypes)
+    return priors_file.PriorsFile(toosicubix_priors=1, description=description, prototypes=prototypes)
 
 
-def write_priors_file(document: schemas.PriorsFile, path: str | Path) -> None:
+def write_priors_file(document: priors_file.PriorsFile, path: str | Path) -> None:
     """Write a priors file atomically (JSON, one-space indent, as the bundled table).
 
     Raises

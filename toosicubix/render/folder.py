@@ -352,11 +352,11 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
 
     Raises
     ------
-    RenderInputError, toosicubix.formats.FormatError, toosicubix.annotations.schema.InputFileError,
+    RenderInputError, toosicubix.errors.FormatError, toosicubix.errors.InputFileError,
     toosicubix.evaluation.EvaluationInputError
         Missing or malformed inputs (each names the file and, where there is one, the JSON path).
     """
-    from toosicubix.formats import read_json
+    from toosicubix.jsonfile import read_json
 
     options = options or RenderOptions()
     fit_dir = Path(fit_dir)

@@ -39,7 +39,7 @@ Randomness is seeded per vehicle from ``seed`` and the vehicle's image and id, s
 not depend on which other vehicles are simulated.
 
 The faces each part can be seen on and the prototypes it suits (the corners: box-shaped ones) are the part
-vocabulary's (:mod:`toosicubix.parts.vocabulary`); the annotation file is written by
+vocabulary's (:mod:`toosicubix.vocabulary`); the annotation file is written by
 :func:`toosicubix.annotations.convert.vehicle_json`.
 """
 
@@ -54,10 +54,10 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix import vocabulary
 from toosicubix.annotations.convert import vehicle_json
 from toosicubix.camera import Camera
-from toosicubix.errors import InputError
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError, InputError
 from toosicubix.formats.datasets import (
     DEFAULT_IMAGE_SIZE,
     KITTI_VEHICLE_CLASSES,
@@ -68,7 +68,6 @@ from toosicubix.formats.datasets import (
 from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
 from toosicubix.model import Part, Vehicle
-from toosicubix.parts import vocabulary
 from toosicubix.parts.synthesis import PartSpec, true_parameters
 
 #: KITTI's vehicle types (defined once, in :mod:`toosicubix.formats.datasets`).
@@ -208,7 +207,7 @@ def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -
 
     Raises
     ------
-    toosicubix.formats.FormatError
+    toosicubix.errors.FormatError
         A missing folder or calibration file, a malformed label line.
     """
     sel = sel or SelectionOptions()
@@ -259,7 +258,7 @@ def select_vehicles(kind: str, root: str | Path, sel: SelectionOptions | None = 
 
     Raises
     ------
-    toosicubix.formats.FormatError
+    toosicubix.errors.FormatError
         An unknown kind, a missing folder or calibration file, a malformed label line.
     """
     if kind == "kitti":

@@ -21,12 +21,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from toosicubix import vocabulary
 from toosicubix.camera import Camera
 from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane
-from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import PartsModel
-from toosicubix.priors.table import SizePrior
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver.degenerate import absurd_depth, degeneracy, degenerate_spread, short_arrows, too_few
 from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts

@@ -8,8 +8,8 @@ import numpy as np
 
 from toosicubix.camera import Camera
 from toosicubix.parts.linear import PartsModel
-from toosicubix.parts.vocabulary import click
 from toosicubix.solver.problem import Problem
+from toosicubix.vocabulary import click
 
 _BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position")
 

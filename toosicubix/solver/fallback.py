@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from toosicubix.parts import vocabulary
+from toosicubix import vocabulary
 from toosicubix.solver.problem import Problem
 
 #: Typical values of the auxiliary unknowns as fractions of (dx, dy, dz), by (kind, the part's name or its

@@ -17,7 +17,7 @@ The cuboid's corners are suggested only on box-shaped vehicles (vans, trucks, bu
 when the person has clicked a corner already: on a car they are points in the air that nobody can click.
 
 The candidates, their typical positions, the faces they are seen on and the prototypes they suit are the part
-vocabulary's (:mod:`toosicubix.parts.vocabulary`), or, when given, a keypoint mapping's keypoints (at their
+vocabulary's (:mod:`toosicubix.vocabulary`), or, when given, a keypoint mapping's keypoints (at their
 typical positions, weighed by their spread as a fit weighs them, seen on the faces they were learned to be seen
 from, :attr:`toosicubix.parts.linear.TypicalKeypoint.faces`).
 """
@@ -31,11 +31,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from toosicubix import vocabulary
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
-from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
-from toosicubix.priors.table import SizePrior
+from toosicubix.size_priors import SizePrior
 from toosicubix.solver import (
     MIN_DEPTH,
     Problem,

@@ -9,14 +9,14 @@ the clicks as well as the true one. Two facts rule most of them out:
 - **Seen faces**: every clicked part lies on a face of the cuboid that is turned to the camera (a tyre
   also from its end of the vehicle, under the bumper; an edge or a corner from any adjacent face). A
   face seen within ``GRAZING_DEG`` of edge-on still counts, for noise. Which faces a part can be seen on is
-  the part vocabulary's (:func:`toosicubix.parts.vocabulary.faces_of_click`).
+  the part vocabulary's (:func:`toosicubix.vocabulary.faces_of_click`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from toosicubix.parts.vocabulary import faces_of_click, faces_seen_from
+from toosicubix.vocabulary import faces_of_click, faces_seen_from
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
 GRAZING_DEG = 15.0

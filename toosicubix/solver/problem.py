@@ -35,7 +35,7 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
-from toosicubix.priors.table import SizePrior
+from toosicubix.size_priors import SizePrior
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5

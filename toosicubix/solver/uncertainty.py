@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
-from toosicubix.parts import vocabulary
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 

@@ -7,7 +7,7 @@ import json
 import math
 from typing import Any
 
-from toosicubix.parts import vocabulary
+from toosicubix import vocabulary
 
 
 class ApiError(Exception):

@@ -30,7 +30,7 @@ from importlib import resources
 from typing import Any
 from urllib.parse import urlsplit
 
-from toosicubix.annotations.schema import InputFileError
+from toosicubix.errors import InputFileError
 from toosicubix.web.request_fields import ApiError
 from toosicubix.web.session import Session
 

@@ -19,7 +19,7 @@ clicks fix a cuboid (its fit succeeds), after the part most probably clicked the
 a face turned to the camera. The response names the choice and the runner-up. The requests' fields are checked by
 :mod:`toosicubix.web.request_fields`.
 
-A keypoint mapping (``--mapping``, :class:`toosicubix.formats.coco.MappingFile`) adds its keypoints to what the
+A keypoint mapping (``--mapping``, :class:`toosicubix.annotations.mapping.MappingFile`) adds its keypoints to what the
 page makes: a click named one is a ``keypoint`` part with the mapping's position for the vehicle's prototype,
 unnamed clicks are named among the mapping's keypoints instead of the point parts, and the next clicks suggested
 are its keypoints.
@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from toosicubix import vocabulary
 from toosicubix.annotations.convert import (
     camera_from_schema,
     ground_from_schema,
@@ -50,23 +51,23 @@ from toosicubix.annotations.convert import (
     load_images,
     part_from_schema,
 )
-from toosicubix.annotations.schema import InputFileError, parse_annotations, parse_ground_block, read_json
+from toosicubix.annotations.mapping import MappingFile
+from toosicubix.annotations.schema import parse_annotations, parse_ground_block
 from toosicubix.camera import Camera
-from toosicubix.formats import FormatError
+from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
-from toosicubix.formats.coco import MappingFile
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import cuboid_corners_cam
+from toosicubix.jsonfile import read_json
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
-from toosicubix.parts import vocabulary
 from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.priors.table import Priors
+from toosicubix.size_priors import Priors
 from toosicubix.solver import SolverOptions
 from toosicubix.web.naming import naming_candidates, nearest_parts
 from toosicubix.web.request_fields import (
@@ -163,7 +164,7 @@ def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None 
     InputFileError
         Naming the file and the JSON path of each problem, or the images without a camera.
     """
-    data = read_json(path)
+    data = read_json(path, at_root=True)
     if not isinstance(data, dict):
         raise InputFileError(path, [("$", "expected an object: a camera block or image id -> camera block")])
     if "cameras" in data:  # the importers' cameras file: one reader for every command's --cameras
@@ -235,7 +236,7 @@ class Session:
         None when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are
         taken to be its answer for the file as it was read; as the file grows, the page estimates again from a
         snapshot of its state, in the background (:meth:`estimate_again_if_grown`)
-    mapping : a keypoint mapping (:func:`toosicubix.formats.coco.load_mapping`) whose keypoints the page offers
+    mapping : a keypoint mapping (:func:`toosicubix.annotations.mapping.load_mapping`) whose keypoints the page offers
         besides the vocabulary: a click named one takes its typical position for the vehicle's prototype (and
         again when the prototype changes), unnamed clicks are named among its keypoints, and the parts to click
         next are its keypoints. None, or a mapping without keypoint parts: the vocabulary alone
@@ -439,7 +440,7 @@ class Session:
         """Unnamed clicks (appended to their vehicle) and done marks of vehicles that still exist."""
         if not self.extras_path.exists():
             return
-        data = read_json(self.extras_path)
+        data = read_json(self.extras_path, at_root=True)
         if not isinstance(data, dict) or data.get("toosicubix_annotate") != 1:
             raise InputFileError(self.extras_path, [("$.toosicubix_annotate", "expected 1 (an annotate session file)")])
         try:

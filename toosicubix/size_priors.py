@@ -1,7 +1,8 @@
-"""Gaussian size priors per vehicle prototype: mean and covariance of ``(dx, dy, dz)``.
+"""Gaussian size priors per vehicle prototype: mean and covariance of ``(dx, dy, dz)``, as the solver uses them.
 
 The bundled table (``toosicubix/data/priors.json``) covers KITTI's Car, Van and Truck and the
-Cityscapes 3D prototype names; ``--priors FILE`` replaces it. Each entry records its provenance.
+Cityscapes 3D prototype names; ``--priors FILE`` replaces it. Each entry records its provenance. The file is read by
+:func:`toosicubix.annotations.priors_file.load_priors`.
 """
 
 from __future__ import annotations
@@ -88,23 +89,3 @@ class Priors(Mapping[str, SizePrior]):
 def bundled_priors_path() -> Path:
     """Path of the priors table shipped with the package."""
     return Path(str(resources.files("toosicubix") / "data" / "priors.json"))
-
-
-def load_priors(path: str | Path | None = None) -> Priors:
-    """Load a priors file, or the bundled one when ``path`` is None.
-
-    Raises
-    ------
-    schemas.InputFileError
-        The file is unreadable or not a valid priors file (the message names the JSON path).
-    """
-    from toosicubix.annotations import schema as schemas  # here, so that the solver never loads pydantic
-
-    path = Path(path) if path is not None else bundled_priors_path()
-    doc = schemas.load_priors_file(path)
-    entries = {
-        name: SizePrior.from_mean_cov(name, np.array(e.mean), np.array(e.cov), e.kitti_type, e.n,
-                                      e.approximate, e.source)
-        for name, e in doc.prototypes.items()
-    }
-    return Priors(entries, str(path))

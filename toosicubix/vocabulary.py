@@ -39,7 +39,7 @@ Per **name**:
 any lines or measurements) to the model. The entry gives its names the attributes the linear form reads, their
 faces and typical positions; the annotation file's schema builds the kind's class from the entry (then
 regenerate ``schemas/annotations.schema.json`` with ``toosicubix schema``). **Adding a name** to a kind is one
-entry under its ``names``. ``tests/parts/test_vocabulary.py`` checks that every kind has its linear form and
+entry under its ``names``. ``tests/test_vocabulary.py`` checks that every kind has its linear form and
 that every name's faces and typical positions are well formed.
 """
 
@@ -124,7 +124,7 @@ class Click:
 
 
 def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
-    text = (resources.files("toosicubix.parts") / "vocabulary.json").read_text(encoding="utf-8")
+    text = (resources.files("toosicubix") / "vocabulary.json").read_text(encoding="utf-8")
     doc = json.loads(text)
     kinds = {}
     for kind, k in doc["kinds"].items():
@@ -154,6 +154,18 @@ KINDS, PROTOTYPE_GROUPS = _load()
 def names(kind: str) -> tuple[str, ...]:
     """Every name a ``kind`` annotation may carry, in the schema's order (empty for an open kind)."""
     return tuple(KINDS[kind].names)
+
+
+#: Every name a ``point`` annotation may carry, in the schema's order.
+POINT_PARTS: tuple[str, ...] = names("point")
+#: The faces a ``symmetry`` pair may lie on, and the axes a ``direction`` arrow may follow.
+SYMMETRY_FACES: tuple[str, ...] = names("symmetry")
+DIRECTION_AXES: tuple[str, ...] = names("direction")
+#: Features of known size for ``length`` annotations, with what their two clicks ``a`` and ``b`` mark.
+LENGTH_FEATURES: dict[str, str | None] = {name: KINDS["length"].names[name].get("description")
+                                          for name in names("length")}
+#: The dimensions, in the order of ``(dx, dy, dz)``: length, width, height.
+DIMENSION_AXES = ("dx", "dy", "dz")
 
 
 def entry(kind: str, name: str) -> Name:
