@@ -75,6 +75,7 @@ from toosicubix.simulate.annotator import (
     simulate_vehicle,
 )
 from toosicubix.solver import SolverOptions
+from toosicubix.solver.uncertainty import infinite_as_none
 from toosicubix.web.client import Client
 from toosicubix.web.naming import NAMING_GRAZING_DEG, naming_candidates, nearest_parts
 from toosicubix.web.server import serve_in_thread
@@ -429,7 +430,8 @@ def apollocar3d_guidance(folder: Path, seed: int = 0, estimates: bool = True, de
                         problems = judge(result, thresholds)
                         step.update({"well_determined": not problems,
                                      "problems": "".join(sorted({p.split()[0][0] for p in problems})),
-                                     "yaw_sigma_deg": result.sigma.yaw_deg, "depth_sigma_rel": result.sigma.depth_rel,
+                                     "yaw_sigma_deg": infinite_as_none(result.sigma.yaw_deg),
+                                     "depth_sigma_rel": infinite_as_none(result.sigma.depth_rel),
                                      "e_r_deg": round(float(np.rad2deg(geodesic_angle(result.R_cam_vehicle,
                                                                                      gt.R_cam_vehicle))), 3),
                                      "e_t": round(float(np.linalg.norm(result.t_cam_vehicle - gt.t_cam_vehicle)

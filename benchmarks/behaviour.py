@@ -105,8 +105,7 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("validate-ac", ["validate", "ac-annotations.json", "--mapping", "apollocar3d-66"]),
     ("eval-ac", ["eval", "out-ac", "--apollocar3d", "ac.json", "--car-models", "$DATA/apollocar3d/car_models.json",
                  "--cameras", "$DATA/apollocar3d/cameras.json", "--json", "eval-ac.json", "--csv", "eval-ac.csv"]),
-    ("render-ac", ["render", "out-ac", "--apollocar3d", "ac.json", "--car-models",
-                   "$DATA/apollocar3d/car_models.json", "-o", "render-ac"]),
+    ("render-ac", ["render", "out-ac", "--apollocar3d", "ac.json", "-o", "render-ac"]),
     ("export-openlabel-ac", ["export", "openlabel", "out-ac", "-o", "labels-ac.json"]),
     ("learn-parts", ["learn-parts", "ac.json", "--car-models", "$DATA/apollocar3d/car_models.json", "--cameras",
                      "$DATA/apollocar3d/cameras.json", "-o", "mapping.json"]),
@@ -136,6 +135,7 @@ def _prepare(data: Path | None) -> None:
         coco["images"] = [im for im in coco["images"] if im["id"] in keep]
         coco["annotations"] = [a for a in coco["annotations"] if a["image_id"] in keep]
         (WORK / "ac.json").write_text(json.dumps(coco))
+        shutil.copy(data / "apollocar3d" / "car_models.json", WORK / "car_models.json")
 
 
 def _files(root: Path) -> dict[str, dict[str, str]]:

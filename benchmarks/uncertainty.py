@@ -91,9 +91,8 @@ def calibration(simulated, ground: dict | None, folder: Path, options: SolverOpt
             conf.append(v.confidence)
             yaw.append(yaw_error_deg(v.R_cam_vehicle, sv.R_cam_vehicle))
             depth.append((v.t_cam_vehicle[2] - sv.t_cam_vehicle[2]) / sv.t_cam_vehicle[2])
-            sigma = v.sigma  # None: infinite (nothing determined), always covers
-            sig_yaw.append(np.inf if sigma.yaw_deg is None else sigma.yaw_deg)
-            sig_depth.append(np.inf if sigma.depth_rel is None else sigma.depth_rel)
+            sig_yaw.append(v.sigma.yaw_deg)  # infinite: nothing determined, always covers
+            sig_depth.append(v.sigma.depth_rel)
     z_yaw = np.abs(yaw) / np.array(sig_yaw)
     z_depth = np.abs(depth) / np.array(sig_depth)
     return {

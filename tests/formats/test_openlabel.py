@@ -1,6 +1,7 @@
 """OpenLABEL 1.0.0 export: valid against the official schema, a known cuboid's val number by number."""
 
 import json
+import math
 from importlib.resources import files
 
 import jsonschema
@@ -11,7 +12,8 @@ from tests.formats.tool_fixtures import sample_doc, write_json
 from toosicubix.camera import Camera
 from toosicubix.formats.fitted import FittedImage, FittedVehicle, load_fitted
 from toosicubix.formats.openlabel import cuboid_val, openlabel_document
-from toosicubix.formats.results import Sigma, VehicleResult
+from toosicubix.formats.results import VehicleResult
+from toosicubix.solver.uncertainty import Uncertainty
 
 #: The official ASAM OpenLABEL 1.0.0 JSON Schema (draft-07, ``$id`` https://openlabel.asam.net/V1-0-0/schema#),
 #: as the ``openlabel-checker`` package (MPL-2.0, the test extra) ships it, fetched unmodified from ASAM's site
@@ -27,8 +29,9 @@ R_AHEAD = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 def _known_image() -> FittedImage:
     ok = VehicleResult("3", "ok", None, "Car", R_AHEAD, np.array([1.0, 1.5, 10.0]), np.array([4.0, 1.8, 1.5]),
-                       sigma=Sigma(yaw_deg=2.0, pitch_deg=None, roll_deg=None, depth_m=0.4, depth_rel=None,
-                                   dimensions=(0.2, 0.05, 0.04), position_m=(), scale_rel=None),
+                       sigma=Uncertainty(yaw_deg=2.0, pitch_deg=math.inf, roll_deg=math.inf, depth_m=0.4,
+                                         depth_rel=math.inf, dimensions=(0.2, 0.05, 0.04), position_m=(),
+                                         scale_rel=math.inf),
                        confidence=0.8, ambiguous=False)
     failed = VehicleResult("4", "failed", "degenerate clicks", "Van")
     parts = [{"kind": "point", "part": "wheel-rear-left", "xy": [600.0, 400.0]},

@@ -1,6 +1,7 @@
 """The typed vehicle result of results.json (:class:`toosicubix.formats.results.VehicleResult`) round-trips."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -12,7 +13,6 @@ from toosicubix.errors import FormatError
 from toosicubix.formats.results import (
     Alternative,
     Cues,
-    Sigma,
     SolverStats,
     VehicleResult,
     dumps,
@@ -22,6 +22,7 @@ from toosicubix.formats.results import (
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.fitting import fit_images
 from toosicubix.solver import SolverOptions
+from toosicubix.solver.uncertainty import Uncertainty
 
 SAMPLE = REPO / "samples" / "annotations.json"
 
@@ -93,8 +94,11 @@ def test_unknown_keys_are_kept_and_written_last():
 
 
 def test_sigma_keeps_null_for_infinite():
-    s = Sigma(None, 1.0, 2.0, 0.5, 0.02, (0.1, None, 0.05), (0.2, 0.5), None)
-    assert Sigma.from_json(json.loads(json.dumps(s.to_json()))) == s
+    inf = math.inf
+    s = Uncertainty(inf, 1.0, 2.0, 0.5, 0.02, (0.1, inf, 0.05), (0.2, 0.5), inf)
+    written = json.loads(json.dumps(s.to_json(), allow_nan=False))
+    assert written["yaw_deg"] is None and written["dimensions"] == [0.1, None, 0.05]
+    assert Uncertainty.from_json(written) == s
 
 
 def test_a_fitted_vehicle_with_alternatives_round_trips():

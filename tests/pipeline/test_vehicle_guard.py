@@ -112,7 +112,7 @@ def _alternative(**changes):
      "$.alternatives[1].t_cam_vehicle[1]"),
     (lambda v: {"alternatives": (_alternative(cost=float("inf")),)}, "$.alternatives[0].cost"),
     (lambda v: {"sigma": replace(v.sigma, dimensions=(0.1, float("nan"), 0.1))}, "$.sigma.dimensions[1]"),
-    (lambda v: {"observability": replace(v.observability, variance_ratios={"yaw": np.float64(np.inf)})},
+    (lambda v: {"observability": replace(v.observability, ratios={"yaw": np.float64(np.nan)})},
      "$.observability.variance_ratios.yaw"),
     (lambda v: {"parameters": {**v.parameters, "wheelbase": float("nan")}}, "$.parameters.wheelbase"),
     (lambda v: {"residuals_px": np.array([[0.1, 0.2], [np.inf, 0.0]])}, "$.residuals_px[1][0]"),

@@ -29,6 +29,7 @@ Layout::
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -90,11 +91,11 @@ def _cuboid_attributes(v: VehicleResult) -> dict[str, Any]:
                           ("roll_deg", "sigma_roll_deg"), ("depth_m", "sigma_depth_m"),
                           ("depth_rel", "sigma_depth_rel"), ("scale_rel", "sigma_scale_rel")):
             value = getattr(v.sigma, key)
-            if value is not None:
+            if math.isfinite(value):
                 num.append({"name": name, "val": float(value)})
         for key, name in (("dimensions", "sigma_dimensions_m"), ("position_m", "sigma_position_m")):
             values = getattr(v.sigma, key)
-            if values and all(x is not None for x in values):
+            if values and all(math.isfinite(x) for x in values):
                 vec.append({"name": name, "val": [float(x) for x in values]})
     for key in ("confidence", "rms_px"):
         value = getattr(v, key)

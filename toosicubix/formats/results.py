@@ -26,72 +26,15 @@ from toosicubix.errors import FormatError
 from toosicubix.jsonfile import json_field, json_numbers, read_json
 from toosicubix.solver import Alternative  # the solver's type: results.json's ``alternatives``
 from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
+from toosicubix.solver.uncertainty import (  # the solver's types: results.json's ``sigma`` and ``observability``
+    Observability,
+    Uncertainty,
+)
 
 RESULTS_VERSION = 1
 RESULTS_FILENAME = "results.json"
 #: Where ``fit`` writes and ``eval`` reads when no folder is given (relative to the working directory).
 DEFAULT_OUTPUT_DIR = "toosicubix-out"
-
-
-def _floats(value: Any) -> tuple[float | None, ...]:
-    return tuple(None if v is None else float(v) for v in value)
-
-
-@dataclass(frozen=True)
-class Sigma:
-    """Standard deviations of a fit (results.json's ``sigma``); None: not determined at all (infinite).
-
-    Attributes
-    ----------
-    yaw_deg, pitch_deg, roll_deg : KITTI yaw, the vehicle's pitch and roll, degrees
-    depth_m, depth_rel : the bottom centre's camera z, metres and relative to it
-    dimensions : (3,) of (dx, dy, dz), metres; position_m : (2,) of the bottom centre's camera x and z
-    scale_rel : of the vehicle's scale (its distance), relative
-    """
-
-    yaw_deg: float | None
-    pitch_deg: float | None
-    roll_deg: float | None
-    depth_m: float | None
-    depth_rel: float | None
-    dimensions: tuple[float | None, ...]
-    position_m: tuple[float | None, ...]
-    scale_rel: float | None
-
-    def to_json(self) -> dict[str, Any]:
-        return {"yaw_deg": self.yaw_deg, "pitch_deg": self.pitch_deg, "roll_deg": self.roll_deg,
-                "depth_m": self.depth_m, "depth_rel": self.depth_rel, "dimensions": list(self.dimensions),
-                "position_m": list(self.position_m), "scale_rel": self.scale_rel}
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> Sigma:
-        return cls(yaw_deg=d["yaw_deg"], pitch_deg=d["pitch_deg"], roll_deg=d["roll_deg"], depth_m=d["depth_m"],
-                   depth_rel=d["depth_rel"], dimensions=_floats(d["dimensions"]),
-                   position_m=_floats(d["position_m"]), scale_rel=d["scale_rel"])
-
-
-@dataclass(frozen=True)
-class Observability:
-    """What the clicks determine (results.json's ``observability``).
-
-    Attributes
-    ----------
-    determined_by : per quantity, 'clicks', 'mostly cues' or 'cues only'
-    variance_ratios : per quantity, variance with the clicks alone over that with clicks and cues (None: infinite)
-    sentences : plain sentences, one per quantity the clicks do not fix, and one on the scale
-    """
-
-    determined_by: dict[str, str]
-    variance_ratios: dict[str, float | None]
-    sentences: tuple[str, ...]
-
-    def to_json(self) -> dict[str, Any]:
-        return {"determined_by": dict(self.determined_by), "variance_ratios": dict(self.variance_ratios),
-                "sentences": list(self.sentences)}
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> Observability:
-        return cls(dict(d["determined_by"]), dict(d["variance_ratios"]), tuple(d["sentences"]))
 
 
 @dataclass(frozen=True)
@@ -209,7 +152,7 @@ class VehicleResult:
     parameters: dict[str, float] = field(default_factory=dict)
     scale_from: str | None = None
     scale_shares: dict[str, float] = field(default_factory=dict)
-    sigma: Sigma | None = None
+    sigma: Uncertainty | None = None
     confidence: float | None = None
     observability: Observability | None = None
     ambiguous: bool = False
@@ -301,7 +244,7 @@ class VehicleResult:
                 downweighted=tuple(str(label) for label in v.get("downweighted") or ()), cost=v.get("cost"),
                 prior_mahalanobis2=v.get("prior_mahalanobis2"), parameters=dict(v.get("parameters") or {}),
                 scale_from=v.get("scale_from"), scale_shares=dict(v.get("scale_shares") or {}),
-                sigma=get("sigma", Sigma.from_json), confidence=v.get("confidence"),
+                sigma=get("sigma", Uncertainty.from_json), confidence=v.get("confidence"),
                 observability=get("observability", Observability.from_json), ambiguous=bool(v.get("ambiguous")),
                 alternatives=tuple(Alternative.from_json(a) for a in v.get("alternatives") or ()),
                 residual_test=get("residual_test", ResidualTest.from_json),

@@ -15,8 +15,6 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.formats.results import (
     Cues,
-    Observability,
-    Sigma,
     SolverStats,
     VehicleResult,
     all_finite,
@@ -29,6 +27,7 @@ from toosicubix.size_priors import SizePrior
 from toosicubix.solver import FitResult, SolverOptions, confidence, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
 from toosicubix.solver.misfit import ResidualTest
+from toosicubix.solver.uncertainty import Uncertainty
 
 __all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_result", "describe_fit", "failed_result",
            "fit_as_written", "fit_one", "with_next_clicks"]
@@ -145,9 +144,9 @@ def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: Part
         parameters={name: float(v) for name, v in zip(parts.param_names[3:], fit.p[3:], strict=True)},
         scale_from=fit.scale_from,
         scale_shares=fit.scale_shares,
-        sigma=Sigma.from_json(fit.uncertainty.to_json()) if fit.uncertainty is not None else None,
+        sigma=fit.uncertainty,
         confidence=confidence(fit.uncertainty) if fit.uncertainty is not None else None,
-        observability=Observability.from_json(fit.observability.to_json()) if fit.observability is not None else None,
+        observability=fit.observability,
         ambiguous=fit.ambiguous,
         alternatives=tuple(fit.alternatives),
         residual_test=fit.residual_test,
@@ -181,7 +180,7 @@ class _FitAsWritten:
         return self.result.ok
 
     @property
-    def uncertainty(self) -> Sigma | None:
+    def uncertainty(self) -> Uncertainty | None:
         return self.result.sigma
 
     @property

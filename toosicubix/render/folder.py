@@ -11,6 +11,7 @@ Every PNG is written atomically (temporary file, then rename); the same inputs g
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -116,7 +117,7 @@ def vehicle_label(v: VehicleResult) -> str:
     AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so."""
     dx, dy, dz = v.dimensions
     parts = [f"{v.id} {v.prototype} {dx:.1f}x{dy:.1f}x{dz:.1f}m z{v.t_cam_vehicle[2]:.1f}m"]
-    if v.sigma is not None and v.sigma.yaw_deg is not None:
+    if v.sigma is not None and math.isfinite(v.sigma.yaw_deg):
         parts.append(f"yaw+-{v.sigma.yaw_deg:.1f}deg")
     if v.confidence is not None:
         parts.append(f"conf {v.confidence:.2f}")
@@ -158,7 +159,7 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera) -> 
             fitted_uv=_fitted_uv(camera, clicks, v.residuals_px) if v.ok and len(clicks) else None,
             downweighted=_click_indices(v.click_labels, v.downweighted), box2d=box,
             label=vehicle_label(v) if v.ok and v.dimensions is not None else "", error=v.error,
-            sigma_yaw=np.deg2rad(sigma.yaw_deg) if sigma is not None and sigma.yaw_deg is not None else None,
+            sigma_yaw=np.deg2rad(sigma.yaw_deg) if sigma is not None else None,
             sigma_depth=sigma.depth_m if sigma is not None else None,
             next_clicks=next_clicks,
         ))

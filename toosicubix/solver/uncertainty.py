@@ -21,7 +21,7 @@ direction ``(0, t, p)``), since no click ever fixes it: the scale is always the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,7 +60,8 @@ _KEYPOINT_HINTS = {
 
 @dataclass(frozen=True)
 class Uncertainty:
-    """Standard deviations of a fitted cuboid for a stated click noise.
+    """Standard deviations of a fitted cuboid for a stated click noise (results.json's ``sigma``); ``inf`` where the
+    fit does not determine a quantity at all (``null`` in the JSON).
 
     Attributes
     ----------
@@ -69,7 +70,7 @@ class Uncertainty:
     dimensions : (3,) of (dx, dy, dz), metres
     position_m : (2,) of the bottom centre's lateral and forward position (camera x and z), metres
     scale_rel : of the vehicle's scale (its distance), relative
-    covariance : (6 + P, 6 + P) of ``(delta, t, p)``
+    covariance : (6 + P, 6 + P) of ``(delta, t, p)``; None when read from results.json (it is not written)
     """
 
     yaw_deg: float
@@ -77,28 +78,55 @@ class Uncertainty:
     roll_deg: float
     depth_m: float
     depth_rel: float
-    dimensions: np.ndarray
-    position_m: np.ndarray
+    dimensions: tuple[float, float, float]
+    position_m: tuple[float, float]
     scale_rel: float
-    covariance: np.ndarray
+    covariance: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for key in ("dimensions", "position_m"):  # plain floats: values compare, whatever the caller gave
+            object.__setattr__(self, key, tuple(float(v) for v in getattr(self, key)))
 
     def widened(self, variance_factor: float) -> Uncertainty:
         """The same with every variance multiplied by ``variance_factor`` (standard deviations by its root): a
         misfit's (:mod:`toosicubix.solver.misfit`)."""
         k = math.sqrt(variance_factor)
         return Uncertainty(self.yaw_deg * k, self.pitch_deg * k, self.roll_deg * k, self.depth_m * k,
-                           self.depth_rel * k, self.dimensions * k, self.position_m * k, self.scale_rel * k,
-                           self.covariance * variance_factor)
+                           self.depth_rel * k, tuple(v * k for v in self.dimensions),
+                           tuple(v * k for v in self.position_m), self.scale_rel * k,
+                           None if self.covariance is None else self.covariance * variance_factor)
 
     def to_json(self) -> dict:
-        """As results.json has it; ``null`` for a quantity the fit does not determine at all (infinite)."""
+        """As results.json has it; ``null`` for a quantity the fit does not determine at all (infinite). A NaN stays
+        (the writer refuses it, naming its path)."""
         scalars = ("yaw_deg", "pitch_deg", "roll_deg", "depth_m", "depth_rel")
         return {
-            **{key: finite_or_none(getattr(self, key)) for key in scalars},
-            "dimensions": [finite_or_none(v) for v in self.dimensions],
-            "position_m": [finite_or_none(v) for v in self.position_m],
-            "scale_rel": finite_or_none(self.scale_rel),
+            **{key: infinite_as_none(getattr(self, key)) for key in scalars},
+            "dimensions": [infinite_as_none(v) for v in self.dimensions],
+            "position_m": [infinite_as_none(v) for v in self.position_m],
+            "scale_rel": infinite_as_none(self.scale_rel),
         }
+
+    @classmethod
+    def from_json(cls, d: dict) -> Uncertainty:
+        """The inverse of :meth:`to_json` (without the covariance)."""
+        return cls(yaw_deg=none_as_infinite(d["yaw_deg"]), pitch_deg=none_as_infinite(d["pitch_deg"]),
+                   roll_deg=none_as_infinite(d["roll_deg"]), depth_m=none_as_infinite(d["depth_m"]),
+                   depth_rel=none_as_infinite(d["depth_rel"]),
+                   dimensions=tuple(none_as_infinite(v) for v in d["dimensions"]),
+                   position_m=tuple(none_as_infinite(v) for v in d["position_m"]),
+                   scale_rel=none_as_infinite(d["scale_rel"]))
+
+
+def infinite_as_none(value: float) -> float | None:
+    """JSON has no infinity: None stands for it. A NaN is kept (it is not a value; writers refuse it)."""
+    value = float(value)
+    return None if math.isinf(value) else value
+
+
+def none_as_infinite(value: float | None) -> float:
+    """The inverse of :func:`infinite_as_none`."""
+    return math.inf if value is None else float(value)
 
 
 def finite_or_none(value: float) -> float | None:
@@ -296,51 +324,59 @@ def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
 
 @dataclass(frozen=True)
 class Observability:
-    """For each of yaw, pitch, roll, length, width, height: how much the cues tighten it.
+    """For each of yaw, pitch, roll, length, width, height: how much the cues tighten it (results.json's
+    ``observability``).
 
     Attributes
     ----------
-    ratios : quantity -> variance from the clicks alone / variance from clicks and cues (>= 1); large means
-        the clicks leave it to the cues
+    ratios : quantity -> variance from the clicks alone / variance from clicks and cues (>= 1; ``inf``: the clicks
+        alone do not determine it); large means the clicks leave it to the cues
     status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
-    scale_from : the cue that sets the scale
-    keypoints_only : every click is a keypoint (or plate) at a typical position: the advice names keypoints
-    upright : the vehicle stands upright on a road (a ground block): pitch and roll left to it need no click
+    sentences : plain sentences, one per quantity the clicks do not fix, and one on the scale
+        (:func:`observability_sentences`)
     """
 
     ratios: dict[str, float]
     status: dict[str, str]
-    scale_from: str | None
-    keypoints_only: bool = False
-    upright: bool = False
-
-    def sentences(self) -> list[str]:
-        """Plain sentences, one per quantity the clicks do not fix, and one on the scale. On a road, pitch and
-        roll left to the cues are one sentence saying the road sets them, with no advice: that is its job."""
-        out = []
-        hints = _KEYPOINT_HINTS if self.keypoints_only else _HINTS
-        on_road = [q for q in ("pitch", "roll") if self.upright and self.status[q] != "clicks"]
-        if on_road:
-            out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
-        for name in QUANTITIES:
-            if name in on_road:
-                continue
-            status = self.status[name]
-            if status == "cues only":
-                out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
-            elif status == "mostly cues":
-                out.append(f"{name} mostly set by the prior: {hints[name]}")
-        if self.scale_from:
-            source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(
-                self.scale_from, self.scale_from)
-            hint = (": a ground block (the camera height) or a known size (licence plate, wheelbase, tyre, known "
-                    "dimensions) pins it better" if self.scale_from == "size prior" else "")
-            out.append(f"scale set by {source} (no click fixes it){hint}")
-        return out
+    sentences: tuple[str, ...]
 
     def to_json(self) -> dict:
-        return {"determined_by": self.status, "variance_ratios": {k: finite_or_none(v) for k, v in self.ratios.items()},
-                "sentences": self.sentences()}
+        return {"determined_by": dict(self.status),
+                "variance_ratios": {k: infinite_as_none(v) for k, v in self.ratios.items()},
+                "sentences": list(self.sentences)}
+
+    @classmethod
+    def from_json(cls, d: dict) -> Observability:
+        """The inverse of :meth:`to_json`."""
+        return cls({k: none_as_infinite(v) for k, v in d["variance_ratios"].items()}, dict(d["determined_by"]),
+                   tuple(d["sentences"]))
+
+
+def observability_sentences(status: dict[str, str], scale_from: str | None, keypoints_only: bool = False,
+                            upright: bool = False) -> tuple[str, ...]:
+    """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
+    one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
+    at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
+    ground block): pitch and roll left to the cues are one sentence saying the road sets them, with no advice,
+    since that is its job."""
+    out = []
+    hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
+    on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
+    if on_road:
+        out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
+    for name in QUANTITIES:
+        if name in on_road:
+            continue
+        if status[name] == "cues only":
+            out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
+        elif status[name] == "mostly cues":
+            out.append(f"{name} mostly set by the prior: {hints[name]}")
+    if scale_from:
+        source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
+        hint = (": a ground block (the camera height) or a known size (licence plate, wheelbase, tyre, known "
+                "dimensions) pins it better" if scale_from == "size prior" else "")
+        out.append(f"scale set by {source} (no click fixes it){hint}")
+    return tuple(out)
 
 
 def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
@@ -352,7 +388,7 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         ratios[name] = ratio
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
-    return Observability(ratios, status, scale_from, keypoints_only, upright)
+    return Observability(ratios, status, observability_sentences(status, scale_from, keypoints_only, upright))
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
