@@ -54,10 +54,10 @@ from toosicubix.annotations.priors_file import load_priors_file
 from toosicubix.annotations.schema import SCHEMA_VERSION
 from toosicubix.errors import InputError
 from toosicubix.evaluation import EvalOptions, evaluate, load_predictions
-from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.formats.apollocar3d import PROTOTYPE_OF_TYPE, keypoint_samples, read_apollocar3d, read_car_models
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import coco_to_annotations
+from toosicubix.formats.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.geometry import depth_reversed_twin
 from toosicubix.parts.learned import (  # CONTRADICTION_M: rule 6's 0.5 m
     CONTRADICTION_M,

@@ -6,8 +6,7 @@ import pickle
 
 import pytest
 
-from toosicubix.errors import FormatError, InputError, InputFileError, locate
-from toosicubix.evaluation import EvaluationInputError
+from toosicubix.errors import EvaluationInputError, FormatError, InputError, InputFileError, locate
 from toosicubix.pipeline.output_folder import OutputFolderError
 from toosicubix.priors.estimation import PriorEstimationError
 from toosicubix.size_priors import UnknownPrototypeError

@@ -3,7 +3,7 @@
 Every exception that reports bad input derives from :class:`InputError`: annotation, priors and settings
 files (:class:`InputFileError`), KITTI, Cityscapes 3D and results files
 (:class:`FormatError`), ground-truth and prediction folders
-(:class:`toosicubix.evaluation.EvaluationInputError`), unknown prototypes
+(:class:`EvaluationInputError`), unknown prototypes
 (:class:`toosicubix.size_priors.UnknownPrototypeError`), priors estimation
 (:class:`toosicubix.priors.estimation.PriorEstimationError`) and output folders
 (:class:`toosicubix.pipeline.output_folder.OutputFolderError`). A caller that only reports the problem catches
@@ -96,6 +96,16 @@ class InputFileError(InputError):
         super().__init__(file, problems)
 
 
+class EvaluationInputError(InputError):
+    """A missing folder or file, or a prediction without a ground-truth partner; the message names the path.
+
+    Malformed files raise :class:`toosicubix.errors.FormatError` (file and line) instead.
+    """
+
+    def __init__(self, message: str, file: str | Path | None = None, where: Where = None):
+        super().__init__(file, [(where, message)])
+
+
 def _restored(cls: type[InputError], args: tuple, state: dict) -> InputError:
     error = cls.__new__(cls, *args)
     error.args = args
@@ -103,4 +113,4 @@ def _restored(cls: type[InputError], args: tuple, state: dict) -> InputError:
     return error
 
 
-__all__ = ["FormatError", "InputError", "InputFileError", "Where", "locate"]
+__all__ = ["EvaluationInputError", "FormatError", "InputError", "InputFileError", "Where", "locate"]

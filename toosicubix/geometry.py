@@ -11,6 +11,8 @@ Angles are radians; names ending in ``_deg`` are degrees. Rotations compose by t
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -329,9 +331,51 @@ def box2d_iou(box_a: np.ndarray, box_b: np.ndarray) -> float:
 CUBOID_EDGES = (
     (0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7),
 )
+#: The front face (vehicle +X) as corner indices: bottom front-left, bottom front-right, top front-right, top
+#: front-left.
+FRONT_FACE = (0, 3, 7, 4)
 
 
-def clip_cuboid_to_near_plane(corners_cam: np.ndarray, z_near: float = 0.1) -> np.ndarray:
+#: The near plane (metres in front of the camera) where clipping cuts what reaches behind the camera.
+Z_NEAR = 0.1
+
+
+def clip_segment_to_near_plane(a_cam: np.ndarray, b_cam: np.ndarray, z_near: float = Z_NEAR
+                               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The part of the segment from ``a_cam`` to ``b_cam`` (3,), camera frame, with ``z >= z_near``, or None when
+    none is.
+
+    Returns
+    -------
+    (a', b') : two (3,) arrays in the camera frame, or None
+    """
+    za, zb = float(a_cam[2]), float(b_cam[2])
+    if za < z_near and zb < z_near:
+        return None
+    if za >= z_near and zb >= z_near:
+        return a_cam, b_cam
+    s = (z_near - za) / (zb - za)
+    crossing = a_cam + s * (b_cam - a_cam)
+    return (crossing, b_cam) if za < z_near else (a_cam, crossing)
+
+
+def clip_polygon_to_near_plane(polygon_cam: np.ndarray, z_near: float) -> np.ndarray:
+    """The part of a planar polygon (k, 3), camera frame, with ``z >= z_near`` (Sutherland-Hodgman): (m, 3), m may be
+    0."""
+    out = []
+    n = len(polygon_cam)
+    for i in range(n):
+        a, b = polygon_cam[i], polygon_cam[(i + 1) % n]
+        a_in, b_in = a[2] >= z_near, b[2] >= z_near
+        if a_in:
+            out.append(a)
+        if a_in != b_in:
+            s = (z_near - a[2]) / (b[2] - a[2])
+            out.append(a + s * (b - a))
+    return np.array(out).reshape(-1, 3)
+
+
+def clip_cuboid_to_near_plane(corners_cam: np.ndarray, z_near: float = Z_NEAR) -> np.ndarray:
     """The corners in front of ``z = z_near`` plus where the cuboid's edges cross that plane.
 
     Projecting these gives the image extent of a cuboid that reaches behind the camera.
@@ -348,7 +392,66 @@ def clip_cuboid_to_near_plane(corners_cam: np.ndarray, z_near: float = 0.1) -> n
     z = corners_cam[:, 2]
     points = [corners_cam[z >= z_near]]
     for i, j in CUBOID_EDGES:
-        if (z[i] - z_near) * (z[j] - z_near) < 0.0:
-            s = (z_near - z[i]) / (z[j] - z[i])
-            points.append((corners_cam[i] + s * (corners_cam[j] - corners_cam[i]))[None, :])
+        if (z[i] - z_near) * (z[j] - z_near) < 0.0:  # the edge crosses the plane: where (its clipped end)
+            a, b = clip_segment_to_near_plane(corners_cam[i], corners_cam[j], z_near)  # type: ignore[misc]
+            points.append((b if z[i] >= z_near else a)[None, :])
     return np.concatenate(points, axis=0)
+
+
+@dataclass(frozen=True)
+class Cuboid:
+    """A cuboid posed in some camera frame (named by whoever holds it).
+
+    Attributes
+    ----------
+    R_cam_vehicle : (3, 3) rotation; its columns are the vehicle's forward, left and up axes in the frame
+    t_cam_vehicle : (3,) centre of the bottom face in the frame, metres
+    dimensions : (3,) ``(dx, dy, dz)`` = (length, width, height), metres
+    """
+
+    R_cam_vehicle: np.ndarray
+    t_cam_vehicle: np.ndarray
+    dimensions: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name, shape in (("R_cam_vehicle", (3, 3)), ("t_cam_vehicle", (3,)), ("dimensions", (3,))):
+            value = np.asarray(getattr(self, name), dtype=np.float64)
+            if value.shape != shape:
+                raise ValueError(f"Cuboid.{name}: expected shape {shape}, got {value.shape}")
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_centre(cls, R_cam_vehicle: np.ndarray, centre_cam: np.ndarray, dimensions: np.ndarray) -> Cuboid:
+        """The cuboid whose geometric centre is ``centre_cam`` (3,): the bottom centre lies ``dz / 2`` below
+        it along the vehicle's up axis ``R_cam_vehicle[:, 2]``."""
+        R = np.asarray(R_cam_vehicle, dtype=np.float64)
+        d = np.asarray(dimensions, dtype=np.float64)
+        return cls(R, np.asarray(centre_cam, dtype=np.float64) - 0.5 * d[2] * R[:, 2], d)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Geometric centre in the frame, (3,)."""
+        return self.t_cam_vehicle + 0.5 * self.dimensions[2] * self.R_cam_vehicle[:, 2]
+
+    @property
+    def volume(self) -> float:
+        """Volume in cubic metres; 0 when a dimension is not positive."""
+        return float(np.prod(np.clip(self.dimensions, 0.0, None)))
+
+    @property
+    def yaw(self) -> float:
+        """KITTI's ``rotation_y`` of the forward axis ``f``: ``atan2(-f_z, f_x)``, radians."""
+        f = self.R_cam_vehicle[:, 0]
+        return float(np.arctan2(-f[2], f[0]))
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners in the frame, (8, 3), in the order of :func:`toosicubix.geometry.cuboid_corners_vehicle`."""
+        return cuboid_corners_cam(self.R_cam_vehicle, self.t_cam_vehicle, self.dimensions)
+
+    def translated(self, offset: np.ndarray) -> Cuboid:
+        """The same cuboid seen from a frame whose origin is at ``-offset``: ``t + offset``."""
+        return Cuboid(self.R_cam_vehicle, self.t_cam_vehicle + np.asarray(offset, dtype=np.float64), self.dimensions)
+
+    def scaled(self, s: float) -> Cuboid:
+        """The cuboid scaled by ``s`` about the frame's origin (the camera centre): ``(R, s t, s d)``."""
+        return Cuboid(self.R_cam_vehicle, s * self.t_cam_vehicle, s * self.dimensions)

@@ -38,15 +38,13 @@ from tests.eval_scenes import (
     write_results,
 )
 from toosicubix.camera import Camera
-from toosicubix.errors import FormatError
+from toosicubix.errors import EvaluationInputError, FormatError
 from toosicubix.evaluation import (
     EvalOptions,
-    EvaluationInputError,
     evaluate,
     evaluate_folder,
     format_report,
     load_predictions,
-    open_ground_truth,
     result_to_csv,
     result_to_json,
     summarize,
@@ -54,6 +52,7 @@ from toosicubix.evaluation import (
     write_json,
 )
 from toosicubix.evaluation.report import CSV_COLUMNS, depth_breakdown, occlusion_breakdown
+from toosicubix.formats.ground_truth import open_ground_truth
 from toosicubix.formats.kitti import format_label_line, object_from_pose
 
 SUMMARY_KEYS = {"n_matched", "n_unmatched_pred", "n_unmatched_gt", "iou_mean", "iou_median", "siou_mean",

@@ -16,9 +16,8 @@ from tests.eval_scenes import (
     write_kitti_object,
     write_kitti_tracking,
 )
-from toosicubix.errors import FormatError
-from toosicubix.evaluation.errors import EvaluationInputError
-from toosicubix.evaluation.ground_truth import (
+from toosicubix.errors import EvaluationInputError, FormatError
+from toosicubix.formats.ground_truth import (
     CityscapesGroundTruth,
     KittiObjectGroundTruth,
     KittiTrackingGroundTruth,

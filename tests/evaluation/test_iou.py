@@ -11,7 +11,6 @@ import pytest
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 from scipy.spatial.transform import Rotation
 
-from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.iou import (
     chebyshev_centre,
     convex_polygon_intersection_area,
@@ -21,7 +20,7 @@ from toosicubix.evaluation.iou import (
     iou_bev_height_yaw,
     polygon_area,
 )
-from toosicubix.geometry import R_cam_vehicle_from_ypr, so3_exp
+from toosicubix.geometry import Cuboid, R_cam_vehicle_from_ypr, so3_exp
 
 I3 = np.eye(3)
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.metrics import (
     METRIC_NAMES,
     ObjectMetrics,
@@ -22,7 +21,7 @@ from toosicubix.evaluation.metrics import (
     translation_error,
     yaw_error_deg,
 )
-from toosicubix.geometry import R_cam_vehicle_from_ypr, so3_exp
+from toosicubix.geometry import Cuboid, R_cam_vehicle_from_ypr, so3_exp
 
 GT = Cuboid(R_cam_vehicle_from_ypr(0.4, 0.02, -0.01), [3.0, 1.6, 20.0], [4.2, 1.8, 1.5])
 

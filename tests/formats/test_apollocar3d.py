@@ -16,9 +16,9 @@ from toosicubix.annotations.mapping import load_mapping
 from toosicubix.cli import main
 from toosicubix.errors import InputFileError
 from toosicubix.evaluation import evaluate_folder, format_report, result_to_csv, result_to_json
-from toosicubix.evaluation.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.evaluation.report import hidden_breakdown, keypoint_breakdown, off_rays_breakdown
 from toosicubix.formats.apollocar3d import keypoints_off_rays, pose_to_vehicle, read_apollocar3d, read_car_models
+from toosicubix.formats.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.geometry import depth_reversed_twin
 
 MODELS = {"0": {"name": "a", "type": "3x", "length": 4.8, "width_body": 1.8, "width_with_mirrors": 2.0,

@@ -106,7 +106,7 @@ def test_image_size_by_focal_length():
 
 
 def test_one_definition_of_the_vehicle_classes_and_tracking_ids():
-    from toosicubix.evaluation import ground_truth
+    from toosicubix.formats import ground_truth
     from toosicubix.priors import estimation
     from toosicubix.simulate import annotator
 

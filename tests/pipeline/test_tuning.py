@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from tests.conftest import REPO
 from tests.scenes import CAMERA, VIEW_YAW, _specs
 from toosicubix.cli import main
-from toosicubix.evaluation import open_ground_truth
+from toosicubix.formats.ground_truth import open_ground_truth
 from toosicubix.formats.kitti import format_label_line, object_from_pose
 from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, cuboid_corners_cam
 from toosicubix.model import Image, Part, Vehicle

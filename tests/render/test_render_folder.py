@@ -192,7 +192,7 @@ def test_only_misfit_keeps_the_images_with_a_misfit(fitted):
 def test_a_ground_truth_that_contradicts_its_clicks_is_noted_by_its_id():
     from dataclasses import replace
 
-    from toosicubix.evaluation.ground_truth import GtObject
+    from toosicubix.formats.ground_truth import GtObject
     from toosicubix.render.folder import ground_truth_note
 
     obj = GtObject(index=0, cls="Car", cuboid_rect=None, box2d=np.zeros(4), truncation=None, occlusion=None,

@@ -15,8 +15,8 @@ import toosicubix.solver as solver_module
 from tests.scenes import CAMERA, VIEW_YAW, random_scene
 from toosicubix.annotations.priors_file import load_priors
 from toosicubix.camera import Camera
-from toosicubix.evaluation import Cuboid, iou_3d, scaled_iou
-from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle, so3_exp
+from toosicubix.evaluation import iou_3d, scaled_iou
+from toosicubix.geometry import Cuboid, R_cam_vehicle_from_ypr, geodesic_angle, so3_exp
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.size_priors import SizePrior

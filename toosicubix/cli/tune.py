@@ -56,7 +56,8 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
 
     from toosicubix.annotations.convert import load_images
     from toosicubix.annotations.priors_file import load_priors
-    from toosicubix.evaluation import EvalOptions, open_ground_truth
+    from toosicubix.evaluation import EvalOptions
+    from toosicubix.formats.ground_truth import open_ground_truth
     from toosicubix.pipeline.fitting import check_prototypes
     from toosicubix.pipeline.pilot import on_estimated_roads
     from toosicubix.pipeline.settings import settings_document, write_settings_file

@@ -1,8 +1,9 @@
 """Scoring fitted cuboids against KITTI and Cityscapes 3D ground truth (paper section "Evaluation Metrics").
 
-Layers, each a small module: :mod:`.cuboid` (the posed box), :mod:`.iou` (exact 3D IoU with full
+Layers, each a small module: :mod:`.iou` (exact 3D IoU with full
 rotations; KITTI's yaw-only variant), :mod:`.metrics` (IoU, sIoU, E_R, E_t, E_d, E_comb as pure
-functions), :mod:`.ground_truth` and :mod:`.predictions` (readers into one per-image form),
+functions), :mod:`.predictions` (results read into one per-image form, beside the ground truth's,
+:mod:`toosicubix.formats.ground_truth`),
 :mod:`.matching` (Hungarian pairing on 2D IoU), :mod:`.evaluate` (the pipeline) and :mod:`.report`
 (aggregates, table, JSON, CSV). Nothing here imports the solver or the CLI.
 
@@ -15,18 +16,7 @@ Example
 
 from __future__ import annotations
 
-from toosicubix.evaluation.cuboid import Cuboid
-from toosicubix.evaluation.errors import EvaluationInputError
 from toosicubix.evaluation.evaluate import EvalOptions, evaluate, evaluate_folder
-from toosicubix.evaluation.ground_truth import (
-    CityscapesGroundTruth,
-    GroundTruthSource,
-    GtImage,
-    GtObject,
-    KittiObjectGroundTruth,
-    KittiTrackingGroundTruth,
-    open_ground_truth,
-)
 from toosicubix.evaluation.iou import intersection_volume_3d, iou_3d, iou_bev_height_yaw
 from toosicubix.evaluation.matching import Matching, box_iou_matrix, match_boxes
 from toosicubix.evaluation.metrics import (
@@ -50,8 +40,8 @@ from toosicubix.evaluation.records import EvaluationResult, MatchedObject, Unsco
 from toosicubix.evaluation.report import format_report, result_to_csv, result_to_json, summarize, write_csv, write_json
 
 __all__ = [
-    "CityscapesGroundTruth", "Cuboid", "EvalOptions", "EvaluationInputError", "EvaluationResult", "GroundTruthSource",
-    "GtImage", "GtObject", "KittiObjectGroundTruth", "KittiTrackingGroundTruth", "MatchedObject", "Matching",
+    "EvalOptions", "EvaluationResult", "GroundTruthSource",
+    "MatchedObject", "Matching",
     "ObjectMetrics", "PredImage", "PredObject", "Predictions", "UnscoredObject", "box_iou_matrix", "combined_error",
     "dimension_error", "evaluate", "evaluate_folder", "format_report", "intersection_volume_3d", "iou_3d",
     "iou_bev_height_yaw", "load_predictions", "match_boxes", "object_metrics", "open_ground_truth",

@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.evaluation.errors import EvaluationInputError
-from toosicubix.evaluation.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
+from toosicubix.errors import EvaluationInputError
 from toosicubix.evaluation.matching import box_iou_matrix, match_boxes
 from toosicubix.evaluation.metrics import object_metrics, twin_rotation_error_deg
 from toosicubix.evaluation.predictions import Predictions, PredImage, PredObject, load_predictions
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
+from toosicubix.formats.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
 
 #: results.json's and the calib's camera offsets may differ by this much (metres) without a warning.
 T_CAM_RECT_TOLERANCE = 1e-3

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
-from toosicubix.evaluation.cuboid import Cuboid
+from toosicubix.geometry import Cuboid
 
 #: Below this Chebyshev radius, relative to the smaller box's largest half-dimension, the boxes only
 #: touch: the intersection is at most a slab of relative thickness 2e-9 and its IoU below ~1e-8.

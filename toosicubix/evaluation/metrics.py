@@ -10,9 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.iou import iou_3d, iou_bev_height_yaw
-from toosicubix.geometry import depth_reversed_twin, geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
+from toosicubix.geometry import Cuboid, depth_reversed_twin, geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 
 
 def rotation_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:

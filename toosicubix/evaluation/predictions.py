@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from toosicubix.evaluation.cuboid import Cuboid
-from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.errors import EvaluationInputError
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
-from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, project_pinhole
+from toosicubix.geometry import Cuboid, box2d_of_points, clip_cuboid_to_near_plane, project_pinhole
 
 LABEL_DIR = "label_2"
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.evaluation.cuboid import Cuboid
 from toosicubix.evaluation.metrics import ObjectMetrics
+from toosicubix.geometry import Cuboid
 
 
 @dataclass(frozen=True)

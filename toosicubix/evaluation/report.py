@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 from toosicubix import __version__
-from toosicubix.evaluation.ground_truth import GtObject
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject
 from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.formats.ground_truth import GtObject
 from toosicubix.parts.learned import CONTRADICTION_M, HIDES_MIN, hides_clicks
 
 #: Depth bins over the ground truth's z, metres: [lo, hi).

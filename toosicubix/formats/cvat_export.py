@@ -18,15 +18,11 @@ import numpy as np
 
 from toosicubix.formats.fitted import FittedImage
 from toosicubix.formats.templates import CUBOID_LABEL, FRONT_LABEL
-from toosicubix.geometry import cuboid_corners_cam
+from toosicubix.geometry import FRONT_FACE, Z_NEAR, cuboid_corners_cam
 
 #: A walk over all 12 edges of a cuboid (corner indices of :func:`toosicubix.geometry.cuboid_corners_vehicle`:
 #: bottom 0-3 front-left, rear-left, rear-right, front-right; top 4-7 the same), each edge at least once.
 EDGE_WALK = (0, 1, 2, 3, 0, 4, 5, 6, 7, 4, 5, 1, 2, 6, 7, 3)
-#: The front face (+X): bottom front-left, bottom front-right, top front-right, top front-left.
-FRONT_FACE = (0, 3, 7, 4)
-#: Nearest a corner may be to the camera plane, metres; a cuboid closer than that is not drawn.
-Z_NEAR = 0.1
 
 
 def _path_cam(corners_cam: np.ndarray, walk: tuple[int, ...], samples: int, closed: bool) -> np.ndarray:

@@ -1,6 +1,6 @@
 """One folder walker per dataset: KITTI object, KITTI tracking, Cityscapes 3D.
 
-Simulation (:mod:`toosicubix.simulate.annotator`), evaluation (:mod:`toosicubix.evaluation.ground_truth`)
+Simulation (:mod:`toosicubix.simulate.annotator`), evaluation (:mod:`toosicubix.formats.ground_truth`)
 and size-prior estimation (:mod:`toosicubix.priors.estimation`) find their files here; the files themselves
 are read by :mod:`toosicubix.formats.kitti` and :mod:`toosicubix.formats.cityscapes`.
 

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.evaluation import EvalOptions, GroundTruthSource, evaluate, predictions_from_results, summarize
+from toosicubix.evaluation import EvalOptions, evaluate, predictions_from_results, summarize
+from toosicubix.formats.ground_truth import GroundTruthSource
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import fit_images
 from toosicubix.size_priors import Priors

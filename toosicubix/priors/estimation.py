@@ -44,11 +44,14 @@ import numpy as np
 from scipy import integrate, linalg, optimize, stats
 
 from toosicubix.annotations import priors_file
-from toosicubix.errors import InputError
-from toosicubix.formats import kitti
+from toosicubix.errors import EvaluationInputError, InputError
 from toosicubix.formats.atomic import atomic_write_text
-from toosicubix.formats.cityscapes import read_gtbbox3d
-from toosicubix.formats.datasets import KITTI_VEHICLE_CLASSES, CityscapesFolder, KittiObjectFolder, KittiTrackingFolder
+from toosicubix.formats.ground_truth import (
+    CITYSCAPES_VEHICLE_LABELS,
+    KITTI_DEFAULT_CLASSES,
+    GroundTruthSource,
+    open_ground_truth,
+)
 from toosicubix.priors.geometric_median import GeometricMedianOptions, GeometricMedianResult, geometric_median
 
 Method = Literal["paper", "whitened", "sample"]
@@ -56,10 +59,6 @@ METHODS: tuple[str, ...] = ("paper", "whitened", "sample")
 #: A median-based estimate is warned about when this share of a class's samples are one repeated vector.
 REPEAT_SHARE = 0.2
 
-#: Classes estimated from KITTI labels when none are asked for.
-KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
-#: Cityscapes labels whose boxes are vehicles; their ``type`` names are the default classes.
-CITYSCAPES_VEHICLE_LABELS = ("car", "truck", "bus", "train", "motorcycle", "bicycle", "caravan", "trailer")
 #: KITTI type written for a Cityscapes 3D prototype; any other name gets ``Misc``.
 CITYSCAPES_KITTI_TYPES: dict[str, str] = {
     **{name: "Car" for name in ("Mid Size Car", "Small Size Car", "Sedan", "SUV", "Station Wagon", "Sports Car",
@@ -344,18 +343,10 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
         raise PriorEstimationError("sequences can only be chosen for KITTI tracking labels")
     if car_models is not None and kind != "apollocar3d":
         raise PriorEstimationError("car models go with ApolloCar3D only")
-    if kind == "kitti":
-        rows, notes, unit = _kitti_object_rows(root), [], "object"
-    elif kind == "kitti-tracking":
-        rows, notes = _kitti_tracking_rows(root, sequences)
-        unit = "track"
-    elif kind == "cityscapes":
-        rows, notes, unit = _cityscapes_rows(root), [], "object"
-    elif kind == "apollocar3d":
-        rows, notes, unit = _apollocar3d_rows(root, car_models), [], "car"
-    else:
-        raise PriorEstimationError(f"unknown ground-truth kind {kind!r}; expected kitti, kitti-tracking, cityscapes "
-                                   "or apollocar3d")
+    options = {"car_models": car_models, "keypoint_checks": False} if kind == "apollocar3d" else {}
+    source = open_ground_truth(kind, root, **options)
+    rows, notes = _rows(source, sequences)
+    unit = {"kitti-tracking": "track", "apollocar3d": "car"}.get(kind, "object")
     if classes is None:
         if kind in ("cityscapes", "apollocar3d"):
             classes = sorted({name for name, _ in rows})
@@ -376,27 +367,39 @@ def collect_dimensions(kind: str, root: str | Path, classes: Sequence[str] | Non
                             notes=tuple(notes))
 
 
-def _kitti_object_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    return [(obj.type, obj.dimensions) for path in KittiObjectFolder(root).label_files()
-            for obj in kitti.read_label_file(path) if obj.type != "DontCare"]
-
-
-def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[list[tuple[str, np.ndarray]],
-                                                                                list[str]]:
-    folder = KittiTrackingFolder(root)
+def _rows(source: GroundTruthSource, sequences: Sequence[str] | None
+          ) -> tuple[list[tuple[str, np.ndarray]], list[str]]:
+    """``(class, dimensions)`` of every object a size prior can be estimated from
+    (:meth:`GroundTruthSource.size_class`), in the order the source reads them; a source of tracks (KITTI tracking)
+    gives one row per track, the dimensions of its first row, or the geometric median of its rows when they differ
+    (a note says so)."""
     if sequences is None:
-        paths = folder.label_files()
+        image_ids = source.image_ids()
     else:
-        paths = [folder.label_file(name) for name in sequences]
-        absent = [str(p) for p in paths if not p.is_file()]
+        files = [source.folder.label_file(name) for name in sequences]  # type: ignore[attr-defined]
+        absent = [str(path) for path in files if not path.is_file()]
         if absent:
             raise PriorEstimationError(f"no label file for the requested sequences: expected {', '.join(absent)}")
+        image_ids = [image_id for name in sequences for image_id in source.sequence_ids(name)]  # type: ignore[attr-defined]
+    per_object: list[tuple[str, np.ndarray]] = []
     tracks: dict[tuple[str, int, str], list[np.ndarray]] = {}
-    for path in paths:
-        for objects in kitti.read_tracking_file(path).values():
-            for obj in objects:
-                if obj.type != "DontCare":
-                    tracks.setdefault((path.stem, int(obj.track_id), obj.type), []).append(obj.dimensions)  # type: ignore[arg-type]
+    for image_id in image_ids:
+        try:
+            gt = source.load(image_id)
+        except EvaluationInputError as exc:  # e.g. Cityscapes files that claim one image
+            raise PriorEstimationError(exc.problems[0][1], source.root) from None
+        for obj in gt.objects:
+            name = source.size_class(obj)
+            if name is None:
+                continue
+            if source.per_track:
+                sequence = image_id.rpartition("_")[0]
+                key = (sequence, int(obj.track_id), name)  # type: ignore[arg-type]
+                tracks.setdefault(key, []).append(obj.cuboid_rect.dimensions)  # type: ignore[union-attr]
+            else:
+                per_object.append((name, obj.cuboid_rect.dimensions))  # type: ignore[union-attr]
+    if not source.per_track:
+        return per_object, []
     rows: list[tuple[str, np.ndarray]] = []
     differing = 0
     for (_, _, type_), dims in tracks.items():
@@ -409,25 +412,6 @@ def _kitti_tracking_rows(root: Path, sequences: Sequence[str] | None) -> tuple[l
     notes = [f"{differing} tracks have rows with differing dimensions; the geometric median of each was used"
              ] if differing else []
     return rows, notes
-
-
-def _cityscapes_rows(root: Path) -> list[tuple[str, np.ndarray]]:
-    folder = CityscapesFolder(root)
-    rows = []
-    for image_id in folder.image_ids():
-        clash = folder.clash(image_id)
-        if clash is not None:
-            raise PriorEstimationError(clash, folder.root)
-        for box in read_gtbbox3d(folder.files[image_id]).objects:
-            if box.label in CITYSCAPES_VEHICLE_LABELS and box.type:
-                rows.append((box.type, np.asarray(box.dimensions, dtype=float)))
-    return rows
-
-
-def _apollocar3d_rows(path: Path, car_models: str | Path | None) -> list[tuple[str, np.ndarray]]:
-    from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
-
-    return apollocar3d_rows(read_apollocar3d(path, read_car_models(car_models_file(path, car_models))))
 
 
 def apollocar3d_rows(images: Sequence, prototype_of_type: dict[str, str] | None = None

@@ -276,7 +276,7 @@ def ground_truth_cuboids(source: Any, result: ImageResult, warnings: list[str]) 
 
     ``source`` is a :class:`toosicubix.evaluation.GroundTruthSource`; an image it lacks adds a warning.
     """
-    from toosicubix.evaluation import EvaluationInputError
+    from toosicubix.errors import EvaluationInputError
 
     try:
         gt = source.load(result.id)
@@ -354,7 +354,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
     Raises
     ------
     RenderInputError, toosicubix.errors.FormatError, toosicubix.errors.InputFileError,
-    toosicubix.evaluation.EvaluationInputError
+    toosicubix.errors.EvaluationInputError
         Missing or malformed inputs (each names the file and, where there is one, the JSON path).
     """
     from toosicubix.jsonfile import read_json
@@ -376,7 +376,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
     images = {im.id: im for im in load_images(annotations_path)}
     source = None
     if ground_truth is not None:
-        from toosicubix.evaluation import open_ground_truth
+        from toosicubix.formats.ground_truth import open_ground_truth
 
         source = open_ground_truth(*ground_truth)
     images_dir = None if images_dir is None else Path(images_dir)

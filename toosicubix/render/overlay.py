@@ -22,7 +22,15 @@ import cv2
 import numpy as np
 
 from toosicubix.camera import Camera
-from toosicubix.geometry import CUBOID_EDGES, cuboid_corners_cam, cuboid_corners_vehicle
+from toosicubix.geometry import (
+    CUBOID_EDGES,
+    FRONT_FACE,
+    Z_NEAR,
+    clip_polygon_to_near_plane,
+    clip_segment_to_near_plane,
+    cuboid_corners_cam,
+    cuboid_corners_vehicle,
+)
 
 #: One colour per vehicle, in image order (BGR; Okabe-Ito-like, distinguishable on grey and on photos).
 PALETTE_BGR = (
@@ -38,8 +46,6 @@ BLANK_BGR = (BLANK_GREY,) * 3
 PANEL_GREY = 28
 TEXT_BGR = (235, 235, 235)
 
-#: The front face (vehicle +X) as corner indices of :func:`toosicubix.geometry.cuboid_corners_vehicle`.
-FRONT_FACE = (0, 3, 7, 4)
 #: Sub-pixel bits for OpenCV's drawing (coordinates are multiplied by 2**SHIFT).
 SHIFT = 2
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -58,7 +64,7 @@ class OverlayOptions:
     next_clicks : draw the suggested next clicks (``next_clicks`` in results.json) as targets
     """
 
-    z_near: float = 0.1
+    z_near: float = Z_NEAR
     samples_per_edge: int = 16
     front_alpha: float = 0.3
     birds_eye: bool = True
@@ -139,23 +145,6 @@ def valid_radius(camera: Camera, size: tuple[int, int] | None) -> float:
     corners_uv = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
     xy = camera.normalize(corners_uv)[:, :2]
     return 1.25 * float(np.max(np.linalg.norm(xy, axis=1)))
-
-
-def clip_segment_to_near_plane(a_cam: np.ndarray, b_cam: np.ndarray, z_near: float) -> tuple[np.ndarray, ...] | None:
-    """The part of the segment from ``a_cam`` to ``b_cam`` (3,) with ``z >= z_near``, or None when none is.
-
-    Returns
-    -------
-    (a', b') : two (3,) arrays in the camera frame, or None
-    """
-    za, zb = float(a_cam[2]), float(b_cam[2])
-    if za < z_near and zb < z_near:
-        return None
-    if za >= z_near and zb >= z_near:
-        return a_cam, b_cam
-    s = (z_near - za) / (zb - za)
-    crossing = a_cam + s * (b_cam - a_cam)
-    return (crossing, b_cam) if za < z_near else (a_cam, crossing)
 
 
 def project_polylines(camera: Camera, segments_cam: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -263,7 +252,7 @@ def cuboid_polylines(camera: Camera, R_cam_vehicle: np.ndarray, t_cam_vehicle: n
     corners_cam = cuboid_corners_cam(R_cam_vehicle, t_cam_vehicle, dimensions)  # (8, 3)
     segments = [clip_segment_to_near_plane(corners_cam[i], corners_cam[j], options.z_near) for i, j in CUBOID_EDGES]
     edges = project_polylines(camera, [s for s in segments if s is not None], options.samples_per_edge, max_radius)
-    face_cam = _clip_polygon_to_near_plane(corners_cam[list(FRONT_FACE)], options.z_near)
+    face_cam = clip_polygon_to_near_plane(corners_cam[list(FRONT_FACE)], options.z_near)
     front: list[np.ndarray] = []
     if len(face_cam) >= 3:
         ring = [(face_cam[i], face_cam[(i + 1) % len(face_cam)]) for i in range(len(face_cam))]
@@ -276,21 +265,6 @@ def cuboid_polylines(camera: Camera, R_cam_vehicle: np.ndarray, t_cam_vehicle: n
     segment = clip_segment_to_near_plane(heading_cam[0], heading_cam[1], options.z_near)
     heading = project_polylines(camera, [segment], options.samples_per_edge, max_radius) if segment else []
     return edges, front, heading
-
-
-def _clip_polygon_to_near_plane(polygon_cam: np.ndarray, z_near: float) -> np.ndarray:
-    """Sutherland-Hodgman against ``z >= z_near``: (k, 3) -> (m, 3)."""
-    out = []
-    n = len(polygon_cam)
-    for i in range(n):
-        a, b = polygon_cam[i], polygon_cam[(i + 1) % n]
-        a_in, b_in = a[2] >= z_near, b[2] >= z_near
-        if a_in:
-            out.append(a)
-        if a_in != b_in:
-            s = (z_near - a[2]) / (b[2] - a[2])
-            out.append(a + s * (b - a))
-    return np.array(out).reshape(-1, 3)
 
 
 class _LabelPlacer:

@@ -65,6 +65,7 @@ from toosicubix.formats.datasets import (
     KittiTrackingFolder,
     tracking_image_id,
 )
+from toosicubix.formats.ground_truth import open_ground_truth
 from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
 from toosicubix.model import Part, Vehicle
@@ -202,16 +203,7 @@ def _keep(obj: KittiObject, camera: Camera, sel: SelectionOptions) -> bool:
     return sel.min_depth <= depth <= sel.max_depth and obj.box2d[3] - obj.box2d[1] >= sel.min_box_height
 
 
-def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
-    """Vehicles of a KITTI object folder (``label_2/`` and ``calib/``) that pass the selection.
-
-    Raises
-    ------
-    toosicubix.errors.FormatError
-        A missing folder or calibration file, a malformed label line.
-    """
-    sel = sel or SelectionOptions()
-    folder = KittiObjectFolder(root, strict=True)
+def _select_kitti_object(folder: KittiObjectFolder, sel: SelectionOptions) -> list[GroundTruthVehicle]:
     out = []
     for path in folder.label_files():
         camera = folder.camera(path.stem)
@@ -221,11 +213,8 @@ def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -
     return out
 
 
-def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
-    """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``): at most ``frames_per_track``
-    eligible frames per track, evenly spread over its eligible frames."""
-    sel = sel or SelectionOptions()
-    folder = KittiTrackingFolder(root, strict=True)
+def _select_kitti_tracking(folder: KittiTrackingFolder, sel: SelectionOptions) -> list[GroundTruthVehicle]:
+    """At most ``frames_per_track`` eligible frames per track, evenly spread over its eligible frames."""
     out = []
     for path in folder.label_files():
         sequence = path.stem
@@ -249,23 +238,40 @@ def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None)
     return out
 
 
+#: The ground truths the simulator reads, by kind: KITTI's label rows (with their cameras) are what it clicks on.
+_SELECTORS = {"kitti": _select_kitti_object, "kitti-tracking": _select_kitti_tracking}
+
+
 def select_vehicles(kind: str, root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
-    """The vehicles of a ground-truth folder that pass the selection.
+    """The vehicles of a ground-truth folder (opened by :func:`toosicubix.formats.ground_truth.open_ground_truth`,
+    which must hold ``label_2/`` or ``label_02/`` and ``calib/``) that pass the selection.
 
     Parameters
     ----------
-    kind : 'kitti' (:func:`select_kitti_object`) or 'kitti-tracking' (:func:`select_kitti_tracking`)
+    kind : 'kitti' (KITTI object labels, every object of an image) or 'kitti-tracking' (at most
+        ``frames_per_track`` eligible frames per track, evenly spread over its eligible frames)
 
     Raises
     ------
     toosicubix.errors.FormatError
         An unknown kind, a missing folder or calibration file, a malformed label line.
     """
-    if kind == "kitti":
-        return select_kitti_object(root, sel)
-    if kind == "kitti-tracking":
-        return select_kitti_tracking(root, sel)
-    raise FormatError(root, f"cannot simulate from {kind!r} ground truth; expected kitti or kitti-tracking")
+    if kind not in _SELECTORS:
+        raise FormatError(root, f"cannot simulate from {kind!r} ground truth; expected kitti or kitti-tracking")
+    source = open_ground_truth(kind, root, strict=True)
+    return _SELECTORS[kind](source.folder, sel or SelectionOptions())  # type: ignore[attr-defined]
+
+
+def select_kitti_object(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """Vehicles of a KITTI object folder (``label_2/`` and ``calib/``) that pass the selection
+    (:func:`select_vehicles` of kind 'kitti')."""
+    return select_vehicles("kitti", root, sel)
+
+
+def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``) that pass the selection
+    (:func:`select_vehicles` of kind 'kitti-tracking')."""
+    return select_vehicles("kitti-tracking", root, sel)
 
 
 def vehicle_rng(seed: int, image_id: str, vehicle_id: str) -> np.random.Generator:

@@ -58,7 +58,7 @@ from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
-from toosicubix.geometry import cuboid_corners_cam
+from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
 from toosicubix.jsonfile import read_json
 from toosicubix.model import GroundPlane, Image, Part, Vehicle
 from toosicubix.parts.linear import TypicalKeypoint
@@ -85,8 +85,6 @@ UNDO_DEPTH = 500
 TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
-#: Corner indices of the cuboid's front face (:func:`toosicubix.geometry.cuboid_corners_vehicle` order).
-FRONT_FACE = (0, 3, 7, 4)
 
 
 @dataclass

@@ -1,4 +1,6 @@
-"""Ground truth from KITTI object labels, KITTI tracking labels or Cityscapes 3D, in one per-image form.
+"""Ground truth from KITTI object labels, KITTI tracking labels, Cityscapes 3D or ApolloCar3D, in one per-image form:
+the one dispatch from a dataset's kind to its reader (:func:`open_ground_truth`), for evaluation, size-prior
+estimation and simulation alike.
 
 Every source turns one image id into a :class:`GtImage`: its objects as cuboids in the ground
 truth's own frame ``rect`` plus ``t_cam_rect``, the offset of the camera whose ``K`` applies
@@ -23,9 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from toosicubix.errors import FormatError
-from toosicubix.evaluation.cuboid import Cuboid
-from toosicubix.evaluation.errors import EvaluationInputError
+from toosicubix.errors import EvaluationInputError, FormatError
 from toosicubix.formats import kitti
 from toosicubix.formats.cityscapes import read_gtbbox3d
 from toosicubix.formats.datasets import (
@@ -35,13 +35,17 @@ from toosicubix.formats.datasets import (
     KittiObjectFolder,
     KittiTrackingFolder,
     parse_tracking_image_id,
+    tracking_image_id,
 )
+from toosicubix.geometry import Cuboid
 
 #: Classes scored by default, compared case-insensitively.
 KITTI_DEFAULT_CLASSES = KITTI_VEHICLE_CLASSES
 CITYSCAPES_DEFAULT_CLASSES = ("car", "truck", "bus", "caravan", "trailer", "train")
 #: Class of a Cityscapes ``ignore`` region (it has no 3D box and is never scored).
 CITYSCAPES_IGNORE_CLASS = "ignore"
+#: Cityscapes labels whose boxes are vehicles; their ``type`` names are the prototypes priors are estimated for.
+CITYSCAPES_VEHICLE_LABELS = ("car", "truck", "bus", "train", "motorcycle", "bicycle", "caravan", "trailer")
 
 
 @dataclass(frozen=True)
@@ -120,11 +124,17 @@ class GroundTruthSource:
     kind: str = ""
     default_classes: tuple[str, ...] = ()
     occlusion_kind: str | None = "level"
+    #: Objects carry track ids that name one physical object across images (a size prior counts it once).
+    per_track: bool = False
 
     def __init__(self, root: str | Path):
         self.root = Path(root)
         if not self.root.is_dir():
             raise EvaluationInputError(f"ground-truth folder not found ({self.kind})", self.root)
+
+    def size_class(self, obj: GtObject) -> str | None:
+        """The class a size prior is estimated for from ``obj`` (None: none, e.g. KITTI's DontCare)."""
+        return obj.cls if obj.cuboid_rect is not None else None
 
     def image_ids(self) -> list[str]:
         """Every image id that has ground truth, sorted."""
@@ -185,9 +195,12 @@ class KittiObjectGroundTruth(GroundTruthSource):
     kind = "kitti"
     default_classes = KITTI_DEFAULT_CLASSES
 
-    def __init__(self, root: str | Path):
-        super().__init__(root)
-        self.folder: KittiObjectFolder = _walk(KittiObjectFolder, self.root)
+    def __init__(self, root: str | Path, strict: bool = False):
+        if strict:  # label_2/ and calib/ both (the simulator's need), named as the folder walker names them
+            self.root, self.folder = Path(root), KittiObjectFolder(root, strict=True)
+        else:
+            super().__init__(root)
+            self.folder = _walk(KittiObjectFolder, self.root)
         self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
 
     def image_ids(self) -> list[str]:
@@ -213,16 +226,24 @@ class KittiTrackingGroundTruth(GroundTruthSource):
 
     kind = "kitti-tracking"
     default_classes = KITTI_DEFAULT_CLASSES
+    per_track = True
 
-    def __init__(self, root: str | Path):
-        super().__init__(root)
-        self.folder: KittiTrackingFolder = _walk(KittiTrackingFolder, self.root)
+    def __init__(self, root: str | Path, strict: bool = False):
+        if strict:  # label_02/ and calib/ both (the simulator's need), named as the folder walker names them
+            self.root, self.folder = Path(root), KittiTrackingFolder(root, strict=True)
+        else:
+            super().__init__(root)
+            self.folder = _walk(KittiTrackingFolder, self.root)
         self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
         self._sequences: dict[str, dict[int, list[kitti.KittiObject]]] = {}
 
     def image_ids(self) -> list[str]:
         """Frames 0 to the last labelled frame of every sequence (a frame without rows has no objects)."""
         return self.folder.image_ids()
+
+    def sequence_ids(self, sequence: str) -> list[str]:
+        """The image ids of one sequence's frames, 0 to its last labelled one (its label file must exist)."""
+        return [tracking_image_id(sequence, f) for f in range(self.folder.last_frame(sequence) + 1)]
 
     def _sequence(self, sequence: str) -> dict[int, list[kitti.KittiObject]]:
         if sequence not in self._sequences:
@@ -257,6 +278,10 @@ class CityscapesGroundTruth(GroundTruthSource):
     kind = "cityscapes"
     default_classes = CITYSCAPES_DEFAULT_CLASSES
     occlusion_kind = "fraction"
+
+    def size_class(self, obj: GtObject) -> str | None:
+        """A vehicle box's prototype (its ``3d.type``, e.g. 'Mid Size Car')."""
+        return obj.subtype if obj.cls in CITYSCAPES_VEHICLE_LABELS and obj.subtype else None
 
     def __init__(self, root: str | Path):
         super().__init__(root)
@@ -315,7 +340,14 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
     default_classes = ("Car",)
     occlusion_kind = None
 
-    def __init__(self, root: str | Path, car_models: str | Path | None = None, cameras: str | Path | None = None):
+    def size_class(self, obj: GtObject) -> str | None:
+        """The prototype its car model's type gets on import (hatchback ``Car``, saloon ``Sedan``, ``SUV``)."""
+        from toosicubix.formats.apollocar3d import prototype_of
+
+        return prototype_of(obj.subtype)
+
+    def __init__(self, root: str | Path, car_models: str | Path | None = None, cameras: str | Path | None = None,
+                 keypoint_checks: bool = True):
         from toosicubix.errors import FormatError, InputFileError
         from toosicubix.formats.apollocar3d import car_models_file, read_apollocar3d, read_car_models
         from toosicubix.formats.cameras import load_cameras
@@ -324,8 +356,10 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         if not self.root.is_file():
             raise EvaluationInputError(f"{self.root}: ApolloCar3D keypoint file not found")
         self.car_models = car_models_file(self.root, car_models)
+        self.keypoint_checks = keypoint_checks
         beside = self.root.parent / "cameras.json"
-        self.cameras = Path(cameras) if cameras is not None else beside if beside.is_file() else None
+        found = beside if beside.is_file() and keypoint_checks else None
+        self.cameras = Path(cameras) if cameras is not None else found
         if self.cameras is not None and not self.cameras.is_file():
             raise EvaluationInputError(f"{self.cameras}: cameras file not found")
         try:
@@ -369,15 +403,15 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         K = self._K(im.file_name)
         objects = []
         for k, car in enumerate(im.cars):
-            typical = self._keypoints_of(prototype_of(car.model.type))
-            seen_from = [() if t is None else tuple(t.seen_from) for t in typical]
+            typical = self._keypoints_of(prototype_of(car.model.type)) if self.keypoint_checks else None
+            seen_from = None if typical is None else [() if t is None else tuple(t.seen_from) for t in typical]
             objects.append(GtObject(
                 index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
                 box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None,
                 track_id=int(car.id) if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
                 keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0)),
-                keypoints_hidden=keypoints_hidden(car, seen_from),
-                keypoints_off_rays_m=None if K is None else keypoints_off_rays(
+                keypoints_hidden=None if seen_from is None else keypoints_hidden(car, seen_from),
+                keypoints_off_rays_m=None if K is None or typical is None else keypoints_off_rays(
                     car, K, [None if t is None else t.at for t in typical])))
         return GtImage(id=image_id, objects=tuple(objects), t_cam_rect=np.zeros(3), K=K, source=str(self.root))
 
@@ -397,13 +431,15 @@ SOURCES: dict[str, type[GroundTruthSource]] = {
 
 
 def open_ground_truth(kind: str, root: str | Path, **source_options: Any) -> GroundTruthSource:
-    """Open a ground-truth folder (or ApolloCar3D's keypoint file).
+    """Open a ground-truth folder (or ApolloCar3D's keypoint file): the one place a dataset's kind chooses its reader
+    (``eval``, ``priors``, ``simulate`` and ``tune`` all open theirs here).
 
     Parameters
     ----------
     kind : 'kitti', 'kitti-tracking', 'cityscapes' or 'apollocar3d'
     root : the folder, or the file
-    source_options : further arguments of the source (``car_models`` for 'apollocar3d')
+    source_options : further arguments of the source (``strict`` for KITTI: ``label_2/`` or ``label_02/`` and
+        ``calib/`` both required; ``car_models``, ``cameras`` and ``keypoint_checks`` for 'apollocar3d')
 
     Raises
     ------
