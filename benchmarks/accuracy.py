@@ -49,7 +49,7 @@ from toosicubix.simulate.annotator import (
     simulate,
     write_simulation,
 )
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.observability import determines_8dof
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import levenberg_marquardt_batch

@@ -74,7 +74,7 @@ from toosicubix.simulate.annotator import (
     select_kitti_tracking,
     simulate_vehicle,
 )
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.uncertainty import infinite_as_none
 from toosicubix.web.client import Client
 from toosicubix.web.naming import NAMING_GRAZING_DEG, naming_candidates, nearest_parts

@@ -78,7 +78,7 @@ from toosicubix.priors.estimation import (
     write_priors_file,
 )
 from toosicubix.size_priors import bundled_priors_path
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 PAPER_KITTI = {"iou": 0.29, "siou": 0.77, "e_r_deg": 3.16, "e_t": 0.10, "e_d": 0.14, "e_comb": 0.10}
 METRICS = ("iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb")

@@ -45,7 +45,7 @@ from toosicubix.simulate.annotator import (
     simulate,
     write_simulation,
 )
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 _PEAK_MEMORY_CHILD = """
 import resource, sys

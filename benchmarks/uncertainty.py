@@ -58,7 +58,7 @@ from toosicubix.simulate.annotator import (
     simulate,
     vehicle_rng,
 )
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import is_box_shaped, suggest_clicks
 
 OPTIONS = replace(SolverOptions(), click_sigma=1.0)

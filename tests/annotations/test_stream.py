@@ -15,7 +15,7 @@ from toosicubix.annotations.stream import index_annotations, iter_image_annotati
 from toosicubix.errors import InputFileError
 from toosicubix.formats.results import dumps, results_to_json, write_results_stream
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"
 

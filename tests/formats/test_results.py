@@ -21,7 +21,7 @@ from toosicubix.formats.results import (
 )
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.fitting import fit_images
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.uncertainty import Uncertainty
 
 SAMPLE = REPO / "samples" / "annotations.json"

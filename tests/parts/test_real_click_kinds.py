@@ -21,7 +21,7 @@ from toosicubix.parts.learned import (
 )
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 
 #: Keypoints on the rear and the left side of a car (fractions of dx, dy, dz), as real ones sit.
 REAR_LEFT = {"lamp-rear-left": (-0.45, 0.38, 0.62), "lamp-rear-right": (-0.45, -0.38, 0.62),

@@ -10,7 +10,7 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.pipeline import batch, fitting, vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.fitting import fit_images, iter_fit_images
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"
 

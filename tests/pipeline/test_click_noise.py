@@ -23,7 +23,7 @@ from toosicubix.pipeline.click_noise import (
     redundancy,
 )
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 SAMPLE = "samples/annotations.json"
 

@@ -12,7 +12,7 @@ from tests.scenes import CAMERA
 from toosicubix.model import GroundPlane, Image
 from toosicubix.pipeline.fitting import fit_image_jointly
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 #: The scenes' vehicles stand 1.6 m below the camera on a level road; the height is left to the joint fit.
 GROUND = GroundPlane(normal=np.array([0.0, -1.0, 0.0]), normal_sigma=np.deg2rad(1.0), camera_height=None,

@@ -17,7 +17,7 @@ from toosicubix.annotations.mapping import MappingFile
 from toosicubix.cli import main
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.validation import validate_file
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 #: Keypoints the twelve clicked ones leave: the front and right side (turned away from these rear-left views)
 #: and two more on the left side.

@@ -9,7 +9,7 @@ import pytest
 from toosicubix.errors import InputFileError
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.settings import ground_overrides, settings_document, solver_options, write_settings_file
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 
 def test_file_over_defaults_and_explicit_over_file(tmp_path):

@@ -144,7 +144,7 @@ def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
     from toosicubix.pipeline.batch import fit_file
     from toosicubix.pipeline.fitting import fit_images
     from toosicubix.pipeline.pilot import file_estimates, on_estimated_roads
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
 
     path = tmp_path / "pitched.json"
     path.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))

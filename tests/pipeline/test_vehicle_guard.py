@@ -12,7 +12,7 @@ from toosicubix.formats.results import ImageResult, read_results
 from toosicubix.geometry import R_cam_vehicle_from_ypr
 from toosicubix.pipeline import vehicle as one
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.solver import FitResult
+from toosicubix.solver.fit import FitResult
 
 SAMPLE = REPO / "samples" / "annotations.json"
 
@@ -100,7 +100,7 @@ def sample_results(tmp_path_factory):
 
 
 def _alternative(**changes):
-    from toosicubix.solver import Alternative
+    from toosicubix.solver.fit import Alternative
 
     fields = dict(cost=1.0, rotation_deg=180.0, turned_around=True, implausible=None, close=True,
                   R_cam_vehicle=np.eye(3), t_cam_vehicle=np.array([0.0, 1.5, 20.0]), dimensions=np.ones(3))

@@ -21,7 +21,7 @@ from toosicubix.simulate.annotator import (
     simulate_vehicle,
     tracking_image_id,
 )
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.observability import determines_8dof
 from toosicubix.solver.plausibility import unseen_clicks
 from toosicubix.solver.problem import Problem

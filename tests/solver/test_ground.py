@@ -24,7 +24,7 @@ from toosicubix.model import GroundPlane, Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.parts.synthesis import PartSpec, render_parts, true_parameters
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.joint import JointVehicle, fit_jointly
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian

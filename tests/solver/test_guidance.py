@@ -7,7 +7,7 @@ from tests.scenes import CAMERA, random_scene
 from toosicubix.annotations.priors_file import load_priors
 from toosicubix.model import Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import suggest_clicks
 
 CAR = load_priors()["Car"]
@@ -148,7 +148,7 @@ def test_a_keypoint_is_seen_on_the_faces_it_was_learned_to_be_seen_from():
     left."""
     from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
     from tests.parts.test_real_click_kinds import scene as keypoint_scene
-    from toosicubix.solver import faces_turned_to_camera
+    from toosicubix.solver.plausibility import faces_turned_to_camera
 
     d, R, t = keypoint_scene(np.random.default_rng(5))
     clicked = keypoint_parts(d, R, t)[:6]

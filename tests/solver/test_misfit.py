@@ -17,8 +17,8 @@ from tests.solver.test_robust import TWELVE
 from toosicubix.cli import main
 from toosicubix.formats.results import read_results
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.solver import MISFIT_WARNING, SolverOptions, fit_vehicle
-from toosicubix.solver.misfit import ResidualTest, chi2_quantile, residual_test
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
+from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, chi2_quantile, residual_test
 
 
 def least_squares(**settings) -> SolverOptions:
@@ -129,7 +129,7 @@ def test_the_next_clicks_of_a_misfit_start_from_its_widened_sigma():
 
 def _spy_batches(monkeypatch) -> list[list]:
     """Record the batches of starts that stage (c) refines."""
-    import toosicubix.solver as solver_module
+    import toosicubix.solver.fit as solver_module
 
     batches: list[list] = []
     refine = solver_module._refine_batch

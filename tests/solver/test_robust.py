@@ -10,7 +10,7 @@ from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_p
 from tests.scenes import CAMERA
 from toosicubix.geometry import geodesic_angle
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 from toosicubix.solver.robust import CauchyLoss, soft_weights, with_weights

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import toosicubix.solver as solver_module
+import toosicubix.solver.fit as solver_module
 from tests.scenes import CAMERA, VIEW_YAW, random_scene
 from toosicubix.annotations.priors_file import load_priors
 from toosicubix.camera import Camera
@@ -20,8 +20,8 @@ from toosicubix.geometry import Cuboid, R_cam_vehicle_from_ypr, geodesic_angle, 
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import SolverOptions, fit_vehicle
 from toosicubix.solver.descent import DescentResult, descend, solve_pose, solve_shape
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.init import YAW_SWEEP, line_rows, yaw_candidates, yaw_from_lines
 from toosicubix.solver.observability import determines_8dof, undetermined_directions
 from toosicubix.solver.problem import ARROW_ZONE_SIGMA, Problem

@@ -12,7 +12,7 @@ from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.parts.synthesis import render_parts
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import SolverOptions, fit_vehicle
+from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.plausibility import unseen_clicks
 from toosicubix.solver.uncertainty import UNDETERMINED_RATIO, Uncertainty, confidence
 

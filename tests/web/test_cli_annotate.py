@@ -232,7 +232,7 @@ def test_the_page_estimates_again_when_the_vehicles_double(scene, tmp_path):
     from dataclasses import replace
 
     from toosicubix.annotations.priors_file import load_priors
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
     from toosicubix.web.session import Session, load_cameras
 
     image, cameras = scene

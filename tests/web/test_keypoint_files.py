@@ -46,7 +46,7 @@ def test_keypoint_vehicles_fit_on_the_page(keypoint_file):
     assert fit["status"] == "ok", fit
     # The page's fit is the batch's fit of that vehicle: the same function on the same parts.
     from toosicubix.pipeline.vehicle import fit_one
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
 
     (loaded, *_) = load_images(out)
     expected = fit_one(loaded.vehicles[0], loaded.camera, load_priors()["Car"], SolverOptions())

@@ -85,7 +85,7 @@ def test_a_named_keypoint_takes_its_position_and_fits_as_fit_does(clicked):
     # The page's fit is fit's fit of the file's vehicle (the same function on the same parts).
     from toosicubix.annotations.convert import load_images
     from toosicubix.pipeline.vehicle import fit_one
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
 
     (image,) = load_images(out)
     expected = fit_one(image.vehicles[0], image.camera, load_priors()["Car"], SolverOptions())

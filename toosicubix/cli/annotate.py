@@ -129,7 +129,7 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
     from dataclasses import replace
 
     from toosicubix.pipeline.road_normal import MIN_VEHICLES
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
 
     options = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
     if click_sigma is not None and not estimate_road:

@@ -20,7 +20,7 @@ from typing import Any
 import click
 
 from toosicubix.errors import InputError
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 

@@ -62,7 +62,7 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     from toosicubix.pipeline.pilot import on_estimated_roads
     from toosicubix.pipeline.settings import settings_document, write_settings_file
     from toosicubix.pipeline.tuning import tune
-    from toosicubix.solver import SolverOptions
+    from toosicubix.solver.fit import SolverOptions
 
     grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")
     images = load_images(annotations)

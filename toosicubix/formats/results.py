@@ -24,7 +24,7 @@ import numpy as np
 
 from toosicubix.errors import FormatError
 from toosicubix.jsonfile import json_field, json_numbers, read_json
-from toosicubix.solver import Alternative  # the solver's type: results.json's ``alternatives``
+from toosicubix.solver.fit import Alternative
 from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
 from toosicubix.solver.uncertainty import (  # the solver's types: results.json's ``sigma`` and ``observability``
     Observability,
@@ -379,7 +379,7 @@ def all_finite(value: Any) -> bool:
     """Whether no number in ``value`` is a NaN or an infinity, read without building a JSON form: floats, numpy
     scalars and arrays, inside dicts (their values), lists, tuples and dataclasses (every field, written or not).
 
-    The types of this module and :class:`toosicubix.solver.Alternative` write nothing but their fields
+    The types of this module and :class:`toosicubix.solver.fit.Alternative` write nothing but their fields
     (``to_json``), so True means that :func:`non_finite_path` of their JSON form is None. False also when it
     cannot tell: a value of any other type, or a numpy array neither numeric nor boolean.
     """

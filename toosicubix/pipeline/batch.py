@@ -41,7 +41,7 @@ from toosicubix.pipeline.output_folder import (
 from toosicubix.pipeline.pilot import PilotFindings, on_estimated_roads, run_pilot
 from toosicubix.pipeline.road_normal import refuse_with_ground
 from toosicubix.size_priors import Priors
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",
            "pilot_and_fits", "write_outputs"]

@@ -33,18 +33,12 @@ from toosicubix.pipeline.vehicle import (
     with_next_clicks,
 )
 from toosicubix.size_priors import Priors, SizePrior
-from toosicubix.solver import (
-    MISFIT_WARNING,
-    FitResult,
-    JointVehicle,
-    Problem,
-    SolverOptions,
-    analyse,
-    fit_jointly,
-    scale_shares,
-    tested,
-)
+from toosicubix.solver.fit import FitResult, SolverOptions, scale_shares, tested
+from toosicubix.solver.joint import JointVehicle, fit_jointly
+from toosicubix.solver.misfit import MISFIT_WARNING
+from toosicubix.solver.problem import Problem
 from toosicubix.solver.robust import with_weights
+from toosicubix.solver.uncertainty import analyse
 
 __all__ = ["FitTask", "KeypointCatalogue", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images",
            "iter_fit_images", "stream_images"]

@@ -27,7 +27,7 @@ from toosicubix.pipeline.road_normal import (
     without_pilot,
 )
 from toosicubix.size_priors import Priors
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 from toosicubix.vocabulary import KINDS
 
 __all__ = ["PilotFindings", "estimated_grounds", "file_estimates", "on_estimated_roads", "run_pilot"]

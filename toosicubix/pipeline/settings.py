@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from toosicubix.formats.atomic import atomic_write_text
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 #: The settings a file may set (the rest of :class:`SolverOptions` keeps its defaults).
 SETTINGS_FIELDS = ("lambda_3d", "lambda_px")

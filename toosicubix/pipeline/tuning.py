@@ -21,7 +21,7 @@ from toosicubix.formats.ground_truth import GroundTruthSource
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import fit_images
 from toosicubix.size_priors import Priors
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 #: Default grids (the refinement then tries the half-decades around the best).
 LAMBDAS = (0.01, 0.1, 1.0, 10.0)

@@ -3,7 +3,7 @@
 Every vehicle is fitted exactly as ``toosicubix fit`` would fit it (same options, same cues), and judged:
 it is *well determined* when the fit succeeded, its yaw and relative depth standard deviations (for the
 stated click noise, :mod:`toosicubix.solver.uncertainty`) are within the thresholds, and no second answer
-fits the clicks about as well (:attr:`toosicubix.solver.FitResult.ambiguous`). The report gives, per
+fits the clicks about as well (:attr:`toosicubix.solver.fit.FitResult.ambiguous`). The report gives, per
 vehicle, the constraint count, the uncertainty, what the clicks leave to the prior, the ambiguity, and the
 parts to click next (:mod:`toosicubix.guidance`).
 """
@@ -24,7 +24,7 @@ from toosicubix.pipeline.batch import pilot_and_fits
 from toosicubix.pipeline.fitting import KeypointCatalogue
 from toosicubix.pipeline.pilot import PilotFindings
 from toosicubix.pipeline.road_normal import refuse_with_ground
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 
 VALIDATION_VERSION = 1
 

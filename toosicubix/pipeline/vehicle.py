@@ -24,10 +24,10 @@ from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cubo
 from toosicubix.model import GroundPlane, Vehicle
 from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import FitResult, SolverOptions, confidence, fit_vehicle
+from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
 from toosicubix.solver.misfit import ResidualTest
-from toosicubix.solver.uncertainty import Uncertainty
+from toosicubix.solver.uncertainty import Uncertainty, confidence
 
 __all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_result", "describe_fit", "failed_result",
            "fit_as_written", "fit_one", "with_next_clicks"]

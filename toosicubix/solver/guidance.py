@@ -36,19 +36,16 @@ from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver import (
-    MIN_DEPTH,
-    Problem,
-    SolverOptions,
-    faces_turned_to_camera,
-    finite_or_none,
-    uncertainties_with_added_clicks,
-)
+from toosicubix.solver.fit import SolverOptions
+from toosicubix.solver.plausibility import faces_turned_to_camera
+from toosicubix.solver.problem import Problem
+from toosicubix.solver.refine import MIN_DEPTH
 from toosicubix.solver.robust import soft_weights, with_weights
+from toosicubix.solver.uncertainty import finite_or_none, uncertainties_with_added_clicks
 
 
 class Fitted(Protocol):
-    """What :func:`suggest_clicks` reads of a fit: a :class:`~toosicubix.solver.FitResult`, or a fit as
+    """What :func:`suggest_clicks` reads of a fit: a :class:`~toosicubix.solver.fit.FitResult`, or a fit as
     results.json keeps it (:func:`toosicubix.pipeline.vehicle.fit_as_written`).
 
     ``R_cam_vehicle`` (3, 3), ``t_cam_vehicle`` (3,), ``dimensions`` (3,), ``p`` (P,) every unknown in the

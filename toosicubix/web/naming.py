@@ -18,7 +18,8 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.formats.results import VehicleResult
 from toosicubix.parts.linear import TypicalKeypoint
-from toosicubix.solver import MIN_DEPTH, faces_turned_to_camera
+from toosicubix.solver.plausibility import faces_turned_to_camera
+from toosicubix.solver.refine import MIN_DEPTH
 
 #: How far past edge-on (degrees) a face a keypoint sits near may be turned for an unnamed click to be named that
 #: keypoint; negative: turned toward the camera by at least that. 0: any face turned toward the camera (a click

@@ -68,7 +68,7 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.size_priors import Priors
-from toosicubix.solver import SolverOptions
+from toosicubix.solver.fit import SolverOptions
 from toosicubix.web.naming import naming_candidates, nearest_parts
 from toosicubix.web.request_fields import (
     ApiError,
