@@ -41,6 +41,7 @@ from toosicubix.evaluation import evaluate_folder, summarize
 from toosicubix.formats.results import read_results
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
@@ -117,7 +118,7 @@ def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, 
     folder.mkdir(parents=True)
     write_simulation(simulated, annotations, gt_dir)
     start = time.perf_counter()
-    fit_file(annotations, out, options=options, jobs=jobs, estimate_road_normal=road_normal)
+    fit_file(annotations, out, BatchSettings(options=options, jobs=jobs, estimate_road_normal=road_normal))
     fit_seconds = time.perf_counter() - start
     evaluation = evaluate_folder(out, "kitti", gt_dir)
     summary = summarize(evaluation)

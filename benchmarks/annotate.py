@@ -218,7 +218,7 @@ def main() -> None:
             cv2.imwrite(str(path), np.zeros((h, w), np.uint8))
             cameras[gt.image_id] = gt.camera
             images.append(path)
-        ground = dict(KITTI_GROUND) if args.kitti_ground else None
+        ground = KITTI_GROUND if args.kitti_ground else None
         session = Session(images, folder / "annotations.json", cameras, load_priors(), ground=ground)
         server = serve_in_thread(session)
         client = Client(*server.server_address[:2])

@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import default_data_dir, machine
 
 from toosicubix.annotations.mapping import MappingFile, load_mapping
-from toosicubix.annotations.priors_file import load_priors_file
+from toosicubix.annotations.priors_file import load_priors, load_priors_file
 from toosicubix.annotations.schema import SCHEMA_VERSION
 from toosicubix.errors import InputError
 from toosicubix.evaluation import EvalOptions, evaluate, load_predictions
@@ -59,6 +59,7 @@ from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import coco_to_annotations
 from toosicubix.formats.ground_truth import ApolloCar3DGroundTruth
 from toosicubix.geometry import depth_reversed_twin
+from toosicubix.model import GroundOverride
 from toosicubix.parts.learned import (  # CONTRADICTION_M: rule 6's 0.5 m
     CONTRADICTION_M,
     contradicting,
@@ -69,6 +70,7 @@ from toosicubix.parts.learned import (  # CONTRADICTION_M: rule 6's 0.5 m
     offset_from_ray,
 )
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.priors.estimation import (
     DimensionSamples,
     apollocar3d_rows,
@@ -184,12 +186,13 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     annotations = work / "annotations.json"
     annotations.write_text(json.dumps(subset(document, image_ids, scored)))
     start = time.perf_counter()
-    ground = {"normal": normal, "normal_sigma_deg": NORMAL_SIGMA_DEG, "upright_sigma_deg": 2.0} if row.ground else None
+    ground = (GroundOverride(normal=normal, normal_sigma_deg=NORMAL_SIGMA_DEG, upright_sigma_deg=2.0) if row.ground
+              else None)
     if row.misfit_level is not None:
         options = replace(options, misfit_level=row.misfit_level)
-    fit_file(annotations, work / "out", priors_path=priors, options=options, jobs=jobs,
-             estimate_click_sigma=estimate_sigma, ground=ground,
-             estimate_road_normal=row.batch_normal)
+    fit_file(annotations, work / "out", BatchSettings(priors=load_priors(priors), options=options, jobs=jobs,
+                                                      estimate_click_sigma=estimate_sigma, ground=ground,
+                                                      estimate_road_normal=row.batch_normal))
     seconds = time.perf_counter() - start
     result = evaluate(load_predictions(work / "out"), ApolloCar3DGroundTruth(keypoints_path),
                       EvalOptions(classes=("Car",)))

@@ -44,8 +44,9 @@ from common import SPLITS, default_data_dir, machine
 
 from toosicubix.evaluation import evaluate_folder, summarize
 from toosicubix.formats.results import dumps, read_results
-from toosicubix.model import KITTI_GROUND
+from toosicubix.model import KITTI_GROUND, GroundOverride
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
@@ -83,7 +84,7 @@ def run(doc: dict, gt_dir: Path, folder: Path, joint: bool = False) -> tuple[dic
     annotations = folder / "annotations.json"
     annotations.write_text(dumps(doc))
     start = time.perf_counter()
-    fit_file(annotations, folder / "out", jobs=2, joint_ground=joint)
+    fit_file(annotations, folder / "out", BatchSettings(jobs=2, joint_ground=joint))
     seconds = time.perf_counter() - start
     summary = summarize(evaluate_folder(folder / "out", "kitti", gt_dir))
     summary["fit_seconds"] = seconds
@@ -93,13 +94,13 @@ def run(doc: dict, gt_dir: Path, folder: Path, joint: bool = False) -> tuple[dic
     return summary, results
 
 
-def with_ground(doc: dict, blocks: dict[str, dict] | dict | None) -> dict:
+def with_ground(doc: dict, blocks: dict[str, dict] | GroundOverride | None) -> dict:
     doc = copy.deepcopy(doc)
     for im in doc["images"]:
         if blocks is None:
             im.pop("ground", None)
-        elif "camera_height" in blocks or "normal" in blocks:  # one block for every image
-            im["ground"] = dict(blocks)
+        elif isinstance(blocks, GroundOverride):  # one block for every image
+            im["ground"] = blocks.to_json()
         else:
             im["ground"] = dict(blocks[im["id"]])
     return doc

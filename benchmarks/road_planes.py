@@ -56,7 +56,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
     root = args.data / "kitti_tracking"
-    nominal = float(KITTI_GROUND["camera_height"])
+    nominal = float(KITTI_GROUND.camera_height)
     report: dict = {"machine": machine(), "nominal_camera_height_m": nominal, "splits": {}}
     for split, sequences in SPLITS.items():
         per_sequence = bottom_centres(root, sequences)

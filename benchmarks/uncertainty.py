@@ -42,14 +42,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import SPLITS, default_data_dir, machine
 
-from toosicubix.annotations.convert import ground_from_schema, load_images
+from toosicubix.annotations.convert import ground_with, load_images
 from toosicubix.annotations.priors_file import load_priors
-from toosicubix.annotations.schema import parse_ground_block
 from toosicubix.formats.results import dumps
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
-from toosicubix.model import KITTI_GROUND
+from toosicubix.model import KITTI_GROUND, GroundOverride
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
     SelectionOptions,
@@ -69,13 +69,13 @@ def yaw_error_deg(R_fit: np.ndarray, R_true: np.ndarray) -> float:
     return float(np.rad2deg(wrap_angle(ypr_from_R_cam_vehicle(R_fit)[0] - ypr_from_R_cam_vehicle(R_true)[0])))
 
 
-def calibration(simulated, ground: dict | None, folder: Path, options: SolverOptions = OPTIONS) -> dict:
+def calibration(simulated, ground: GroundOverride | None, folder: Path, options: SolverOptions = OPTIONS) -> dict:
     """Share of fitted vehicles whose yaw (depth) error is within 1 and 2 predicted sigmas."""
     path = folder / "annotations.json"
     path.write_text(dumps(annotation_document(simulated, ground)))
     images = load_images(path)
     start = time.perf_counter()
-    results = fit_images(images, load_priors(), options, jobs=2)
+    results = fit_images(images, BatchSettings(priors=load_priors(), options=options, jobs=2))
     seconds = time.perf_counter() - start
     truth = {(sv.source.image_id, sv.source.vehicle_id): sv for sv in simulated}
     yaw, depth, sig_yaw, sig_depth, flip, ambiguous, conf = [], [], [], [], [], [], []
@@ -119,7 +119,7 @@ def part_sigma_landscape(data: Path, grid: list[float], options: SolverOptions =
         for value in grid:
             loss = 0.0
             row: dict = {"part_sigma": value}
-            for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND))):
+            for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND)):
                 folder = Path(tmp) / f"{value}-{label.replace(' ', '-')}"
                 folder.mkdir()
                 c = calibration(simulated, ground, folder, replace(options, part_sigma=value))
@@ -138,7 +138,7 @@ def _next_click_task(task) -> dict | None:
     sv, ground_block, seed = task
     prior = load_priors()[sv.source.label.type]
     camera = sv.source.camera
-    ground = ground_from_schema(parse_ground_block(ground_block)) if ground_block else None
+    ground = ground_with(None, ground_block)[1] if ground_block else None
     base = tuple(sv.parts)
     fit = fit_vehicle(build_parts_model(base), camera, prior, OPTIONS, ground)
     if not fit.ok or not sv.spare:
@@ -164,7 +164,7 @@ def _next_click_task(task) -> dict | None:
     return out
 
 
-def next_click(vehicles, budget: int, ground: dict | None, seed: int = 0) -> dict:
+def next_click(vehicles, budget: int, ground: GroundOverride | None, seed: int = 0) -> dict:
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0, max_clicks=budget))
     tasks = [(sv, ground, seed) for sv in simulated]
     with ProcessPoolExecutor(max_workers=2) as pool:
@@ -219,7 +219,7 @@ def main() -> None:
             for placement, simulated, options in (("realistic placement", realistic, base),
                                                    ("exact placement, part_sigma 0", exact,
                                                     replace(base, part_sigma=0.0)))
-            for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND)))]
+            for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND))]
     with tempfile.TemporaryDirectory() as tmp:
         for placement, label, ground, simulated, options in rows:
             folder = Path(tmp) / f"{placement}-{label}".replace(" ", "-").replace(",", "")
@@ -236,7 +236,7 @@ def main() -> None:
                   f"ambiguous {row['ambiguous']}"
                   + (f"; misfits {row['misfits']}" if args.misfit_level is not None else ""), flush=True)
     for budget in (int(b) for b in args.budgets.split(",")):
-        for label, ground in (("size prior only", None), ("KITTI ground block", dict(KITTI_GROUND))):
+        for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND)):
             row = {"ground": label, **next_click(vehicles, budget, ground)}
             report["next_click"].append(row)
             print(f"next click | budget {budget} | {label}: {row['vehicles']} vehicles; median |yaw error| "

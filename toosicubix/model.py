@@ -6,7 +6,8 @@ annotation file into them and back.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -90,8 +91,88 @@ class GroundPlane:
 
 
 @dataclass(frozen=True)
+class GroundBlock:
+    """An image's ground block as the annotation file states it (its field names and units; see
+    :class:`toosicubix.annotations.schema.GroundModel`): what a file written back keeps. The solver reads the
+    :class:`GroundPlane` made from it.
+
+    Attributes
+    ----------
+    camera_height : metres above the road, or None when unknown; camera_height_sigma : metres
+    normal : (3,) road normal in camera coordinates, pointing up (not necessarily unit), or None
+    camera_pitch_deg, camera_roll_deg : instead of the normal, or None
+    normal_sigma_deg, upright_sigma_deg : degrees
+    """
+
+    camera_height: float | None = None
+    camera_height_sigma: float = 0.05
+    normal: tuple[float, float, float] | None = None
+    camera_pitch_deg: float | None = None
+    camera_roll_deg: float | None = None
+    normal_sigma_deg: float = 1.0
+    upright_sigma_deg: float = 2.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The block as the annotation file has it: every field, None ones as null."""
+        return {f.name: list(v) if isinstance(v := getattr(self, f.name), tuple) else v for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class GroundOverride:
+    """Ground-block fields set on every image of a batch, over each image's own block (``fit --kitti-ground``,
+    ``--camera-height``, ``--road-normal x,y,z``, ..., or a camera's road normal estimated from the batch). None
+    leaves a field as the image's block has it; a normal replaces a block's pitch and roll, a pitch or roll its
+    normal. Merged by :func:`toosicubix.annotations.convert.with_ground`, which validates the result.
+
+    Attributes: those of :class:`GroundBlock`, each None when not set.
+    """
+
+    camera_height: float | None = None
+    camera_height_sigma: float | None = None
+    normal: tuple[float, float, float] | None = None
+    camera_pitch_deg: float | None = None
+    camera_roll_deg: float | None = None
+    normal_sigma_deg: float | None = None
+    upright_sigma_deg: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.normal is not None:
+            object.__setattr__(self, "normal", tuple(float(v) for v in self.normal))
+
+    def __bool__(self) -> bool:
+        return bool(self.fields())
+
+    def fields(self) -> dict[str, Any]:
+        """The fields it sets, by name (schema names), in the block's order."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+    def over(self, other: GroundOverride | None) -> GroundOverride:
+        """This override's fields set over ``other``'s (a normal given here drops ``other``'s pitch and roll, a pitch
+        or roll given here its normal)."""
+        if other is None:
+            return self
+        base = other.fields()
+        if self.normal is not None:
+            base.pop("camera_pitch_deg", None)
+            base.pop("camera_roll_deg", None)
+        if self.camera_pitch_deg is not None or self.camera_roll_deg is not None:
+            base.pop("normal", None)
+        return GroundOverride(**{**base, **self.fields()})
+
+    def to_json(self) -> dict[str, Any]:
+        """The fields it sets (results.json's ``settings.ground``)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.fields().items()}
+
+
+@dataclass(frozen=True)
 class Image:
-    """One annotated image and its camera."""
+    """One annotated image and its camera.
+
+    Attributes
+    ----------
+    ground : the road plane the solver reads, or None
+    ground_block : the ground block it was made from, as the file states it (or as an override set it), or None
+    """
 
     id: str
     file: str | None
@@ -99,7 +180,7 @@ class Image:
     vehicles: tuple[Vehicle, ...]
     json_path: str
     ground: GroundPlane | None = None
-    ground_block: dict | None = None  # the ground block as the file gave it (schema field names)
+    ground_block: GroundBlock | None = None
 
 
 #: The road normal of a level camera (camera y points down).
@@ -110,5 +191,5 @@ LEVEL_NORMAL = np.array([0.0, -1.0, 0.0])
 #: ground truth (sequences 0000-0009): the bottom centres of vehicles within 10 m lie 1.68 m below the
 #: camera (standard deviation 0.12 m); farther away the road's slope spreads them by about 0.75 degrees
 #: times the distance, which the normal's uncertainty covers.
-KITTI_GROUND = {"camera_height": 1.65, "camera_height_sigma": 0.1, "normal": (0.0, -1.0, 0.0),
-                "normal_sigma_deg": 1.0, "upright_sigma_deg": 2.0}
+KITTI_GROUND = GroundOverride(camera_height=1.65, camera_height_sigma=0.1, normal=(0.0, -1.0, 0.0),
+                              normal_sigma_deg=1.0, upright_sigma_deg=2.0)

@@ -69,9 +69,10 @@ class Priors(Mapping[str, SizePrior]):
     """A read-only table ``prototype -> SizePrior``; looking up an unknown name raises
     :class:`UnknownPrototypeError`."""
 
-    def __init__(self, entries: dict[str, SizePrior], source: str):
+    def __init__(self, entries: dict[str, SizePrior], source: str, bundled: bool = False):
         self._entries = dict(entries)
         self.source = source
+        self.bundled = bundled  # the table shipped with the package, not a file a user gave
 
     def __getitem__(self, prototype: str) -> SizePrior:
         try:

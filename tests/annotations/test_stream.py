@@ -15,6 +15,7 @@ from toosicubix.annotations.stream import index_annotations, iter_image_annotati
 from toosicubix.errors import InputFileError
 from toosicubix.formats.results import dumps, results_to_json, write_results_stream
 from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.solver.fit import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"
@@ -72,7 +73,7 @@ def test_errors_are_those_of_the_whole_file_reader(tmp_path, text):
 
 
 def test_streamed_results_json_is_byte_identical():
-    results = fit_images(load_images(SAMPLE), load_priors(), SolverOptions())
+    results = fit_images(load_images(SAMPLE), BatchSettings(priors=load_priors(), options=SolverOptions()))
     for header in ({}, {"generator": "x", "settings": {"a": [1, 2]}}):
         for images in (results, results[:1], []):
             handle = io.StringIO()

@@ -5,6 +5,7 @@ import math
 
 from tests.cli.test_cli_fit import SAMPLE, run, sample_doc, write_doc
 from toosicubix.formats.kitti import read_label_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.validation import Thresholds, validate_file
 
 LOOSE = ("--max-yaw-sigma", "1000", "--max-depth-sigma", "100", "--allow-ambiguous")
@@ -79,7 +80,7 @@ def test_validate_and_fit_agree(tmp_path):
     out = tmp_path / "out"
     assert run("fit", str(SAMPLE), "-o", str(out), "--next-clicks", "3").exit_code == 0
     fitted = json.loads((out / "results.json").read_text())
-    report = validate_file(SAMPLE, thresholds=Thresholds())
+    report = validate_file(SAMPLE, BatchSettings(next_clicks=3), thresholds=Thresholds())
     by_id = {(c.image_id, c.result.id): c.result.to_json() for c in report.vehicles}
     for image in fitted["images"]:
         for v in image["vehicles"]:

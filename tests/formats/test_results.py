@@ -8,7 +8,6 @@ import pytest
 
 from tests.conftest import REPO
 from toosicubix.annotations.convert import load_images, with_ground
-from toosicubix.annotations.priors_file import load_priors
 from toosicubix.errors import FormatError
 from toosicubix.formats.results import (
     Alternative,
@@ -21,6 +20,7 @@ from toosicubix.formats.results import (
 )
 from toosicubix.model import KITTI_GROUND
 from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.uncertainty import Uncertainty
 
@@ -33,9 +33,9 @@ def fitted(request):
     (joint blocks)."""
     images = load_images(SAMPLE)
     if request.param:
-        images = with_ground(images, dict(KITTI_GROUND))
-    return fit_images(images, load_priors(), SolverOptions(misfit_level=0.99), joint_ground=request.param,
-                      next_clicks=2)
+        images = with_ground(images, KITTI_GROUND)
+    return fit_images(images, BatchSettings(options=SolverOptions(misfit_level=0.99), joint_ground=request.param,
+                                            next_clicks=2))
 
 
 def test_every_vehicle_round_trips_through_json(fitted):

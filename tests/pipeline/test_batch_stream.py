@@ -10,6 +10,7 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.pipeline import batch, fitting, vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.fitting import fit_images, iter_fit_images
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.solver.fit import SolverOptions
 
 SAMPLE = REPO / "samples" / "annotations.json"
@@ -26,7 +27,7 @@ def test_images_are_read_lazily_and_results_come_in_order(jobs):
             yield im
 
     n = sum(len(im.vehicles) for im in images)
-    stream = iter_fit_images(source(), n, load_priors(), SolverOptions(), jobs=jobs)
+    stream = iter_fit_images(source(), n, BatchSettings(priors=load_priors(), options=SolverOptions(), jobs=jobs))
     first = next(stream)
     assert first.id == images[0].id
     # jobs 1: nothing read beyond the first image's; jobs 2: at most the chunks in flight (8 chunks of 3).
@@ -38,8 +39,8 @@ def test_images_are_read_lazily_and_results_come_in_order(jobs):
 
 def test_streamed_results_equal_the_listed_ones():
     images = load_images(SAMPLE)
-    listed = fit_images(images, load_priors(), SolverOptions())
-    streamed = list(iter_fit_images(iter(images), 6, load_priors(), SolverOptions(), jobs=2))
+    listed = fit_images(images, BatchSettings())
+    streamed = list(iter_fit_images(iter(images), 6, BatchSettings(jobs=2)))
     assert [[(v.id, v.status, v.cost) for v in im.vehicles] for im in streamed] == [
         [(v.id, v.status, v.cost) for v in im.vehicles] for im in listed]
 
@@ -75,7 +76,7 @@ def test_a_small_batch_with_nothing_to_estimate_is_fitted_once(tmp_path, monkeyp
     # road normal). The pilot fits all 6 with the batch's settings, and its fits are written.
     once = tmp_path / "once"
     calls = _counting_fits(monkeypatch)
-    summary = fit_file(SAMPLE, once, estimate_click_sigma=True, estimate_road_normal=True)
+    summary = fit_file(SAMPLE, once, BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     assert summary.ok == 6 and len(calls) == 6
     assert summary.pilot.results is not None and len(summary.pilot.results) == 3  # the sample's three images
     # The same as fitting without a pilot, byte for byte but for the header's estimates.
@@ -90,7 +91,8 @@ def test_a_small_batch_with_nothing_to_estimate_is_fitted_once(tmp_path, monkeyp
 def test_a_batch_the_pilot_changes_is_fitted_again(tmp_path, monkeypatch):
     calls = _counting_fits(monkeypatch)
     # A robust loss: the pilot fits without it, so its fits are not the batch's.
-    fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True)
+    fit_file(SAMPLE, tmp_path / "robust",
+             BatchSettings(options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True))
     assert len(calls) == 12
 
 
@@ -101,15 +103,15 @@ def test_next_clicks_are_suggested_by_a_pilot_that_fits_every_vehicle(tmp_path, 
 
     calls = _counting_fits(monkeypatch)
     once = tmp_path / "once"
-    fit_file(SAMPLE, once, estimate_click_sigma=True, estimate_road_normal=True, next_clicks=2)
+    fit_file(SAMPLE, once, BatchSettings(estimate_click_sigma=True, estimate_road_normal=True, next_clicks=2))
     assert len(calls) == 6
-    fit_file(SAMPLE, tmp_path / "plain", next_clicks=2)
+    fit_file(SAMPLE, tmp_path / "plain", BatchSettings(next_clicks=2))
     assert len(calls) == 12
     a, b = (json.loads((d / "results.json").read_text()) for d in (once, tmp_path / "plain"))
     assert a["images"] == b["images"] and all(len(v["next_clicks"]) == 2 for im in a["images"] for v in im["vehicles"])
-    report = validate_file(SAMPLE, estimate_click_sigma=True, estimate_road_normal=True)
+    report = validate_file(SAMPLE, BatchSettings(next_clicks=3, estimate_click_sigma=True, estimate_road_normal=True))
     assert len(calls) == 18 and len(report.vehicles) == 6
-    plain = validate_file(SAMPLE)
+    plain = validate_file(SAMPLE, BatchSettings(next_clicks=3))
     assert [c.result.next_clicks for c in report.vehicles] == [c.result.next_clicks for c in plain.vehicles]
 
 
@@ -126,11 +128,12 @@ def test_a_pilot_whose_fits_are_not_reused_suggests_nothing(tmp_path, monkeypatc
 
     monkeypatch.setattr(vehicle, "suggest_clicks", counted)
     calls = _counting_fits(monkeypatch)
-    fit_file(SAMPLE, tmp_path / "robust", options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True,
-             next_clicks=2)
+    fit_file(SAMPLE, tmp_path / "robust",
+             BatchSettings(options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True, next_clicks=2))
     assert len(calls) == 12 and len(suggested) == 6
-    summary = fit_file(SAMPLE, tmp_path / "reused", estimate_road_normal=True, next_clicks=2)
+    summary = fit_file(SAMPLE, tmp_path / "reused", BatchSettings(estimate_road_normal=True, next_clicks=2))
     assert summary.pilot.results is not None and len(calls) == 18 and len(suggested) == 12
-    fit_file(SAMPLE, tmp_path / "two", estimate_road_normal=True, next_clicks=2, jobs=2)  # counted in workers
+    fit_file(SAMPLE, tmp_path / "two",
+             BatchSettings(estimate_road_normal=True, next_clicks=2, jobs=2))  # counted in workers
     a, b = (json.loads((d / "results.json").read_text()) for d in (tmp_path / "reused", tmp_path / "two"))
     assert a["images"] == b["images"] and all(len(v["next_clicks"]) == 2 for im in a["images"] for v in im["vehicles"])

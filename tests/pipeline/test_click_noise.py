@@ -22,6 +22,7 @@ from toosicubix.pipeline.click_noise import (
     pooled_sigma,
     redundancy,
 )
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.vehicle import fit_one
 from toosicubix.solver.fit import SolverOptions
 
@@ -116,12 +117,12 @@ def test_the_estimate_recovers_the_click_noise_of_simulated_keypoint_clicks(trut
 
 
 def test_fit_says_where_its_click_noise_came_from(tmp_path):
-    fit_file(SAMPLE, tmp_path / "estimated", estimate_click_sigma=True)
+    fit_file(SAMPLE, tmp_path / "estimated", BatchSettings(estimate_click_sigma=True))
     header = json.loads((tmp_path / "estimated" / "results.json").read_text())
     # The sample's clicks are parts on the cuboid: nothing to estimate from, the default stays and says so.
     assert header["click_noise"]["source"] == "default" and header["click_noise"]["redundant_vehicles"] == 0
     assert header["settings"]["click_sigma"] == SolverOptions.click_sigma
-    summary = fit_file(SAMPLE, tmp_path / "given", options=SolverOptions(click_sigma=0.7))
+    summary = fit_file(SAMPLE, tmp_path / "given", BatchSettings(options=SolverOptions(click_sigma=0.7)))
     header = json.loads((tmp_path / "given" / "results.json").read_text())
     assert "click_noise" not in header and header["settings"]["click_sigma"] == 0.7
     assert summary.pilot.click_noise.source == "given"

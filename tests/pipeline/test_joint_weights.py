@@ -36,7 +36,7 @@ def _image(rng, n: int = 3):
 def test_joint_fit_keeps_each_vehicles_click_weights():
     image, results, priors, options = _image(np.random.default_rng(2))
     joint, plane = fit_image_jointly(image, results, priors, options)
-    assert plane["estimated"] and all(v.cues.joint_ground for v in joint)
+    assert plane.estimated and all(v.cues.joint_ground for v in joint)
     for own, together in zip(results, joint, strict=True):
         assert own.click_weights is not None
         np.testing.assert_array_equal(together.click_weights, own.click_weights)

@@ -15,7 +15,9 @@ from tests.solver.test_robust import TWELVE
 from toosicubix.annotations.convert import document_json
 from toosicubix.annotations.mapping import MappingFile
 from toosicubix.cli import main
+from toosicubix.model import GroundOverride
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.validation import validate_file
 from toosicubix.solver.fit import SolverOptions
 
@@ -50,7 +52,7 @@ def _suggested(out: Path) -> list[list[tuple[str, str]]]:
 
 def test_fit_suggests_the_mappings_keypoints_not_clicked_yet(keypoint_file, tmp_path):
     mapping = _mapping()
-    fit_file(keypoint_file, tmp_path / "one", next_clicks=20, keypoints=mapping)
+    fit_file(keypoint_file, tmp_path / "one", BatchSettings(next_clicks=20, keypoints=mapping))
     suggested = _suggested(tmp_path / "one")
     clicked = set(list(TWELVE)[:8])
     for names in suggested:
@@ -58,33 +60,34 @@ def test_fit_suggests_the_mappings_keypoints_not_clicked_yet(keypoint_file, tmp_
         assert {n for _, n in names} == set(TWELVE) - clicked | set(MORE)  # every one not clicked, once
     # Several processes: the same bytes. The pilot's own fits, reused (a file too small for a road normal: the
     # pilot fitted every vehicle as the batch does): the same suggestions.
-    fit_file(keypoint_file, tmp_path / "two", next_clicks=20, keypoints=mapping, jobs=2)
+    fit_file(keypoint_file, tmp_path / "two", BatchSettings(next_clicks=20, keypoints=mapping, jobs=2))
     assert (tmp_path / "two" / "results.json").read_bytes() == (tmp_path / "one" / "results.json").read_bytes()
-    summary = fit_file(keypoint_file, tmp_path / "pilot", next_clicks=20, keypoints=mapping,
-                       estimate_road_normal=True)
+    summary = fit_file(keypoint_file, tmp_path / "pilot",
+                       BatchSettings(next_clicks=20, keypoints=mapping, estimate_road_normal=True))
     assert summary.pilot.results is None  # the pilot fits without the robust loss, keypoint vehicles get it
     a, b = (json.loads((d / "results.json").read_text())["images"] for d in (tmp_path / "pilot", tmp_path / "one"))
     assert a == b  # every vehicle as fitted without a pilot, suggestions included
     plain = SolverOptions(robust_loss="none")
-    fit_file(keypoint_file, tmp_path / "plain-one", next_clicks=20, keypoints=mapping, options=plain)
-    summary = fit_file(keypoint_file, tmp_path / "plain-pilot", next_clicks=20, keypoints=mapping,
-                       estimate_road_normal=True, options=plain)
+    fit_file(keypoint_file, tmp_path / "plain-one", BatchSettings(next_clicks=20, keypoints=mapping, options=plain))
+    summary = fit_file(keypoint_file, tmp_path / "plain-pilot",
+                       BatchSettings(next_clicks=20, keypoints=mapping, estimate_road_normal=True, options=plain))
     assert summary.pilot.results is not None  # without the robust loss the pilot fits as the batch: reused
     assert _suggested(tmp_path / "plain-pilot") == _suggested(tmp_path / "plain-one")
     a, b = (json.loads((d / "results.json").read_text())["images"]
             for d in (tmp_path / "plain-pilot", tmp_path / "plain-one"))
     assert a == b
     # Refined together with the ground plane, the vehicles keep keypoint suggestions.
-    ground = {"normal": [0.0, -float(np.cos(np.deg2rad(9.0))), -float(np.sin(np.deg2rad(9.0)))]}
-    fit_file(keypoint_file, tmp_path / "joint", next_clicks=20, keypoints=mapping, ground=ground, joint_ground=True)
+    ground = GroundOverride(normal=(0.0, -float(np.cos(np.deg2rad(9.0))), -float(np.sin(np.deg2rad(9.0)))))
+    fit_file(keypoint_file, tmp_path / "joint",
+             BatchSettings(next_clicks=20, keypoints=mapping, ground=ground, joint_ground=True))
     assert all(names and all(k == "keypoint" for k, _ in names) for names in _suggested(tmp_path / "joint"))
     # Without a mapping: the vocabulary's parts, as before.
-    fit_file(keypoint_file, tmp_path / "plain", next_clicks=20)
+    fit_file(keypoint_file, tmp_path / "plain", BatchSettings(next_clicks=20))
     assert all(all(k != "keypoint" for k, _ in names) for names in _suggested(tmp_path / "plain"))
 
 
 def test_validate_names_keypoints_to_click_next(keypoint_file, tmp_path):
-    report = validate_file(keypoint_file, next_clicks=3, keypoints=_mapping())
+    report = validate_file(keypoint_file, BatchSettings(next_clicks=3, keypoints=_mapping()))
     for check in report.vehicles:
         names = [s["name"] for s in check.result.next_clicks]
         assert len(names) == 3 and set(names) <= set(TWELVE) | set(MORE)

@@ -28,6 +28,7 @@ from toosicubix.pipeline.road_normal import (
     estimate_road_normals,
     without_pilot,
 )
+from toosicubix.pipeline.settings import BatchSettings
 
 #: A camera looking 9 degrees down (ApolloCar3D's camera 5 looks about that much): R_cam_level.
 PITCH = np.deg2rad(9.0)
@@ -129,7 +130,7 @@ def test_fit_estimates_the_normal_and_fits_upright_on_it(tmp_path):
     images = _pitched_batch(40, np.random.default_rng(6))
     path = tmp_path / "pitched.json"
     path.write_text(json.dumps(document_json(images)))
-    summary = fit_file(path, tmp_path / "estimated", estimate_road_normal=True)
+    summary = fit_file(path, tmp_path / "estimated", BatchSettings(estimate_road_normal=True))
     fit_file(path, tmp_path / "none")
     estimated = json.loads((tmp_path / "estimated" / "results.json").read_text())
     plain = json.loads((tmp_path / "none" / "results.json").read_text())
@@ -201,9 +202,9 @@ def test_validate_fits_as_fit_does_with_the_batch_estimates(tmp_path):
 
     path = tmp_path / "pitched.json"
     path.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
-    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    fit_file(path, tmp_path / "out", BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     fitted = json.loads((tmp_path / "out" / "results.json").read_text())
-    report = validate_file(path, estimate_click_sigma=True, estimate_road_normal=True)
+    report = validate_file(path, BatchSettings(next_clicks=3, estimate_click_sigma=True, estimate_road_normal=True))
     as_json = report.to_json()
     assert as_json["road_normal"] == fitted["road_normal"] and as_json["click_noise"] == fitted["click_noise"]
     assert as_json["click_sigma"] == fitted["settings"]["click_sigma"]
@@ -211,7 +212,7 @@ def test_validate_fits_as_fit_does_with_the_batch_estimates(tmp_path):
     assert len(report.vehicles) == 40
     for check in report.vehicles:
         np.testing.assert_array_equal(check.result.R_cam_vehicle, poses[check.result.id])
-    plain = validate_file(path).to_json()
+    plain = validate_file(path, BatchSettings(next_clicks=3)).to_json()
     assert "road_normal" not in plain and "click_noise" not in plain
 
 

@@ -32,11 +32,13 @@ def test_a_bad_settings_file_names_file_and_path(tmp_path):
 
 
 def test_ground_overrides():
-    assert ground_overrides() == {}
+    assert ground_overrides() is None
     assert ground_overrides(kitti_ground=True) == KITTI_GROUND
     fields = ground_overrides(True, (0.0, -0.99, 0.1), camera_height=1.5, normal_sigma_deg=None)
-    assert fields["normal"] == (0.0, -0.99, 0.1) and fields["camera_height"] == 1.5
-    assert fields["normal_sigma_deg"] == KITTI_GROUND["normal_sigma_deg"]
+    assert fields.normal == (0.0, -0.99, 0.1) and fields.camera_height == 1.5
+    assert fields.normal_sigma_deg == KITTI_GROUND.normal_sigma_deg
     # A camera pitch replaces the normal, KITTI's included.
     pitched = ground_overrides(True, camera_pitch_deg=1.0)
-    assert "normal" not in pitched and pitched["camera_pitch_deg"] == 1.0
+    assert pitched.normal is None and pitched.camera_pitch_deg == 1.0
+    assert list(pitched.to_json()) == ["camera_height", "camera_height_sigma", "camera_pitch_deg", "normal_sigma_deg",
+                                       "upright_sigma_deg"]

@@ -15,6 +15,7 @@ from toosicubix.formats.kitti import format_label_line, object_from_pose
 from toosicubix.geometry import R_cam_vehicle_from_ypr, box2d_of_points, cuboid_corners_cam
 from toosicubix.model import Image, Part, Vehicle
 from toosicubix.parts.synthesis import render_parts
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.tuning import GridPoint, grid_search, tune
 from toosicubix.size_priors import Priors, SizePrior
 
@@ -152,11 +153,12 @@ def test_tune_fits_as_fit_does_with_the_files_estimates(tmp_path):
     findings = file_estimates(path, priors, SolverOptions())  # what `tune` does before its grid
     images, options = list(on_estimated_roads(load_images(path), findings.road_normals)), findings.options
     assert all(im.ground is not None and im.ground.from_batch for im in images)
-    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    fit_file(path, tmp_path / "out", BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     fitted = json.loads((tmp_path / "out" / "results.json").read_text())
     assert options.click_sigma == fitted["settings"]["click_sigma"] and findings.header()["road_normal"] == fitted[
         "road_normal"]
-    scored = {v.id: v.R_cam_vehicle for im in fit_images(images, priors, options) for v in im.vehicles}
+    scored = {v.id: v.R_cam_vehicle for im in fit_images(images, BatchSettings(priors=priors, options=options))
+              for v in im.vehicles}
     for im in fitted["images"]:
         for v in im["vehicles"]:
             np.testing.assert_array_equal(scored[v["id"]], v["R_cam_vehicle"])

@@ -12,6 +12,7 @@ from toosicubix.formats.results import ImageResult, read_results
 from toosicubix.geometry import R_cam_vehicle_from_ypr
 from toosicubix.pipeline import vehicle as one
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.solver.fit import FitResult
 
 SAMPLE = REPO / "samples" / "annotations.json"
@@ -95,7 +96,7 @@ def test_a_failed_result_keeps_its_reason_and_loses_non_finite_details():
 def sample_results(tmp_path_factory):
     """The sample's fitted vehicles, with their next clicks."""
     out = tmp_path_factory.mktemp("guard") / "out"
-    fit_file(SAMPLE, out, next_clicks=2)
+    fit_file(SAMPLE, out, BatchSettings(next_clicks=2))
     return [v for im in read_results(out / "results.json") for v in im.vehicles]
 
 

@@ -17,6 +17,7 @@ from tests.solver.test_robust import TWELVE
 from toosicubix.cli import main
 from toosicubix.formats.results import read_results
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.solver.fit import SolverOptions, fit_vehicle
 from toosicubix.solver.misfit import MISFIT_WARNING, ResidualTest, chi2_quantile, residual_test
 
@@ -182,7 +183,7 @@ def test_the_search_past_a_misfit_never_takes_an_answer_at_an_absurd_depth(tmp_p
     path.write_text(json.dumps(doc))
     from toosicubix.pipeline.batch import fit_file
 
-    fit_file(path, tmp_path / "out", estimate_click_sigma=True, estimate_road_normal=True)
+    fit_file(path, tmp_path / "out", BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     results = json.loads((tmp_path / "out" / "results.json").read_text())
     statuses = {v["id"]: v["status"] for im in results["images"] for v in im["vehicles"]}
     assert statuses["7"] == "ok", statuses

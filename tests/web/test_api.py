@@ -285,7 +285,7 @@ def test_ground_block_for_new_images_is_used_and_saved(scene, tmp_path):
     falls below the size prior's alone, and the block goes into the file for `fit`."""
     image, cameras = scene
     views = {}
-    for name, ground in (("prior", None), ("ground", dict(KITTI_GROUND))):
+    for name, ground in (("prior", None), ("ground", KITTI_GROUND)):
         session = Session([image], tmp_path / f"{name}.json", load_cameras(cameras, ["car"]), load_priors(),
                           ground=ground)
         session.edit(0, {"revision": 0, "op": "add_vehicle"})

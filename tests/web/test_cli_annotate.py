@@ -15,6 +15,7 @@ from click.testing import CliRunner
 from tests.conftest import REPO
 from tests.web.synthetic import K
 from toosicubix.cli import main
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.web.client import Client
 
 
@@ -122,12 +123,12 @@ def _ground_given(monkeypatch, scene, tmp_path, *options: str):
 
 def test_road_normal_and_camera_height_make_the_new_images_ground(monkeypatch, scene, tmp_path):
     assert _ground_given(monkeypatch, scene, tmp_path) is None
-    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0.04,-0.99,0.15") == {
-        "normal": (0.04, -0.99, 0.15)}
-    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0,-1,0.1", "--camera-height", "1.4") == {
-        "normal": (0.0, -1.0, 0.1), "camera_height": 1.4}
+    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0.04,-0.99,0.15").to_json() == {
+        "normal": [0.04, -0.99, 0.15]}
+    assert _ground_given(monkeypatch, scene, tmp_path, "--road-normal", "0,-1,0.1", "--camera-height",
+                         "1.4").to_json() == {"normal": [0.0, -1.0, 0.1], "camera_height": 1.4}
     kitti = _ground_given(monkeypatch, scene, tmp_path, "--kitti-ground", "--camera-height", "1.8")
-    assert kitti["camera_height"] == 1.8 and kitti["camera_height_sigma"] == 0.1 and kitti["normal"] == (0.0, -1.0, 0.0)
+    assert kitti.camera_height == 1.8 and kitti.camera_height_sigma == 0.1 and kitti.normal == (0.0, -1.0, 0.0)
 
 
 def test_a_bad_road_normal_is_refused(scene, tmp_path):
@@ -165,7 +166,7 @@ def test_the_page_fits_the_files_vehicles_as_fit_does(monkeypatch, tmp_path):
 
     out = tmp_path / "pitched.json"
     out.write_text(json.dumps(document_json(_pitched_batch(40, np.random.default_rng(8)))))
-    fit_file(out, tmp_path / "fitted", estimate_click_sigma=True, estimate_road_normal=True)
+    fit_file(out, tmp_path / "fitted", BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     fitted = json.loads((tmp_path / "fitted" / "results.json").read_text())
     image = tmp_path / "im000.png"
     cv2.imwrite(str(image), np.zeros((375, 1242, 3), np.uint8))
@@ -217,7 +218,7 @@ def test_the_page_estimates_again_as_the_file_grows(monkeypatch, tmp_path):
     assert session.image_view(0)["vehicles"][0]["fit"]["road"] is None
 
     out.write_text(json.dumps(document_json(batch)))
-    fit_file(out, tmp_path / "fitted", estimate_click_sigma=True, estimate_road_normal=True)
+    fit_file(out, tmp_path / "fitted", BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     fitted = json.loads((tmp_path / "fitted" / "results.json").read_text())
     session.reload()
     session.wait_for_estimates(60.0)

@@ -16,7 +16,7 @@ import numpy as np
 from toosicubix.annotations import schema as schemas
 from toosicubix.camera import Camera
 from toosicubix.geometry import rot_x, rot_z
-from toosicubix.model import LEVEL_NORMAL, GroundPlane, Image, Part, Vehicle
+from toosicubix.model import LEVEL_NORMAL, GroundBlock, GroundOverride, GroundPlane, Image, Part, Vehicle
 from toosicubix.vocabulary import KINDS
 
 # -- file -> model ---------------------------------------------------------------------------------------------------
@@ -48,6 +48,14 @@ def ground_from_schema(g: schemas.GroundModel) -> GroundPlane:
                        upright_sigma=float(np.deg2rad(g.upright_sigma_deg)))
 
 
+def block_from_schema(g: schemas.GroundModel) -> GroundBlock:
+    """The :class:`GroundBlock` of an image's ground block: its fields as the file states them."""
+    fields = g.model_dump()
+    if fields["normal"] is not None:
+        fields["normal"] = tuple(fields["normal"])
+    return GroundBlock(**fields)
+
+
 def camera_from_schema(cam: schemas.CameraModel, size: tuple[int, int] | None) -> Camera:
     """The :class:`Camera` of an annotation's camera block."""
     distortion = None if cam.distortion is None else np.array(cam.distortion, dtype=float)
@@ -77,7 +85,7 @@ def image_from_schema(im: schemas.ImageAnnotation, index: int) -> Image:
     return Image(id=im.id, file=im.file, camera=camera_from_schema(im.camera, im.size),
                  vehicles=vehicles, json_path=ip,
                  ground=None if im.ground is None else ground_from_schema(im.ground),
-                 ground_block=None if im.ground is None else im.ground.model_dump())
+                 ground_block=None if im.ground is None else block_from_schema(im.ground))
 
 
 def load_images(path: str | Path) -> list[Image]:
@@ -90,27 +98,41 @@ def load_images(path: str | Path) -> list[Image]:
     return images_from_schema(schemas.load_annotations(path))
 
 
-def with_ground(images: list[Image], overrides: dict[str, object]) -> list[Image]:
-    """The images with their ground block's fields replaced by ``overrides`` (schema field names), for a
-    whole file; an image without a block gets one from the overrides and the defaults.
+def ground_with(block: GroundBlock | None, override: GroundOverride, source: str = "ground options"
+                ) -> tuple[GroundBlock, GroundPlane]:
+    """An image's ground ``block`` (None: none) with ``override``'s fields set on it (a normal given drops the
+    block's pitch and roll, a pitch or roll its normal), validated, and the plane the solver reads from it.
+
+    Raises
+    ------
+    toosicubix.errors.InputFileError
+        When the resulting block is invalid (e.g. a zero normal), naming ``source`` and the field.
+    """
+    fields = override.fields()
+    if "normal" in fields:
+        fields.setdefault("camera_pitch_deg", None)
+        fields.setdefault("camera_roll_deg", None)
+    if "camera_pitch_deg" in fields or "camera_roll_deg" in fields:
+        fields.setdefault("normal", None)
+    parsed = schemas.parse_ground_block({**(block.to_json() if block is not None else {}), **fields}, source)
+    return block_from_schema(parsed), ground_from_schema(parsed)
+
+
+def with_ground(images: list[Image], override: GroundOverride | None) -> list[Image]:
+    """The images with their ground block's fields replaced by ``override``'s (:func:`ground_with`), for a whole
+    file; an image without a block gets one from the override and the defaults.
 
     Raises
     ------
     toosicubix.errors.InputFileError
         When the resulting block is invalid (e.g. a negative height), naming the field.
     """
-    if not overrides:
+    if not override:
         return images
     out = []
     for im in images:
-        fields = dict(overrides)
-        if "normal" in fields:
-            fields.setdefault("camera_pitch_deg", None)
-            fields.setdefault("camera_roll_deg", None)
-        if "camera_pitch_deg" in fields or "camera_roll_deg" in fields:
-            fields.setdefault("normal", None)
-        block = schemas.parse_ground_block({**(im.ground_block or {}), **fields}, "ground options")
-        out.append(replace(im, ground=ground_from_schema(block), ground_block=block.model_dump()))
+        block, plane = ground_with(im.ground_block, override)
+        out.append(replace(im, ground=plane, ground_block=block))
     return out
 
 
@@ -182,7 +204,7 @@ def image_json(image: Image, decimals: int | None = None) -> dict[str, Any]:
         out["size"] = list(image.camera.image_size)
     out["camera"] = camera_json(image.camera)
     if image.ground_block is not None:
-        out["ground"] = dict(image.ground_block)
+        out["ground"] = image.ground_block.to_json()
     out["vehicles"] = [vehicle_json(v, decimals) for v in image.vehicles]
     return out
 

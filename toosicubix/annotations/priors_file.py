@@ -70,6 +70,7 @@ def load_priors(path: str | Path | None = None) -> Priors:
     toosicubix.errors.InputFileError
         The file is unreadable or not a valid priors file (the message names the JSON path).
     """
+    bundled = path is None
     path = Path(path) if path is not None else bundled_priors_path()
     doc = load_priors_file(path)
     entries = {
@@ -77,4 +78,4 @@ def load_priors(path: str | Path | None = None) -> Priors:
                                       e.approximate, e.source)
         for name, e in doc.prototypes.items()
     }
-    return Priors(entries, str(path))
+    return Priors(entries, str(path), bundled)

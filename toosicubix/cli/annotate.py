@@ -8,7 +8,16 @@ from typing import Any
 
 import click
 
-from toosicubix.cli.options import BadInput, announced_estimates, keypoint_mapping_option, parse_normal
+from toosicubix.cli.options import (
+    BadInput,
+    announced_estimates,
+    click_sigma_option,
+    keypoint_mapping_option,
+    out_option,
+    priors_option,
+    road_normal_choice,
+    road_normal_option,
+)
 
 
 @click.command("annotate")
@@ -17,29 +26,19 @@ from toosicubix.cli.options import BadInput, announced_estimates, keypoint_mappi
               help="Cameras file: one camera block ({\"K\": ...} or {\"P\": ...}, as in the annotation file) for "
                    "every image, or {\"<image id or file name>\": block}. Needed for images the output file does "
                    "not have yet.")
-@click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("annotations.json"),
-              show_default=True, help="Annotation file (v1): read and continued when it exists, written "
-                                      "atomically after every change.")
+@out_option("Annotation file (v1): read and continued when it exists, written atomically after every change.",
+            type=click.Path(dir_okay=False, path_type=Path), default=Path("annotations.json"), show_default=True)
 @click.option("--prototype", default="Car", show_default=True, help="Prototype (size prior) of a new vehicle.")
-@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Size priors file; default: the bundled table.")
+@priors_option
 @click.option("--kitti-ground", is_flag=True,
               help="Give images the file does not have yet KITTI's ground block (camera 1.65 +- 0.1 m above a road "
                    "whose normal is -y): vehicles stand on the road, which fixes their scale far better than the "
                    "size prior alone. It is written to the file, so `fit` uses it too.")
-@click.option("--road-normal", default=None, metavar="X,Y,Z",
-              help="Give images the file does not have yet a road of this normal (camera frame, e.g. the "
-                   "`road_normal` that `fit` estimated for this camera in results.json): vehicles stand upright on "
-                   "it (within 2 deg; the normal known within 1), which tells far vehicles' pose from their "
-                   "depth-reversed one. Replaces --kitti-ground's normal. 'none': no road normal estimated from "
-                   "the file's vehicles either.")
+@road_normal_option
 @click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
               help="With it, the camera's height above that road, metres (+- 0.05; with --kitti-ground 0.1): "
                    "vehicles stand on the road, which fixes their scale. Replaces --kitti-ground's height.")
-@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Click noise in pixels the page's sigmas and next clicks are for. Not given: estimated at start "
-                   "from the file's vehicles as `fit` estimates it (1.5 when the file has too few), and again as "
-                   "they grow.")
+@click_sigma_option
 @keypoint_mapping_option("Also offer a keypoint mapping's keypoints (bundled: apollocar3d-66, ApolloCar3D's 66 car "
                          "keypoints: lamp, glass, door and handle corners, wheel centres, plates; or a mapping file, "
                          "e.g. from `toosicubix learn-parts`): a click named one takes its typical position for the "
@@ -53,6 +52,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
                      camera_height: float | None, click_sigma: float | None, mapping: Any, host: str,
                      port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
+
+    --kitti-ground, --road-normal x,y,z and --camera-height give the images the file does not have yet a ground
+    block (its own blocks are kept); it is written to the file, so `fit` uses it too.
 
     After every click the vehicle is refitted as `fit` fits it; the page draws the cuboid, the residuals, the
     yaw and depth sigmas and the parts to click next. When the file already has vehicles, the click noise and
@@ -72,8 +74,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
       toosicubix annotate frames/*.jpg --cameras cameras.json --road-normal 0.04,-0.99,0.15
       toosicubix annotate frames/*.jpg --cameras cameras.json --mapping apollocar3d-66
     """
+    from toosicubix.annotations.convert import ground_with
     from toosicubix.annotations.priors_file import load_priors
-    from toosicubix.annotations.schema import parse_ground_block
     from toosicubix.errors import InputFileError
     from toosicubix.pipeline.settings import ground_overrides
     from toosicubix.web.request_fields import ApiError
@@ -81,9 +83,9 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.web.session import Session, load_cameras
     from toosicubix.web.worker import WorkerProcess
 
-    estimate_road = road_normal != "none"
-    normal = parse_normal(road_normal) if road_normal not in (None, "none") else None
-    ground = ground_overrides(kitti_ground, normal, camera_height=camera_height) or None
+    road, normal = road_normal_choice(road_normal)
+    estimate_road = road != "none"
+    ground = ground_overrides(kitti_ground, normal, camera_height=camera_height)
     missing = [str(p) for p in images if not p.is_file()]
     if missing:
         raise BadInput(f"no such image: {', '.join(missing)}")
@@ -91,7 +93,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         raise BadInput(f"{out}: the folder {out.parent} does not exist")
     try:
         if ground is not None:
-            parse_ground_block(ground, "ground options")  # a zero normal: refused here, not on the first click
+            ground_with(None, ground)  # a zero normal: refused here, not on the first click
         priors = load_priors(priors_path)
         ids = [p.stem for p in images]
         cameras = load_cameras(cameras_path, ids, [p.name for p in images]) if cameras_path is not None else {}

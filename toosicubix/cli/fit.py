@@ -11,7 +11,6 @@ import click
 from toosicubix.cli.options import (
     EXIT_OK,
     EXIT_SOME_FAILED,
-    Fitting,
     ProgressBar,
     fitting_options,
     keypoint_mapping_option,
@@ -31,7 +30,7 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @keypoint_mapping_option("With --next-clicks: suggest this keypoint mapping's keypoints (e.g. apollocar3d-66, or a "
                          "mapping file) instead of the cuboid vocabulary's parts, for clicks made in its vocabulary.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary on stderr.")
-def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks: int, mapping: Any,
+def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: int, mapping: Any,
                 quiet: bool) -> None:
     """Fit a 3D cuboid to every annotated vehicle.
 
@@ -63,15 +62,14 @@ def fit_command(annotations: Path, out_dir: Path, fitting: Fitting, next_clicks:
       toosicubix fit big.json --jobs 2 --kitti-ground
       toosicubix fit big.json --road-normal 0,-1,0 --joint-ground   # camera height unknown
     """
+    from dataclasses import replace
+
     from toosicubix.pipeline.batch import fit_file
 
     bar = ProgressBar(quiet)
     try:
-        summary = fit_file(annotations, out_dir, fitting.priors_path, fitting.options, progress=bar.update,
-                           on_start=bar.start, jobs=fitting.jobs, ground=fitting.ground,
-                           joint_ground=fitting.joint_ground, next_clicks=next_clicks, keypoints=mapping,
-                           estimate_click_sigma=not fitting.click_sigma_given,
-                           estimate_road_normal=fitting.estimate_road_normal)
+        summary = fit_file(annotations, out_dir, replace(settings, next_clicks=next_clicks, keypoints=mapping),
+                           progress=bar.update, on_start=bar.start)
     finally:
         bar.finish()
     if not quiet:

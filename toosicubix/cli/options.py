@@ -3,7 +3,9 @@
 - :func:`ground_truth_options`: exactly one of ``--kitti``, ``--kitti-tracking``, ``--cityscapes``; the
   command receives ``ground_truth`` (a :class:`GroundTruth`).
 - :func:`fitting_options`: priors, weights, settings file, click and part noise, ground cues, jobs; the
-  command receives ``fitting`` (a :class:`Fitting`).
+  command receives ``settings`` (a :class:`toosicubix.pipeline.settings.BatchSettings`).
+- the options several commands share, declared once: :data:`priors_option`, :data:`click_sigma_option`,
+  :data:`road_normal_option`, :data:`jobs_option`, :func:`out_option`.
 - :class:`CommandGroup`: any :class:`toosicubix.errors.InputError` a command lets through is printed as
   ``Error: <message>`` and exits 2, so commands do not catch input errors themselves.
 """
@@ -210,11 +212,56 @@ def _keypoint_mapping(name: str | None) -> Any:
     return mapping
 
 
+# --- options several commands share, declared once -----------------------------------------------------------
+
+#: ``--priors FILE`` (fit, validate, tune, annotate, template): the command receives ``priors_path``.
+priors_option = click.option(
+    "--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+    help="Size priors file (JSON, see docs/size-priors.md); default: the bundled KITTI and Cityscapes 3D table.")
+#: ``--click-sigma PX`` (fit, validate, tune, annotate): the command receives ``click_sigma`` (None: estimate it).
+click_sigma_option = click.option(
+    "--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) and the keypoints' soft "
+         "term are for. Estimated from the file's own residuals when not given, as `fit` does (a pilot fit of up to "
+         f"400 vehicles; {SolverOptions.click_sigma:g} when their clicks are too few to tell).")
+#: ``--road-normal x,y,z|estimate|none`` (fit, validate, tune, annotate): the command receives ``road_normal`` (the
+#: text; :func:`road_normal_choice` reads it).
+road_normal_option = click.option(
+    "--road-normal", default=None, metavar="X,Y,Z|estimate|none",
+    help="Road normal in camera coordinates, x,y,z (vehicles upright on it, e.g. the `road_normal` that `fit` "
+         "estimated for this camera in results.json); 'estimate': per camera from a pilot fit of the file's vehicles "
+         "(the default when no ground is given); 'none': no road, vehicles only within 45 deg of the camera's up. "
+         "With other ground options and no normal: 0,-1,0.")
+#: ``-j/--jobs N`` (fit, validate, tune): the command receives ``jobs``.
+jobs_option = click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+                           help="Worker processes; the output is the same for any number.")
+
+
+def out_option(help_text: str, parameter: str = "out", **kwargs: Any) -> Callable:
+    """``-o/--out`` (every command that writes a file or a folder), received as ``parameter``."""
+    return click.option("-o", "--out", parameter, help=help_text, **kwargs)
+
+
+def road_normal_choice(value: str | None) -> tuple[str, tuple[float, float, float] | None]:
+    """What ``--road-normal`` says: ``('estimate', None)`` (also when not given), ``('none', None)`` or
+    ``('given', (x, y, z))``.
+
+    Raises
+    ------
+    click.BadParameter
+        Neither three numbers nor 'estimate' or 'none' (exit 2).
+    """
+    if value is None or value == "estimate":
+        return "estimate", None
+    if value == "none":
+        return "none", None
+    return "given", parse_normal(value, "three numbers x,y,z, 'estimate' or 'none'")
+
+
 # --- fitting -----------------------------------------------------------------------------------------------
 
 _FITTING_OPTIONS = [
-    click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                 help="Size priors file (JSON, see README); default: the bundled KITTI and Cityscapes 3D table."),
+    priors_option,
     click.option("--lambda", "lambda_3d", type=click.FloatRange(min=0.0, min_open=True),
                  default=SolverOptions.lambda_3d, show_default=True,
                  help="Weight of the size prior in the coordinate descent's 3D cost."),
@@ -224,11 +271,7 @@ _FITTING_OPTIONS = [
                       "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more."),
     click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
                  help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
-    click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
-                 help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) and the "
-                      "keypoints' soft term are for. Estimated from the batch's own residuals when not given "
-                      f"(a pilot fit of up to 400 vehicles; {SolverOptions.click_sigma:g} when their clicks are too "
-                      "few to tell)."),
+    click_sigma_option,
     click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box. "
@@ -240,7 +283,7 @@ _FITTING_OPTIONS = [
     click.option("--misfit-level", type=click.FloatRange(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
                  help="Test each fit's residuals against the click noise (chi-square at this level, e.g. 0.99): a "
                       "fit that fails is warned about ('misfit: ...', `residual_test` in results.json) and its sigmas "
-                      "widen to what its residuals show. Off by default (benchmarks/RESULTS.md, rule 8)."),
+                      "widen to what its residuals show. Off by default (benchmarks/decisions.md, rule 8)."),
     click.option("--kitti-ground", is_flag=True,
                  help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
                       "deg, vehicles upright within 2 deg. The options below then change single fields."),
@@ -248,10 +291,7 @@ _FITTING_OPTIONS = [
                  help="Camera height above the road, metres, for every image (enables the ground contact)."),
     click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
                  help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
-    click.option("--road-normal", default=None,
-                 help="Road normal in camera coordinates, x,y,z (vehicles upright on it); 'estimate': per camera "
-                      "from the same pilot fit (the default when no ground is given); 'none': no road, vehicles only "
-                      "within 45 deg of the camera's up. With other ground options and no normal: 0,-1,0."),
+    road_normal_option,
     click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
     click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
     click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
@@ -261,45 +301,12 @@ _FITTING_OPTIONS = [
     click.option("--joint-ground", is_flag=True,
                  help="Refine each image's vehicles together with its ground plane (images with a ground block or "
                       "the options above); the camera height may then be unknown: the vehicles' sizes fix it."),
-    click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
-                 help="Worker processes; the output is the same for any number."),
+    jobs_option,
 ]
 _FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
                   "misfit_level", "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
                   "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "jobs")
-
-
-@dataclass(frozen=True)
-class Fitting:
-    """What the fitting options amount to.
-
-    Attributes
-    ----------
-    priors_path : the priors file, or None for the bundled table
-    options : defaults, then the settings file, then the options given on the command line
-    ground : ground-block fields (schema names) to set on every image
-    joint_ground : refine each image's vehicles together with its ground plane
-    jobs : worker processes
-    click_sigma_given : ``--click-sigma`` was given (else ``options.click_sigma`` is the default, and ``fit``
-        estimates the click noise from the batch)
-    estimate_road_normal : ``fit`` and ``validate`` estimate each camera's road normal from the batch (no ground
-        option given, or ``--road-normal estimate``)
-    """
-
-    priors_path: Path | None
-    options: SolverOptions
-    ground: dict[str, object]
-    joint_ground: bool
-    jobs: int
-    click_sigma_given: bool = False
-    estimate_road_normal: bool = False
-
-
-def _road_normal(value: str | None) -> tuple[float, float, float] | None:
-    if value is None or value in ("estimate", "none"):
-        return None
-    return parse_normal(value, "three numbers x,y,z, 'estimate' or 'none'")
 
 
 def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[float, float, float]:
@@ -321,7 +328,7 @@ def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[flo
 
 
 def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimate_click_sigma: bool,
-                        estimate_road_normal: bool, shown: Path | None = None) -> Any:
+                        estimate_road_normal: bool, shown: Path | None = None, ground: Any = None) -> Any:
     """What `fit` would estimate from the vehicles of the annotation file ``path`` before fitting it (the pilot,
     :func:`toosicubix.pipeline.pilot.file_estimates`), saying on stderr what is estimated (from the file named
     ``shown``, default ``path``: annotate estimates from a snapshot of its file) and what was found; None, with a
@@ -335,14 +342,17 @@ def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimat
         click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
         return None
     click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {shown or path}, as `fit` does ...", err=True)
-    findings = file_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal)
+    findings = file_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal, ground=ground)
     for line in findings.describe():
         click.echo(line, err=True)
     return findings
 
 
-def _fitting(values: dict[str, Any]) -> Fitting:
-    from toosicubix.pipeline.settings import ground_overrides, solver_options
+def _settings(values: dict[str, Any]) -> Any:
+    """The :class:`~toosicubix.pipeline.settings.BatchSettings` the fitting options amount to (without next clicks
+    and keypoints, which each command sets)."""
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.pipeline.settings import BatchSettings, ground_overrides, solver_options
 
     ctx = click.get_current_context()
     explicit = {k: values[k] for k in ("lambda_3d", "lambda_px")
@@ -352,7 +362,7 @@ def _fitting(values: dict[str, Any]) -> Fitting:
                       click_sigma=SolverOptions.click_sigma if given_sigma is None else given_sigma,
                       part_sigma=values["part_sigma"], robust_loss=values["robust_loss"],
                       misfit_level=values["misfit_level"])
-    normal = _road_normal(values["road_normal"])
+    road, normal = road_normal_choice(values["road_normal"])
     given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
                                     "normal_sigma_deg", "upright_sigma_deg")}
     if (given["camera_pitch_deg"] is not None or given["camera_roll_deg"] is not None) and normal is not None:
@@ -361,19 +371,24 @@ def _fitting(values: dict[str, Any]) -> Fitting:
     if values["road_normal"] == "estimate" and (ground or values["joint_ground"]):
         raise click.UsageError("--road-normal estimate goes without other ground options and --joint-ground "
                                "(they say what the road is); give the normal as x,y,z instead")
-    estimate = values["road_normal"] == "estimate" or (
-        values["road_normal"] is None and not ground and not values["joint_ground"])
-    return Fitting(values["priors_path"], options, ground, values["joint_ground"], values["jobs"],
-                   click_sigma_given=given_sigma is not None, estimate_road_normal=estimate)
+    if ground is not None:
+        from toosicubix.annotations.convert import ground_with
+
+        ground_with(None, ground)  # a zero normal or an impossible block: refused here, naming the options
+    estimate = road == "estimate" and not ground and not values["joint_ground"]
+    return BatchSettings(priors=load_priors(values["priors_path"]), options=options, ground=ground,
+                         joint_ground=values["joint_ground"], jobs=values["jobs"],
+                         estimate_click_sigma=given_sigma is None, estimate_road_normal=estimate)
 
 
 def fitting_options(command: Callable) -> Callable:
-    """Add the options ``fit`` and ``validate`` share; the command receives ``fitting: Fitting`` instead."""
+    """Add the options ``fit`` and ``validate`` share; the command receives ``settings`` (a
+    :class:`~toosicubix.pipeline.settings.BatchSettings`, without next clicks and keypoints) instead."""
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         values = {name: kwargs.pop(name) for name in _FITTING_NAMES}
-        return command(*args, fitting=_fitting(values), **kwargs)
+        return command(*args, settings=_settings(values), **kwargs)
 
     for option in reversed(_FITTING_OPTIONS):
         wrapper = option(wrapper)
@@ -406,7 +421,7 @@ class ProgressBar:
 
 
 __all__ = [
-    "EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "GROUND_TRUTH_HELP", "BadInput", "CommandGroup", "Fitting",
-    "GroundTruth", "ProgressBar", "fitting_options", "float_list", "ground_truth_options", "parse_classes",
-    "parse_sequences",
+    "EXIT_BAD_INPUT", "EXIT_OK", "EXIT_SOME_FAILED", "GROUND_TRUTH_HELP", "BadInput", "CommandGroup", "GroundTruth",
+    "ProgressBar", "click_sigma_option", "fitting_options", "float_list", "ground_truth_options", "jobs_option",
+    "out_option", "parse_classes", "parse_sequences", "priors_option", "road_normal_choice", "road_normal_option",
 ]

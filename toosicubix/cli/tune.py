@@ -6,35 +6,40 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import GroundTruth, announced_estimates, float_list, ground_truth_options
+from toosicubix.cli.options import (
+    GroundTruth,
+    announced_estimates,
+    click_sigma_option,
+    float_list,
+    ground_truth_options,
+    jobs_option,
+    out_option,
+    priors_option,
+    road_normal_choice,
+    road_normal_option,
+)
 
 
 @click.command("tune")
 @click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
 @ground_truth_options()
-@click.option("-o", "--out", "config_out", type=click.Path(dir_okay=False, path_type=Path),
-              default="toosicubix-settings.json", show_default=True,
-              help="Settings file to write, for `toosicubix fit --config`.")
+@out_option("Settings file to write, for `toosicubix fit --config`.", "config_out",
+            type=click.Path(dir_okay=False, path_type=Path), default="toosicubix-settings.json", show_default=True)
 @click.option("--lambdas", default=",".join(f"{v:g}" for v in (0.01, 0.1, 1, 10)), show_default=True,
               help="Values of lambda (descent prior weight) to try.")
 @click.option("--lambda-ps", default=",".join(f"{v:g}" for v in (0.01, 0.1, 1, 10, 100)), show_default=True,
               help="Values of lambda_p (pixel-cost prior weight) to try.")
 @click.option("--refine/--no-refine", default=True, show_default=True,
               help="Then try the half-steps around the best pair.")
-@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Size priors file; default: the bundled one.")
+@priors_option
 @click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU needed to pair a fit with a ground-truth vehicle.")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Worker processes.")
-@click.option("--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Click noise in pixels (it weighs keypoints' soft term). Not given: estimated from the file's "
-                   "residuals, as `fit` does.")
-@click.option("--road-normal", type=click.Choice(["estimate", "none"]), default="estimate", show_default=True,
-              help="estimate: fit each camera's images upright on its road normal estimated from the file's "
-                   "vehicles, as `fit` does by default; none: without one (as `fit --road-normal none`).")
+@jobs_option
+@click_sigma_option
+@road_normal_option
 def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path, lambdas: str, lambda_ps: str,
                  refine: bool, priors_path: Path | None, min_iou: float, jobs: int, click_sigma: float | None,
-                 road_normal: str) -> None:
+                 road_normal: str | None) -> None:
     """Choose lambda and lambda_p by maximising mean sIoU against ground truth, as the paper does.
 
     Fits every vehicle of ANNOTATIONS with each pair of weights on a log grid (then the half-steps around
@@ -44,7 +49,7 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
 
     The fits are made as `fit` makes them by default: the click noise and each camera's road normal are first
     estimated from the file's vehicles (once, with the default weights), unless --click-sigma or --road-normal
-    none say otherwise.
+    (none, or a normal x,y,z every image stands upright on) say otherwise.
 
     \b
     Example:
@@ -54,24 +59,27 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     """
     from dataclasses import replace
 
-    from toosicubix.annotations.convert import load_images
+    from toosicubix.annotations.convert import load_images, with_ground
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.evaluation import EvalOptions
     from toosicubix.formats.ground_truth import open_ground_truth
     from toosicubix.pipeline.fitting import check_prototypes
     from toosicubix.pipeline.pilot import on_estimated_roads
-    from toosicubix.pipeline.settings import settings_document, write_settings_file
+    from toosicubix.pipeline.settings import ground_overrides, settings_document, write_settings_file
     from toosicubix.pipeline.tuning import tune
     from toosicubix.solver.fit import SolverOptions
 
     grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")
+    road, normal = road_normal_choice(road_normal)
     images = load_images(annotations)
     priors = load_priors(priors_path)
     check_prototypes(images, priors, annotations)
     source = open_ground_truth(ground_truth.kind, ground_truth.root)
     n = sum(len(im.vehicles) for im in images)
     base = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
-    findings = announced_estimates(annotations, priors, base, click_sigma is None, road_normal == "estimate")
+    ground = ground_overrides(normal=normal)
+    images = with_ground(images, ground)  # every image upright on a given road, as `fit --road-normal x,y,z` fits
+    findings = announced_estimates(annotations, priors, base, click_sigma is None, road == "estimate", ground=ground)
     if findings is not None:  # fitted as `fit` fits them: the estimated click noise, on each camera's road
         images, base = list(on_estimated_roads(images, findings.road_normals)), findings.options
     click.echo(f"tuning on {n} vehicles in {len(images)} images", err=True)

@@ -11,7 +11,6 @@ import click
 from toosicubix.cli.options import (
     EXIT_OK,
     EXIT_SOME_FAILED,
-    Fitting,
     ProgressBar,
     fitting_options,
     keypoint_mapping_option,
@@ -38,7 +37,7 @@ from toosicubix.pipeline.validation import Thresholds
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout instead of text.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar on stderr.")
 def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigma_rel: float, allow_ambiguous: bool,
-                     next_clicks: int, mapping: Any, fitting: Fitting, show_all: bool, as_json: bool,
+                     next_clicks: int, mapping: Any, settings: Any, show_all: bool, as_json: bool,
                      quiet: bool) -> None:
     """Check an annotation file and say which vehicles need more clicks; writes nothing.
 
@@ -60,15 +59,15 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
       toosicubix validate annotations.json --json > report.json
       toosicubix validate apollo.json --mapping apollocar3d-66   # keypoints to click next
     """
+    from dataclasses import replace
+
     from toosicubix.pipeline.validation import validate_file
 
     thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous)
     bar = ProgressBar(quiet)
     try:
-        report = validate_file(annotations, fitting.priors_path, fitting.options, thresholds, fitting.ground,
-                               fitting.joint_ground, next_clicks, fitting.jobs, progress=bar.update,
-                               on_start=bar.start, estimate_click_sigma=not fitting.click_sigma_given,
-                               estimate_road_normal=fitting.estimate_road_normal, keypoints=mapping)
+        report = validate_file(annotations, replace(settings, next_clicks=next_clicks, keypoints=mapping), thresholds,
+                               progress=bar.update, on_start=bar.start)
     finally:
         bar.finish()
     if not quiet and not as_json and report.pilot is not None:  # the JSON report holds them

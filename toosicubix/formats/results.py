@@ -262,6 +262,45 @@ _KNOWN_KEYS = {f.name for f in fields(VehicleResult)} - {"extra"}
 
 
 @dataclass(frozen=True)
+class RoadPlane:
+    """The road plane an image's fits stood on (results.json's per-image ``ground``).
+
+    Attributes
+    ----------
+    normal : (3,) unit normal in the camera frame, pointing up
+    camera_height : metres above the road, or None when unknown
+    estimated : refined with the vehicles (``--joint-ground``) or the batch's road normal, not given
+    joint_iterations, vehicles : of the joint refinement (``--joint-ground``), else None
+    joint_error : why the joint refinement failed (the vehicles keep their own fits), else None
+    """
+
+    normal: tuple[float, float, float]
+    camera_height: float | None
+    estimated: bool
+    joint_iterations: int | None = None
+    vehicles: int | None = None
+    joint_error: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "normal", tuple(float(v) for v in self.normal))
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"normal": list(self.normal), "camera_height": self.camera_height,
+                               "estimated": self.estimated}
+        if self.joint_iterations is not None:
+            out.update(joint_iterations=self.joint_iterations, vehicles=self.vehicles)
+        if self.joint_error is not None:
+            out["joint_error"] = self.joint_error
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> RoadPlane:
+        return cls(normal=tuple(d["normal"]), camera_height=d.get("camera_height"), estimated=bool(d.get("estimated")),
+                   joint_iterations=d.get("joint_iterations"), vehicles=d.get("vehicles"),
+                   joint_error=d.get("joint_error"))
+
+
+@dataclass(frozen=True)
 class ImageResult:
     """One image's fits and the camera they are expressed in.
 
@@ -270,8 +309,7 @@ class ImageResult:
     K : (3, 3)
     t_cam_rect : (3,) zero unless the camera came from a KITTI ``P``
     image_size : (width, height) or None
-    ground : the road plane used or estimated (``{"normal": [...], "camera_height": h, "estimated": bool}``;
-        estimated: refined with the vehicles (``--joint-ground``) or the batch's road normal), or None
+    ground : the road plane used or estimated, or None
     """
 
     id: str
@@ -279,7 +317,7 @@ class ImageResult:
     t_cam_rect: np.ndarray
     image_size: tuple[int, int] | None
     vehicles: list[VehicleResult]
-    ground: dict[str, Any] | None = None
+    ground: RoadPlane | None = None
 
 
 def _array(value: np.ndarray | None) -> Any:
@@ -297,7 +335,7 @@ def image_to_json(im: ImageResult) -> dict[str, Any]:
         "id": im.id,
         "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
                    "image_size": list(im.image_size) if im.image_size else None},
-        **({"ground": im.ground} if im.ground is not None else {}),
+        **({"ground": im.ground.to_json()} if im.ground is not None else {}),
         "vehicles": [vehicle_to_json(v) for v in im.vehicles],
     }
 
@@ -446,6 +484,16 @@ def read_results(path: str | Path) -> list[ImageResult]:
         images.append(ImageResult(
             id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
-            ground=im.get("ground"),
+            ground=_road_plane(im.get("ground")),
         ))
     return images
+
+
+def _road_plane(value: Any) -> RoadPlane | None:
+    """An image's ``ground`` as read; None when absent or not one (it is informational: nothing reads it back but a
+    report, so a file another version or program wrote is not refused for it)."""
+    try:
+        plane = RoadPlane.from_json(value)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    return plane if all(math.isfinite(v) for v in plane.normal) and len(plane.normal) == 3 else None

@@ -19,18 +19,17 @@ import hashlib
 import itertools
 import os
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from toosicubix import __version__
-from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, write_results_stream
 from toosicubix.model import Image
-from toosicubix.pipeline.fitting import KeypointCatalogue, iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import iter_fit_images, stream_images
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     OutputFolderError,
@@ -39,9 +38,7 @@ from toosicubix.pipeline.output_folder import (
     staged_output,
 )
 from toosicubix.pipeline.pilot import PilotFindings, on_estimated_roads, run_pilot
-from toosicubix.pipeline.road_normal import refuse_with_ground
-from toosicubix.size_priors import Priors
-from toosicubix.solver.fit import SolverOptions
+from toosicubix.pipeline.settings import BatchSettings
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",
            "pilot_and_fits", "write_outputs"]
@@ -134,21 +131,20 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
     return summary
 
 
-def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot: PilotFindings,
-                 progress: Callable[[int], None] | None = None, jobs: int = 1, joint_ground: bool = False,
-                 next_clicks: int = 0, keypoints: KeypointCatalogue | None = None) -> Iterator[ImageResult]:
+def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettings, pilot: PilotFindings,
+                 progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
     """The batch's results, image by image in file order
-    (:func:`~toosicubix.pipeline.fitting.iter_fit_images` with the pilot's settings), reusing the pilot's own
+    (:func:`~toosicubix.pipeline.fitting.iter_fit_images` with the pilot's solver settings), reusing the pilot's own
     fits when they are the batch's (:attr:`~toosicubix.pipeline.pilot.PilotFindings.results`) and the batch asks
     nothing the pilot did not do (no joint ground, as many next clicks): a small batch is then fitted once."""
-    if pilot.results is None or joint_ground or next_clicks != pilot.next_clicks:
-        yield from iter_fit_images(images, n_vehicles, priors, pilot.options, progress, jobs, joint_ground,
-                                   next_clicks, keypoints)
+    settings = replace(settings, options=pilot.options)
+    if pilot.results is None or settings.joint_ground or settings.next_clicks != pilot.next_clicks:
+        yield from iter_fit_images(images, n_vehicles, settings, progress)
         return
     done = iter(pilot.results)  # the images with vehicles, in file order
     for im in images:
         if not im.vehicles:  # the pilot skipped it: nothing to fit
-            yield from iter_fit_images([im], 0, priors, pilot.options)
+            yield from iter_fit_images([im], 0, settings)
             continue
         result = next(done)
         assert result.id == im.id and len(result.vehicles) == len(im.vehicles)
@@ -157,81 +153,58 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, priors: Priors, pilot
         yield result
 
 
-def pilot_and_fits(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
-                   jobs: int, progress: Callable[[int], None] | None, on_start: Callable[[int], None] | None,
-                   estimate_click_sigma: bool, estimate_road_normal: bool, joint_ground: bool, next_clicks: int,
-                   keypoints: KeypointCatalogue | None = None
+def pilot_and_fits(index: AnnotationIndex, settings: BatchSettings, progress: Callable[[int], None] | None = None,
+                   on_start: Callable[[int], None] | None = None
                    ) -> tuple[PilotFindings, Iterator[Image], Iterator[ImageResult]]:
     """A batch as ``fit`` fits it (``fit`` and ``validate``): the pilot
     (:func:`~toosicubix.pipeline.pilot.run_pilot`), then, lazily, every image of the file on its camera's
     estimated road (a second reader of the stream, for the labels or the checks) and its fit
     (:func:`fitted_batch`), in file order."""
-    pilot = run_pilot(index, ground, priors, options, jobs, progress, on_start, estimate_click_sigma,
-                      estimate_road_normal, 0 if joint_ground else next_clicks, keypoints)
-    images, second = itertools.tee(on_estimated_roads(stream_images(index, ground), pilot.road_normals))
-    return pilot, second, fitted_batch(images, index.vehicles, priors, pilot, progress, jobs, joint_ground,
-                                       next_clicks, keypoints)
+    pilot = run_pilot(index, settings, progress, on_start)
+    images, second = itertools.tee(on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals))
+    return pilot, second, fitted_batch(images, index.vehicles, settings, pilot, progress)
 
 
-def fit_file(annotations: str | Path, out_dir: str | Path, priors_path: str | Path | None = None,
-             options: SolverOptions | None = None,
+def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettings | None = None,
              progress: Callable[[int], None] | None = None,
-             on_start: Callable[[int], None] | None = None, jobs: int = 1,
-             ground: dict[str, object] | None = None, joint_ground: bool = False,
-             next_clicks: int = 0, estimate_click_sigma: bool = False,
-             estimate_road_normal: bool = False, keypoints: KeypointCatalogue | None = None) -> BatchSummary:
+             on_start: Callable[[int], None] | None = None) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
     ----------
     annotations : the annotation file (v1)
     out_dir : output folder, created when missing
-    priors_path : a priors file; the bundled one when None
-    options : solver settings
+    settings : how the batch is fitted (:class:`~toosicubix.pipeline.settings.BatchSettings`: priors, solver
+        settings, ground override, joint ground, jobs, next clicks, whether to estimate the click noise and the road
+        normals first); its defaults when None
     progress : called with the number of vehicles just finished
     on_start : called once with the number of vehicles to fit
-    jobs : worker processes (the output does not depend on it)
-    ground : ground-block fields (schema names) set for every image of the file
-    joint_ground : refine each image's vehicles together with its ground plane
-    next_clicks : per vehicle, how many suggestions of what to click next results.json gets (0: none)
-    keypoints : suggest a keypoint mapping's keypoints instead of the vocabulary's parts
-        (:func:`~toosicubix.pipeline.fitting.fit_images`)
-    estimate_click_sigma : first estimate the click noise from a pilot fit's residuals
-        (:mod:`toosicubix.pipeline.click_noise`) and fit with it; ``options.click_sigma`` is the pilot's
-        assumption and stays when the batch's clicks are too few to estimate it (``toosicubix fit`` does this
-        unless given ``--click-sigma``)
-    estimate_road_normal : estimate each camera's road normal from the same pilot fit's vehicles
-        (:mod:`toosicubix.pipeline.road_normal`) and fit that camera's images without a ground block of their
-        own upright on it (``toosicubix fit`` does this unless given a ground); not with ``ground`` or
-        ``joint_ground``
 
     Raises
     ------
     InputFileError
-        Bad annotation or priors file, unknown prototype: nothing is written.
+        Bad annotation file, unknown prototype: nothing is written.
     OutputFolderError
         The output folder holds label files toosicubix did not write.
     """
-    refuse_with_ground(estimate_road_normal, ground, joint_ground)
     annotations, out_dir = Path(annotations), Path(out_dir)
-    options = options or SolverOptions()
-    priors = load_priors(priors_path)
-    index = index_annotations(annotations, known_prototypes=list(priors))
+    settings = settings or BatchSettings()
+    index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    pilot, for_labels, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
-                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks,
-                                                keypoints)
+    pilot, for_labels, results = pilot_and_fits(index, settings, progress, on_start)
     options = pilot.options
+    ground = settings.ground
     header = {
         "generator": f"toosicubix {__version__}",
         "annotations": str(annotations),
         "annotations_sha256": _sha256(annotations),
-        "priors": priors.source if priors_path is not None else "bundled",
+        "priors": "bundled" if settings.priors.bundled else settings.priors.source,
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
                      **({"misfit_level": options.misfit_level} if options.misfit_level is not None else {}),
-                     **({"ground": ground} if ground else {}), **({"joint_ground": True} if joint_ground else {})},
+                     **({"ground": ground.to_json()} if ground else {}),
+                     **({"joint_ground": True} if settings.joint_ground else {})},
         **pilot.header(),
         "notes": "t_cam_vehicle is in the frame where the image's K applies (camera 2 for KITTI P2); "
                  "X_rect = X_cam - t_cam_rect. KITTI label files drop pitch and roll; R_cam_vehicle keeps them.",

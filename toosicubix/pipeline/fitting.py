@@ -10,7 +10,6 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -19,9 +18,10 @@ from toosicubix.annotations.convert import image_from_schema, with_ground
 from toosicubix.annotations.stream import AnnotationIndex, iter_image_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import InputFileError
-from toosicubix.formats.results import ImageResult, VehicleResult
-from toosicubix.model import GroundPlane, Image, Vehicle
-from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
+from toosicubix.formats.results import ImageResult, RoadPlane, VehicleResult
+from toosicubix.model import GroundOverride, GroundPlane, Image, Vehicle
+from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline.settings import BatchSettings, KeypointCatalogue
 from toosicubix.pipeline.vehicle import (
     Keypoints,
     SuggestTask,
@@ -40,7 +40,7 @@ from toosicubix.solver.problem import Problem
 from toosicubix.solver.robust import with_weights
 from toosicubix.solver.uncertainty import analyse
 
-__all__ = ["FitTask", "KeypointCatalogue", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images",
+__all__ = ["FitTask", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images",
            "iter_fit_images", "stream_images"]
 
 
@@ -59,15 +59,6 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
     ]
     if problems:
         raise InputFileError(source, problems)
-
-
-class KeypointCatalogue(Protocol):
-    """Keypoints to suggest as next clicks, per prototype (a keypoint mapping,
-    :class:`toosicubix.annotations.mapping.MappingFile`)."""
-
-    def keypoint_candidates(self, prototype: str) -> dict[str, TypicalKeypoint]:
-        """Name -> where it typically is on a vehicle of ``prototype`` and the faces it is seen from."""
-        ...
 
 
 #: What :func:`~toosicubix.pipeline.vehicle.fit_one` takes, as the batch hands it to a worker.
@@ -93,38 +84,35 @@ def _worker_init() -> None:
     cv2.setNumThreads(1)  # one process per core; no threads on top
 
 
-def fit_images(images: list[Image], priors: Priors, options: SolverOptions,
-               progress: Callable[[int], None] | None = None, jobs: int = 1,
-               joint_ground: bool = False, next_clicks: int = 0,
-               keypoints: KeypointCatalogue | None = None) -> list[ImageResult]:
-    """Fit every vehicle of every image.
+def fit_images(images: list[Image], settings: BatchSettings | None = None,
+               progress: Callable[[int], None] | None = None) -> list[ImageResult]:
+    """Fit every vehicle of every image with ``settings``' priors and solver options (the images' own grounds: the
+    settings' ground override and estimates are applied where the images are read, :func:`stream_images`).
 
     Parameters
     ----------
+    settings : the batch's settings (default: :class:`BatchSettings`'); its ``jobs`` worker processes give the same
+        results for any number (each vehicle is fitted on its own, deterministically, and the results come back in
+        input order); with ``joint_ground`` each image's vehicles are then refined together with its ground plane
+        (images with a ground block; the camera height may be unknown); ``next_clicks`` suggestions of what to click
+        next per vehicle, among ``keypoints`` when given (a keypoint mapping's)
     progress : called with the number of vehicles just finished
-    jobs : worker processes; the results are the same for any number (each vehicle is fitted on its own,
-        deterministically, and the results come back in input order)
-    joint_ground : then refine each image's vehicles together with its ground plane (images with a
-        ground block); the camera height may be unknown
-    next_clicks : per vehicle, how many suggestions of what to click next to add (0: none)
-    keypoints : suggest these keypoints instead of the vocabulary's parts (a keypoint mapping,
-        :class:`toosicubix.annotations.mapping.MappingFile`: its keypoints at their positions for each prototype)
     """
     n = sum(len(im.vehicles) for im in images)
-    return list(iter_fit_images(images, n, priors, options, progress, jobs, joint_ground, next_clicks, keypoints))
+    return list(iter_fit_images(images, n, settings, progress))
 
 
-def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, options: SolverOptions,
-                    progress: Callable[[int], None] | None = None, jobs: int = 1,
-                    joint_ground: bool = False, next_clicks: int = 0,
-                    keypoints: KeypointCatalogue | None = None) -> Iterator[ImageResult]:
+def iter_fit_images(images: Iterable[Image], n_vehicles: int, settings: BatchSettings | None = None,
+                    progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
     """:func:`fit_images` one image at a time, in input order: the images are read from ``images`` only as
     the workers need them, and each result is handed on as soon as its image is done, so memory does not
     grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
     """
+    settings = settings or BatchSettings()
+    priors, options, next_clicks, jobs = settings.priors, settings.options, settings.next_clicks, settings.jobs
     pending: deque[Image] = deque()
     done: list[VehicleResult] = []
-    candidates = _candidates_of(keypoints if next_clicks > 0 else None)
+    candidates = _candidates_of(settings.keypoints if next_clicks > 0 else None)
 
     def tasks() -> Iterator[FitTask]:
         for im in images:
@@ -137,9 +125,10 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, priors: Priors, op
             im = pending.popleft()
             vehicles = done[:len(im.vehicles)]
             del done[:len(im.vehicles)]
-            ground = _ground_json(im.ground, estimated=im.ground.from_batch) if im.ground is not None else None
-            if joint_ground and im.ground is not None:
-                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks, keypoints)
+            ground = None if im.ground is None else RoadPlane(im.ground.normal, im.ground.camera_height,
+                                                              im.ground.from_batch)
+            if settings.joint_ground and im.ground is not None:
+                vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks, settings.keypoints)
             yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
                               image_size=im.camera.image_size, vehicles=vehicles, ground=ground)
 
@@ -186,25 +175,16 @@ def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
             yield from in_flight.popleft().result()
 
 
-def _ground_json(ground: GroundPlane, estimated: bool, camera_height: float | None = None,
-                 normal: np.ndarray | None = None) -> dict[str, Any]:
-    return {
-        "normal": (ground.normal if normal is None else normal).tolist(),
-        "camera_height": ground.camera_height if camera_height is None else camera_height,
-        "estimated": estimated,
-    }
-
-
 def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
                       next_clicks: int = 0, keypoints: KeypointCatalogue | None = None
-                      ) -> tuple[list[VehicleResult], dict[str, Any]]:
+                      ) -> tuple[list[VehicleResult], RoadPlane]:
     """Refine an image's fitted vehicles together with its ground plane (see :mod:`toosicubix.solver.joint`);
     return the updated results and the plane. Failed vehicles stay as they were."""
     ground = image.ground
     assert ground is not None
     fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok]
     if not fitted:
-        return vehicles, _ground_json(ground, estimated=False)
+        return vehicles, RoadPlane(ground.normal, ground.camera_height, False)
     joint_vehicles, models = [], []
     candidates = _candidates_of(keypoints if next_clicks > 0 else None)
     for k, v in fitted:
@@ -218,9 +198,8 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     try:
         result = fit_jointly(joint_vehicles, ground)
     except Exception as exc:  # the vehicles keep their own fits
-        plane = _ground_json(ground, estimated=False)
-        plane["joint_error"] = f"{type(exc).__name__}: {exc}"
-        return vehicles, plane
+        return vehicles, RoadPlane(ground.normal, ground.camera_height, False,
+                                   joint_error=f"{type(exc).__name__}: {exc}")
     plane_fitted = replace(ground, normal=result.normal, camera_height=result.camera_height)
     out = list(vehicles)
     for (k, v), jv, parts, R, t, p in zip(fitted, joint_vehicles, models, result.R, result.t, result.p, strict=True):
@@ -247,23 +226,23 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
             continue
         out[k] = replace(updated, cues=replace(updated.cues, joint_ground=True),
                          solver=replace(vehicles[k].solver, joint_iterations=result.iterations))
-    return out, {**_ground_json(ground, True, result.camera_height, result.normal),
-                 "joint_iterations": result.iterations, "vehicles": len(fitted)}
+    return out, RoadPlane(result.normal, result.camera_height, True, joint_iterations=result.iterations,
+                          vehicles=len(fitted))
 
 
-def stream_images(index: AnnotationIndex, ground: dict[str, object] | None) -> Iterator[Image]:
+def stream_images(index: AnnotationIndex, ground: GroundOverride | None) -> Iterator[Image]:
     """The images of an indexed annotation file (:func:`toosicubix.annotations.stream.index_annotations`), one
-    at a time, with the options' ground block applied."""
+    at a time, with the ground override set on each."""
     for i, annotation in iter_image_annotations(index):
-        yield from with_ground([image_from_schema(annotation, i)], ground or {})
+        yield from with_ground([image_from_schema(annotation, i)], ground)
 
 
-def add_next_clicks(images: list[Image], results: list[ImageResult], priors: Priors, options: SolverOptions,
-                    n: int, keypoints: KeypointCatalogue | None, jobs: int) -> list[ImageResult]:
-    """``results`` (:func:`iter_fit_images`' of ``images``, in order, without next clicks) with ``n`` next clicks per
-    vehicle, as if they had been asked for (:func:`~toosicubix.pipeline.vehicle.with_next_clicks`), in ``jobs``
-    processes."""
-    candidates = _candidates_of(keypoints)
+def add_next_clicks(images: list[Image], results: list[ImageResult], settings: BatchSettings) -> list[ImageResult]:
+    """``results`` (:func:`iter_fit_images`' of ``images``, in order, without next clicks) with ``settings``'
+    ``next_clicks`` per vehicle, as if they had been asked for (:func:`~toosicubix.pipeline.vehicle.with_next_clicks`),
+    in its ``jobs`` processes."""
+    priors, options, n, jobs = settings.priors, settings.options, settings.next_clicks, settings.jobs
+    candidates = _candidates_of(settings.keypoints)
     tasks = ((v, im.camera, priors[v.prototype], r, options, im.ground, n, candidates(v.prototype))
              for im, result in zip(images, results, strict=True)
              for v, r in zip(im.vehicles, result.vehicles, strict=True))

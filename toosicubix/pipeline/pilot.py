@@ -14,9 +14,9 @@ from typing import Any
 from toosicubix.annotations.convert import with_ground
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
-from toosicubix.model import Image
+from toosicubix.model import GroundOverride, Image
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
-from toosicubix.pipeline.fitting import KeypointCatalogue, add_next_clicks, iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, stream_images
 from toosicubix.pipeline.road_normal import (
     MIN_VEHICLES,
     RoadNormal,
@@ -26,6 +26,7 @@ from toosicubix.pipeline.road_normal import (
     ground_block,
     without_pilot,
 )
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.vocabulary import KINDS
@@ -89,22 +90,23 @@ class PilotFindings:
         return [line for line in lines if line]
 
 
-def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: Priors, options: SolverOptions,
-              jobs: int = 1, progress: Callable[[int], None] | None = None,
-              on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
-              estimate_road_normal: bool = False, next_clicks: int = 0,
-              keypoints: KeypointCatalogue | None = None) -> PilotFindings:
+def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callable[[int], None] | None = None,
+              on_start: Callable[[int], None] | None = None) -> PilotFindings:
     """Fit every k-th vehicle of an indexed file (at most :data:`toosicubix.pipeline.click_noise.PILOT_VEHICLES`,
-    held in memory) and estimate from them what was asked: the click noise
+    held in memory) and estimate from them what ``settings`` ask: the click noise
     (:mod:`toosicubix.pipeline.click_noise`; its vehicles only) and each camera's road normal
     (:mod:`toosicubix.pipeline.road_normal`; any vehicle). Nothing asked: no pilot. When the pilot fits every
     vehicle of the file with the batch's settings, its fits are the batch's (:attr:`PilotFindings.results`), and it
-    then adds the ``next_clicks`` the batch asks for to them (``jobs`` processes). Fits it does not hand on get
-    none: their guidance (a quarter to a half of a fit's time with a mapping's keypoints) would be thrown away.
+    then adds the ``next_clicks`` the batch asks for to them (``jobs`` processes; none with ``joint_ground``, whose
+    refinement changes the fits). Fits it does not hand on get none: their guidance (a quarter to a half of a fit's
+    time with a mapping's keypoints) would be thrown away.
 
     ``on_start`` is called once with the vehicles the whole batch fits, the pilot's and the file's;
     ``progress`` with each vehicle the pilot finishes.
     """
+    options = settings.options
+    estimate_click_sigma, estimate_road_normal = settings.estimate_click_sigma, settings.estimate_road_normal
+    next_clicks = 0 if settings.joint_ground else settings.next_clicks
     cameras: Counter = Counter()  # images without their own ground block, per camera
 
     def counted(images: Iterable[Image]) -> Iterator[Image]:
@@ -115,14 +117,16 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
 
     pilot: list[Image] = []
     if estimate_click_sigma or estimate_road_normal:
-        pilot = list(pilot_images(counted(stream_images(index, ground)), index.vehicles,
+        pilot = list(pilot_images(counted(stream_images(index, settings.ground)), index.vehicles,
                                   keep=None if estimate_road_normal else telling))
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
     pilot_options = replace(options, robust_loss="none")
     every = n_pilot == index.vehicles
-    results = list(iter_fit_images(iter(pilot), n_pilot, priors, pilot_options, progress, jobs)) if pilot else []
+    pilot_settings = replace(settings, options=pilot_options, joint_ground=False, next_clicks=0, keypoints=None,
+                             estimate_click_sigma=False, estimate_road_normal=False, ground=None)
+    results = list(iter_fit_images(iter(pilot), n_pilot, pilot_settings, progress)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
@@ -134,7 +138,7 @@ def run_pilot(index: AnnotationIndex, ground: dict[str, object] | None, priors: 
            and not any(n.normal is not None for n in (normals or {}).values()))
     pilot_next = next_clicks if own else 0
     if own and next_clicks > 0:
-        results = add_next_clicks(pilot, results, priors, options, next_clicks, keypoints, jobs)
+        results = add_next_clicks(pilot, results, replace(settings, options=options, next_clicks=next_clicks))
     if normals is None:
         return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
@@ -151,7 +155,8 @@ def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: Sol
 
 
 def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
-                   estimate_road_normal: bool = True, progress: Callable[[int], None] | None = None) -> PilotFindings:
+                   estimate_road_normal: bool = True, progress: Callable[[int], None] | None = None,
+                   ground: GroundOverride | None = None) -> PilotFindings:
     """What ``toosicubix fit ANNOTATIONS`` would estimate before fitting, with its default ground settings: the
     click noise (unless ``estimate_click_sigma`` is False: ``options.click_sigma`` was given) and each camera's
     road normal (unless ``estimate_road_normal`` is False), by :func:`run_pilot`. For fitting single vehicles of
@@ -164,11 +169,12 @@ def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptio
         Bad annotation file, unknown prototype.
     """
     index = index_annotations(Path(annotations), known_prototypes=list(priors))
-    return run_pilot(index, None, priors, options, progress=progress, estimate_click_sigma=estimate_click_sigma,
-                     estimate_road_normal=estimate_road_normal)
+    settings = BatchSettings(priors, options, ground, estimate_click_sigma=estimate_click_sigma,
+                             estimate_road_normal=estimate_road_normal)
+    return run_pilot(index, settings, progress=progress)
 
 
-def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, dict[str, object]]:
+def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, GroundOverride]:
     """Per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block its estimated road normal
     gives the camera's images without one of their own; cameras without an estimate are left out."""
     return {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
@@ -184,4 +190,4 @@ def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal]
             yield im
         else:
             im = with_ground([im], block)[0]
-            yield replace(im, ground=replace(im.ground, from_batch=True))
+            yield replace(im, ground=replace(im.ground, from_batch=True))  # type: ignore[arg-type]

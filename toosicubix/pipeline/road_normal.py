@@ -30,7 +30,7 @@ import numpy as np
 
 from toosicubix.camera import Camera
 from toosicubix.formats.results import ImageResult
-from toosicubix.model import Image
+from toosicubix.model import GroundOverride, Image
 
 #: Fewer fitted pilot vehicles of a camera than this give it no estimate.
 MIN_VEHICLES = 30
@@ -146,20 +146,7 @@ def _estimate(camera: tuple, images: int, ups: np.ndarray) -> RoadNormal:
     return RoadNormal(camera, images, tuple(float(v) for v in n), len(ups), spread)
 
 
-def ground_block(normal: RoadNormal) -> dict[str, object]:
-    """The ground-block fields (schema names) an estimated normal gives its camera's images."""
+def ground_block(normal: RoadNormal) -> GroundOverride:
+    """The ground-block fields an estimated normal gives its camera's images."""
     assert normal.normal is not None
-    return {"normal": normal.normal, "normal_sigma_deg": NORMAL_SIGMA_DEG, "upright_sigma_deg": UPRIGHT_SIGMA_DEG}
-
-
-def refuse_with_ground(estimate: bool, ground: dict[str, object] | None, joint_ground: bool) -> None:
-    """An estimate is for batches without a ground: with ``ground`` or ``joint_ground`` the caller said what the
-    road is.
-
-    Raises
-    ------
-    ValueError
-        When both are asked for.
-    """
-    if estimate and (ground or joint_ground):
-        raise ValueError("estimate_road_normal goes without a ground or joint_ground: they say what the road is")
+    return GroundOverride(normal=normal.normal, normal_sigma_deg=NORMAL_SIGMA_DEG, upright_sigma_deg=UPRIGHT_SIGMA_DEG)

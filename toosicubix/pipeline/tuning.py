@@ -20,6 +20,7 @@ from toosicubix.evaluation import EvalOptions, evaluate, predictions_from_result
 from toosicubix.formats.ground_truth import GroundTruthSource
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
 
@@ -83,7 +84,7 @@ class TuneResult:
 def score(images: list[Image], priors: Priors, ground_truth: GroundTruthSource, options: SolverOptions,
           eval_options: EvalOptions | None = None, jobs: int = 1) -> GridPoint:
     """Fit every vehicle with ``options`` and score the fits against the ground truth."""
-    results = fit_images(images, priors, options, jobs=jobs)
+    results = fit_images(images, BatchSettings(priors, options, jobs=jobs))
     evaluation = evaluate(predictions_from_results(results), ground_truth, eval_options)
     summary = summarize(evaluation)
     n_failed = sum(1 for im in results for v in im.vehicles if not v.ok)

@@ -17,14 +17,11 @@ from pathlib import Path
 from typing import Any
 
 from toosicubix import vocabulary
-from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
 from toosicubix.pipeline.batch import pilot_and_fits
-from toosicubix.pipeline.fitting import KeypointCatalogue
 from toosicubix.pipeline.pilot import PilotFindings
-from toosicubix.pipeline.road_normal import refuse_with_ground
-from toosicubix.solver.fit import SolverOptions
+from toosicubix.pipeline.settings import BatchSettings
 
 VALIDATION_VERSION = 1
 
@@ -224,38 +221,30 @@ def describe(check: VehicleCheck) -> str:
     return "\n".join(lines)
 
 
-def validate_file(annotations: str | Path, priors_path: str | Path | None = None,
-                  options: SolverOptions | None = None, thresholds: Thresholds | None = None,
-                  ground: dict[str, object] | None = None, joint_ground: bool = False, next_clicks: int = 3,
-                  jobs: int = 1, progress: Callable[[int], None] | None = None,
-                  on_start: Callable[[int], None] | None = None, estimate_click_sigma: bool = False,
-                  estimate_road_normal: bool = False, keypoints: KeypointCatalogue | None = None) -> ValidationReport:
+def validate_file(annotations: str | Path, settings: BatchSettings | None = None, thresholds: Thresholds | None = None,
+                  progress: Callable[[int], None] | None = None,
+                  on_start: Callable[[int], None] | None = None) -> ValidationReport:
     """Fit every vehicle of a file as ``fit`` would, write nothing, judge each (see the module docstring).
 
     Parameters
     ----------
-    annotations, priors_path, options, ground, joint_ground, jobs, progress, on_start, estimate_click_sigma,
-    estimate_road_normal : as :func:`toosicubix.pipeline.batch.fit_file` takes them (``toosicubix validate``, like
-        ``fit``, estimates the click noise and the road normals unless given them)
+    annotations, progress, on_start : as :func:`toosicubix.pipeline.batch.fit_file` takes them
+    settings : as :func:`~toosicubix.pipeline.batch.fit_file` takes them (``toosicubix validate``, like ``fit``,
+        estimates the click noise and the road normals unless given them); default: its defaults with 3 next clicks
+        per vehicle (the parts to suggest)
     thresholds : when a vehicle is well determined
-    next_clicks : how many parts to suggest per vehicle
-    keypoints : suggest a keypoint mapping's keypoints instead of the vocabulary's parts
 
     Raises
     ------
     InputFileError
-        Bad annotation or priors file, unknown prototype (the message has the file and the JSON paths).
+        Bad annotation file, unknown prototype (the message has the file and the JSON paths).
     """
     annotations = Path(annotations)
-    options = options or SolverOptions()
+    settings = settings or BatchSettings(next_clicks=3)
     thresholds = thresholds or Thresholds()
-    priors = load_priors(priors_path)
-    index = index_annotations(annotations, known_prototypes=list(priors))
-    refuse_with_ground(estimate_road_normal, ground, joint_ground)
+    index = index_annotations(annotations, known_prototypes=list(settings.priors))
     # Read image by image, as fit does: the fitter and the checks read the same stream.
-    pilot, for_checks, results = pilot_and_fits(index, ground, priors, options, jobs, progress, on_start,
-                                                estimate_click_sigma, estimate_road_normal, joint_ground, next_clicks,
-                                                keypoints)
+    pilot, for_checks, results = pilot_and_fits(index, settings, progress, on_start)
     options = pilot.options
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)

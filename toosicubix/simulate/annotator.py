@@ -68,7 +68,7 @@ from toosicubix.formats.datasets import (
 from toosicubix.formats.ground_truth import open_ground_truth
 from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
-from toosicubix.model import Part, Vehicle
+from toosicubix.model import GroundOverride, Part, Vehicle
 from toosicubix.parts.synthesis import PartSpec, true_parameters
 
 #: KITTI's vehicle types (defined once, in :mod:`toosicubix.formats.datasets`).
@@ -454,12 +454,12 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
 
 
 def annotation_document(simulated: list[SimulatedVehicle],
-                        ground: dict[str, Any] | None = None) -> dict[str, Any]:
+                        ground: GroundOverride | None = None) -> dict[str, Any]:
     """The annotation file (v1) of simulated vehicles, one image entry per image id (input order).
 
     Parameters
     ----------
-    ground : a ground block given to every image (e.g. ``toosicubix.model.KITTI_GROUND``), or None
+    ground : the ground-block fields given to every image (e.g. ``toosicubix.model.KITTI_GROUND``), or None
     """
     images: dict[str, dict[str, Any]] = {}
     for sv in simulated:
@@ -469,7 +469,7 @@ def annotation_document(simulated: list[SimulatedVehicle],
             P2 = np.hstack([gt.camera.K, (gt.camera.K @ gt.camera.t_cam_rect)[:, None]])
             image = images[gt.image_id] = {
                 "id": gt.image_id, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
-                "camera": {"P": P2.tolist()}, **({"ground": dict(ground)} if ground else {}), "vehicles": [],
+                "camera": {"P": P2.tolist()}, **({"ground": ground.to_json()} if ground else {}), "vehicles": [],
             }
         box2d = np.array([round(float(v), 2) for v in gt.label.box2d])
         image["vehicles"].append(vehicle_json(Vehicle(gt.vehicle_id, gt.label.type, box2d, tuple(sv.parts), "")))
@@ -532,7 +532,7 @@ def check_simulation_targets(annotations: str | Path, gt_dir: str | Path) -> Non
 
 
 def write_simulation(simulated: list[SimulatedVehicle], annotations: str | Path, gt_dir: str | Path,
-                     ground: dict[str, Any] | None = None) -> None:
+                     ground: GroundOverride | None = None) -> None:
     """Write the annotation file and, in ``gt_dir``, the simulated vehicles' ground truth as a KITTI object
     folder (``label_2/<image id>.txt``, ``calib/<image id>.txt`` with ``P2`` in every ``P`` line) that
     ``toosicubix eval --kitti`` reads. Files are written atomically; the marker :data:`SIMULATION_MARKER`

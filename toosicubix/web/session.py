@@ -46,13 +46,13 @@ import numpy as np
 from toosicubix import vocabulary
 from toosicubix.annotations.convert import (
     camera_from_schema,
-    ground_from_schema,
+    ground_with,
     image_json,
     load_images,
     part_from_schema,
 )
 from toosicubix.annotations.mapping import MappingFile
-from toosicubix.annotations.schema import parse_annotations, parse_ground_block
+from toosicubix.annotations.schema import parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
@@ -60,7 +60,7 @@ from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
 from toosicubix.jsonfile import read_json
-from toosicubix.model import GroundPlane, Image, Part, Vehicle
+from toosicubix.model import GroundBlock, GroundOverride, GroundPlane, Image, Part, Vehicle
 from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
@@ -145,7 +145,7 @@ class ImageState:
     path: Path
     file: str
     camera: Camera
-    ground_block: dict | None
+    ground_block: GroundBlock | None
     ground: GroundPlane | None
     vehicles: list[VehicleState] = field(default_factory=list)
     undo: list[list[VehicleState]] = field(default_factory=list)
@@ -225,10 +225,10 @@ class Session:
     cameras : camera per image id, for images the file does not have
     priors : size priors (the prototypes a vehicle may take)
     prototype : the prototype of a new vehicle
-    ground : the ground block (annotation file fields, e.g. :data:`toosicubix.model.KITTI_GROUND`) given to
-        images the file does not have yet; the file's own blocks are kept
-    road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground block of the road
-        normal ``fit`` estimates for it (:func:`toosicubix.pipeline.pilot.file_estimates`): the page fits that
+    ground : the ground block's fields (e.g. :data:`toosicubix.model.KITTI_GROUND`) given to images the file does
+        not have yet; the file's own blocks are kept
+    road_grounds : per camera (:func:`toosicubix.pipeline.road_normal.camera_key`), the ground-block fields of the
+        road normal ``fit`` estimates for it (:func:`toosicubix.pipeline.pilot.file_estimates`): the page fits that
         camera's images without a ground block of their own on it, as ``fit`` does; never written to the file
     estimate : what ``fit`` would estimate from an annotation file (its path), ``(options, road_grounds)``, or
         None when nothing is estimated (a given click noise, no road normal). ``options`` and ``road_grounds`` are
@@ -242,14 +242,13 @@ class Session:
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
                  prototype: str = "Car", options: SolverOptions | None = None,
-                 thresholds: Thresholds | None = None, ground: dict[str, Any] | None = None,
-                 road_grounds: dict[tuple, dict[str, Any]] | None = None,
-                 estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, dict[str, Any]] | None]] | None = None,
+                 thresholds: Thresholds | None = None, ground: GroundOverride | None = None,
+                 road_grounds: dict[tuple, GroundOverride] | None = None,
+                 estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, GroundOverride] | None]] | None = None,
                  mapping: MappingFile | None = None):
         self.out = Path(out)
         self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
-        self._ground_block = None if ground is None else parse_ground_block(ground, "ground").model_dump()
-        self._ground = None if ground is None else ground_from_schema(parse_ground_block(ground, "ground"))
+        self._ground_block, self._ground = (None, None) if not ground else ground_with(None, ground, "ground")
         self._road_grounds = _road_grounds(road_grounds)
         self._estimate = estimate
         self._estimating: threading.Thread | None = None
@@ -810,9 +809,9 @@ class Session:
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
 
 
-def _road_grounds(blocks: dict[tuple, dict[str, Any]] | None) -> dict[tuple, GroundPlane]:
+def _road_grounds(blocks: dict[tuple, GroundOverride] | None) -> dict[tuple, GroundPlane]:
     """Per camera, the ground plane of an estimated road normal's block (the batch's, never the file's)."""
-    return {key: replace(ground_from_schema(parse_ground_block(block, "estimated road normal")), from_batch=True)
+    return {key: replace(ground_with(None, block, "estimated road normal")[1], from_batch=True)
             for key, block in (blocks or {}).items()}
 
 
