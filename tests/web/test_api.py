@@ -17,6 +17,7 @@ from toosicubix.errors import InputFileError
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import KITTI_GROUND
 from toosicubix.web.server import serve_in_thread
+from toosicubix.web.request_fields import ApiError
 from toosicubix.web.session import Session, load_cameras
 
 
@@ -351,3 +352,28 @@ def test_cameras_file_of_the_importers_is_read_too(tmp_path):
     path.write_text(json.dumps({"cameras": [{"match": "*Camera_5*", "K": K}]}))
     with pytest.raises(InputFileError, match="no camera for image 'b'"):
         load_cameras(path, ["a", "b"], ["a_Camera_5.jpg", "b_Camera_6.jpg"])
+
+
+def test_edits_are_checked_with_the_schemas_own_field_bounds(scene, tmp_path):
+    """A click, box or known length the annotation file's schema would refuse is refused by the page (400), so the
+    page never saves a file that `fit`, `validate` or `annotate` itself would not read back."""
+    from toosicubix.annotations.schema import MAX_METRES, MAX_PIXEL, MIN_SIGMA_METRES
+
+    image, cameras = scene
+    session = Session([image], tmp_path / "a.json", load_cameras(cameras, ["car"]), load_priors())
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    revision = session.revision
+    bad = [
+        ({"op": "add_click", "vehicle": "1", "kind": "point", "name": "wheel-front-left", "uv": [[2 * MAX_PIXEL, 1.0]]},
+         "pixel coordinate within"),
+        ({"op": "set_vehicle", "vehicle": "1", "box2d": [0, 0, 1e308, 1e308]}, "pixel coordinate within"),
+        ({"op": "add_click", "vehicle": "1", "kind": "length", "name": "plate-rear", "uv": [[10.0, 10.0], [20.0, 10.0]],
+          "known": [2 * MAX_METRES, 0.01]}, "size in metres"),
+        ({"op": "add_click", "vehicle": "1", "kind": "length", "name": "plate-rear", "uv": [[10.0, 10.0], [20.0, 10.0]],
+          "known": [0.5, MIN_SIGMA_METRES / 10]}, "sigma in metres"),
+    ]
+    for edit, expected in bad:
+        with pytest.raises(ApiError, match=expected) as refused:
+            session.edit(0, {"revision": revision, **edit})
+        assert refused.value.status == 400
+    assert session.revision == revision  # nothing changed

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput
+from toosicubix.cli.options import BadInput, out_option
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -62,8 +62,8 @@ def _write(path: Path, text: str, warnings: list[str], quiet: bool) -> None:
 
 @export_group.command("openlabel")
 @_common
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="The OpenLABEL JSON file to write.")
+@out_option("The OpenLABEL JSON file to write.", "output", type=click.Path(dir_okay=False, path_type=Path),
+            required=True)
 def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, output: Path) -> None:
     """Write ASAM OpenLABEL 1.0.0: a frame per image, a camera stream with intrinsics_pinhole, each fitted
     vehicle an object with a cuboid [x, y, z, qx, qy, qz, qw, dx, dy, dz] (box centre in the camera frame,
@@ -83,8 +83,8 @@ def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, out
 
 @export_group.command("cvat")
 @_common
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="The CVAT for images 1.1 XML file to write.")
+@out_option("The CVAT for images 1.1 XML file to write.", "output", type=click.Path(dir_okay=False, path_type=Path),
+            required=True)
 def cvat_command(out: Path, annotations_path: Path | None, quiet: bool, output: Path) -> None:
     """Write the fitted cuboids projected into each image as CVAT for images 1.1 shapes (a polyline over the
     12 edges, a polygon on the front face), for CVAT to import into the task that holds the clicks (upload

@@ -6,15 +6,14 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput
+from toosicubix.cli.options import BadInput, priors_option
 
 
 @click.command("template")
 @click.argument("tool", type=click.Choice(["cvat", "label-studio", "coco"]))
 @click.option("--prototypes", default="Car,Van,Truck", show_default=True,
               help="Comma-separated prototypes (size classes of the priors table) annotators choose from.")
-@click.option("--priors", "priors_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Priors file the prototypes must be in; default: the bundled table.")
+@priors_option
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the template to this file instead of stdout.")
 def template_command(tool: str, prototypes: str, priors_path: Path | None, out_path: Path | None) -> None:
