@@ -172,7 +172,7 @@ def main() -> None:
                         help="with --apollocar3d: positions learned on the even images, the odd images scored")
     parser.add_argument("--design", action="store_true",
                         help="with --apollocar3d: the learning half only (positions learned on images 0, 4, 8, ..., "
-                             "the cars of images 2, 6, 10, ... scored), for choosing a setting (RESULTS.md rule 12)")
+                             "the cars of images 2, 6, 10, ... scored), for choosing a setting (benchmarks/decisions.md, rule 12)")
     parser.add_argument("--naming-grazing-deg", type=float, default=NAMING_GRAZING_DEG,
                         help="with --apollocar3d: name among keypoints on faces turned away by up to this (degrees; "
                              "negative: turned toward the camera by at least that) [default: the page's]")
@@ -287,7 +287,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
     cars scored; ``design``: the same within the even images (learned on images 0, 4, 8, ..., images 2, 6, 10, ...
     scored). ``grazing_deg``: :func:`~toosicubix.web.naming.naming_candidates`'s. ``estimates``: as
     :func:`loaded_as_the_page`. ``position_faces``: as :func:`_faces`. ``nearest``: name by the nearest keypoint,
-    not the most probable (as before rule 15, RESULTS.md)."""
+    not the most probable (as before rule 15, benchmarks/decisions.md)."""
     keypoints_path = folder / "apollocar3d_val_dev.json"
     cameras = load_cameras(folder / "cameras.json")
     scored_images = None
@@ -366,7 +366,7 @@ def apollocar3d_naming(folder: Path, seed: int = 0, ks: tuple[int, ...] = APOLLO
 
 def _faces(mapping, position_faces: bool):
     """``mapping`` as it is, or with ``position_faces`` without the faces its keypoints were learned to be seen
-    from, so that each is seen on the faces its position sits near (as before rule 13, RESULTS.md)."""
+    from, so that each is seen on the faces its position sits near (as before rule 13, benchmarks/decisions.md)."""
     if not position_faces:
         return mapping
     document = mapping.model_dump(mode="json", exclude_none=True)

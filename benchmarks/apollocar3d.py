@@ -2,7 +2,7 @@
 
 One command: import the keypoints (``import coco``), fit (``fit``), score (``eval --apollocar3d``), with the
 paper's six metrics (mean and median) by number of labelled keypoints and by depth, beside the paper's KITTI
-row. The rules that fixed every choice before any result was seen are in ``benchmarks/RESULTS.md``:
+row. The rules that fixed every choice before any result was seen are in ``benchmarks/decisions.md``:
 
 - images sorted by file name; positions learned on the even ones (learning half), scored on the odd ones
   (comparison half): the out-of-sample figures;
@@ -17,7 +17,7 @@ row. The rules that fixed every choice before any result was seen are in ``bench
 Rows: the keypoints with ``fit``'s default settings (the targets' row: the size prior, the click noise and the
 camera's road normal estimated from the batch, rule 7); the same with the chi-square test of each fit's residuals
 widening the misfits' sigmas (``--misfit-level 0.99``, rule 8); with each car type its own prototype, its size
-prior measured on the learning images' cars (rule 16: not a default, see RESULTS.md); without the road normal
+prior measured on the learning images' cars (rule 16: not a default, see benchmarks/decisions.md); without the road normal
 (``--road-normal none``, the default before rule 7); with the licence plates' width (``--option plates``); with
 the camera's road normal taken
 from the ground truth (the median up axis of the learning half's cars, or of all for the in-sample half) instead
@@ -303,7 +303,7 @@ def calibration(objects: list[dict], of: str = "yaw") -> tuple[float | None, flo
 
 
 def contradicting_cars(images: list, learned: dict, samples: list) -> dict[str, str]:
-    """The cars of ``images`` whose ground truth contradicts their clicks by rule 6 (RESULTS.md): at the
+    """The cars of ``images`` whose ground truth contradicts their clicks by rule 6 (benchmarks/decisions.md): at the
     ground-truth pose their keypoints (``samples``) lie more than 0.5 m RMS from their rays, keypoints at the
     ``learned`` positions (:func:`learned_and_samples`). For a report beside the figures; no car is left out of
     them.
@@ -333,7 +333,7 @@ def contradicting_cars(images: list, learned: dict, samples: list) -> dict[str, 
 
 
 def hiding_cars(learned: dict, samples: list) -> dict[str, dict]:
-    """The cars whose ground truth hides their clicks (``samples``) by rule 17 (RESULTS.md), each with how many of
+    """The cars whose ground truth hides their clicks (``samples``) by rule 17 (benchmarks/decisions.md), each with how many of
     its labelled keypoints have learned ``seen_from`` faces (``labelled_with_faces``) and how many of those its
     ground-truth pose turns away from the camera (``hidden``); and, at the ground truth's depth-reversed twin
     (:func:`toosicubix.geometry.depth_reversed_twin`), the keypoints' RMS distance from their rays

@@ -1,4 +1,4 @@
-"""How far KITTI's roads are from the nominal ground plane (issue 6, RESULTS.md "Scale and ground cues").
+"""How far KITTI's roads are from the nominal ground plane (issue 6, benchmarks/decisions.md "Scale and ground cues").
 
 The KITTI ground block says: camera 1.65 m above a road whose normal is the camera's -y. This measures how
 well that holds where the vehicles stand: the camera-frame height ``y`` of every labelled vehicle's bottom

@@ -199,7 +199,7 @@ def main() -> None:
                              "(metres), e.g. 0.05,0.06,0.07,0.08,0.09,0.1.")
     parser.add_argument("--misfit-level", type=float, default=None,
                         help="The calibration rows with the chi-square test of each fit's residuals at this level "
-                             "(`fit --misfit-level`; rule 8 of RESULTS.md measured 0.99).")
+                             "(`fit --misfit-level`; rule 8 of benchmarks/decisions.md measured 0.99).")
     args = parser.parse_args()
     base = replace(OPTIONS, misfit_level=args.misfit_level)
     report: dict = {"machine": machine(), "misfit_level": args.misfit_level, "calibration": [], "next_click": []}

@@ -1,6 +1,6 @@
 """Rotations, projections and cuboids: the geometry every other module shares.
 
-Frames (see README, "Conventions"):
+Frames (see docs/conventions.md):
 
 - ``vehicle``: origin at the centre of the cuboid's bottom face; X forward, Y left, Z up.
 - ``cam``: x right, y down, z forward (OpenCV). ``X_cam = R_cam_vehicle @ X_vehicle + t_cam_vehicle``.

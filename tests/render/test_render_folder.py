@@ -134,7 +134,7 @@ def test_only_keeps_images_with_failed_vehicles(fitted):
     assert not any(selected(r, "failed") for r in results)  # every sample vehicle is fitted
     assert all(selected(r, None) for r in results)
     uncertain = [r.id for r in results if selected(r, "uncertain")]
-    assert uncertain  # the sample has vehicles with yaw sigmas far above 5 degrees (see README, validate)
+    assert uncertain  # the sample has vehicles with yaw sigmas far above 5 degrees (see docs/uncertainty.md, validate)
 
 
 def test_fitted_positions_round_trip_through_the_distortion():

@@ -151,7 +151,7 @@ def test_a_fit_the_noise_explains_refines_one_batch(monkeypatch):
 
 
 def test_a_misfit_refines_the_next_plausible_starts_and_keeps_the_cheapest(monkeypatch):
-    """The search goes on after a misfit whether or not --misfit-level is given (rule 10, RESULTS.md)."""
+    """The search goes on after a misfit whether or not --misfit-level is given (rule 10, benchmarks/decisions.md)."""
     batches = _spy_batches(monkeypatch)
     rng = np.random.default_rng(5)
     d, parts = twelve_keypoints(rng, 1.0)

@@ -27,7 +27,7 @@ def template_command(tool: str, prototypes: str, priors_path: Path | None, out_p
                   keypoints (nest each under its box in the Regions panel)
     coco          COCO 'categories' (one per prototype) with the keypoint names and a skeleton
 
-    Every template names one keypoint per click (see the README's keypoint vocabulary).
+    Every template names one keypoint per click (see docs/tools.md for the keypoint vocabulary).
 
     \b
     Example:

@@ -117,7 +117,7 @@ class VehicleResult:
     cost : final pixel cost; prior_mahalanobis2 : the size prior's squared Mahalanobis distance
     parameters : the wheel positions and other auxiliary unknowns by name, metres
     scale_from, scale_shares : the cue that sets the scale, and every cue's share of it
-    sigma, confidence, observability, ambiguous, alternatives : how sure the fit is (README, "How sure is a fit")
+    sigma, confidence, observability, ambiguous, alternatives : how sure the fit is (docs/uncertainty.md)
     residual_test : the chi-square test of its residuals (:mod:`toosicubix.solver.misfit`; a misfit's sigmas are
         widened), or None when its clicks were not redundant enough (written only when set)
     warnings : what the solver warned about; solver : its statistics

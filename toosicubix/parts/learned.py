@@ -42,13 +42,13 @@ from toosicubix.vocabulary import FACES, faces_seen_from
 SEEN_FROM_SHARE = 0.95
 
 #: A ground-truth pose *hides its clicks* when it turns at least this many of a vehicle's labelled keypoints, and at
-#: least this share of them, away from the camera (:func:`hides_clicks`; benchmarks/RESULTS.md, rule 17).
+#: least this share of them, away from the camera (:func:`hides_clicks`; benchmarks/decisions.md, rule 17).
 HIDES_MIN, HIDES_SHARE = 3, 0.25
 
 #: Metres: a vehicle whose labelled keypoints, at their learned positions on its ground-truth cuboid, lie farther
 #: than this (RMS) from their rays has a ground truth that contradicts its clicks (:func:`contradicting`):
 #: ``learn-parts``' second pass leaves it out by default and ``eval --apollocar3d`` scores it apart
-#: (benchmarks/RESULTS.md, rule 6).
+#: (benchmarks/decisions.md, rule 6).
 CONTRADICTION_M = 0.5
 
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.

@@ -16,7 +16,7 @@ refused when their median angle from it exceeds :data:`MAX_SPREAD_DEG` (they do 
 are then fitted with the ground block :func:`ground_block`: the normal known within :data:`NORMAL_SIGMA_DEG`,
 vehicles upright on it within :data:`UPRIGHT_SIGMA_DEG`, no camera height (the scale still comes from the sizes).
 
-These values were fixed before the comparison run by rule 7 of benchmarks/RESULTS.md: the sigmas from the
+These values were fixed before the comparison run by rule 7 of benchmarks/decisions.md: the sigmas from the
 spread of ApolloCar3D's learning-half ground-truth up axes (median 2.0, 90 %: 5.2 degrees), the thresholds
 before any result.
 """

@@ -80,7 +80,7 @@ OCCLUSION_DROP = {0: 0.0, 1: 0.3, 2: 0.6, 3: 0.6}
 #: How far, at most, the outer faces of the tyres sit inside the body's sides (metres; uniform from 0, one
 #: draw per vehicle). Measured on ApolloCar3D's car meshes (10 models: the sidewall at the ground a median
 #: 2.2 cm inside the widest body point, mirrors left out, 10-90 % 0.3-4.3 cm at KITTI's 1.63 m mean width);
-#: track, tyre and body widths of common cars agree. Sources: benchmarks/RESULTS.md, "Scale and ground cues".
+#: track, tyre and body widths of common cars agree. Sources: benchmarks/decisions.md, "Scale and ground cues".
 TYRE_INSET_MAX = 0.05
 
 

@@ -61,7 +61,7 @@ class SolverOptions:
     lambda_px : weight of the size prior in the pixel cost (``lambda_p``), px^2 per unit of squared
         Mahalanobis distance: the click-noise variance at which a MAP estimate weighs clicks and prior.
         The defaults (0.1, 10) are ``toosicubix tune``'s choice on simulated clicks (1 px noise, realistic
-        part placement) on the KITTI tracking tuning sequences 0000-0009; see README, "Method and settings".
+        part placement) on the KITTI tracking tuning sequences 0000-0009; see docs/method.md.
     min_constraints : fewer constraints than this fail the vehicle (6: pose, with the prior's 3 for size)
     sweep_starts : yaws spread over the circle tried besides the line-based ones (0: the paper's starts only)
     descent_starts : how many starts, the best by pixel cost after the first shape step, continue the descent
@@ -89,12 +89,12 @@ class SolverOptions:
     robust_loss : 'cauchy' (reweight clicks far off the fit, :mod:`.robust`), 'none', or 'auto': Cauchy for
         vehicles with keypoint or plate clicks (real clicks: mislabelled ones happen), none otherwise. Default
         'auto': on ApolloCar3D's comparison half it lowered the mean E_comb and E_R and took yaw within two sigmas
-        from 87.2 to 89.8 % (rule 18 of benchmarks/RESULTS.md); vehicles of cuboid parts are fitted as without it
+        from 87.2 to 89.8 % (rule 18 of benchmarks/decisions.md); vehicles of cuboid parts are fitted as without it
     robust_rounds : how many reweighting rounds the robust loss takes at most
     misfit_level : the level of the chi-square test of a fit's residuals (:mod:`.misfit`), e.g. 0.99; a fit that
         fails it is warned about and its sigmas widen by the root of its chi-square per degree of freedom. Default
         None (no test): on the simulated KITTI test split it took the yaw share within one sigma with a ground
-        block to 76.2 %, past the 60-76 % that rule 8 of benchmarks/RESULTS.md asked for
+        block to 76.2 %, past the 60-76 % that rule 8 of benchmarks/decisions.md asked for
     """
 
     lambda_3d: float = 0.1

@@ -17,7 +17,7 @@ left: disagreement spread over many clicks, not one mislabelled click.
 
 Real human clicks (ApolloCar3D) have heavier tails than one noise level per batch. The test is off unless asked
 for (``SolverOptions.misfit_level``, ``--misfit-level``): the rules that decided it and what it did on real and
-simulated clicks are in benchmarks/RESULTS.md (rules 8 and 9).
+simulated clicks are in benchmarks/decisions.md (rules 8 and 9).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from toosicubix.solver.refine import MIN_DEPTH
 
 #: How far past edge-on (degrees) a face a keypoint sits near may be turned for an unnamed click to be named that
 #: keypoint; negative: turned toward the camera by at least that. 0: any face turned toward the camera (a click
-#: shows its part is seen), chosen by RESULTS.md's rule 12 over the targets' -5 (VISIBLE_MIN_DEG).
+#: shows its part is seen), chosen by rule 12 of benchmarks/decisions.md over the targets' -5 (VISIBLE_MIN_DEG).
 NAMING_GRAZING_DEG = 0.0
 
 
@@ -40,7 +40,7 @@ def naming_candidates(result: VehicleResult, camera: Camera,
     away by up to that, negative: toward it by at least that), or when it has none. A keypoint behind the camera
     is left out. With ``click_sigma`` (pixels), each keypoint also gets ``sigma_px``, how far a click of it may
     lie from its predicted pixel (the click noise and its spread projected at its depth), and ``prior``, its
-    ``clicked_share``: :func:`nearest_parts` then ranks by probability (RESULTS.md, rule 15)."""
+    ``clicked_share``: :func:`nearest_parts` then ranks by probability (benchmarks/decisions.md, rule 15)."""
     out = [s for s in (result.next_clicks or []) if s["kind"] == "point" and (points is None or s["name"] in points)]
     if not keypoints or not result.ok:
         return out
