@@ -172,7 +172,8 @@ def main() -> None:
                         help="with --apollocar3d: positions learned on the even images, the odd images scored")
     parser.add_argument("--design", action="store_true",
                         help="with --apollocar3d: the learning half only (positions learned on images 0, 4, 8, ..., "
-                             "the cars of images 2, 6, 10, ... scored), for choosing a setting (benchmarks/decisions.md, rule 12)")
+                             "the cars of images 2, 6, 10, ... scored), for choosing a setting "
+                             "(benchmarks/decisions.md, rule 12)")
     parser.add_argument("--naming-grazing-deg", type=float, default=NAMING_GRAZING_DEG,
                         help="with --apollocar3d: name among keypoints on faces turned away by up to this (degrees; "
                              "negative: turned toward the camera by at least that) [default: the page's]")

@@ -17,7 +17,8 @@ row. The rules that fixed every choice before any result was seen are in ``bench
 Rows: the keypoints with ``fit``'s default settings (the targets' row: the size prior, the click noise and the
 camera's road normal estimated from the batch, rule 7); the same with the chi-square test of each fit's residuals
 widening the misfits' sigmas (``--misfit-level 0.99``, rule 8); with each car type its own prototype, its size
-prior measured on the learning images' cars (rule 16: not a default, see benchmarks/decisions.md); without the road normal
+prior measured on the learning images' cars (rule 16: not a default, see benchmarks/decisions.md); without the road
+normal
 (``--road-normal none``, the default before rule 7); with the licence plates' width (``--option plates``); with
 the camera's road normal taken
 from the ground truth (the median up axis of the learning half's cars, or of all for the in-sample half) instead
@@ -333,8 +334,8 @@ def contradicting_cars(images: list, learned: dict, samples: list) -> dict[str, 
 
 
 def hiding_cars(learned: dict, samples: list) -> dict[str, dict]:
-    """The cars whose ground truth hides their clicks (``samples``) by rule 17 (benchmarks/decisions.md), each with how many of
-    its labelled keypoints have learned ``seen_from`` faces (``labelled_with_faces``) and how many of those its
+    """The cars whose ground truth hides their clicks (``samples``) by rule 17 (benchmarks/decisions.md), each with how
+    many of its labelled keypoints have learned ``seen_from`` faces (``labelled_with_faces``) and how many of those its
     ground-truth pose turns away from the camera (``hidden``); and, at the ground truth's depth-reversed twin
     (:func:`toosicubix.geometry.depth_reversed_twin`), the keypoints' RMS distance from their rays
     (``twin_off_rays_m``; ``off_rays_m`` at the ground truth) and how many it turns away (``twin_hidden``).

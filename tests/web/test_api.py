@@ -16,8 +16,8 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.errors import InputFileError
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import KITTI_GROUND
-from toosicubix.web.server import serve_in_thread
 from toosicubix.web.request_fields import ApiError
+from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras
 
 

@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field
 
 from toosicubix import vocabulary
-from toosicubix.annotations.schema import _Model, _validate
+from toosicubix.annotations.schema import PositiveRow3, _Model, _validate
 from toosicubix.errors import InputFileError
 from toosicubix.jsonfile import read_json
 from toosicubix.parts.linear import TypicalKeypoint
@@ -74,7 +74,7 @@ class KeypointPosition(_Model):
     """A keypoint's typical position, fractions of ``(dx, dy, dz)``, and its spread over vehicles."""
 
     at: Row3
-    spread: Row3
+    spread: PositiveRow3
     n: int | None = Field(default=None, ge=0, description="How many labelled keypoints it was learned from.")
     seen_from: list[Literal["front", "rear", "left", "right", "top"]] | None = Field(
         default=None, min_length=1,
@@ -86,13 +86,6 @@ class KeypointPosition(_Model):
         description="How often it was clicked where it could be seen (learned: of the vehicles on which one of "
                     "its seen_from faces was turned to the camera, the share on which it was labelled); the "
                     "suggested next clicks weigh their gain by it. None: 1.")
-
-    @field_validator("spread")
-    @classmethod
-    def _ensure_positive_spread(cls, spread: Row3) -> Row3:
-        if min(spread) <= 0:
-            raise ValueError(f"expected positive spreads, got {list(spread)}")
-        return spread
 
 
 class _PositionFor:

@@ -107,10 +107,12 @@ def _ensure_positive_row(row: Row3) -> Row3:
     return row
 
 
+#: Three positive numbers (a keypoint's spread).
+PositiveRow3 = Annotated[Row3, AfterValidator(_ensure_positive_row)]
 #: The pydantic type and default of each ``fields_extra`` type name of the vocabulary.
 _EXTRA_FIELD_TYPES: dict[str, tuple[Any, Any]] = {
     "row3": (Row3, ...),
-    "positive_row3": (Annotated[Row3, AfterValidator(_ensure_positive_row)], ...),
+    "positive_row3": (PositiveRow3, ...),
     "bool_default_true": (bool, True),
 }
 

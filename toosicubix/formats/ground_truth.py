@@ -188,20 +188,29 @@ def _calib_offset(calib_path: Path | None) -> tuple[np.ndarray | None, np.ndarra
     return camera.t_cam_rect, camera.K, str(calib_path)
 
 
-class KittiObjectGroundTruth(GroundTruthSource):
+class _KittiGroundTruth(GroundTruthSource):
+    """KITTI labels in the folder its walker (:attr:`walker`) finds; ``strict``: ``label_2/`` (or ``label_02/``) and
+    ``calib/`` both required (the simulator's need), named as the walker names them."""
+
+    default_classes = KITTI_DEFAULT_CLASSES
+    walker: type[KittiObjectFolder] | type[KittiTrackingFolder]
+
+    def __init__(self, root: str | Path, strict: bool = False):
+        if strict:
+            self.root, self.folder = Path(root), self.walker(root, strict=True)
+        else:
+            super().__init__(root)
+            self.folder = _walk(self.walker, self.root)
+        self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
+
+
+class KittiObjectGroundTruth(_KittiGroundTruth):
     """KITTI object-benchmark labels: ``DIR/label_2/<id>.txt`` with ``DIR/calib/<id>.txt``, or ``DIR/<id>.txt``
     with the calib folder at ``DIR/../calib``."""
 
     kind = "kitti"
-    default_classes = KITTI_DEFAULT_CLASSES
-
-    def __init__(self, root: str | Path, strict: bool = False):
-        if strict:  # label_2/ and calib/ both (the simulator's need), named as the folder walker names them
-            self.root, self.folder = Path(root), KittiObjectFolder(root, strict=True)
-        else:
-            super().__init__(root)
-            self.folder = _walk(KittiObjectFolder, self.root)
-        self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
+    walker = KittiObjectFolder
+    folder: KittiObjectFolder
 
     def image_ids(self) -> list[str]:
         return self.folder.image_ids()
@@ -220,21 +229,17 @@ class KittiObjectGroundTruth(GroundTruthSource):
         return f"KITTI object labels in {self.label_dir} (calib: {calib})"
 
 
-class KittiTrackingGroundTruth(GroundTruthSource):
+class KittiTrackingGroundTruth(_KittiGroundTruth):
     """KITTI tracking labels: ``DIR/label_02/<seq>.txt`` with ``DIR/calib/<seq>.txt``; image ids
     ``<seq>_<frame as 6 digits>``."""
 
     kind = "kitti-tracking"
-    default_classes = KITTI_DEFAULT_CLASSES
+    walker = KittiTrackingFolder
+    folder: KittiTrackingFolder
     per_track = True
 
     def __init__(self, root: str | Path, strict: bool = False):
-        if strict:  # label_02/ and calib/ both (the simulator's need), named as the folder walker names them
-            self.root, self.folder = Path(root), KittiTrackingFolder(root, strict=True)
-        else:
-            super().__init__(root)
-            self.folder = _walk(KittiTrackingFolder, self.root)
-        self.label_dir, self.calib_dir = self.folder.label_dir, self.folder.calib_dir
+        super().__init__(root, strict)
         self._sequences: dict[str, dict[int, list[kitti.KittiObject]]] = {}
 
     def image_ids(self) -> list[str]:
