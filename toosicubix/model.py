@@ -57,6 +57,7 @@ class Vehicle:
     box2d : (4,) annotated (x1, y1, x2, y2), or None
     parts : its annotations, in file order
     known_dimensions : ``{"dx": (metres, sigma), ...}`` for the dimensions known from elsewhere
+    track : the physical vehicle it is across the frames of its image's sequence, or None
     """
 
     id: str
@@ -65,6 +66,7 @@ class Vehicle:
     parts: tuple[Part, ...]
     json_path: str
     known_dimensions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    track: str | None = None
 
 
 @dataclass(frozen=True)
@@ -172,6 +174,7 @@ class Image:
     ----------
     ground : the road plane the solver reads, or None
     ground_block : the ground block it was made from, as the file states it (or as an override set it), or None
+    sequence, frame : the video it is a frame of and its frame number there, or None
     """
 
     id: str
@@ -181,6 +184,8 @@ class Image:
     json_path: str
     ground: GroundPlane | None = None
     ground_block: GroundBlock | None = None
+    sequence: str | None = None
+    frame: int | None = None
 
 
 #: The road normal of a level camera (camera y points down).

@@ -79,13 +79,15 @@ def image_from_schema(im: schemas.ImageAnnotation, index: int) -> Image:
             parts=tuple(part_from_schema(p, f"{ip}.vehicles[{j}].parts[{k}]") for k, p in enumerate(v.parts)),
             json_path=f"{ip}.vehicles[{j}]",
             known_dimensions={axis: (k.metres, k.sigma) for axis, k in (v.known_dimensions or {}).items()},
+            track=v.track,
         )
         for j, v in enumerate(im.vehicles)
     )
     return Image(id=im.id, file=im.file, camera=camera_from_schema(im.camera, im.size),
                  vehicles=vehicles, json_path=ip,
                  ground=None if im.ground is None else ground_from_schema(im.ground),
-                 ground_block=None if im.ground is None else block_from_schema(im.ground))
+                 ground_block=None if im.ground is None else block_from_schema(im.ground),
+                 sequence=im.sequence, frame=im.frame)
 
 
 def load_images(path: str | Path) -> list[Image]:
@@ -174,6 +176,8 @@ def part_json(part: Part, decimals: int | None = None) -> dict[str, Any]:
 def vehicle_json(vehicle: Vehicle, decimals: int | None = None) -> dict[str, Any]:
     """One vehicle as the file has it (``box2d`` as stored, the parts' pixels rounded to ``decimals``)."""
     out: dict[str, Any] = {"id": vehicle.id, "prototype": vehicle.prototype}
+    if vehicle.track is not None:
+        out["track"] = vehicle.track
     if vehicle.box2d is not None:
         out["box2d"] = [float(v) for v in vehicle.box2d]
     out["parts"] = [part_json(p, decimals) for p in vehicle.parts]
@@ -200,6 +204,8 @@ def image_json(image: Image, decimals: int | None = None) -> dict[str, Any]:
     out: dict[str, Any] = {"id": image.id}
     if image.file is not None:
         out["file"] = image.file
+    if image.sequence is not None:
+        out["sequence"], out["frame"] = image.sequence, image.frame
     if image.camera.image_size is not None:
         out["size"] = list(image.camera.image_size)
     out["camera"] = camera_json(image.camera)

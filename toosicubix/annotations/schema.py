@@ -52,6 +52,10 @@ MAX_ID_LENGTH = 128
 FOCAL_RANGE_PX = (1.0, 1e6)
 #: The largest camera offset ``|K^-1 P[:, 3]|`` (metres) a ``P`` may hold (KITTI's: 0.06 m).
 MAX_CAMERA_OFFSET = 100.0
+#: The largest frame number of a sequence (KITTI's longest sequence has 1,106 frames; 10^6 is a day at 10 Hz).
+MAX_FRAME = 1_000_000
+#: What names a file: image ids and sequence names (``label_2/<image id>.txt``, ``label_02/<sequence>.txt``).
+FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$"
 
 
 
@@ -282,8 +286,15 @@ class VehicleAnnotation(_Model):
                     description="Unique within its image; no control characters.")
     prototype: str = Field(min_length=1, max_length=MAX_ID_LENGTH,
                            description="Size class in the priors file, e.g. 'Car', 'Mid Size Car'.")
+    track: str | None = Field(
+        default=None, min_length=1, max_length=MAX_ID_LENGTH, pattern=r"^[^\x00-\x1f\x7f]*$",
+        description="The same physical vehicle across the frames of its image's sequence (e.g. '0003-7'): one "
+                    "prototype and one size per track. A tracked vehicle may have clicks, only a box2d, or neither "
+                    "(its pose is then interpolated from the track's other frames).")
     box2d: tuple[Coordinate, Coordinate, Coordinate, Coordinate] | None = Field(
-        default=None, description="Annotated 2D box (x1, y1, x2, y2) in pixels, written to the KITTI file."
+        default=None, description="Annotated 2D box (x1, y1, x2, y2) in pixels, written to the KITTI file; for a "
+                                  "tracked vehicle (or with fit --box-cue) also a cue: the fitted cuboid's projection "
+                                  "touches its sides."
     )
     parts: list[PartAnnotation] = Field(default_factory=list)
     known_dimensions: dict[Literal[DIMENSION_AXES], KnownSize] | None = Field(  # type: ignore[valid-type]
@@ -310,11 +321,19 @@ class ImageAnnotation(_Model):
     """One image: its camera and its annotated vehicles."""
 
     id: str = Field(
-        pattern=r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$", max_length=MAX_ID_LENGTH,
+        pattern=FILE_NAME_PATTERN, max_length=MAX_ID_LENGTH,
         description=f"Image id; names the KITTI label file, so letters, digits, '_', '.', '-' only, at most "
                     f"{MAX_ID_LENGTH} characters.",
     )
     file: str | None = Field(default=None, description="Image path relative to the annotation file.")
+    sequence: str | None = Field(
+        default=None, pattern=FILE_NAME_PATTERN, max_length=MAX_ID_LENGTH,
+        description="The video (sequence) the image is a frame of, e.g. '0003'; names the KITTI tracking label file "
+                    "label_02/<sequence>.txt. Given with 'frame'.")
+    frame: int | None = Field(
+        default=None, ge=0, le=MAX_FRAME,
+        description="The image's frame number in its sequence: orders the frames (each number at most once per "
+                    "sequence; gaps are frames not annotated). Given with 'sequence'.")
     size: tuple[ImageSide, ImageSide] | None = Field(
         default=None, description="(width, height) in pixels; projected boxes are clipped to it."
     )
@@ -326,7 +345,20 @@ class ImageAnnotation(_Model):
     @classmethod
     def _ensure_unique_vehicle_ids(cls, vehicles: list[VehicleAnnotation]) -> list[VehicleAnnotation]:
         _ensure_unique([v.id for v in vehicles], "vehicle")
+        tracks: dict[str, int] = {}
+        for j, v in enumerate(vehicles):
+            if v.track is not None and tracks.setdefault(v.track, j) != j:
+                raise ValueError(f"expected one vehicle per track in a frame, got track {v.track!r} at "
+                                 f"[{tracks[v.track]}] and [{j}]")
         return vehicles
+
+    @model_validator(mode="after")
+    def _ensure_sequence_with_frame(self) -> ImageAnnotation:
+        if (self.sequence is None) != (self.frame is None):
+            raise ValueError("expected 'sequence' and 'frame' together (a frame of a sequence), or neither")
+        if self.sequence is None and any(v.track is not None for v in self.vehicles):
+            raise ValueError("expected 'sequence' and 'frame' on an image whose vehicles carry a 'track'")
+        return self
 
 
 class AnnotationFile(_Model):
@@ -344,6 +376,46 @@ class AnnotationFile(_Model):
         # They name files, and some file systems ignore case: 'A' and 'a' would share one label file.
         _ensure_unique([im.id.lower() for im in images], "image (ignoring case: they name files)")
         return images
+
+    @model_validator(mode="after")
+    def _ensure_consistent_tracks(self) -> AnnotationFile:
+        book = TrackBook()
+        for i, image in enumerate(self.images):
+            book.add(i, image)
+        if book.problems:
+            raise ValueError("; ".join(f"{where}: {message}" for where, message in book.problems))
+        return self
+
+
+class TrackBook:
+    """The rules that span images, checked one image at a time (a file's images, or a stream of them): a frame number
+    at most once per sequence, a track in one sequence only, one prototype per track. ``problems`` lists each broken
+    rule as ``(JSON path, message)``, naming the other place too."""
+
+    def __init__(self) -> None:
+        self.problems: list[tuple[str, str]] = []
+        self._frames: dict[tuple[str, int], int] = {}  # (sequence, frame) -> image index
+        self._tracks: dict[str, tuple[str, str, str]] = {}  # track -> (sequence, prototype, JSON path)
+
+    def add(self, index: int, image: ImageAnnotation) -> None:
+        if image.sequence is None or image.frame is None:
+            return
+        where = f"$.images[{index}]"
+        first = self._frames.setdefault((image.sequence, image.frame), index)
+        if first != index:
+            self.problems.append((f"{where}.frame", f"frame {image.frame} of sequence {image.sequence!r} is given "
+                                                    f"twice: also at $.images[{first}]"))
+        for j, v in enumerate(image.vehicles):
+            if v.track is None:
+                continue
+            path = f"{where}.vehicles[{j}].track"
+            sequence, prototype, seen = self._tracks.setdefault(v.track, (image.sequence, v.prototype, path))
+            if sequence != image.sequence:
+                self.problems.append((path, f"track {v.track!r} is in sequence {image.sequence!r} here and in "
+                                            f"{sequence!r} at {seen}: a track stays in one sequence"))
+            elif prototype != v.prototype:
+                self.problems.append((path, f"track {v.track!r} has prototype {v.prototype!r} here and {prototype!r} "
+                                            f"at {seen}: one prototype (and one size) per track"))
 
 
 def _ensure_unique(ids: list[str], what: str) -> None:

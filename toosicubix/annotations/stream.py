@@ -18,7 +18,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, _describe, _json_path
+from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, TrackBook, _describe, _json_path
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.jsonfile import read_json_text
 
@@ -34,6 +34,8 @@ class AnnotationIndex:
     Attributes
     ----------
     prototypes : the prototype names the vehicles use
+    sequences : per image, its ``(sequence, frame)``, or None for an image of no sequence
+    tracked : how many vehicles carry a ``track``
     """
 
     path: Path
@@ -41,6 +43,8 @@ class AnnotationIndex:
     spans: tuple[tuple[int, int], ...]
     vehicles: int
     prototypes: frozenset[str]
+    sequences: tuple[tuple[str, int] | None, ...] = ()
+    tracked: int = 0
 
 
 class _Scanner:
@@ -149,7 +153,9 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     known = None if known_prototypes is None else set(known_prototypes)
     problems: list[tuple[str, str]] = []
     first_index: dict[str, int] = {}
-    vehicles = 0
+    vehicles = tracked = 0
+    sequences: list[tuple[str, int] | None] = []
+    tracks = TrackBook()
     images_seen = False
     for key, value, _, _ in _top_level(scanner):
         if key != "images":
@@ -163,6 +169,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
             continue
         for i, (raw, start, end) in enumerate(_image_spans(scanner)):
             spans.append((start, end))
+            sequences.append(None)
             if len(problems) >= MAX_PROBLEMS:
                 continue
             try:
@@ -170,6 +177,10 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
             except ValidationError as exc:
                 problems += _problems(exc, ("images", i))
                 continue
+            if image.sequence is not None and image.frame is not None:
+                sequences[-1] = (image.sequence, image.frame)
+                tracked += sum(v.track is not None for v in image.vehicles)
+                tracks.add(i, image)
             if image.id in first_index:
                 problems.append((f"$.images[{i}].id", f"expected unique image ids, got {image.id!r} at "
                                                        f"[{first_index[image.id]}] and [{i}]"))
@@ -184,9 +195,10 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
         AnnotationFile.model_validate({**header, "images": header.get("images", [])} if images_seen else header)
     except ValidationError as exc:
         problems = _problems(exc, ()) + problems
+    problems += tracks.problems
     if problems:
         raise InputFileError(path, problems[:MAX_PROBLEMS])
-    return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes))
+    return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes), tuple(sequences), tracked)
 
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:

@@ -124,6 +124,10 @@ class VehicleResult:
     next_clicks : the best parts to click next (as :meth:`toosicubix.solver.guidance.Suggestion.to_json`
         gives them), or None when not asked for; next_clicks_error : why there are none
     extra : keys of the JSON object this type does not know (kept, written last)
+    track : the track it is a frame of (annotation file's ``track``), or None
+    pose_from : for a tracked vehicle, what determined its pose in this frame: 'clicks' (clicked here), 'box' (only
+        its 2D box here, and the track's other frames), 'interpolated' (nothing here: the track's motion between
+        its other frames); None for a vehicle fitted alone
     """
 
     id: str
@@ -163,6 +167,8 @@ class VehicleResult:
     next_clicks: list[dict[str, Any]] | None = None
     next_clicks_error: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    track: str | None = None
+    pose_from: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -172,6 +178,8 @@ class VehicleResult:
         """The JSON object of one vehicle, keys in results.json's order."""
         out: dict[str, Any] = {
             "id": self.id, "status": self.status, "error": self.error, "prototype": self.prototype,
+            **({"track": self.track} if self.track is not None else {}),
+            **({"pose_from": self.pose_from} if self.pose_from is not None else {}),
             "R_cam_vehicle": _array(self.R_cam_vehicle), "t_cam_vehicle": _array(self.t_cam_vehicle),
             "dimensions": _array(self.dimensions), "box2d": _array(self.box2d),
         }
@@ -228,6 +236,8 @@ class VehicleResult:
             return cls(
                 id=str(json_field(v, "id", str, path, where)), status=status, error=v.get("error"),
                 prototype=str(v.get("prototype", "")),
+                track=v["track"] if isinstance(v.get("track"), str) else None,
+                pose_from=v["pose_from"] if isinstance(v.get("pose_from"), str) else None,
                 R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{where}.R_cam_vehicle")
                 if posed else None,
                 t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{where}.t_cam_vehicle")
@@ -310,6 +320,7 @@ class ImageResult:
     t_cam_rect : (3,) zero unless the camera came from a KITTI ``P``
     image_size : (width, height) or None
     ground : the road plane used or estimated, or None
+    sequence, frame : the video the image is a frame of and its frame number, or None
     """
 
     id: str
@@ -318,6 +329,8 @@ class ImageResult:
     image_size: tuple[int, int] | None
     vehicles: list[VehicleResult]
     ground: RoadPlane | None = None
+    sequence: str | None = None
+    frame: int | None = None
 
 
 def _array(value: np.ndarray | None) -> Any:
@@ -333,6 +346,7 @@ def image_to_json(im: ImageResult) -> dict[str, Any]:
     """The JSON object of one image."""
     return {
         "id": im.id,
+        **({"sequence": im.sequence, "frame": im.frame} if im.sequence is not None else {}),
         "camera": {"K": _array(im.K), "t_cam_rect": _array(im.t_cam_rect),
                    "image_size": list(im.image_size) if im.image_size else None},
         **({"ground": im.ground.to_json()} if im.ground is not None else {}),
@@ -485,6 +499,8 @@ def read_results(path: str | Path) -> list[ImageResult]:
             id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=_road_plane(im.get("ground")),
+            sequence=im["sequence"] if isinstance(im.get("sequence"), str) else None,
+            frame=im["frame"] if isinstance(im.get("frame"), int) and not isinstance(im.get("frame"), bool) else None,
         ))
     return images
 
