@@ -157,8 +157,8 @@ def main() -> None:
             errors = []
             for im in results:
                 fitted = sum(v.ok for v in im.vehicles)
-                if im.ground and im.ground.get("estimated") and fitted >= 3:
-                    errors.append(im.ground["camera_height"] - planes[im.id]["camera_height"])
+                if im.ground is not None and im.ground.estimated and fitted >= 3:
+                    errors.append(im.ground.camera_height - planes[im.id]["camera_height"])
             errors = np.array(errors)
             record = {"placement": placement, "images": len(errors),
                       "median_abs_error_m": float(np.median(np.abs(errors))), "bias_m": float(np.median(errors)),

@@ -158,14 +158,14 @@ def test_an_undetermined_direction_gives_infinite_sigmas_never_zero_or_negative(
     """A parameter no row sees (a zero Jacobian column) makes H singular: the covariance is infinite, the
     sigmas too, written as null in results.json, and the confidence is 0, never 1."""
     from toosicubix.formats.results import dumps
-    from toosicubix.solver.uncertainty import _sandwich, _uncertainty
+    from toosicubix.solver.uncertainty import _sandwich, uncertainty_from_covariance
 
     rng = np.random.default_rng(0)
     J_px = rng.normal(size=(12, 10))
     J_px[:, 7] = 0.0
     J_cue = np.zeros((3, 10))
     cov = _sandwich(J_px, J_cue, 10.0, np.full(12, 1.5))
-    u = _uncertainty(cov, np.eye(3), np.array([0.0, 1.5, 20.0]))
+    u = uncertainty_from_covariance(cov, np.eye(3), np.array([0.0, 1.5, 20.0]))
     assert math.isinf(u.yaw_deg) and math.isinf(u.depth_rel)
     assert u.to_json()["yaw_deg"] is None and u.to_json()["dimensions"] == [None, None, None]
     dumps({"sigma": u.to_json()})  # valid JSON: no infinities

@@ -377,15 +377,6 @@ class AnnotationFile(_Model):
         _ensure_unique([im.id.lower() for im in images], "image (ignoring case: they name files)")
         return images
 
-    @model_validator(mode="after")
-    def _ensure_consistent_tracks(self) -> AnnotationFile:
-        book = TrackBook()
-        for i, image in enumerate(self.images):
-            book.add(i, image)
-        if book.problems:
-            raise ValueError("; ".join(f"{where}: {message}" for where, message in book.problems))
-        return self
-
 
 class TrackBook:
     """The rules that span images, checked one image at a time (a file's images, or a stream of them): a frame number
@@ -473,14 +464,20 @@ def _validate(model: type[_M], data: Any, source: str | Path) -> _M:
 
 
 def parse_annotations(data: Any, source: str | Path = "<annotations>") -> AnnotationFile:
-    """Validate already-decoded JSON data.
+    """Validate already-decoded JSON data: the model, then the rules that span images (:class:`TrackBook`).
 
     Raises
     ------
     InputFileError
         Naming ``source`` and the JSON path of every problem.
     """
-    return _validate(AnnotationFile, data, source)
+    doc = _validate(AnnotationFile, data, source)
+    book = TrackBook()
+    for i, image in enumerate(doc.images):
+        book.add(i, image)
+    if book.problems:
+        raise InputFileError(source, book.problems)
+    return doc
 
 
 def load_annotations(path: str | Path) -> AnnotationFile:

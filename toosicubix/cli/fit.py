@@ -81,6 +81,12 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
         )
         for line in summary.pilot.describe() if summary.pilot is not None else ():
             click.echo(line, err=True)
+        if summary.tracks:
+            counts = ", ".join(f"{summary.pose_from.get(k, 0)} {what}" for k, what in (
+                ("clicks", "from their clicks"), ("box", "from a box alone"), ("interpolated", "interpolated")))
+            click.echo(f"tracks: {summary.tracks} fitted as tracks (one size each, a smooth motion), their frames "
+                       f"{counts} (results.json: pose_from; KITTI tracking labels in "
+                       f"{summary.out_dir / 'label_02'})", err=True)
         if summary.scale_from:
             counts = ", ".join(f"{cue} {n}" for cue, n in sorted(summary.scale_from.items(), key=lambda kv: -kv[1]))
             click.echo(f"scale set by: {counts} (vehicles; per vehicle in results.json: scale_from)", err=True)

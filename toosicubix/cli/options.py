@@ -301,12 +301,22 @@ _FITTING_OPTIONS = [
     click.option("--joint-ground", is_flag=True,
                  help="Refine each image's vehicles together with its ground plane (images with a ground block or "
                       "the options above); the camera height may then be unknown: the vehicles' sizes fix it."),
+    click.option("--tracks", type=click.Choice(["on", "off"]), default="on", show_default=True,
+                 help="on: vehicles that carry a 'track' are fitted with their track's other frames (one size per "
+                      "track, a smooth motion; frames with a box only or nothing get a pose too, said in results.json "
+                      "as pose_from box / interpolated); off: every frame alone (box-only and empty frames fail)."),
+    click.option("--frame-rate", type=click.FloatRange(min=0.0, min_open=True), default=10.0, show_default=True,
+                 help="Frames per second of the sequences (frame numbers over it are the times the tracks' motion "
+                      "model runs on; KITTI's 10)."),
+    click.option("--box-cue", is_flag=True,
+                 help="A vehicle fitted alone with a box2d takes the box as a cue too: the projected cuboid's extremes "
+                      "touch its sides (sides on the image border left out). Tracked frames always do."),
     jobs_option,
 ]
 _FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
                   "misfit_level", "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
-                  "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "jobs")
+                  "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "tracks", "frame_rate", "box_cue", "jobs")
 
 
 def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[float, float, float]:
@@ -376,9 +386,13 @@ def _settings(values: dict[str, Any]) -> Any:
 
         ground_with(None, ground)  # a zero normal or an impossible block: refused here, naming the options
     estimate = road == "estimate" and not ground and not values["joint_ground"]
+    from toosicubix.solver.track import TrackOptions
+
     return BatchSettings(priors=load_priors(values["priors_path"]), options=options, ground=ground,
                          joint_ground=values["joint_ground"], jobs=values["jobs"],
-                         estimate_click_sigma=given_sigma is None, estimate_road_normal=estimate)
+                         estimate_click_sigma=given_sigma is None, estimate_road_normal=estimate,
+                         tracks=values["tracks"] == "on", track_options=TrackOptions(frame_rate=values["frame_rate"]),
+                         box_cue=values["box_cue"])
 
 
 def fitting_options(command: Callable) -> Callable:

@@ -112,7 +112,8 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
     excluded: dict[str, int] = {}
     for pred_image in predictions.images:
         try:
-            gt_image = ground_truth.load(pred_image.id)
+            gt_image = ground_truth.load(ground_truth.resolve_id(pred_image.id, pred_image.sequence,
+                                                                 pred_image.frame_number))
         except EvaluationInputError as exc:
             missing.append(f"{exc} (predictions: {pred_image.source})")
             continue
@@ -163,7 +164,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
         raise EvaluationInputError(
             f"{len(missing)} predicted image(s) have no ground truth{more}:\n  " + "\n  ".join(missing[:_MAX_LISTED]))
     gt_ids = set(ground_truth.image_ids())
-    pred_ids = {ground_truth.resolve_id(im.id) for im in predictions.images}
+    pred_ids = {ground_truth.resolve_id(im.id, im.sequence, im.frame_number) for im in predictions.images}
     warnings = notes.lines()
     if not predictions.images:
         warnings.append(f"{predictions.source}: no predicted images, nothing scored")

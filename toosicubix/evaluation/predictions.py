@@ -61,6 +61,7 @@ class PredImage:
     t_cam_rect : (3,) ``X_cam = X_rect + t_cam_rect`` as results.json states it, or None (label files)
     objects : the vehicles, in file order
     source : the file read
+    sequence, frame_number : the video the image is a frame of and its frame number (results.json), or None
     """
 
     id: str
@@ -69,6 +70,8 @@ class PredImage:
     t_cam_rect: np.ndarray | None
     objects: tuple[PredObject, ...]
     source: str
+    sequence: str | None = None
+    frame_number: int | None = None
 
 
 @dataclass(frozen=True)
@@ -131,7 +134,8 @@ def predictions_from_results(results: list[ImageResult], source: str | Path = "<
 def _image_from_result(im: ImageResult, i: int, path: Path) -> PredImage:
     objects = tuple(_object_from_vehicle(v, im, f"{path} $.images[{i}].vehicles[{j}]")
                     for j, v in enumerate(im.vehicles))
-    return PredImage(id=im.id, frame="cam", K=im.K, t_cam_rect=im.t_cam_rect, objects=objects, source=str(path))
+    return PredImage(id=im.id, frame="cam", K=im.K, t_cam_rect=im.t_cam_rect, objects=objects, source=str(path),
+                     sequence=im.sequence, frame_number=im.frame)
 
 
 def _object_from_vehicle(v: VehicleResult, im: ImageResult, source: str) -> PredObject:

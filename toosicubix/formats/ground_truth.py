@@ -140,8 +140,9 @@ class GroundTruthSource:
         """Every image id that has ground truth, sorted."""
         raise NotImplementedError
 
-    def resolve_id(self, image_id: str) -> str:
-        """The ground-truth id a prediction's image id pairs with (the same id unless a source says otherwise)."""
+    def resolve_id(self, image_id: str, sequence: str | None = None, frame: int | None = None) -> str:
+        """The ground-truth id a prediction's image pairs with (its id, or its ``sequence`` and ``frame`` where the
+        source names frames so: the same id unless a source says otherwise)."""
         return image_id
 
     def load(self, image_id: str) -> GtImage:
@@ -246,6 +247,13 @@ class KittiTrackingGroundTruth(_KittiGroundTruth):
         """Frames 0 to the last labelled frame of every sequence (a frame without rows has no objects)."""
         return self.folder.image_ids()
 
+    def resolve_id(self, image_id: str, sequence: str | None = None, frame: int | None = None) -> str:
+        """A frame's id ``<sequence>_<frame as 6 digits>``: the image id itself when it is one, else made from the
+        image's ``sequence`` and ``frame`` (an annotation file whose frames carry other ids)."""
+        if parse_tracking_image_id(image_id) is None and sequence is not None and frame is not None:
+            return tracking_image_id(sequence, frame)
+        return image_id
+
     def sequence_ids(self, sequence: str) -> list[str]:
         """The image ids of one sequence's frames, 0 to its last labelled one (its label file must exist)."""
         return [tracking_image_id(sequence, f) for f in range(self.folder.last_frame(sequence) + 1)]
@@ -295,7 +303,7 @@ class CityscapesGroundTruth(GroundTruthSource):
     def image_ids(self) -> list[str]:
         return self.folder.image_ids()
 
-    def resolve_id(self, image_id: str) -> str:
+    def resolve_id(self, image_id: str, sequence: str | None = None, frame: int | None = None) -> str:
         return self.folder.resolve_id(image_id)
 
     def load(self, image_id: str) -> GtImage:

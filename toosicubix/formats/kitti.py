@@ -134,6 +134,11 @@ def format_label_line(obj: KittiObject) -> str:
     return " ".join(fields)
 
 
+def format_tracking_line(frame: int, track_id: int, obj: KittiObject) -> str:
+    """One KITTI tracking label line: the frame, the track id, then :func:`format_label_line`'s fields."""
+    return f"{int(frame)} {int(track_id)} {format_label_line(obj)}"
+
+
 def parse_label_line(text: str, file: str | Path = "<label>", line: int | None = None,
                      tracking: bool = False) -> KittiObject:
     """Parse one object (15 or 16 fields) or tracking (17 or 18 fields) label line.

@@ -365,10 +365,12 @@ def results_to_json(images: list[ImageResult], header: dict[str, Any] | None = N
 
 
 def write_results_stream(handle: IO[str], images: Iterable[ImageResult], header: dict[str, Any] | None = None,
-                         on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
+                         on_image: Callable[[ImageResult], None] | None = None,
+                         trailer: Callable[[], dict[str, Any]] | None = None) -> dict[str, int]:
     """Write the document of :func:`results_to_json` to ``handle`` one image at a time, byte for byte as
     :func:`dumps` would (so a batch never holds every image's results); return its summary.
-    ``on_image`` is called with each image after it is written.
+    ``on_image`` is called with each image after it is written; ``trailer`` then gives keys written after the
+    images, before the summary (what is known only once every image is: the track ids).
 
     Raises
     ------
@@ -387,8 +389,10 @@ def write_results_stream(handle: IO[str], images: Iterable[ImageResult], header:
         if on_image is not None:
             on_image(im)
     summary["failed"] = summary["vehicles"] - summary["ok"]
-    handle.write(("\n ]" if summary["images"] else "]") + ',\n "summary": '
-                 + json.dumps(summary, indent=1).replace("\n", "\n ") + "\n}\n")
+    handle.write("\n ]" if summary["images"] else "]")
+    for key, value in (trailer() if trailer is not None else {}).items():
+        handle.write(f',\n {json.dumps(key)}: ' + json.dumps(value, indent=1, allow_nan=False).replace("\n", "\n "))
+    handle.write(',\n "summary": ' + json.dumps(summary, indent=1).replace("\n", "\n ") + "\n}\n")
     return summary
 
 

@@ -27,11 +27,12 @@ from toosicubix import __version__
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.camera import Camera
 from toosicubix.formats import kitti
-from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, write_results_stream
+from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import iter_fit_images, stream_images
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
+    TRACKING_LABEL_DIR,
     OutputFolderError,
     check_output_dir,
     pause_after_file,
@@ -39,6 +40,7 @@ from toosicubix.pipeline.output_folder import (
 )
 from toosicubix.pipeline.pilot import PilotFindings, on_estimated_roads, run_pilot
 from toosicubix.pipeline.settings import BatchSettings
+from toosicubix.pipeline.tracks import fit_tracks
 
 __all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",
            "pilot_and_fits", "write_outputs"]
@@ -60,6 +62,8 @@ class BatchSummary:
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     pilot: PilotFindings | None = None  # the click noise and road normals the batch was fitted with, and whence
     misfits: int | None = None  # fitted vehicles whose residuals failed the chi-square test; None: not tested
+    tracks: int = 0  # tracks fitted as tracks
+    pose_from: dict[str, int] = field(default_factory=dict)  # tracked frames fitted, by what their pose came from
 
     @property
     def n_failed(self) -> int:
@@ -68,19 +72,17 @@ class BatchSummary:
         return self.vehicles - self.ok
 
 
+def kitti_objects(image_result: ImageResult, camera: Camera) -> list[tuple[VehicleResult, kitti.KittiObject]]:
+    """The KITTI label objects of an image's successful fits (pitch and roll dropped), each with its fit."""
+    return [(v, kitti.object_from_pose(
+        v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
+        truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
+        score=1.0 if v.confidence is None else v.confidence)) for v in image_result.vehicles if v.ok]
+
+
 def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
     """The KITTI label lines of an image's successful fits (pitch and roll dropped)."""
-    lines = []
-    for v in image_result.vehicles:
-        if not v.ok:
-            continue
-        obj = kitti.object_from_pose(
-            v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
-            truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
-            score=1.0 if v.confidence is None else v.confidence,
-        )
-        lines.append(kitti.format_label_line(obj))
-    return lines
+    return [kitti.format_label_line(obj) for _, obj in kitti_objects(image_result, camera)]
 
 
 def prepare_output_dir(out_dir: Path) -> None:
@@ -99,7 +101,11 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
                   header: dict[str, Any], on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
     """Write the KITTI label files and results.json into a staging folder, one image at a time as the
     results come, then swap it in for ``out_dir`` as a whole (:mod:`.output_folder`); return the summary.
-    ``images`` and ``results`` are consumed together, in step."""
+    ``images`` and ``results`` are consumed together, in step.
+
+    Frames of sequences also give KITTI tracking labels, ``label_02/<sequence>.txt``, of their tracked vehicles
+    (sorted by frame): each track gets an integer id per sequence in the order the file first names it, and
+    results.json's ``track_ids`` maps the tracks' names to them."""
 
     def write_label(path: Path, text: str) -> None:
         with open(path, "w", encoding="utf-8", newline="\n") as handle:
@@ -112,18 +118,37 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
         with staged_output(out_dir, {"generator": header.get("generator")}) as staging:
             label_dir = staging / LABEL_DIR
             label_dir.mkdir()
+            track_ids: dict[str, dict[str, int]] = {}  # per sequence, track -> its KITTI tracking id
+            tracking: dict[str, list[tuple[int, int, str]]] = {}  # per sequence, (frame, id, line)
 
             def labelled() -> Iterator[ImageResult]:
                 for im, res in zip(images, results, strict=True):
-                    lines = "".join(f"{ln}\n" for ln in kitti_lines(res, im.camera))
-                    write_label(label_dir / f"{im.id}.txt", lines)
+                    objects = kitti_objects(res, im.camera)
+                    write_label(label_dir / f"{im.id}.txt", "".join(f"{kitti.format_label_line(o)}\n"
+                                                                    for _, o in objects))
+                    if res.sequence is not None:
+                        ids, frame = track_ids.setdefault(res.sequence, {}), int(res.frame or 0)
+                        for v, obj in objects:
+                            if v.track is not None:
+                                number = ids.setdefault(v.track, len(ids))
+                                tracking.setdefault(res.sequence, []).append(
+                                    (frame, number, kitti.format_tracking_line(frame, number, obj)))
                     yield res
 
+            def trailer() -> dict[str, Any]:
+                named = {sequence: ids for sequence, ids in track_ids.items() if ids}
+                return {"track_ids": named} if named else {}
+
             with open(staging / RESULTS_FILENAME, "w", encoding="utf-8", newline="\n") as handle:
-                summary = write_results_stream(handle, labelled(), header, on_image)
+                summary = write_results_stream(handle, labelled(), header, on_image, trailer)
                 handle.flush()
                 os.fsync(handle.fileno())
             pause_after_file()
+            if tracking:
+                tracking_dir = staging / TRACKING_LABEL_DIR
+                tracking_dir.mkdir()
+                for sequence, rows in tracking.items():
+                    write_label(tracking_dir / f"{sequence}.txt", "".join(f"{line}\n" for *_, line in sorted(rows)))
     except OSError as exc:  # a full disk, a name the file system refuses: nothing of this run is left
         where = Path(exc.filename).name if exc.filename else out_dir
         raise OutputFolderError(f"{out_dir}: cannot write {where}: {exc.strerror or exc}; the folder is "
@@ -132,14 +157,17 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
 
 
 def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettings, pilot: PilotFindings,
-                 progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
+                 progress: Callable[[int], None] | None = None,
+                 tracked: Iterator[tuple[Image, list[VehicleResult]]] | None = None) -> Iterator[ImageResult]:
     """The batch's results, image by image in file order
-    (:func:`~toosicubix.pipeline.fitting.iter_fit_images` with the pilot's solver settings), reusing the pilot's own
-    fits when they are the batch's (:attr:`~toosicubix.pipeline.pilot.PilotFindings.results`) and the batch asks
-    nothing the pilot did not do (no joint ground, as many next clicks): a small batch is then fitted once."""
+    (:func:`~toosicubix.pipeline.fitting.iter_fit_images` with the pilot's solver settings; ``tracked`` the
+    tracked vehicles' results, :func:`~toosicubix.pipeline.tracks.fit_tracks`), reusing the pilot's own fits when
+    they are the batch's (:attr:`~toosicubix.pipeline.pilot.PilotFindings.results`) and the batch asks nothing the
+    pilot did not do (no joint ground, as many next clicks, no tracks): a small batch is then fitted once."""
     settings = replace(settings, options=pilot.options)
-    if pilot.results is None or settings.joint_ground or settings.next_clicks != pilot.next_clicks:
-        yield from iter_fit_images(images, n_vehicles, settings, progress)
+    if (pilot.results is None or settings.joint_ground or settings.next_clicks != pilot.next_clicks
+            or tracked is not None or settings.box_cue):
+        yield from iter_fit_images(images, n_vehicles, settings, progress, tracked)
         return
     done = iter(pilot.results)  # the images with vehicles, in file order
     for im in images:
@@ -162,7 +190,12 @@ def pilot_and_fits(index: AnnotationIndex, settings: BatchSettings, progress: Ca
     (:func:`fitted_batch`), in file order."""
     pilot = run_pilot(index, settings, progress, on_start)
     images, second = itertools.tee(on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals))
-    return pilot, second, fitted_batch(images, index.vehicles, settings, pilot, progress)
+    tracked = None
+    if settings.tracks and index.tracked:  # a third reader: the tracks, fitted a sequence at a time
+        last_of_sequence = {where[0]: i for i, where in enumerate(index.sequences) if where is not None}
+        tracked = fit_tracks(on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals),
+                             last_of_sequence, replace(settings, options=pilot.options), progress)
+    return pilot, second, fitted_batch(images, index.vehicles, settings, pilot, progress, tracked)
 
 
 def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettings | None = None,
@@ -212,9 +245,15 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     failed: list[tuple[str, str, str]] = []
     scale_from: dict[str, int] = {}
     misfits = [0]
+    tracks: set[str] = set()
+    pose_from: dict[str, int] = {}
 
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
+            if v.track is not None and v.pose_from is not None:
+                tracks.add(v.track)
+                if v.ok:
+                    pose_from[v.pose_from] = pose_from.get(v.pose_from, 0) + 1
             if not v.ok:
                 if len(failed) < FAILED_KEPT:
                     failed.append((im.id, v.id, v.error or ""))
@@ -226,7 +265,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     summary = write_outputs(out_dir, for_labels, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,
-                        misfits=misfits[0] if options.misfit_level is not None else None)
+                        misfits=misfits[0] if options.misfit_level is not None else None, tracks=len(tracks),
+                        pose_from=pose_from)
 
 
 def _sha256(path: Path) -> str:

@@ -62,7 +62,7 @@ def check_prototypes(images: list[Image], priors: Priors, source: str | Path) ->
 
 
 #: What :func:`~toosicubix.pipeline.vehicle.fit_one` takes, as the batch hands it to a worker.
-FitTask = tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int, Keypoints | None]
+FitTask = tuple[Vehicle, Camera, SizePrior, SolverOptions, GroundPlane | None, int, Keypoints | None, bool]
 
 
 def _candidates_of(keypoints: KeypointCatalogue | None
@@ -103,36 +103,51 @@ def fit_images(images: list[Image], settings: BatchSettings | None = None,
 
 
 def iter_fit_images(images: Iterable[Image], n_vehicles: int, settings: BatchSettings | None = None,
-                    progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
+                    progress: Callable[[int], None] | None = None,
+                    tracked: Iterator[tuple[Image, list[VehicleResult]]] | None = None) -> Iterator[ImageResult]:
     """:func:`fit_images` one image at a time, in input order: the images are read from ``images`` only as
     the workers need them, and each result is handed on as soon as its image is done, so memory does not
     grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
+
+    ``tracked``: the results of the vehicles that carry a ``track``, image by image in file order
+    (:func:`toosicubix.pipeline.tracks.fit_tracks`), which take their place; None: every vehicle is fitted alone.
     """
     settings = settings or BatchSettings()
     priors, options, next_clicks, jobs = settings.priors, settings.options, settings.next_clicks, settings.jobs
-    pending: deque[Image] = deque()
+    pending: deque[tuple[Image, dict[int, VehicleResult]]] = deque()  # each with its tracked vehicles' results
     done: list[VehicleResult] = []
     candidates = _candidates_of(settings.keypoints if next_clicks > 0 else None)
+    box_cue = settings.box_cue
 
     def tasks() -> Iterator[FitTask]:
         for im in images:
-            pending.append(im)
-            for v in im.vehicles:
-                yield v, im.camera, priors[v.prototype], options, im.ground, next_clicks, candidates(v.prototype)
+            from_tracks: dict[int, VehicleResult] = {}
+            if tracked is not None and any(v.track is not None for v in im.vehicles):
+                same, results = next(tracked)
+                assert same.id == im.id, (same.id, im.id)
+                from_tracks = {j: r for j, r in zip((j for j, v in enumerate(im.vehicles) if v.track is not None),
+                                                    results, strict=True)}
+            pending.append((im, from_tracks))
+            for j, v in enumerate(im.vehicles):
+                if j not in from_tracks:
+                    yield (v, im.camera, priors[v.prototype], options, im.ground, next_clicks, candidates(v.prototype),
+                           box_cue)
 
     def finished_images() -> Iterator[ImageResult]:
-        while pending and len(done) >= len(pending[0].vehicles):
-            im = pending.popleft()
-            vehicles = done[:len(im.vehicles)]
-            del done[:len(im.vehicles)]
+        while pending and len(done) >= len(pending[0][0].vehicles) - len(pending[0][1]):
+            im, from_tracks = pending.popleft()
+            own = iter(done[:len(im.vehicles) - len(from_tracks)])
+            del done[:len(im.vehicles) - len(from_tracks)]
+            vehicles = [from_tracks[j] if j in from_tracks else next(own) for j in range(len(im.vehicles))]
             ground = None if im.ground is None else RoadPlane(im.ground.normal, im.ground.camera_height,
                                                               im.ground.from_batch)
             if settings.joint_ground and im.ground is not None:
                 vehicles, ground = fit_image_jointly(im, vehicles, priors, options, next_clicks, settings.keypoints)
             yield ImageResult(id=im.id, K=im.camera.K, t_cam_rect=im.camera.t_cam_rect,
-                              image_size=im.camera.image_size, vehicles=vehicles, ground=ground)
+                              image_size=im.camera.image_size, vehicles=vehicles, ground=ground, sequence=im.sequence,
+                              frame=im.frame)
 
-    for result in _ordered_map(tasks(), jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs)):
+    for result in ordered_map(tasks(), jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs)):
         done.append(result)
         if progress is not None:
             progress(1)
@@ -153,7 +168,7 @@ def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
     return [with_next_clicks(*task) for task in tasks]
 
 
-def _ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
+def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
                  work: Callable[[list], list[VehicleResult]] = _fit_chunk) -> Iterator[VehicleResult]:
     """``work`` (:func:`~toosicubix.pipeline.vehicle.fit_one` over a chunk, by default) over ``tasks`` in order,
     in ``jobs`` processes, with a bounded number of chunks of ``chunk`` tasks in flight (the pool's own ``map``
@@ -182,7 +197,8 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
     return the updated results and the plane. Failed vehicles stay as they were."""
     ground = image.ground
     assert ground is not None
-    fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok]
+    # A tracked vehicle keeps its track's pose (the track's other frames hold it there).
+    fitted = [(k, v) for k, (v, r) in enumerate(zip(image.vehicles, vehicles, strict=True)) if r.ok and r.track is None]
     if not fitted:
         return vehicles, RoadPlane(ground.normal, ground.camera_height, False)
     joint_vehicles, models = [], []
@@ -247,5 +263,5 @@ def add_next_clicks(images: list[Image], results: list[ImageResult], settings: B
              for im, result in zip(images, results, strict=True)
              for v, r in zip(im.vehicles, result.vehicles, strict=True))
     n_vehicles = sum(len(im.vehicles) for im in images)
-    done = iter(_ordered_map(tasks, jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs), _suggest_chunk))
+    done = iter(ordered_map(tasks, jobs if n_vehicles > 1 else 1, _chunk(n_vehicles, jobs), _suggest_chunk))
     return [replace(result, vehicles=[next(done) for _ in result.vehicles]) for result in results]

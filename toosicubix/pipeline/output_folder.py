@@ -2,9 +2,9 @@
 
 A folder is toosicubix's output only when it holds the marker file :data:`MARKER_NAME` that ``fit``
 writes (never because a ``results.json`` is there), and nothing but what ``fit`` writes: the marker,
-``results.json`` and ``label_2/*.txt``. ``fit -o`` refuses any other non-empty folder: a dataset root
-(``label_2``, ``calib``, ``image_2``, ``training``, ``testing``, ``gtBbox3d``...), ground truth, or a folder
-with one file it did not write.
+``results.json``, ``label_2/*.txt`` and, for sequences, ``label_02/*.txt``. ``fit -o`` refuses any other non-empty
+folder: a dataset root (``calib``, ``image_2``, ``training``, ``testing``, ``gtBbox3d``...), ground truth (label
+files without the marker), or a folder with one file it did not write.
 
 Writing (:func:`staged_output`), for an output folder ``OUT`` in ``PARENT``:
 
@@ -48,12 +48,14 @@ from toosicubix.formats.atomic import current_umask
 MARKER_NAME = ".toosicubix-output.json"
 MARKER_VERSION = 1
 LABEL_DIR = "label_2"
+#: KITTI tracking labels of the frames of sequences: ``label_02/<sequence>.txt``.
+TRACKING_LABEL_DIR = "label_02"
 RESULTS_NAME = "results.json"
 #: Seconds to sleep after each file and between the swap's steps (tests kill the run there).
 PAUSE_ENV = "TOOSICUBIX_PAUSE_BETWEEN_WRITES"
 
 #: Entries of a folder that mark a dataset (KITTI object or tracking, Cityscapes 3D).
-DATASET_ENTRIES = ("calib", "image_2", "image_02", "label_02", "velodyne", "training", "testing", "gtBbox3d",
+DATASET_ENTRIES = ("calib", "image_2", "image_02", "velodyne", "training", "testing", "gtBbox3d",
                    "gtBbox2d", "leftImg8bit", "camera")
 
 
@@ -93,8 +95,8 @@ def foreign_entries(folder: Path) -> list[str]:
     for entry in sorted(folder.iterdir()):
         if entry.name in (MARKER_NAME, RESULTS_NAME) and entry.is_file() and not entry.is_symlink():
             continue
-        if entry.name == LABEL_DIR and entry.is_dir() and not entry.is_symlink():
-            foreign += [f"{LABEL_DIR}/{f.name}" for f in sorted(entry.iterdir())
+        if entry.name in (LABEL_DIR, TRACKING_LABEL_DIR) and entry.is_dir() and not entry.is_symlink():
+            foreign += [f"{entry.name}/{f.name}" for f in sorted(entry.iterdir())
                         if f.suffix != ".txt" or not f.is_file() or f.is_symlink()]
             continue
         foreign.append(entry.name + ("/" if entry.is_dir() else ""))
@@ -129,7 +131,8 @@ def check_output_dir(out_dir: str | Path) -> None:
             f"{out_dir}: looks like a dataset ({', '.join(e + '/' for e in dataset)}); toosicubix never writes "
             f"into one. Choose another output folder.")
     if not is_ours(out_dir):
-        what = f"label files in {LABEL_DIR}/ (ground truth?)" if LABEL_DIR in entries else "files"
+        labels = [d for d in (LABEL_DIR, TRACKING_LABEL_DIR) if d in entries]
+        what = f"label files in {labels[0]}/ (ground truth?)" if labels else "files"
         raise OutputFolderError(
             f"{out_dir}: holds {what} that toosicubix did not write (no {MARKER_NAME} marker): "
             f"{', '.join(sorted(entries)[:5])}{' ...' if len(entries) > 5 else ''}. Choose another output folder.")

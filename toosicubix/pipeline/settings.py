@@ -18,6 +18,7 @@ from toosicubix.model import KITTI_GROUND, GroundOverride
 from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
+from toosicubix.solver.track import TrackOptions
 
 #: The settings a file may set (the rest of :class:`SolverOptions` keeps its defaults).
 SETTINGS_FIELDS = ("lambda_3d", "lambda_px")
@@ -53,6 +54,11 @@ class BatchSettings:
     estimate_road_normal : estimate each camera's road normal from the same pilot fit's vehicles
         (:mod:`toosicubix.pipeline.road_normal`) and fit that camera's images without a ground block of their own
         upright on it (``toosicubix fit`` does this unless given a ground); not with ``ground`` or ``joint_ground``
+    tracks : fit the vehicles that carry a ``track`` together with the track's other frames
+        (:mod:`toosicubix.pipeline.tracks`); False fits every frame alone (``fit --tracks off``)
+    track_options : the tracks' motion model and box cue (:class:`toosicubix.solver.track.TrackOptions`)
+    box_cue : a vehicle fitted alone with a ``box2d`` takes the box as a cue too (``fit --box-cue``): the projected
+        cuboid's extremes touch its sides (the sides the image border cuts left out)
     """
 
     priors: Priors = field(default_factory=load_priors)
@@ -64,6 +70,9 @@ class BatchSettings:
     keypoints: KeypointCatalogue | None = None
     estimate_click_sigma: bool = False
     estimate_road_normal: bool = False
+    tracks: bool = True
+    track_options: TrackOptions = field(default_factory=TrackOptions)
+    box_cue: bool = False
 
     def __post_init__(self) -> None:
         if self.estimate_road_normal and (self.ground or self.joint_ground):

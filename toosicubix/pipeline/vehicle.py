@@ -27,6 +27,7 @@ from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
 from toosicubix.solver.misfit import ResidualTest
+from toosicubix.solver.track import with_box_cue
 from toosicubix.solver.uncertainty import Uncertainty, confidence
 
 __all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_result", "describe_fit", "failed_result",
@@ -39,16 +40,19 @@ Keypoints = Mapping[str, TypicalKeypoint]
 
 def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
             ground: GroundPlane | None = None, next_clicks: int = 0,
-            keypoints: Keypoints | None = None) -> VehicleResult:
+            keypoints: Keypoints | None = None, box_cue: bool = False) -> VehicleResult:
     """Fit one vehicle and describe it as results.json does; never raises.
 
     ``next_clicks``: how many suggestions of what to click next to add (:mod:`toosicubix.solver.guidance`), 0:
     none; ``keypoints``: the keypoints to suggest instead of the vocabulary's parts (name ->
-    :class:`~toosicubix.parts.linear.TypicalKeypoint`).
+    :class:`~toosicubix.parts.linear.TypicalKeypoint`); ``box_cue``: refine the fit with the vehicle's ``box2d``
+    as a cue too (:func:`toosicubix.solver.track.with_box_cue`).
     """
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
+        if box_cue and vehicle.box2d is not None:
+            fit = with_box_cue(fit, parts, camera, prior, options, ground, vehicle.box2d)
         with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
             return checked_result(describe_fit(vehicle, camera, prior, parts, fit, ground, options, next_clicks,
                                                   keypoints))

@@ -225,14 +225,14 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
             trial = problem.settle(trial)
             r_try, J_try = problem.residuals(trial, True)
             new_cost = _cost(loss, r_try)
-            rho = _gain_ratio(step, mu[:, None] * Dg * step - g, cost, new_cost)
+            rho = gain_ratio(step, mu[:, None] * Dg * step - g, cost, new_cost)
         else:
             rho = np.full(B, -1.0)
             if n_feasible:
                 trial = problem.settle(tuple(a[feasible] for a in trial))
                 r_try, J_try = problem.residuals(trial, True)
                 new_cost = _cost(loss, r_try)
-                rho[feasible] = _gain_ratio(step[feasible], (mu[:, None] * Dg * step - g)[feasible],
+                rho[feasible] = gain_ratio(step[feasible], (mu[:, None] * Dg * step - g)[feasible],
                                             cost[feasible], new_cost)
         accept = rho > 0  # implies feasible, hence running
         rejected = running & ~accept
@@ -247,7 +247,7 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
         if len(ka) == B:  # every start moved (hence every trial was evaluated): the trial is the iterate
             state, r, J = trial, r_try, J_try
             drop, cost = cost - new_cost, new_cost
-            mu = _damping_after_success(mu, rho)
+            mu = damping_after_success(mu, rho)
             nu = np.full(B, 2.0)
             status = _status_after_success(small, drop, new_cost, options.cost_tolerance)
         else:
@@ -258,7 +258,7 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
             new_cost = new_cost[taken]
             drop = cost[ka] - new_cost
             cost[ka] = new_cost
-            mu[ka] = _damping_after_success(mu[ka], rho[ka])
+            mu[ka] = damping_after_success(mu[ka], rho[ka])
             nu[ka] = 2.0
             status[ka] = _status_after_success(small, drop, new_cost, options.cost_tolerance)
         if trivial:
@@ -270,7 +270,7 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
                     time.perf_counter() - started)
 
 
-def _gain_ratio(step: np.ndarray, damped_step_minus_g: np.ndarray, cost: np.ndarray,
+def gain_ratio(step: np.ndarray, damped_step_minus_g: np.ndarray, cost: np.ndarray,
                 new_cost: np.ndarray) -> np.ndarray:
     """Nielsen's gain ratio of k steps (k, n): the drop of the cost (k,) over the drop the damped model
     predicts, ``step . (mu D step - g)``, or -1 where that prediction is not positive: (k,)."""
@@ -279,7 +279,7 @@ def _gain_ratio(step: np.ndarray, damped_step_minus_g: np.ndarray, cost: np.ndar
         return np.where(predicted > 0, (cost - new_cost) / predicted, -1.0)
 
 
-def _damping_after_success(mu: np.ndarray, rho: np.ndarray) -> np.ndarray:
+def damping_after_success(mu: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Nielsen's damping (k,) after accepted steps of gain ratios ``rho`` (k,)."""
     return np.maximum(mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-15)
 

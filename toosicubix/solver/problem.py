@@ -127,8 +127,9 @@ class Problem:
                 targets.append(-ground.camera_height / sigma)
                 cues.append("ground contact")
         A = parts.A
+        A_mean = A.mean(axis=0) if len(A) else np.zeros((3, P))  # no clicks (a track's frame with a box only)
         return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, np.array(rows), np.array(targets),
-                   tuple(cues), ground, upright_sigma, A.reshape(-1, P), A.mean(axis=0), *_arrow_zone(parts))
+                   tuple(cues), ground, upright_sigma, A.reshape(-1, P), A_mean, *_arrow_zone(parts))
 
     @property
     def n_arrow_rows(self) -> int:

@@ -200,7 +200,7 @@ def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: f
     """Standard deviations of a fit from the rows :func:`jacobians` gives (any subset of clicks and of
     parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
     and ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
-    return _uncertainty(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
+    return uncertainty_from_covariance(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
 
 
 def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
@@ -240,7 +240,10 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     return now, out
 
 
-def _uncertainty(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
+def uncertainty_from_covariance(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
+    """The standard deviations of a fit from the covariance ``cov`` (6 + P, 6 + P) of ``(delta, t, p)`` (``p``'s
+    first three the dimensions), the yaw-pitch-roll gradient ``G`` (3, 3) (:func:`ypr_gradient`) and ``t`` (3,);
+    every one infinite when ``cov`` is not finite."""
     if not np.all(np.isfinite(cov)):  # nothing determined: every standard deviation infinite
         inf = math.inf
         return Uncertainty(inf, inf, inf, inf, inf, np.full(3, inf), np.full(2, inf), inf, cov)
@@ -268,7 +271,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     C = J_c.T @ J_c
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
-    u = _uncertainty(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
+    u = uncertainty_from_covariance(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
     return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
                              problem.upright_sigma is not None)
