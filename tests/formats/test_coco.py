@@ -1,4 +1,5 @@
-"""COCO keypoint import: names and index mappings, v flags, cameras, and errors naming file and JSON path."""
+"""COCO keypoint import: names and index mappings, v flags, cameras, videos and tracks (TAO, BDD100K), and errors
+naming file and JSON path."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from click.testing import CliRunner
 
 from toosicubix.annotations.mapping import load_mapping, mapping_json_schema
 from toosicubix.annotations.schema import parse_annotations
+from toosicubix.annotations.stream import index_annotations
 from toosicubix.cli import main
 from toosicubix.errors import InputFileError
 from toosicubix.formats.cameras import load_cameras as read_cameras
@@ -171,3 +173,107 @@ def test_toosicubix_mapping_is_the_tool_vocabulary():
     assert mapping.keypoints == list(KEYPOINTS)
     assert mapping.model_dump(mode="json", exclude_none=True, exclude_defaults=True)["parts"] == [
         {k: v for k, v in p.items()} for p in mapping_document()["parts"]]
+
+
+# --- videos: TAO's and BDD100K's spellings ---------------------------------------------------------------------
+
+KEYPOINTS = [100, 200, 2, 140, 201, 2, 90, 230, 1, 120, 180, 0, 130, 150, 2]
+
+
+def video_doc(frame_key: str = "frame_index", track_key: str = "track_id") -> dict:
+    """Two frames of one video (a keypoint frame, then a box-only frame of the same track) and a still image."""
+    folder = "train/YFCC100M/v_f69e"
+    return {"videos": [{"id": 3, "name": folder, "width": 1280, "height": 720}],
+            "images": [{"id": 10, "video_id": 3, frame_key: 0, "file_name": f"{folder}/frame0001.jpg", "width": 1280,
+                        "height": 720},
+                       {"id": 11, "video_id": 3, frame_key: 5, "file_name": f"{folder}/frame0006.jpg", "width": 1280,
+                        "height": 720},
+                       {"id": 12, "file_name": "dir/still_Camera_5.jpg"}],
+            "categories": [{"id": 7, "name": "car", "keypoints": ["lamp-l", "lamp-r", "hub", "handle", "aerial"]},
+                           {"id": 8, "name": "van", "keypoints": ["lamp-l", "lamp-r", "hub", "handle", "aerial"]}],
+            "annotations": [{"id": 1, "image_id": 10, "category_id": 7, "bbox": [10, 20, 100, 50],
+                             "keypoints": KEYPOINTS, track_key: 4},
+                            {"id": 2, "image_id": 11, "category_id": 7, "bbox": [14, 20, 100, 50], track_key: 4},
+                            {"id": 3, "image_id": 12, "category_id": 7, "keypoints": KEYPOINTS}]}
+
+
+@pytest.mark.parametrize(("frame_key", "track_key"), [("frame_index", "track_id"), ("frame_id", "instance_id")])
+def test_video_frames_and_tracks(files, frame_key, track_key):
+    tmp_path, mapping_path, _ = files
+    cameras = write(tmp_path, "cams.json", {"cameras": [{"match": "*", "K": K}]})
+    mapping, _ = load_mapping(mapping_path)
+    coco = write(tmp_path, "video.json", video_doc(frame_key, track_key))
+    doc, summary = coco_to_annotations(coco, mapping, read_cameras(cameras))
+    first, second, still = doc["images"]
+    assert [list(im) for im in (first, still)] == [["id", "file", "sequence", "frame", "camera", "vehicles", "size"],
+                                                   ["id", "file", "camera", "vehicles"]]
+    assert (first["id"], first["sequence"], first["frame"]) == ("train_YFCC100M_v_f69e_000000", "train_YFCC100M_v_f69e",
+                                                                0)
+    assert (second["id"], second["frame"], second["file"]) == ("train_YFCC100M_v_f69e_000005", 5,
+                                                               "train/YFCC100M/v_f69e/frame0006.jpg")
+    assert first["vehicles"][0]["track"] == second["vehicles"][0]["track"] == "train_YFCC100M_v_f69e-4"
+    assert len(first["vehicles"][0]["parts"]) == 2
+    # No keypoints on a tracked annotation: a frame with its box only.
+    assert second["vehicles"][0] == {"id": "2", "prototype": "SUV", "track": "train_YFCC100M_v_f69e-4", "parts": [],
+                                     "box2d": [14, 20, 114, 70]}
+    assert still["id"] == "still_Camera_5" and "track" not in still["vehicles"][0]
+    assert summary.tracks == {"train_YFCC100M_v_f69e-4"} and summary.tracked_without_parts == 1
+    assert summary.vehicles_without_parts == 0
+    # The document passes the rules across frames, as a whole and streamed.
+    parse_annotations(doc)
+    index = index_annotations(write(tmp_path, "ann.json", doc))
+    assert index.sequences == (("train_YFCC100M_v_f69e", 0), ("train_YFCC100M_v_f69e", 5), None)
+
+
+def test_video_named_on_the_image(files):
+    tmp_path, mapping_path, _ = files
+    coco = video_doc()
+    del coco["videos"]
+    for image in coco["images"][:2]:
+        del image["video_id"]
+        image["video_name"] = "b1c66a42-6f7d68ca"
+    mapping, _ = load_mapping(mapping_path)
+    doc, _ = coco_to_annotations(write(tmp_path, "v.json", coco), mapping,
+                                 read_cameras(write(tmp_path, "c.json", {"cameras": [{"match": "*", "K": K}]})))
+    assert [im.get("sequence") for im in doc["images"]] == ["b1c66a42-6f7d68ca", "b1c66a42-6f7d68ca", None]
+    assert doc["images"][1]["vehicles"][0]["track"] == "b1c66a42-6f7d68ca-4"
+
+
+def _bad_frame(coco):
+    coco["images"][1]["frame_index"] = 1.5
+
+
+def _frame_without_video(coco):
+    del coco["images"][0]["video_id"]
+
+
+def _track_on_a_still(coco):
+    coco["annotations"][2]["track_id"] = 9
+
+
+def _two_prototypes(coco):
+    coco["annotations"][1]["category_id"] = 8  # 'van': the mapping's default prototype, not SUV
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (_bad_frame, "{coco}: $.images[1].frame_index: expected an integer frame number from 0 to 1000000, got 1.5"),
+    (_frame_without_video, "{coco}: $.images[0].frame_index: expected a video (video_id, video_name, video) and a "
+                           "frame number (frame_index, frame_id) together, found only 'frame_index'"),
+    (_track_on_a_still, "{coco}: $.annotations[2].track_id: a track needs a frame of a video, but image "
+                        "'dir/still_Camera_5.jpg' has no video_id or video_name or video with frame_index or frame_id"),
+    (_two_prototypes, "{coco} (as imported): $.images[1].vehicles[0].track (image 'train_YFCC100M_v_f69e_000005'): "
+                      "track 'train_YFCC100M_v_f69e-4' has prototype 'Car' here and 'SUV' at "
+                      "$.images[0].vehicles[0].track: one prototype (and one size) per track"),
+])
+def test_video_bad_input_exits_2_naming_the_json_path(files, change, message):
+    tmp_path, mapping_path, _ = files
+    coco = video_doc()
+    change(coco)
+    path = write(tmp_path, "video.json", coco)
+    cameras = write(tmp_path, "cams.json", {"cameras": [{"match": "*", "K": K}]})
+    out = tmp_path / "ann.json"
+    result = CliRunner().invoke(main, ["import", "coco", str(path), "--mapping", str(mapping_path), "--cameras",
+                                       str(cameras), "-o", str(out)])
+    assert result.exit_code == 2
+    assert result.output == f"Error: {message.format(coco=path)}\n"
+    assert not out.exists()

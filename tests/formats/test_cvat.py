@@ -1,11 +1,14 @@
-"""CVAT for images 1.1 import (fixtures as CVAT's dumper writes them) and the review export."""
+"""CVAT for images 1.1 and CVAT for video 1.1 import (fixtures as CVAT's dumpers write them) and the review
+export."""
 
 import json
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from tests.conftest import REPO
 from tests.formats.tool_fixtures import (
     cameras_doc,
     cvat_xml,
@@ -17,6 +20,10 @@ from tests.formats.tool_fixtures import (
     sample_fit,
     write_json,
 )
+from toosicubix.annotations.convert import document_json, images_from_schema
+from toosicubix.annotations.schema import parse_annotations
+from toosicubix.annotations.stream import index_annotations
+from toosicubix.cli import main
 from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.cvat import read_cvat
@@ -173,3 +180,175 @@ def test_review_export_projects_each_fitted_cuboid(tmp_path):
     assert len(distorted) == 15 * 8 + 1
     assert sum(len(im.findall("polyline")) for im in xml_images) == 6
     assert sum(len(im.findall("polygon")) for im in xml_images) == 6
+
+
+# --- CVAT for video 1.1 ----------------------------------------------------------------------------------------
+
+VIDEO = REPO / "tests" / "formats" / "fixtures" / "cvat-video-1.1.xml"
+VIDEO_K = [[721.5, 0.0, 609.6], [0.0, 721.5, 172.9], [0.0, 0.0, 1.0]]
+
+
+def _video_cameras(tmp_path):
+    return write_json(tmp_path / "cameras.json", {"cameras": [{"match": "images/frame_*", "K": VIDEO_K}]})
+
+
+def _video_variant(tmp_path, old: str, new: str):
+    text = VIDEO.read_text()
+    assert text.count(old) == 1, old
+    path = tmp_path / "annotations.xml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_video_export_becomes_frames_of_one_sequence(tmp_path):
+    # The fixture, as dump_as_cvat_interpolation writes it: task 'highway 0003', frames 0-5 of 1242x375.
+    # Vehicle A: skeleton track 0 (keyframes 0 and 3, CVAT's interpolation on 1-2, outside from 4) and box track 1
+    # (keyframes 0, 3, outside on 4, back on 5), linked by group_id 1. Vehicle B: box track 2 alone, every frame.
+    # Vehicle C: skeleton track 3 alone, keyframes 1 and 3, copied to the task's end (4, 5) without keyframes.
+    doc, summary = read_cvat(VIDEO, load_cameras(_video_cameras(tmp_path)))
+    assert summary.warnings == []
+    images = doc["images"]
+    assert [im["id"] for im in images] == [f"highway_0003_{f:06d}" for f in range(6)]
+    assert [im["file"] for im in images] == [f"images/frame_{f:06d}.PNG" for f in range(6)]
+    assert {im["sequence"] for im in images} == {"highway_0003"}
+    assert [im["frame"] for im in images] == list(range(6))
+    assert all(im["size"] == [1242, 375] and im["camera"] == {"K": VIDEO_K} for im in images)
+    assert [list(im) for im in images[:1]] == [["id", "file", "sequence", "frame", "size", "camera", "vehicles"]]
+    on = {f: {v["id"]: v for v in im["vehicles"]} for f, im in enumerate(images)}
+    # A is not in frame 4 (outside); B is in every frame; C from frame 1 on.
+    assert [sorted(on[f]) for f in range(6)] == [["0", "2"], ["0", "2", "3"], ["0", "2", "3"], ["0", "2", "3"],
+                                                 ["2", "3"], ["0", "2", "3"]]
+    assert {v["track"] for f in on for v in on[f].values()} == {"highway_0003-0", "highway_0003-2", "highway_0003-3"}
+    assert all(v["track"] == f"highway_0003-{v['id']}" for f in on for v in on[f].values())
+    # Prototypes: A's skeleton attribute (also on frame 5, where only its box is), B's box label, C's attribute.
+    assert {(v["id"], v["prototype"]) for f in on for v in on[f].values()} == {("0", "Van"), ("2", "Truck"),
+                                                                               ("3", "Car")}
+    # Clicks on keyframes only; at frame 3 A's rear-center was not set again (keyframe="0"): no click.
+    parts = {(f, k): [p["part"] for p in v["parts"]] for f in on for k, v in on[f].items() if v["parts"]}
+    assert parts == {(0, "0"): ["wheel-front-left", "wheel-rear-left", "rear-center"],
+                     (3, "0"): ["wheel-front-left", "wheel-rear-left"],
+                     (1, "3"): ["wheel-rear-left", "rear-center"], (3, "3"): ["wheel-rear-left", "rear-center"]}
+    assert on[0]["0"]["parts"][0] == {"kind": "point", "part": "wheel-front-left", "xy": [400.0, 220.0]}
+    assert on[3]["3"]["parts"][1] == {"kind": "point", "part": "rear-center", "xy": [1040.0, 202.0]}
+    # Boxes on every frame their track is not outside, interpolated (keyframe="0") or not.
+    assert [on[f]["0"].get("box2d") for f in (0, 1, 2, 3, 5)] == [
+        [270.0, 150.0, 420.0, 225.0], [280.0, 151.0, 430.0, 226.0], [290.0, 152.0, 440.0, 227.0],
+        [300.0, 153.0, 450.0, 228.0], [320.0, 155.0, 470.0, 230.0]]
+    assert [on[f]["2"]["box2d"][0] for f in range(6)] == [700.0, 698.0, 696.0, 694.0, 692.0, 690.0]
+    assert all("box2d" not in on[f]["3"] for f in range(1, 6))
+    # C on frames 2, 4, 5: neither clicks nor box, for the solver to interpolate.
+    assert [on[f]["3"] for f in (2, 4, 5)] == [{"id": "3", "prototype": "Car", "track": "highway_0003-3",
+                                                "parts": []}] * 3
+    assert summary.tracks == {"highway_0003-0", "highway_0003-2", "highway_0003-3"}
+    assert dict(summary.tracked) == {"clicks": 4, "box only": 9, "neither": 3}
+    assert summary.images == 6 and summary.vehicles == 16 and summary.keypoints == 9
+
+
+def test_video_round_trip_through_the_schema_and_the_streaming_index(tmp_path):
+    doc, _ = read_cvat(VIDEO, load_cameras(_video_cameras(tmp_path)), sequence="drive-3")
+    parsed = parse_annotations(doc)
+    assert [(im.sequence, im.frame) for im in parsed.images] == [("drive-3", f) for f in range(6)]
+    assert parsed.images[4].vehicles[0].track == "drive-3-2"
+    again = document_json(images_from_schema(parsed))
+    assert again == doc  # nothing lost or added on the way through the numpy model
+    path = write_json(tmp_path / "imported.json", doc)
+    index = index_annotations(path)  # the TrackBook rules pass on the stream too
+    assert index.sequences == tuple(("drive-3", f) for f in range(6)) and index.tracked == 16
+
+
+def test_video_cli_names_the_sequence_and_reports_the_tracks(tmp_path):
+    out = tmp_path / "drive.json"
+    result = CliRunner().invoke(main, ["import", "cvat", str(VIDEO), "--cameras", str(_video_cameras(tmp_path)),
+                                       "--sequence", "drive3", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert result.output == ("6 images, 16 vehicles, 9 keypoints used\n"
+                             "3 tracks; their vehicle frames: 4 with clicks, 9 with a box only, 3 with neither "
+                             "(the solver interpolates those)\n"
+                             f"wrote {out}\n")
+    written = json.loads(out.read_text())
+    assert written["images"][0]["id"] == "drive3_000000" and written["images"][0]["vehicles"][0]["track"] == "drive3-0"
+    result = CliRunner().invoke(main, ["import", "cvat", str(VIDEO), "--sequence", "drive 3", "-o", str(out)])
+    assert result.exit_code == 2
+    assert ("Invalid value for '--sequence': expected a sequence name of letters, digits and '_', '.', '-' inside, "
+            "at most 120 characters, got 'drive 3' (e.g. 'drive_3')") in result.output
+
+
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ('<box frame="2" keyframe="0" outside="0" occluded="0" xtl="696.00"',
+     '<box frame="1.5" keyframe="0" outside="0" occluded="0" xtl="696.00"',
+     "{xml}: <track id='2' label='Truck'> box 3: expected an integer frame number from 0 to 1000000, got '1.5'"),
+    ('<box frame="2" keyframe="0" outside="0" occluded="0" xtl="696.00"',
+     '<box frame="1" keyframe="0" outside="0" occluded="0" xtl="696.00"',
+     "{xml}: <track id='2' label='Truck'> box 3 (frame 1): frame 1 is given twice in one track"),
+    ('<skeleton frame="2" keyframe="0" z_order="0">\n      <points label="wheel-front-left" keyframe="0" outside="0"',
+     '<skeleton frame="2" keyframe="no" z_order="0">\n      <points label="wheel-front-left" keyframe="0" outside="0"',
+     "{xml}: <track id='0' label='vehicle'> skeleton 3 (frame 2): expected keyframe=\"0\" or \"1\", got 'no'"),
+    ('<track id="2" label="Truck" source="manual">', '<track id="2" label="Truck" source="manual" group_id="1">',
+     "{xml}: <track id='2' label='Truck'> box 1 (frame 0): group_id 1 (tracks 0, 1, 2) has a second box on frame 0 "
+     "(also <track id='1' label='Car'> box 1 (frame 0)): one box per vehicle"),
+    # The prototype attribute changes along track 0 (Van, then Car on frame 3): one prototype per track.
+    ('keyframe="0" outside="0" occluded="1" points="310.00,193.00">\n      </points>\n      '
+     '<attribute name="prototype">Van',
+     'keyframe="0" outside="0" occluded="1" points="310.00,193.00">\n      </points>\n      '
+     '<attribute name="prototype">Car',
+     "{xml} (as imported): $.images[3].vehicles[0].track (image 'highway_0003_000003'): track 'highway_0003-0' has "
+     "prototype 'Car' here and 'Van' at $.images[0].vehicles[0].track: one prototype (and one size) per track"),
+])
+def test_video_bad_input_exits_2_naming_the_file_and_where(tmp_path, old, new, message):
+    xml = _video_variant(tmp_path, old, new)
+    out = tmp_path / "out.json"
+    result = CliRunner().invoke(main, ["import", "cvat", str(xml), "--cameras", str(_video_cameras(tmp_path)),
+                                       "-o", str(out)])
+    assert result.exit_code == 2
+    assert result.output == f"Error: {message.format(xml=xml)}\n"
+    assert not out.exists()
+
+
+def test_video_refusals_name_the_file(tmp_path):
+    cameras = load_cameras(_video_cameras(tmp_path))
+    project = _video_variant(tmp_path, "<task>\n      <id>12</id>", "<project>\n      <id>12</id>")
+    project.write_text(project.read_text().replace("</task>", "</project>"))
+    with pytest.raises(FormatError, match=f"{project}: CVAT for video from a project export: export each task"):
+        read_cvat(project, cameras)
+    unnamed = _video_variant(tmp_path, "<name>highway 0003</name>", "<name>(((</name>")
+    assert read_cvat(unnamed, cameras)[0]["images"][0]["sequence"] == "task_12"
+    unnamed.write_text(unnamed.read_text().replace("<id>12</id>", "<id></id>"))
+    with pytest.raises(FormatError, match=r"names no task or job: give the sequence a name \(--sequence NAME\)"):
+        read_cvat(unnamed, cameras)
+    assert read_cvat(unnamed, cameras, sequence="s1")[0]["images"][0]["id"] == "s1_000000"
+    # A job export: no name, and (as JobData writes it) the frame size beside <job> rather than in it.
+    size = "\n      <original_size>\n        <width>1242</width>\n        <height>375</height>\n      </original_size>"
+    task = "<task>\n      <id>12</id>\n      <name>highway 0003</name>"
+    job = _video_variant(tmp_path, task, "<job>\n      <id>41</id>")
+    job.write_text(job.read_text().replace(size, "").replace("</task>", f"</job>{size}"))
+    first = read_cvat(job, cameras)[0]["images"][0]
+    assert (first["id"], first["size"]) == ("job_41_000000", [1242, 375])
+    with pytest.raises(FormatError, match=r"this file has no <track> \(CVAT for images 1.1\)"):
+        read_cvat(_xml(tmp_path, f"  {IMAGE}\n  </image>"), cameras, sequence="drive3")
+
+
+def test_images_export_still_imports_byte_for_byte(tmp_path):
+    # CVAT for images 1.1 writes no sequence, frame or track, in the key order it always had.
+    path = _xml(tmp_path, f"""  {IMAGE}
+    <skeleton label="vehicle" source="manual" z_order="0">
+      <points label="wheel-front-left" source="manual" outside="0" occluded="0" points="100.00,200.00">
+      </points>
+      <attribute name="prototype">Van</attribute>
+    </skeleton>
+    <points label="rear-center" source="manual" occluded="0" points="30.00,21.00" z_order="0" group_id="2">
+    </points>
+    <box label="Truck" source="manual" occluded="0" xtl="5.00" ytl="6.00" xbr="70.00" ybr="80.00" z_order="0" \
+group_id="2">
+    </box>
+  </image>""")
+    out = tmp_path / "out.json"
+    cameras = write_json(tmp_path / "c.json", {"cameras": [{"match": "*", "K": VIDEO_K}]})
+    result = CliRunner().invoke(main, ["import", "cvat", str(path), "--cameras", str(cameras), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    first = {"kind": "point", "part": "wheel-front-left", "xy": [100.0, 200.0]}
+    expected = {"toosicubix": 1, "images": [{
+        "id": "a", "file": "frames/a.png", "size": [1000, 500], "camera": {"K": VIDEO_K}, "vehicles": [
+            {"id": "1", "prototype": "Van", "parts": [first]},
+            {"id": "2", "prototype": "Truck", "box2d": [5.0, 6.0, 70.0, 80.0],
+             "parts": [{"kind": "point", "part": "rear-center", "xy": [30.0, 21.0]}]}]}]}
+    assert out.read_text() == json.dumps(expected, indent=1) + "\n"

@@ -85,26 +85,45 @@ def _write(doc: dict, summary, out_path: Path, quiet: bool) -> None:
         click.echo(f"wrote {out_path}", err=True)
 
 
+def _sequence_name(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    from toosicubix.formats.tool_import import check_sequence_name
+
+    try:
+        return None if value is None else check_sequence_name(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
 @click.command("cvat")
 @click.argument("annotations_xml", type=click.Path(dir_okay=False, path_type=Path))
 @_common
+@click.option("--sequence", "sequence", default=None, metavar="NAME", callback=_sequence_name,
+              help="CVAT for video: the sequence name of the frames [default: the task name, else task_<id> or "
+                   "job_<id>].")
 def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Path, default_prototype: str,
-                 lengths: tuple[str, ...], strict: bool, quiet: bool) -> None:
-    """Import a CVAT for images 1.1 export (annotations.xml) as an annotation file.
+                 lengths: tuple[str, ...], strict: bool, quiet: bool, sequence: str | None) -> None:
+    """Import a CVAT for images 1.1 or CVAT for video 1.1 export (annotations.xml) as an annotation file.
 
     Skeletons (from `toosicubix template cvat`) are vehicles, their points the keypoints; points marked
     outside are not clicked. Loose points are grouped into vehicles by group_id (a box in the group gives
-    the prototype and box). Task, job and project exports are read. Keypoints that cannot be grouped,
-    unknown names and points outside the image are warnings that name the image and the element.
+    the prototype and box). Task, job and project exports are read (a video's: task or job). Keypoints that
+    cannot be grouped, unknown names and points outside the image are warnings that name the image and the
+    element.
+
+    A video export (tracks) becomes one sequence: frame N is the image <sequence>_<N:06d> (file
+    images/frame_<N:06d>.PNG), tracks with the same group_id are one vehicle whose "track" is
+    <sequence>-<smallest track id>. Clicks come from keyframes only; boxes from every frame the box track is
+    not outside; outside means not in the frame.
 
     \b
     Example:
       toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
+      toosicubix import cvat video/annotations.xml --sequence drive3 --cameras cameras.json -o drive3.json
     """
     from toosicubix.formats.cvat import read_cvat
 
     known = _lengths(lengths)
-    _run(lambda path, cameras: read_cvat(path, cameras, default_prototype, known),
+    _run(lambda path, cameras: read_cvat(path, cameras, default_prototype, known, sequence),
          annotations_xml, cameras_path, out_path, strict, quiet)
 
 
@@ -152,6 +171,10 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     Image id = the file name's stem, vehicle id = the COCO annotation id, box2d from bbox. Keypoints with
     v = 0 are skipped, v = 1 (labelled, not visible) kept. The summary on stderr counts every labelled
     keypoint the mapping left unused, per name.
+
+    Videos (TAO, BDD100K): an image with video_id (named by videos[]), video_name or video, and frame_index
+    or frame_id is a frame of a sequence (image id <sequence>_<frame:06d>); an annotation's track_id or
+    instance_id makes its track <sequence>-<id> (without keypoints: a box-only frame).
 
     Exit code 0 on success, 2 for a malformed file (named with its JSON path), an image without a camera or a
     keypoint the mapping does not know.

@@ -18,6 +18,25 @@ or the image's own ``K``.
 The bundled ``toosicubix`` mapping is not a file: it is :func:`toosicubix.parts.keypoints.mapping_document`, the
 labelling tools' flat keypoint names, so the two cannot disagree. Its length features without a default size
 (wheelbases, tyres) are not made on a COCO import (no size to give them); their keypoints are counted unused.
+
+Videos (COCO-style tracking files, TAO and BDD100K's ``to_coco``): an image that names its video and its frame is a
+frame of a sequence, an annotation with a track id a tracked vehicle.
+
+- Video: ``video_id`` (TAO, BDD100K), named by ``videos[]`` (``{"id", "name"}``) when it lists the id, else by the
+  image's ``video_name`` or ``video`` (TAO), else by the id itself; or only ``video_name`` / ``video``. The name,
+  made a file name (:func:`~toosicubix.formats.tool_import.sequence_id_for`), is the image's ``"sequence"``.
+- Frame: ``frame_index`` (TAO), else ``frame_id`` (BDD100K): an integer from 0, the image's ``"frame"``. A video
+  without a frame, or a frame without a video, is an error naming the JSON path.
+- Track: ``track_id`` (TAO), else ``instance_id`` (BDD100K, numbered per video): the vehicle's ``"track"`` is
+  ``<sequence>-<track id>``. A track id on an annotation whose image is not a frame of a video is an error naming
+  its JSON path: a track only means something within one sequence, and guessing one (the whole file) would tie
+  unrelated images together. A tracked annotation may have no ``keypoints`` (TAO's and BDD100K's have none):
+  a frame with its box only.
+
+Such an image's id is ``<sequence>_<frame:06d>`` (TAO's file names repeat across videos); the file stays its
+``file_name``. A tracked vehicle without parts is kept (its box, or nothing: the solver interpolates it); the rules
+across frames (one prototype per track, a frame once per sequence) are checked on the imported document, naming
+the JSON path. Files without these fields import as before.
 """
 
 from __future__ import annotations
@@ -41,6 +60,7 @@ from toosicubix.annotations.mapping import (
 )
 from toosicubix.errors import InputFileError
 from toosicubix.formats.cameras import CameraTable
+from toosicubix.formats.tool_import import check_imported, frame_image_id, sequence_id_for
 from toosicubix.jsonfile import read_json
 from toosicubix.vocabulary import KINDS
 
@@ -57,6 +77,8 @@ class ImportSummary:
     unlabelled: int = 0
     unused: Counter = field(default_factory=Counter)
     vehicles_without_parts: int = 0
+    tracks: set[str] = field(default_factory=set)
+    tracked_without_parts: int = 0
 
     def lines(self) -> list[str]:
         kinds = ", ".join(f"{n} {k}" for k, n in sorted(self.parts.items())) or "none"
@@ -65,6 +87,9 @@ class ImportSummary:
                f"{self.unlabelled} unlabelled (v = 0) skipped"]
         if self.vehicles_without_parts:
             out.append(f"{self.vehicles_without_parts} vehicles got no part (they will fail to fit)")
+        if self.tracks:
+            out.append(f"{len(self.tracks)} tracks; {self.tracked_without_parts} of their vehicle frames have no part "
+                       "(a box only, or the solver interpolates them)")
         if self.unused:
             out.append(f"{sum(self.unused.values())} labelled keypoints no part used, by name: "
                        + ", ".join(f"{name} {n}" for name, n in sorted(self.unused.items())))
@@ -131,12 +156,23 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
 
     images: dict[Any, dict[str, Any]] = {}
     order: list[Any] = []
+    videos = _video_names(data, coco_path)
+    sequences: dict[str, tuple[Any, str]] = {}  # sequence -> (the video it names, where first)
     for i, im in enumerate(_field(data, "images", list, coco_path, "$")):
         where = f"$.images[{i}]"
         image_id = _field(im, "id", (int, str), coco_path, where)
         file_name = _field(im, "file_name", str, coco_path, where)
         camera = _camera_of(im, file_name, cameras, coco_path, where)
-        doc: dict[str, Any] = {"id": Path(file_name).stem, "file": file_name, "camera": camera, "vehicles": []}
+        doc: dict[str, Any] = {"id": Path(file_name).stem, "file": file_name}
+        frame_of = _video_frame(im, videos, coco_path, where)
+        if frame_of is not None:
+            video, sequence, frame = frame_of
+            first = sequences.setdefault(sequence, (video, where))
+            if first[0] != video:
+                raise _fail(coco_path, where, f"videos {first[0][1]!r} (at {first[1]}) and {video[1]!r} both become "
+                                              f"sequence {sequence!r}: rename one")
+            doc.update(id=frame_image_id(sequence, frame), sequence=sequence, frame=frame)
+        doc.update(camera=camera, vehicles=[])
         if _number(im.get("width")) and _number(im.get("height")):
             doc["size"] = [int(im["width"]), int(im["height"])]
         if image_id in images:
@@ -154,18 +190,26 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
             raise _fail(coco_path, f"{where}.image_id", f"no image has id {image_id!r}")
         category = ann.get("category_id")
         cat_name, names = categories.get(category, (str(category), None))
+        track = _track_of(ann, images[image_id], coco_path, where)
         if names is None:
             names = mapping.keypoints
-        if names is None:
-            raise _fail(coco_path, f"{where}.category_id",
-                        f"category {category!r} does not name its keypoints, nor does the mapping {mapping.name!r}")
-        labelled = _triplets(ann, names, coco_path, where, summary)
+        labelled: dict[str, tuple[float, float, bool]] = {}
+        if track is None or "keypoints" in ann:  # a tracked box without keypoints is a frame with a box only
+            if names is None:
+                raise _fail(coco_path, f"{where}.category_id", f"category {category!r} does not name its keypoints, "
+                                                               f"nor does the mapping {mapping.name!r}")
+            labelled = _triplets(ann, names, coco_path, where, summary)
         prototype = mapping.prototypes.get(str(category), mapping.prototypes.get(cat_name, mapping.prototype))
         parts, taken = _make_parts(enabled, labelled, prototype)
         for name in labelled:
             if name not in taken:
                 summary.unused[name] += 1
-        vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype, "parts": parts}
+        vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype}
+        if track is not None:
+            vehicle["track"] = track
+            summary.tracks.add(track)
+            summary.tracked_without_parts += not parts
+        vehicle["parts"] = parts
         if "bbox" in ann:
             box = ann["bbox"]
             if not (isinstance(box, list) and len(box) == 4 and all(_number(v) for v in box)) or box[2] <= 0 \
@@ -174,13 +218,71 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
             vehicle["box2d"] = [box[0], box[1], box[0] + box[2], box[1] + box[3]]
         images[image_id]["vehicles"].append(vehicle)
         summary.vehicles += 1
-        summary.vehicles_without_parts += not parts
+        summary.vehicles_without_parts += not parts and track is None
         for part in parts:
             summary.parts[part["kind"]] += 1
             summary.clicks += len(KINDS[part["kind"]].clicks)
     document = {"toosicubix": schemas.SCHEMA_VERSION, "images": [images[k] for k in order]}
-    schemas.parse_annotations(document, f"{coco_path} (as imported)")
+    if sequences:
+        check_imported(document, f"{coco_path} (as imported)")  # the rules across frames name the image too
+    else:
+        schemas.parse_annotations(document, f"{coco_path} (as imported)")
     return document, summary
+
+
+#: The spellings of a frame's video (identity first, then names), its frame number and an annotation's track.
+VIDEO_KEYS = ("video_id", "video_name", "video")
+FRAME_KEYS = ("frame_index", "frame_id")
+TRACK_KEYS = ("track_id", "instance_id")
+
+
+def _video_names(data: dict[str, Any], path: str | Path) -> dict[Any, str]:
+    """The ``videos[]`` table: id -> name (empty when the file has none)."""
+    if "videos" not in data:
+        return {}
+    names: dict[Any, str] = {}
+    for i, video in enumerate(_field(data, "videos", list, path, "$")):
+        video_id = _field(video, "id", (int, str), path, f"$.videos[{i}]")
+        name = video.get("name")
+        if name is not None:
+            names[video_id] = str(_field(video, "name", str, path, f"$.videos[{i}]"))
+    return names
+
+
+def _video_frame(im: dict[str, Any], videos: dict[Any, str], path: str | Path,
+                 where: str) -> tuple[tuple[str, Any], str, int] | None:
+    """((key, value) naming the video, sequence, frame) of an image that is a frame of a video, else None."""
+    video_key = next((k for k in VIDEO_KEYS if im.get(k) is not None), None)
+    frame_key = next((k for k in FRAME_KEYS if im.get(k) is not None), None)
+    if video_key is None and frame_key is None:
+        return None
+    if video_key is None or frame_key is None:
+        found = video_key or frame_key
+        raise _fail(path, f"{where}.{found}", f"expected a video ({', '.join(VIDEO_KEYS)}) and a frame number "
+                                              f"({', '.join(FRAME_KEYS)}) together, found only {found!r}")
+    frame = im[frame_key]
+    if not isinstance(frame, int) or isinstance(frame, bool) or not 0 <= frame <= schemas.MAX_FRAME:
+        raise _fail(path, f"{where}.{frame_key}", f"expected an integer frame number from 0 to {schemas.MAX_FRAME}, "
+                                                  f"got {frame!r:.40}")
+    value = _field(im, video_key, (int, str) if video_key == "video_id" else str, path, where)
+    name = videos.get(value) if video_key == "video_id" else None
+    name = name or next((im[k] for k in VIDEO_KEYS[1:] if isinstance(im.get(k), str)), None) or str(value)
+    sequence = sequence_id_for(name)
+    if not sequence:
+        raise _fail(path, f"{where}.{video_key}", f"video {name!r} makes no sequence name (letters or digits needed)")
+    return (video_key, value), sequence, frame
+
+
+def _track_of(ann: dict[str, Any], image: dict[str, Any], path: str | Path, where: str) -> str | None:
+    """The track of an annotation, ``<sequence>-<track id>``, or None."""
+    key = next((k for k in TRACK_KEYS if ann.get(k) is not None), None)
+    if key is None:
+        return None
+    value = _field(ann, key, (int, str), path, where)
+    if "sequence" not in image:
+        raise _fail(path, f"{where}.{key}", f"a track needs a frame of a video, but image {image['file']!r} has no "
+                                            f"{' or '.join(VIDEO_KEYS)} with {' or '.join(FRAME_KEYS)}")
+    return f"{image['sequence']}-{value}"
 
 
 def _camera_of(im: dict[str, Any], file_name: str, cameras: CameraTable | None, path: str | Path,

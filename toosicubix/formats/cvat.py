@@ -1,4 +1,5 @@
-"""CVAT for images 1.1 XML -> annotation file v1 (the review export is :mod:`toosicubix.formats.cvat_export`).
+"""CVAT for images 1.1 and CVAT for video 1.1 XML -> annotation file v1 (the review export is
+:mod:`toosicubix.formats.cvat_export`).
 
 Import (as CVAT's ``dump_as_cvat_annotation`` writes it, task, job or project export)::
 
@@ -19,20 +20,80 @@ Import (as CVAT's ``dump_as_cvat_annotation`` writes it, task, job or project ex
 - Loose ``points`` shapes are grouped into vehicles by ``group_id``; a ``box`` in the group gives the box
   and the prototype (its ``prototype`` attribute, else its label). In an image without skeletons or groups,
   all loose points are one vehicle.
+
+CVAT for video 1.1 (``dump_as_cvat_interpolation``; a task or job export) has no ``<image>``: its shapes live in
+tracks, one child per frame, and the frames of the task become one *sequence*::
+
+    <annotations><version>1.1</version><meta><task><id>7</id><name>drive 3</name>...
+        <original_size><width>1242</width><height>375</height></original_size></task></meta>
+      <track id="0" label="vehicle" source="manual" group_id="1">
+        <skeleton frame="12" keyframe="1" z_order="0">
+          <points label="wheel-front-left" keyframe="1" outside="0" occluded="0" points="401.20,202.00"/>
+          <attribute name="prototype">Car</attribute>
+        </skeleton>
+        <skeleton frame="13" keyframe="0" z_order="0">...</skeleton>
+      </track>
+      <track id="1" label="Car" source="manual" group_id="1">
+        <box frame="12" keyframe="1" outside="0" occluded="0" xtl=".." ytl=".." xbr=".." ybr=".." z_order="0"/>
+        ...
+
+CVAT writes every frame of a track from its first keyframe on: the keyframes a person set (``keyframe="1"``),
+the frames between them as it interpolates them (``keyframe="0"``), and after the last keyframe copies up to the
+task's end, unless a keyframe with ``outside="1"`` says the object left the view (nothing is written then until
+its next keyframe). The import reads them so:
+
+- *Sequence*: the task's name (:func:`~toosicubix.formats.tool_import.sequence_id_for`), else ``task_<id>``
+  (``job_<id>`` for a job export), or the name the caller gives. A frame is the image
+  ``<sequence>_<frame:06d>`` with ``"sequence"`` and ``"frame"`` (CVAT's frame number, which counts from the
+  video's first frame) and the file :data:`FRAME_FILE` (the name CVAT's export gives a video frame; the XML
+  names no frame files). Frames where no vehicle is present are not written.
+- *Vehicles*: tracks with the same ``group_id`` are one vehicle (e.g. a skeleton track and a box track); a track
+  without one is a vehicle of its own (a box track alone: a vehicle with boxes only). Points tracks without a
+  ``group_id`` are one vehicle when the task has no other tracks, else left out with a warning. A vehicle is
+  named by its smallest track id: vehicle ``"id"`` that id, ``"track"`` ``<sequence>-<id>``.
+- *Outside*: a shape with ``outside="1"`` (a skeleton: all its points outside) means the vehicle is not in that
+  frame; a vehicle is in a frame where any of its tracks is.
+- *Clicks* come from keyframes only: a skeleton point is a click on a frame where both the skeleton and the
+  point are keyframes (a point without its own flag takes its skeleton's), a point shape where it is a
+  keyframe. Interpolated positions are CVAT's guess, not a person's click: such a frame gets no parts, only
+  its box if there is one, else an empty tracked vehicle whose pose the solver interpolates.
+- *Boxes* are taken on every frame where the box track is not outside, interpolated or not (what a tracker or
+  CVAT's interpolation gives is what the solver uses a box for). Two boxes of one vehicle on a frame are an
+  error.
+- *Prototype*: the ``prototype`` attribute of the vehicle's shapes on that frame (skeleton or points first, then
+  the box), else the vehicle's first ``prototype`` attribute on any frame, else its box track's label, else the
+  default (one warning per vehicle). A prototype that changes along a track is the annotation file's error (one
+  prototype per track), naming the JSON path.
+
+Project exports of video tasks are refused (export each task: one sequence each).
 """
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from toosicubix.annotations.schema import MAX_FRAME
 from toosicubix.errors import FormatError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.templates import PROTOTYPE_ATTRIBUTE
-from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolKeypoint, ToolVehicle
+from toosicubix.formats.tool_import import (
+    DocumentBuilder,
+    ImportSummary,
+    ToolKeypoint,
+    ToolVehicle,
+    check_imported,
+    check_sequence_name,
+    sequence_id_for,
+)
+
+#: The file of frame ``frame`` of a video task, as CVAT's export names it (``images/`` beside annotations.xml).
+FRAME_FILE = "images/frame_{frame:06d}.PNG"
 
 
 def _parse(path: Path) -> ET.Element:
@@ -61,15 +122,18 @@ def _attributes(element: ET.Element) -> dict[str, str]:
 
 
 def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: str = "Car",
-              lengths: dict[str, tuple[float, float]] | None = None) -> tuple[dict[str, Any], ImportSummary]:
-    """Read a CVAT for images 1.1 ``annotations.xml`` into an annotation file v1 document.
+              lengths: dict[str, tuple[float, float]] | None = None,
+              sequence: str | None = None) -> tuple[dict[str, Any], ImportSummary]:
+    """Read a CVAT for images 1.1 or CVAT for video 1.1 ``annotations.xml`` into an annotation file v1 document.
 
     Parameters
     ----------
-    path : the XML file (from a task, job or project export)
-    cameras : intrinsics by image name; every image with vehicles needs one
+    path : the XML file (from a task, job or project export; a video only from a task or job)
+    cameras : intrinsics by image name (for a video: by :data:`FRAME_FILE`); every image with vehicles needs one
     default_prototype : for vehicles without a prototype attribute or box
     lengths : known sizes of length features, feature -> (metres, sigma)
+    sequence : the sequence name of a video export (default: from its task or job); a name
+        :func:`~toosicubix.formats.tool_import.check_sequence_name` accepts
 
     Returns
     -------
@@ -78,8 +142,11 @@ def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: 
     Raises
     ------
     FormatError
-        Not XML, not CVAT for images 1.1 (e.g. CVAT for video's tracks), malformed shapes, an image without a
-        camera: naming the file and the image and element.
+        Not XML, not CVAT 1.1, malformed shapes or frame numbers, an image without a camera: naming the file
+        and the image, track and element; a ``sequence`` for a file without tracks.
+    InputFileError
+        A video whose imported document breaks the annotation file's rules (e.g. a prototype that changes
+        along a track), naming the file ("as imported") and the JSON path.
     """
     path = Path(path)
     root = _parse(path)
@@ -88,9 +155,12 @@ def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: 
     version = (root.findtext("version") or "").strip()
     if version and version != "1.1":
         raise FormatError(path, f"<version>: expected 1.1, found {version}")
-    if root.find("track") is not None:
-        raise FormatError(path, "<track> found: this is CVAT for video; export the task as CVAT for images 1.1")
     builder = DocumentBuilder(str(path), cameras, default_prototype, lengths)
+    if root.find("track") is not None:
+        return _read_video(root, path, builder, sequence)
+    if sequence is not None:
+        raise FormatError(path, f"a sequence name ({sequence!r}) is for CVAT for video exports; this file has no "
+                                "<track> (CVAT for images 1.1)")
     for image in root.findall("image"):
         name = image.get("name")
         if not name:
@@ -170,3 +240,252 @@ def _image_vehicles(image: ET.Element, path: Path, where: str, builder: Document
                                                  "skeletons or groups): left out")
             builder.summary.left_out[keypoint.name] += 1
     return vehicles
+
+
+# --- CVAT for video 1.1 -------------------------------------------------------------------------------------------
+
+_SHAPES = ("box", "points", "skeleton")
+
+
+@dataclass
+class _Shape:
+    """One shape of a track on one frame."""
+
+    frame: int
+    keyframe: bool
+    outside: bool
+    element: ET.Element
+    where: str  # for errors: "<track id='0' label='Car'> box 3 (frame 12)"
+    name: str  # for warnings: "track 0 (label 'Car'), box (frame 12)"
+
+
+@dataclass
+class _Track:
+    id: str
+    label: str
+    kind: str  # box, points or skeleton
+    group: str | None
+    shapes: dict[int, _Shape] = field(default_factory=dict)
+
+
+@dataclass
+class _Vehicle:
+    """The tracks of one vehicle: one track, a group, or the task's loose points tracks."""
+
+    id: str
+    element: str
+    tracks: list[_Track]
+
+
+def _number_key(text: str) -> tuple[int, int | str]:
+    return (0, int(text)) if text.isdigit() else (1, text)
+
+
+def _flag(element: ET.Element, name: str, where: str, path: Path, default: bool | None) -> bool:
+    value = element.get(name)
+    if value is None and default is not None:
+        return default
+    if value not in ("0", "1"):
+        raise FormatError(path, f'{where}: expected {name}="0" or "1", got {value!r}')
+    return value == "1"
+
+
+def _video_meta(root: ET.Element, path: Path) -> tuple[str | None, tuple[int, int] | None]:
+    """The default sequence name (task name, else task_<id> or job_<id>) and the frame size of a video export."""
+    meta = root.find("meta")
+    if meta is None:
+        return None, None
+    if meta.find("project") is not None:
+        raise FormatError(path, "CVAT for video from a project export: export each task (or job) as CVAT for video "
+                                "1.1, one sequence each")
+    owner, kind = meta.find("task"), "task"
+    if owner is None:
+        owner, kind = meta.find("job"), "job"
+    name = None
+    if owner is not None:
+        task_name = (owner.findtext("name") or "").strip() if kind == "task" else ""  # a job's meta has no name
+        number = (owner.findtext("id") or "").strip()
+        name = sequence_id_for(task_name) or (sequence_id_for(f"{kind}_{number}") if number else "") or None
+    size_element = owner.find("original_size") if owner is not None else None
+    if size_element is None:
+        size_element = meta.find("original_size")  # where a job export puts it
+    if size_element is None:
+        return name, None
+    try:
+        size = (int(size_element.findtext("width", "")), int(size_element.findtext("height", "")))
+    except ValueError:
+        size = (0, 0)
+    if min(size) <= 0:
+        raise FormatError(path, "<original_size>: expected positive integer <width> and <height>")
+    return name, size
+
+
+def _tracks(root: ET.Element, path: Path) -> list[_Track]:
+    tracks: list[_Track] = []
+    ids: set[str] = set()
+    for t, element in enumerate(root.findall("track")):
+        track_id, label = (element.get("id") or "").strip(), element.get("label", "")
+        where = f"<track id={track_id!r} label={label!r}>"
+        if not re.fullmatch(r"[A-Za-z0-9_.\-]+", track_id):
+            raise FormatError(path, f"<track> {t + 1} (label {label!r}): expected an id of digits (CVAT's track "
+                                    f"number), got {track_id!r}")
+        if track_id in ids:
+            raise FormatError(path, f"{where}: a second track with id {track_id!r}")
+        ids.add(track_id)
+        group = element.get("group_id")
+        kinds = {child.tag for child in element if child.tag != "attribute"}
+        if not kinds & set(_SHAPES):
+            continue  # an empty track, or polygons, cuboids, ...: not ours
+        if len(kinds) > 1:
+            raise FormatError(path, f"{where}: expected one kind of shape per track, got {', '.join(sorted(kinds))}")
+        track = _Track(track_id, label, kinds.pop(), group if group and group != "0" else None)
+        for index, shape in enumerate(element):
+            if shape.tag != track.kind:
+                continue
+            text = shape.get("frame")
+            swhere = f"{where} {shape.tag} {index + 1}"
+            if text is None or not re.fullmatch(r"[0-9]+", text) or int(text) > MAX_FRAME:
+                raise FormatError(path, f"{swhere}: expected an integer frame number from 0 to {MAX_FRAME}, "
+                                        f"got {text!r:.40}")
+            frame = int(text)
+            swhere = f"{swhere} (frame {frame})"
+            if frame in track.shapes:
+                raise FormatError(path, f"{swhere}: frame {frame} is given twice in one track")
+            track.shapes[frame] = _Shape(frame, _flag(shape, "keyframe", swhere, path, None),
+                                         _flag(shape, "outside", swhere, path, False), shape, swhere,
+                                         f"track {track_id} (label {label!r}), {shape.tag} (frame {frame})")
+        tracks.append(track)
+    return tracks
+
+
+def _vehicles(tracks: list[_Track], builder: DocumentBuilder) -> list[_Vehicle]:
+    """Link tracks into vehicles: by group_id, else one vehicle per track; loose points tracks (see the module)."""
+    groups: dict[str, list[_Track]] = {}
+    alone: list[_Track] = []
+    loose: list[_Track] = []
+    for track in tracks:
+        if track.group is not None:
+            groups.setdefault(track.group, []).append(track)
+        elif track.kind == "points":
+            loose.append(track)
+        else:
+            alone.append(track)
+    vehicles = [_Vehicle(track.id, f"track {track.id} (label {track.label!r})", [track]) for track in alone]
+    for group, members in groups.items():
+        first = min((m.id for m in members), key=_number_key)
+        vehicles.append(_Vehicle(first, f"group_id {group} (tracks {', '.join(m.id for m in members)})", members))
+    if loose and not vehicles:
+        first = min((m.id for m in loose), key=_number_key)
+        vehicles.append(_Vehicle(first, "points tracks without group_id", loose))
+    else:
+        for track in loose:
+            clicks = [s for s in track.shapes.values() if s.keyframe and not s.outside]
+            builder.summary.warnings.append(
+                f"{builder.source}: track {track.id} (label {track.label!r}): a points track without group_id cannot "
+                "be linked to a vehicle (the task has other tracks): left out")
+            builder.summary.left_out[track.label] += len(clicks)
+    return sorted(vehicles, key=lambda v: _number_key(v.id))
+
+
+def _box(shape: _Shape, path: Path) -> tuple[float, float, float, float]:
+    try:
+        box = tuple(float(shape.element.get(k, "")) for k in ("xtl", "ytl", "xbr", "ybr"))
+    except ValueError:
+        box = (np.nan,) * 4
+    if not (np.all(np.isfinite(box)) and box[0] < box[2] and box[1] < box[3]):
+        raise FormatError(path, f"{shape.where}: expected numbers xtl < xbr and ytl < ybr")
+    return box  # type: ignore[return-value]
+
+
+def _vehicle_frame(vehicle: _Vehicle, frame: int, path: Path, builder: DocumentBuilder,
+                   file_name: str) -> tuple[ToolVehicle, str | None] | None:
+    """The vehicle on one frame (None: not in it) and the prototype its shapes there name."""
+    out = ToolVehicle(id=vehicle.id, element=vehicle.element)
+    present = False
+    named: list[str] = []
+    box_named: list[str] = []
+    box_owner: _Shape | None = None
+    for track in vehicle.tracks:
+        shape = track.shapes.get(frame)
+        if shape is None or shape.outside:
+            continue
+        prototype = _attributes(shape.element).get(PROTOTYPE_ATTRIBUTE)
+        if track.kind == "box":
+            if box_owner is not None:
+                raise FormatError(path, f"{shape.where}: {vehicle.element} has a second box on frame {frame} "
+                                        f"(also {box_owner.where}): one box per vehicle")
+            present, box_owner, out.box2d = True, shape, _box(shape, path)
+            box_named += [prototype] if prototype else []
+            continue
+        if track.kind == "points":
+            present = True
+            if shape.keyframe:
+                xy = _xy_list(shape.element.get("points"), path, shape.where)
+                if len(xy) != 1:
+                    builder.warn(file_name, shape.name, f"{len(xy)} points in one shape: left out")
+                    builder.summary.left_out[track.label] += 1
+                else:
+                    out.keypoints.append(ToolKeypoint(track.label, xy[0], shape.name))
+        else:
+            points = [p for p in shape.element.findall("points")
+                      if not _flag(p, "outside", f"{shape.where}, points {p.get('label', '')!r}", path, False)]
+            if not points:
+                continue  # every point outside: the skeleton is not in this frame
+            present = True
+            for point in points:
+                label = point.get("label", "")
+                pwhere = f"{shape.where}, points {label!r}"
+                if not (shape.keyframe and _flag(point, "keyframe", pwhere, path, shape.keyframe)):
+                    continue  # CVAT's interpolation, not a click
+                xy = _xy_list(point.get("points"), path, pwhere)
+                element = f"{shape.name}, points {label!r}"
+                if len(xy) != 1:
+                    builder.warn(file_name, element, f"{len(xy)} points in one element: left out")
+                    builder.summary.left_out[label] += 1
+                    continue
+                out.keypoints.append(ToolKeypoint(label, xy[0], element))
+        named += [prototype] if prototype else []
+    if not present:
+        return None
+    return out, (named + box_named + [None])[0]
+
+
+def _read_video(root: ET.Element, path: Path, builder: DocumentBuilder,
+                sequence: str | None) -> tuple[dict[str, Any], ImportSummary]:
+    if root.find("image") is not None:
+        raise FormatError(path, "both <image> and <track> elements: expected CVAT for images 1.1 or CVAT for "
+                                "video 1.1, not both")
+    default_name, size = _video_meta(root, path)
+    if sequence is not None:
+        try:
+            check_sequence_name(sequence)
+        except ValueError as exc:
+            raise FormatError(path, f"sequence name: {exc}") from None
+    sequence = sequence or default_name
+    if sequence is None:
+        raise FormatError(path, "CVAT for video 1.1 whose <meta> names no task or job: give the sequence a name "
+                                "(--sequence NAME)")
+    frames: dict[int, list[ToolVehicle]] = {}
+    for vehicle in _vehicles(_tracks(root, path), builder):
+        track = f"{sequence}-{vehicle.id}"
+        on_frames = []
+        for frame in sorted({f for t in vehicle.tracks for f in t.shapes}):
+            found = _vehicle_frame(vehicle, frame, path, builder, FRAME_FILE.format(frame=frame))
+            if found is not None:
+                on_frames.append((frame, *found))
+        if not on_frames:
+            continue
+        fallback = next((named for _, _, named in on_frames if named), None)
+        fallback = fallback or next((t.label for t in vehicle.tracks if t.kind == "box" and t.label), None)
+        if fallback is None:
+            builder.warn(FRAME_FILE.format(frame=on_frames[0][0]), vehicle.element,
+                         f"no prototype on any frame: {builder.default_prototype!r} assumed")
+            fallback = builder.default_prototype
+        for frame, tool_vehicle, named in on_frames:
+            tool_vehicle.prototype, tool_vehicle.track = named or fallback, track
+            frames.setdefault(frame, []).append(tool_vehicle)
+    for frame in sorted(frames):
+        builder.add_image(FRAME_FILE.format(frame=frame), size, frames[frame], sequence=sequence, frame=frame)
+    document = builder.document()
+    check_imported(document, f"{path} (as imported)")
+    return document, builder.summary

@@ -4,6 +4,12 @@ An importer (:mod:`toosicubix.formats.cvat`, :mod:`toosicubix.formats.labelstudi
 into :class:`ToolVehicle` objects per image and hands them to :class:`DocumentBuilder`, which checks the
 points against the image, turns keypoints into parts (:mod:`toosicubix.parts.keypoints`), attaches the camera
 from a cameras file and collects every warning with the image and element it is about.
+
+Videos: an image may be a frame of a sequence (``add_image(..., sequence=, frame=)``) and a vehicle a track
+(:attr:`ToolVehicle.track`). A tracked vehicle is kept without parts (a box only, or nothing: the solver
+interpolates its pose from the track's other frames); an untracked one without usable keypoints is left out.
+:func:`sequence_id_for` makes a sequence name from a tool's video or task name, :func:`check_imported` checks
+a finished document, the rules across frames (one prototype per track, ...) first.
 """
 
 from __future__ import annotations
@@ -14,7 +20,10 @@ from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from toosicubix.errors import FormatError
+from pydantic import ValidationError
+
+from toosicubix.annotations.schema import MAX_FRAME, MAX_ID_LENGTH, ImageAnnotation, TrackBook, parse_annotations
+from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.parts.keypoints import parts_from_keypoints
 
@@ -37,13 +46,15 @@ class ToolKeypoint:
 
 @dataclass
 class ToolVehicle:
-    """One vehicle as the tool stored it: its keypoints and, where the tool has them, prototype and box."""
+    """One vehicle as the tool stored it: its keypoints and, where the tool has them, prototype and box; on a
+    frame of a video, its ``track`` (the same vehicle across the frames of the sequence)."""
 
     id: str
     element: str
     prototype: str | None = None
     box2d: tuple[float, float, float, float] | None = None
     keypoints: list[ToolKeypoint] = field(default_factory=list)
+    track: str | None = None
 
 
 @dataclass
@@ -55,11 +66,17 @@ class ImportSummary:
     keypoints: int = 0
     warnings: list[str] = field(default_factory=list)
     left_out: Counter = field(default_factory=Counter)  # keypoint name -> how many were left out
+    tracks: set[str] = field(default_factory=set)  # the tracks of the tracked vehicles
+    tracked: Counter = field(default_factory=Counter)  # tracked vehicle frames: "clicks", "box only", "neither"
 
     def lines(self) -> list[str]:
         out = [f"{self.images} images, {self.vehicles} vehicles, {self.keypoints} keypoints used"]
         if self.left_out:
             out.append("left out: " + ", ".join(f"{name} x{n}" for name, n in sorted(self.left_out.items())))
+        if self.tracks:
+            out.append(f"{len(self.tracks)} tracks; their vehicle frames: {self.tracked['clicks']} with clicks, "
+                       f"{self.tracked['box only']} with a box only, {self.tracked['neither']} with neither "
+                       "(the solver interpolates those)")
         return out
 
 
@@ -71,6 +88,64 @@ def image_id_for(file_name: str) -> str:
     stem = PurePosixPath(file_name.replace("\\", "/")).stem or "image"
     image_id = _ID_BAD.sub("_", stem)
     return image_id if image_id[0].isalnum() else f"i{image_id}"
+
+
+#: The longest sequence name: a frame's image id ``<sequence>_<frame:06d>`` (up to 7 digits) stays within
+#: the schema's ``MAX_ID_LENGTH``.
+MAX_SEQUENCE_LENGTH = MAX_ID_LENGTH - len(f"_{MAX_FRAME}")
+
+
+def sequence_id_for(name: str) -> str:
+    """A sequence name from a tool's video or task name: other characters than ``A-Za-z0-9_.-`` as ``_`` (one
+    for a run), no ``_``, ``.`` or ``-`` at either end, at most :data:`MAX_SEQUENCE_LENGTH` characters; ``""``
+    when nothing is left. ``"Drive 3 (front)"`` gives ``"Drive_3_front"``."""
+    text = re.sub(r"_+", "_", _ID_BAD.sub("_", name)).strip("_.-")
+    return text[:MAX_SEQUENCE_LENGTH].rstrip("_.-")
+
+
+def check_sequence_name(name: str) -> str:
+    """``name`` if it can name a sequence as it is (what :func:`sequence_id_for` leaves unchanged).
+
+    Raises
+    ------
+    ValueError
+        Naming what a sequence name may hold.
+    """
+    if not name or sequence_id_for(name) != name:
+        raise ValueError(f"expected a sequence name of letters, digits and '_', '.', '-' inside, at most "
+                         f"{MAX_SEQUENCE_LENGTH} characters, got {name!r} (e.g. {sequence_id_for(name) or '0003'!r})")
+    return name
+
+
+def frame_image_id(sequence: str, frame: int) -> str:
+    """The image id of a frame of a sequence: ``<sequence>_<frame:06d>``, e.g. ``0003_000012``."""
+    return f"{sequence}_{frame:06d}"
+
+
+def check_imported(document: dict[str, Any], source: str) -> None:
+    """Validate an imported annotation document: first the rules across frames (:class:`TrackBook`: a frame
+    once per sequence, a track in one sequence, one prototype per track), each problem at its JSON path with the
+    image id, then the whole file.
+
+    Raises
+    ------
+    InputFileError
+        Naming ``source`` and the JSON path of every problem.
+    """
+    book = TrackBook()
+    for index, image in enumerate(document["images"]):
+        try:
+            book.add(index, ImageAnnotation.model_validate(image))
+        except ValidationError:
+            continue  # the whole-file check below names it
+    if book.problems:
+        ids = [image.get("id") for image in document["images"]]
+        problems = []
+        for where, message in book.problems:
+            index = int(re.match(r"\$\.images\[(\d+)\]", where).group(1))  # type: ignore[union-attr]
+            problems.append((f"{where} (image {ids[index]!r})", message))
+        raise InputFileError(source, problems)
+    parse_annotations(document, source)
 
 
 class DocumentBuilder:
@@ -97,15 +172,17 @@ class DocumentBuilder:
     def warn(self, image: str, element: str, message: str) -> None:
         self.summary.warnings.append(f"{self.source}: image {image!r}, {element}: {message}")
 
-    def add_image(self, file_name: str, size: tuple[int, int] | None, vehicles: list[ToolVehicle]) -> None:
-        """Add one image with its vehicles.
+    def add_image(self, file_name: str, size: tuple[int, int] | None, vehicles: list[ToolVehicle], *,
+                  sequence: str | None = None, frame: int | None = None) -> None:
+        """Add one image with its vehicles; a frame of a video with its ``sequence`` and ``frame`` (its image id
+        is then :func:`frame_image_id`, else :func:`image_id_for` the file name).
 
         Raises
         ------
         FormatError
             No camera for the image, or two images with the same id.
         """
-        image_id = image_id_for(file_name)
+        image_id = image_id_for(file_name) if sequence is None or frame is None else frame_image_id(sequence, frame)
         if image_id in self._files:
             raise FormatError(self.source, f"images {self._files[image_id]!r} and {file_name!r} get the same "
                                            f"image id {image_id!r}: rename one")
@@ -128,6 +205,8 @@ class DocumentBuilder:
                 return
             raise FormatError(self.source, f"image {file_name!r}: no camera ({hint})")
         image: dict[str, Any] = {"id": image_id, "file": file_name}
+        if sequence is not None:
+            image["sequence"], image["frame"] = sequence, frame
         if size is not None:
             image["size"] = [int(size[0]), int(size[1])]
         image["camera"] = camera
@@ -150,14 +229,20 @@ class DocumentBuilder:
         for name, message in conversion.problems:
             self.warn(file_name, elements.get(name, vehicle.element), f"keypoint {name!r}: {message}: left out")
             self.summary.left_out[name] += 1
-        if not conversion.parts:
+        if not conversion.parts and vehicle.track is None:
             self.warn(file_name, vehicle.element, "no usable keypoints: vehicle left out")
             return None
+        if not conversion.parts and vehicle.keypoints:
+            self.warn(file_name, vehicle.element, "no usable keypoints: kept without parts (a tracked vehicle)")
         prototype = vehicle.prototype
         if not prototype:
             self.warn(file_name, vehicle.element, f"no prototype: {self.default_prototype!r} assumed")
             prototype = self.default_prototype
         out: dict[str, Any] = {"id": vehicle.id, "prototype": prototype}
+        if vehicle.track is not None:
+            out["track"] = vehicle.track
+            self.summary.tracks.add(vehicle.track)
+            self.summary.tracked["clicks" if conversion.parts else "box only" if vehicle.box2d else "neither"] += 1
         if vehicle.box2d is not None:
             out["box2d"] = [float(v) for v in vehicle.box2d]
         out["parts"] = conversion.parts
