@@ -79,13 +79,19 @@ class TrackOptions:
         ``hypot(box_sigma_px, box_sigma_rel * size)`` pixels, ``size`` the box's width (for its left and right
         sides) or height (top, bottom): a person's box hugs the silhouette, inside the cuboid's corners
     max_iterations : of the Levenberg-Marquardt
+
+    The defaults are rules 19 and 19a of benchmarks/decisions.md, fixed from the tuning sequences 0000-0009 of KITTI
+    tracking before any track was fitted (``python benchmarks/tracks.py --motion-model``): the motion sigmas the root
+    mean square of the ground truth's changes of velocity and of yaw rate over the root of the frame interval (9,357
+    triples; pitch and roll take the yaw's), the speed priors their tracks' 99th percentiles; the box sigmas the
+    simulated person's boxes against the projected cuboids.
     """
 
     frame_rate: float = 10.0
-    accel_sigma: tuple[float, float, float] = (1.0, 0.5, 1.5)
-    angular_accel_sigma: tuple[float, float, float] = (0.1, 0.1, 0.3)
-    speed_sigma: float = 30.0
-    angular_speed_sigma: float = 1.0
+    accel_sigma: tuple[float, float, float] = (1.45, 1.77, 2.07)
+    angular_accel_sigma: tuple[float, float, float] = (0.177, 0.177, 0.177)
+    speed_sigma: float = 30.5
+    angular_speed_sigma: float = 0.525
     box_sigma_px: float = 2.0
     box_sigma_rel: float = 0.03
     max_iterations: int = 100

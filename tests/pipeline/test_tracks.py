@@ -1,0 +1,127 @@
+"""A file with tracks through ``fit`` (:mod:`toosicubix.pipeline.tracks`): every frame gets a pose, one size per
+track, ``track`` and ``pose_from`` in results.json, KITTI tracking labels that read back as the object labels, and
+``eval --kitti-tracking`` pairs the frames with ground truth by their sequence and frame."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.scenes import CAMERA, _specs
+from toosicubix.annotations.convert import part_json
+from toosicubix.cli import main
+from toosicubix.evaluation import EvalOptions, evaluate_folder, summarize
+from toosicubix.formats.kitti import read_label_file, read_tracking_file
+from toosicubix.geometry import R_cam_vehicle_from_ypr, cuboid_corners_cam
+from toosicubix.parts.synthesis import render_parts
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
+
+D = np.array([4.3, 1.8, 1.5])
+FRAMES, EVERY = 21, 10
+
+
+def _truth(f: int) -> tuple[np.ndarray, np.ndarray]:
+    return R_cam_vehicle_from_ypr(3 * np.pi / 4 + 0.02 * f), np.array([-3.0, 1.6, 15.0]) + np.array([0.05, 0.0, 0.3]) * f
+
+
+@pytest.fixture
+def tracked_file(tmp_path):
+    """Sequence 0003: one car clicked on frames 0, 10 and 20, boxed on two frames in three, nothing on the rest; and
+    an untracked car clicked on every frame, which is fitted alone as ever."""
+    rng = np.random.default_rng(0)
+    specs = _specs("oblique-front-left", D, rng)
+    other = _specs("oblique-rear-right", D, rng)
+    wheel_x = (0.32 * D[0], -0.3 * D[0])
+    images = []
+    for f in range(FRAMES):
+        R, t = _truth(f)
+        parts = render_parts(specs, R, t, D, CAMERA, wheel_x) if f % EVERY == 0 else []
+        uv = CAMERA.project(cuboid_corners_cam(R, t, D))
+        tracked = {"id": "1", "prototype": "Car", "track": "0003-car", "parts": [part_json(p) for p in parts]}
+        if f % 3:
+            tracked["box2d"] = [float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()),
+                                float(uv[:, 1].max())]
+        R2, t2 = R_cam_vehicle_from_ypr(-np.pi / 4), np.array([4.0, 1.6, 25.0])
+        alone = {"id": "2", "prototype": "Car",
+                 "parts": [part_json(p) for p in render_parts(other, R2, t2, D, CAMERA, wheel_x)]}
+        images.append({"id": f"frame-{f}", "sequence": "0003", "frame": f, "size": list(CAMERA.image_size),
+                       "camera": {"K": CAMERA.K.tolist()}, "vehicles": [tracked, alone]})
+    path = tmp_path / "tracked.json"
+    path.write_text(json.dumps({"toosicubix": 1, "images": images}))
+    return path
+
+
+def test_every_frame_of_a_track_gets_a_pose_and_its_track_one_size(tracked_file, tmp_path):
+    summary = fit_file(tracked_file, tmp_path / "out")
+    assert summary.ok == summary.vehicles == 2 * FRAMES
+    assert summary.tracks == 1 and summary.pose_from == {"clicks": 3, "box": 12, "interpolated": 6}
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    tracked = [im["vehicles"][0] for im in doc["images"]]
+    assert {v["track"] for v in tracked} == {"0003-car"}
+    assert [v["pose_from"] for v in tracked[:4]] == ["clicks", "box", "box", "interpolated"]
+    assert len({tuple(v["dimensions"]) for v in tracked}) == 1  # one size for the track
+    assert all("track" not in im["vehicles"][1] and "pose_from" not in im["vehicles"][1] for im in doc["images"])
+    assert doc["track_ids"] == {"0003": {"0003-car": 0}}
+    assert doc["images"][5]["sequence"] == "0003" and doc["images"][5]["frame"] == 5
+    # The interpolated and box-only frames are where the vehicle is: within the prior's scale error of the truth.
+    for f, v in enumerate(tracked):
+        _, t = _truth(f)
+        assert np.linalg.norm(np.array(v["t_cam_vehicle"]) - t) < 0.1 * np.linalg.norm(t), f
+
+
+def test_kitti_tracking_labels_read_back_as_the_object_labels(tracked_file, tmp_path):
+    fit_file(tracked_file, tmp_path / "out")
+    frames = read_tracking_file(tmp_path / "out" / "label_02" / "0003.txt")
+    assert sorted(frames) == list(range(FRAMES))
+    for f, objects in frames.items():
+        (obj,) = objects  # the tracked car only: the other is not a track
+        (label, _) = read_label_file(tmp_path / "out" / "label_2" / f"frame-{f}.txt")
+        assert obj.track_id == 0
+        for field in ("type", "truncated", "occluded", "alpha", "rotation_y", "score"):
+            assert getattr(obj, field) == getattr(label, field), field
+        for field in ("box2d", "dimensions", "location_rect"):
+            np.testing.assert_array_equal(getattr(obj, field), getattr(label, field))
+
+
+def test_eval_pairs_frames_with_kitti_tracking_ground_truth_by_sequence_and_frame(tracked_file, tmp_path):
+    fit_file(tracked_file, tmp_path / "out")
+    gt = tmp_path / "gt"
+    (gt / "label_02").mkdir(parents=True)
+    (gt / "calib").mkdir()
+    P = np.hstack([CAMERA.K, np.zeros((3, 1))])
+    (gt / "calib" / "0003.txt").write_text("\n".join(f"P{k}: " + " ".join(f"{v:.6e}" for v in P.ravel())
+                                                     for k in range(4)) + "\nR0_rect: 1 0 0 0 1 0 0 0 1\n")
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    lines = []
+    for f, im in enumerate(results["images"]):
+        v = im["vehicles"][0]
+        _, t = _truth(f)
+        R, _ = _truth(f)
+        ry = float(np.arctan2(-R[2, 0], R[0, 0]))
+        box = " ".join(f"{x:.2f}" for x in v["box2d"])
+        lines.append(f"{f} 0 Car 0 0 0 {box} {D[2]} {D[1]} {D[0]} {t[0]} {t[1]} {t[2]} {ry}")
+    (gt / "label_02" / "0003.txt").write_text("\n".join(lines) + "\n")
+    result = evaluate_folder(tmp_path / "out", "kitti-tracking", gt, EvalOptions())
+    stats = summarize(result)
+    assert stats["n_matched"] == FRAMES and stats["e_r_median_deg"] < 2.0  # paired by (sequence, frame): ids differ
+
+
+def test_tracks_off_fits_every_frame_alone(tracked_file, tmp_path):
+    summary = fit_file(tracked_file, tmp_path / "out", replace(BatchSettings(), tracks=False))
+    assert summary.ok == FRAMES + 3 and summary.tracks == 0  # the clicked frames and the car fitted alone
+    reasons = {reason for _, vehicle, reason in summary.failed if vehicle == "1"}
+    assert len(reasons) == 1 and "too few" in next(iter(reasons))
+
+
+def test_fit_says_how_the_tracks_frames_were_determined(tracked_file, tmp_path):
+    result = CliRunner().invoke(main, ["fit", str(tracked_file), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "tracks: 1 fitted as tracks" in result.output and "3 from their clicks, 12 from a box alone, 6 " \
+                                                                "interpolated" in result.output
+    off = CliRunner().invoke(main, ["fit", str(tracked_file), "-o", str(tmp_path / "off"), "--tracks", "off"])
+    assert off.exit_code == 1 and "tracks:" not in off.output
