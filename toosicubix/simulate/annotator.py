@@ -38,6 +38,21 @@ where the parts model puts it (the arrows too), which tests the solver rather th
 Randomness is seeded per vehicle from ``seed`` and the vehicle's image and id, so a vehicle's clicks do
 not depend on which other vehicles are simulated.
 
+**Tracks** (:func:`select_kitti_tracks`, :func:`simulate_tracks`; ``toosicubix simulate --tracks``). On KITTI
+tracking labels each selected track becomes one vehicle across the frames of a contiguous run: the longest run of
+consecutive frames in which the object passes the selection's filters (classes, truncation, occlusion, depth, box
+height) with one type, the first of equally long ones, cut to its first ``frames_per_track`` frames when that is
+set. Every frame of the run is an image ``<sequence>_<frame:06d>`` with ``"sequence"`` and ``"frame"``, and the
+object is a vehicle with ``"track": "<sequence>-<track id>"`` (its id is the track id, as without tracks) on each:
+
+- clicks, simulated as above, only on the keyframes: the run's first frame, every ``keyframes``-th frame after it,
+  and its last frame; the other frames' vehicles have no parts (a keyframe's clicks are the very clicks the frame
+  gets without tracks, from the same per-vehicle stream);
+- a 2D box (``box2d``) on every frame, by ``boxes``: 'person' (:mod:`toosicubix.simulate.boxes`: a box around the
+  silhouette of a car-shaped solid inside the true cuboid, drawn once per track, with a person's error drawn per
+  frame), 'projection' (KITTI's own box from the label line: the projected cuboid clipped to the image) or 'none';
+- the ground truth of every frame, written as without tracks (a KITTI object label file per image id).
+
 The faces each part can be seen on and the prototypes it suits (the corners: box-shaped ones) are the part
 vocabulary's (:mod:`toosicubix.vocabulary`); the annotation file is written by
 :func:`toosicubix.annotations.convert.vehicle_json`.
@@ -48,7 +63,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +85,7 @@ from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
 from toosicubix.model import GroundOverride, Part, Vehicle
 from toosicubix.parts.synthesis import PartSpec, true_parameters
+from toosicubix.simulate.boxes import BodyShape, draw_body_shape, simulated_box2d
 
 #: KITTI's vehicle types (defined once, in :mod:`toosicubix.formats.datasets`).
 VEHICLE_CLASSES = KITTI_VEHICLE_CLASSES
@@ -153,13 +169,43 @@ def _ensure_range(name: str, value: float, low: float, high: float, unit: str) -
 
 
 @dataclass(frozen=True)
+class TrackOptions:
+    """How tracks are simulated (:func:`simulate_tracks`).
+
+    Attributes
+    ----------
+    keyframes : clicks on a track's first frame, every ``keyframes``-th frame after it, and its last frame
+    boxes : the 2D box on every frame: 'person' (a person's box around the silhouette,
+        :mod:`toosicubix.simulate.boxes`), 'projection' (KITTI's own box) or 'none'
+    """
+
+    keyframes: int = 1
+    boxes: str = "person"
+
+    def __post_init__(self) -> None:
+        _ensure_range("keyframes", self.keyframes, 1, 10**6, "frames")
+        if self.boxes not in TRACK_BOXES:
+            raise ValueError(f"option boxes: expected one of {', '.join(TRACK_BOXES)}, got {self.boxes!r}")
+
+
+#: The 2D boxes a track's frames can get.
+TRACK_BOXES = ("person", "projection", "none")
+#: The note of a tracked vehicle left without clicks because its frame is not a keyframe.
+NOT_A_KEYFRAME = "no clicks: not a keyframe"
+
+
+@dataclass(frozen=True)
 class GroundTruthVehicle:
-    """A vehicle to annotate: its label and its image's camera (``P2``)."""
+    """A vehicle to annotate: its label and its image's camera (``P2``); for a track, its sequence, frame and
+    track name (``<sequence>-<track id>``)."""
 
     image_id: str
     vehicle_id: str
     label: KittiObject
     camera: Camera
+    sequence: str | None = None
+    frame: int | None = None
+    track: str | None = None
 
 
 @dataclass(frozen=True)
@@ -178,6 +224,8 @@ class SimulatedVehicle:
     spare : the parts the person could see and click but left out because of the click budget, clicked as
         the others (placement and noise; the noise from a stream of their own, so that ``parts`` do not
         depend on them): what the person would add when asked for one more
+    box2d : (4,) a tracked vehicle's 2D box (:func:`simulate_tracks`), or None (then a vehicle without a track
+        gets its label's box, a tracked one none)
     """
 
     source: GroundTruthVehicle
@@ -190,6 +238,7 @@ class SimulatedVehicle:
     p_true: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
     spare: list[Part] = field(default_factory=list)
+    box2d: np.ndarray | None = None
 
     @property
     def n_clicks(self) -> int:
@@ -272,6 +321,67 @@ def select_kitti_tracking(root: str | Path, sel: SelectionOptions | None = None)
     """Vehicles of a KITTI tracking folder (``label_02/``, ``calib/``) that pass the selection
     (:func:`select_vehicles` of kind 'kitti-tracking')."""
     return select_vehicles("kitti-tracking", root, sel)
+
+
+def select_kitti_tracks(root: str | Path, sel: SelectionOptions | None = None) -> list[GroundTruthVehicle]:
+    """Tracks of a KITTI tracking folder (``label_02/``, ``calib/``): per track, every frame of its longest run of
+    consecutive frames that pass the selection with one type (the first of equally long runs), cut to the run's
+    first ``frames_per_track`` frames when that is set. Sorted by image id, then track id.
+
+    Raises
+    ------
+    toosicubix.errors.FormatError
+        A missing folder or calibration file, a malformed label line.
+    """
+    sel = sel or SelectionOptions()
+    folder = open_ground_truth("kitti-tracking", root, strict=True).folder  # type: ignore[attr-defined]
+    out = []
+    for path in folder.label_files():
+        sequence = path.stem
+        if sel.sequences is not None and sequence not in sel.sequences:
+            continue
+        camera = folder.camera(sequence)
+        tracks: dict[int, list[KittiObject]] = {}
+        for frame in sorted(frames := read_tracking_file(path)):
+            for obj in frames[frame]:
+                if obj.track_id is not None and obj.track_id >= 0:
+                    tracks.setdefault(int(obj.track_id), []).append(obj)
+        for track_id in sorted(tracks):
+            run = _longest_run(tracks[track_id], camera, sel)
+            if sel.frames_per_track is not None:
+                run = run[: sel.frames_per_track]
+            for obj in run:
+                frame = int(obj.frame)  # type: ignore[arg-type]
+                out.append(GroundTruthVehicle(tracking_image_id(sequence, frame), str(track_id), obj, camera,
+                                              sequence, frame, f"{sequence}-{track_id}"))
+    out.sort(key=lambda g: (g.image_id, int(g.vehicle_id)))
+    return out
+
+
+def _longest_run(objs: list[KittiObject], camera: Camera, sel: SelectionOptions) -> list[KittiObject]:
+    """The longest run of ``objs`` (one track, by frame) on consecutive frames, each passing the selection, all of
+    one type; the first of equally long runs."""
+    best: list[KittiObject] = []
+    run: list[KittiObject] = []
+    for obj in objs:
+        if not _keep(obj, camera, sel):
+            run = []
+            continue
+        if run and (obj.frame != run[-1].frame + 1 or obj.type != run[-1].type):  # type: ignore[operator]
+            run = []
+        run.append(obj)
+        if len(run) > len(best):
+            best = run
+    return list(best)
+
+
+def keyframe_indices(n_frames: int, keyframes: int) -> list[int]:
+    """The positions in a run of ``n_frames`` frames that get clicks: the first, every ``keyframes``-th after it,
+    and the last."""
+    picks = list(range(0, n_frames, keyframes))
+    if n_frames and picks[-1] != n_frames - 1:
+        picks.append(n_frames - 1)
+    return picks
 
 
 def vehicle_rng(seed: int, image_id: str, vehicle_id: str) -> np.random.Generator:
@@ -455,7 +565,9 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
 
 def annotation_document(simulated: list[SimulatedVehicle],
                         ground: GroundOverride | None = None) -> dict[str, Any]:
-    """The annotation file (v1) of simulated vehicles, one image entry per image id (input order).
+    """The annotation file (v1) of simulated vehicles, one image entry per image id (input order). A vehicle
+    without a track gets its label's 2D box; a tracked one its ``box2d`` (if any) and its track, its image the
+    sequence and frame.
 
     Parameters
     ----------
@@ -467,18 +579,71 @@ def annotation_document(simulated: list[SimulatedVehicle],
         image = images.get(gt.image_id)
         if image is None:
             P2 = np.hstack([gt.camera.K, (gt.camera.K @ gt.camera.t_cam_rect)[:, None]])
+            frame = {"sequence": gt.sequence, "frame": gt.frame} if gt.sequence is not None else {}
             image = images[gt.image_id] = {
-                "id": gt.image_id, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
+                "id": gt.image_id, **frame, "size": list(gt.camera.image_size or DEFAULT_IMAGE_SIZE),
                 "camera": {"P": P2.tolist()}, **({"ground": ground.to_json()} if ground else {}), "vehicles": [],
             }
-        box2d = np.array([round(float(v), 2) for v in gt.label.box2d])
-        image["vehicles"].append(vehicle_json(Vehicle(gt.vehicle_id, gt.label.type, box2d, tuple(sv.parts), "")))
+        if gt.track is None:
+            box2d = np.array([round(float(v), 2) for v in gt.label.box2d])
+        else:
+            box2d = sv.box2d
+        image["vehicles"].append(vehicle_json(Vehicle(gt.vehicle_id, gt.label.type, box2d, tuple(sv.parts), "",
+                                                      track=gt.track)))
     return {"toosicubix": 1, "images": list(images.values())}
 
 
 def simulate(vehicles: list[GroundTruthVehicle], options: AnnotatorOptions) -> list[SimulatedVehicle]:
     """Simulate the annotator on every vehicle."""
     return [simulate_vehicle(gt, options) for gt in vehicles]
+
+
+def track_body_shape(seed: int, track: str, prototype: str) -> BodyShape:
+    """The solid a track's person's boxes are drawn around (:func:`toosicubix.simulate.boxes.draw_body_shape`), from
+    the stream ``seed``, ``track/<track>``, ``body``: one per track, whatever else is simulated."""
+    return draw_body_shape(prototype, vehicle_rng(seed, f"track/{track}", "body"))
+
+
+def simulate_tracks(vehicles: list[GroundTruthVehicle], options: AnnotatorOptions,
+                    tracks: TrackOptions | None = None) -> list[SimulatedVehicle]:
+    """Simulate the annotator on tracked vehicles (:func:`select_kitti_tracks`), in input order: clicks on each
+    track's keyframes (:func:`keyframe_indices` of its frames in frame order), none on its other frames, and on
+    every frame the 2D box ``tracks.boxes`` asks for (see the module's description).
+
+    The person's solid is drawn once per track (stream ``seed``, ``track/<track>``, ``body``), the person's error
+    per frame (stream ``seed``, image id, ``<vehicle id>/box``); the clicks' streams are untouched by both.
+
+    Raises
+    ------
+    ValueError
+        A vehicle without a track.
+    """
+    tracks = tracks or TrackOptions()
+    frames: dict[str, list[int]] = {}
+    for i, gt in enumerate(vehicles):
+        if gt.track is None or gt.frame is None:
+            raise ValueError(f"vehicle {gt.vehicle_id} of image {gt.image_id}: expected a tracked vehicle")
+        frames.setdefault(gt.track, []).append(i)
+    clicked: set[int] = set()
+    for indices in frames.values():
+        ordered = sorted(indices, key=lambda i: vehicles[i].frame)  # type: ignore[arg-type, return-value]
+        clicked.update(ordered[k] for k in keyframe_indices(len(ordered), tracks.keyframes))
+    shapes = {track: track_body_shape(options.seed, track, vehicles[indices[0]].label.type)
+              for track, indices in frames.items()}
+    out = []
+    for i, gt in enumerate(vehicles):
+        sv = simulate_vehicle(gt, options)
+        if i not in clicked:
+            sv = replace(sv, parts=[], specs=[], spare=[], p_true=None, notes=[NOT_A_KEYFRAME])
+        box = None
+        if tracks.boxes == "projection":
+            box = np.array([round(float(v), 2) for v in gt.label.box2d])
+        elif tracks.boxes == "person":
+            box = simulated_box2d(sv.R_cam_vehicle, sv.t_cam_vehicle, sv.dimensions, gt.label.type, gt.camera,
+                                  vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/box"),
+                                  shape=shapes[gt.track])  # type: ignore[index]
+        out.append(replace(sv, box2d=box))
+    return out
 
 
 def _calib_text(camera: Camera) -> str:
@@ -597,6 +762,4 @@ MAX_NAME_BYTES = 240
 
 
 def _without_tracking(obj: KittiObject) -> KittiObject:
-    from dataclasses import replace
-
     return replace(obj, frame=None, track_id=None, score=None)
