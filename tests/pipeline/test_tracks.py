@@ -26,7 +26,8 @@ FRAMES, EVERY = 21, 10
 
 
 def _truth(f: int) -> tuple[np.ndarray, np.ndarray]:
-    return R_cam_vehicle_from_ypr(3 * np.pi / 4 + 0.02 * f), np.array([-3.0, 1.6, 15.0]) + np.array([0.05, 0.0, 0.3]) * f
+    t = np.array([-3.0, 1.6, 15.0]) + np.array([0.05, 0.0, 0.3]) * f
+    return R_cam_vehicle_from_ypr(3 * np.pi / 4 + 0.02 * f), t
 
 
 @pytest.fixture

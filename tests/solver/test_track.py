@@ -27,7 +27,8 @@ EXACT = SolverOptions(lambda_px=1e-9)
 
 def _truth(f: int) -> tuple[np.ndarray, np.ndarray]:
     """A vehicle turning at a constant rate and moving at a constant velocity relative to the camera."""
-    return R_cam_vehicle_from_ypr(3 * np.pi / 4 + 0.02 * f), np.array([-3.0, 1.6, 15.0]) + np.array([0.05, 0.0, 0.3]) * f
+    t = np.array([-3.0, 1.6, 15.0]) + np.array([0.05, 0.0, 0.3]) * f
+    return R_cam_vehicle_from_ypr(3 * np.pi / 4 + 0.02 * f), t
 
 
 def _track(frames: int, clicked, boxed, seed: int = 0) -> list[TrackFrame]:
@@ -47,8 +48,9 @@ def _track(frames: int, clicked, boxed, seed: int = 0) -> list[TrackFrame]:
 
 
 def _errors(fit, frames: list[TrackFrame]) -> tuple[float, float]:
-    t_err = max(float(np.linalg.norm(r.t_cam_vehicle - _truth(f.frame)[1])) for r, f in zip(fit.frames, frames))
-    R_err = max(float(geodesic_angle(r.R_cam_vehicle, _truth(f.frame)[0])) for r, f in zip(fit.frames, frames))
+    pairs = list(zip(fit.frames, frames, strict=True))
+    t_err = max(float(np.linalg.norm(r.t_cam_vehicle - _truth(f.frame)[1])) for r, f in pairs)
+    R_err = max(float(geodesic_angle(r.R_cam_vehicle, _truth(f.frame)[0])) for r, f in pairs)
     return t_err, R_err
 
 
