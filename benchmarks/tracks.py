@@ -173,7 +173,8 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
 
     work = folder / label
     work.mkdir(parents=True)
-    simulated = simulate_tracks(vehicles, AnnotatorOptions(noise_px=NOISE_PX, seed=0), TrackOptions(keyframes, "person"))
+    options = AnnotatorOptions(noise_px=NOISE_PX, seed=0)
+    simulated = simulate_tracks(vehicles, options, TrackOptions(keyframes, "person"))
     write_simulation(simulated, work / "annotations.json", work / "gt")
     settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_road_normal=True, tracks=as_tracks)
     start = time.perf_counter()
@@ -184,7 +185,7 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     truth = {(sv.source.image_id, sv.source.vehicle_id): sv for sv in simulated}
     frame_of = {(sv.source.image_id, sv.source.vehicle_id): sv.source.frame for sv in simulated}
     per_frame = [m for m in result.matched]
-    e_r = np.array([m.metrics.e_r for m in per_frame])
+    e_r = np.array([m.metrics.e_r_deg for m in per_frame])
     e_t = np.array([m.metrics.e_t for m in per_frame])
     iou = np.array([m.metrics.iou for m in per_frame])
     siou = np.array([m.metrics.siou for m in per_frame])

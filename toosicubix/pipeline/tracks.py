@@ -50,6 +50,8 @@ def results_of_track(track: str, frames: list[tuple[Image, Vehicle]], prior: Siz
         return [_tracked(failed_result(v, prior, fit.reason or "the track failed"), track, None) for _, v in frames]
     out = []
     for (im, v), model, frame in zip(frames, models, fit.frames, strict=True):
+        if frame.pose_from != "clicks" and model.n_clicks:  # its clicks were left out of the track's fit
+            model = build_parts_model(())
         try:
             result = describe_fit(v, im.camera, prior, model, _as_fit(model, frame, fit), im.ground, options,
                                   next_clicks)
@@ -66,8 +68,8 @@ def _tracked(result: VehicleResult, track: str, pose_from: str | None) -> Vehicl
 
 def _as_fit(model: PartsModel, frame: FrameFit, track: TrackFit) -> FitResult:
     """A track's frame as one vehicle's fit reads (what :func:`~toosicubix.pipeline.vehicle.describe_fit` takes)."""
-    warnings = () if frame.uncertainty is not None else (
-        "no uncertainty: the track's information matrix is singular (a direction no frame determines)",)
+    warnings = frame.warnings + (() if frame.uncertainty is not None else (
+        "no uncertainty: the track's information matrix is singular (a direction no frame determines)",))
     return FitResult(
         "ok", None, model.constraints, model.n_clicks, model.n_aux, R_cam_vehicle=frame.R_cam_vehicle,
         t_cam_vehicle=frame.t_cam_vehicle, p=frame.p, cost=frame.cost, residuals_px=frame.residuals_px,

@@ -12,7 +12,10 @@ standardized residual times ``sqrt(lambda_px)``, as :mod:`.problem` weighs the s
 - per frame with a 2D box (:class:`TrackFrame`): each side of the box the image border does not cut is where the
   projected cuboid's extreme corner lies (:func:`box_residuals`), within :attr:`TrackOptions.box_sigma`;
 - per frame without clicks: the ground contact and the upright term when its image has a ground;
-- the size prior, once;
+- the size prior, once, weighed as in each clicked frame fitted alone (its information times the number of clicked
+  frames): real parts sit off the cuboid model by the same offsets in every frame (a tyre is as far inside the body
+  in each), so the frames' clicks are not independent evidence on the shape, and the prior must keep the weight
+  against them that it has against one frame's (rule 19b of benchmarks/decisions.md);
 - the motion: a white-noise acceleration model at the frame rate (:class:`TrackOptions`). Between frames ``i - 1``,
   ``i``, ``i + 1`` at times ``tau`` (frame numbers over the frame rate; gaps allowed), the change of velocity
   ``(t_i+1 - t_i) / h_2 - (t_i - t_i-1) / h_1`` has the variance ``q (h_1 + h_2) / 2`` per camera axis, and the
@@ -44,10 +47,11 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.geometry import Z_NEAR, geodesic_angle, so3_exp, so3_log
 from toosicubix.model import GroundPlane
-from toosicubix.parts.linear import PartsModel
+from toosicubix.parts.linear import PartsModel, build_parts_model
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver import lm
 from toosicubix.solver.blocks import BlockArrow, NotPositiveDefinite
+from toosicubix.solver.fallback import typical_p
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import MIN_DEPTH, residuals_batch
@@ -58,6 +62,9 @@ from toosicubix.solver.uncertainty import Uncertainty, row_sigmas, uncertainty_f
 SHARED = ("dx", "dy", "dz", "Xwf", "Xwr", "Zh")
 #: Box sides within this many pixels of the image border are cut by it: they say nothing of the vehicle.
 BORDER_PX = 1.0
+#: A clicked frame too poorly clicked to be fitted alone is fitted with these settings for the track's start: a
+#: direction its clicks leave free is the size prior's, three clicked points are enough.
+RELAXED = {"min_constraints": 1, "rank_tolerance": 0.0}
 #: The corners of the unit cuboid, as multiples of (dx, dy, dz) from the bottom centre: (8, 3).
 _CORNERS = np.array([[sx * 0.5, sy * 0.5, sz] for sz in (0.0, 1.0) for sx in (1.0, -1.0) for sy in (1.0, -1.0)])
 
@@ -132,6 +139,7 @@ class FrameFit:
     uncertainty : its sigmas, from the track's marginal covariance, or None when it could not be computed
     cost : its share of the track's cost (its pixel and cue rows, not the motion's)
     single : the frame's own fit from its clicks alone, or None (no clicks, or too few)
+    warnings : what the track's fit says of this frame (e.g. its clicks left out)
     """
 
     R_cam_vehicle: np.ndarray
@@ -144,6 +152,7 @@ class FrameFit:
     uncertainty: Uncertainty | None
     cost: float
     single: FitResult | None = None
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -284,6 +293,9 @@ class _TrackProblem:
                  sides: list[np.ndarray | None]):
         self.frames, self.problems, self.layout, self.prior = frames, problems, layout, prior
         self.w = math.sqrt(lambda_px)
+        # The size prior weighs as in each clicked frame fitted alone (see the module docstring).
+        self.prior_sqrt_information = math.sqrt(max(1, sum(p.parts.n_clicks > 0 for p in problems))) * (
+            prior.sqrt_information)
         self.options = options
         self.boxes, self.sides = boxes, sides
         self.F = len(frames)
@@ -376,11 +388,11 @@ class _TrackProblem:
             cost += shares[-1]
             if system is not None:
                 self._add(system, r, [(f, J_frame)], J_border)
-        prior_r = self.w * (self.prior.sqrt_information @ (shared[:3] - self.prior.mean))
+        prior_r = self.w * (self.prior_sqrt_information @ (shared[:3] - self.prior.mean))
         cost += float(prior_r @ prior_r)
         if system is not None:
             J_border = np.zeros((3, self.n_shared))
-            J_border[:, :3] = self.w * self.prior.sqrt_information
+            J_border[:, :3] = self.w * self.prior_sqrt_information
             system.C += J_border.T @ J_border
             system.g_border += J_border.T @ prior_r
         for _, r, pieces in self._motion_rows(R, t):
@@ -443,7 +455,7 @@ class _TrackProblem:
                 scale[:N2] = 1.0 / row_sigmas(self.problems[f], R[f], t[f], p, click_sigma, part_sigma)
             self._add(system, scale * r, [(f, scale[:, None] * J_frame)], scale[:, None] * J_border)
         J_border = np.zeros((3, self.n_shared))
-        J_border[:, :3] = self.prior.sqrt_information
+        J_border[:, :3] = self.prior_sqrt_information
         system.C += J_border.T @ J_border
         for _, r, pieces in self._motion_rows(R, t):
             self._add(system, r / self.w, [(f, np.concatenate([J / self.w, np.zeros((len(J), self.frame_sizes[f] - 6))],
@@ -578,20 +590,31 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
     given = singles or {}
     frames = [frames[i] for i in order]
     times = np.array([f.frame for f in frames], dtype=float) / track_options.frame_rate
-    singles = {}
+    singles, relaxed = {}, {}
     for f, frame in enumerate(frames):
         if frame.parts.n_clicks:
             fit = given.get(order[f]) or fit_vehicle(frame.parts, frame.camera, prior, options, frame.ground)
             if fit.ok:
                 singles[f] = fit
+            elif frame.parts.n_clicks >= 3:
+                # Clicks too few or too poor to place a vehicle on their own (a rear view leaves its length to the
+                # prior) still place it with the track's other frames: such a frame's own answer, with the prior
+                # filling what its clicks leave free, is a start (and its unknowns' start), never an answer alone.
+                fit = fit_vehicle(frame.parts, frame.camera, prior, replace(options, **RELAXED), frame.ground)
+                if fit.ok:
+                    relaxed[f] = fit
     t_single = time.perf_counter()
+    if not singles:
+        singles = relaxed
     if not singles:
         clicked = sum(1 for frame in frames if frame.parts.n_clicks)
         why = ("no frame has clicks" if not clicked else
-               f"none of its {clicked} clicked frame(s) fixes a cuboid from its own clicks")
+               f"none of its {clicked} clicked frame(s) places a cuboid from its own clicks, even with the size prior "
+               "filling what they leave free")
         return TrackFit("failed", f"the track cannot be placed: {why}; click one frame as fully as a vehicle fitted "
                                   "alone (its other frames may keep a box only, or nothing)",
                         timings={"single": t_single - started})
+    starts = {**relaxed, **singles}  # every frame's own answer, for its own unknowns' start
     chosen = _consistent_rotations(singles, times, options.lambda_px)
     dims = np.median(np.array([d for _, _, d in chosen.values()]), axis=0)
     known = {}
@@ -599,6 +622,23 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
         known[f] = (R, t * float(np.linalg.norm(dims) / np.linalg.norm(d)))  # at the track's one size
     R0, t0 = _interpolated(times, known)
 
+    # Each clicked frame's unknowns start at its own fit's values, else at their typical places on the track's cuboid;
+    # a frame whose clicks would then lie behind the camera at the track's start is not clicked, for the track.
+    track_prior = SizePrior.from_mean_cov(prior.prototype, dims, prior.cov)
+    start_p, dropped = [], set()
+    for f, frame in enumerate(frames):
+        if not frame.parts.n_clicks:
+            start_p.append(dims.copy())
+            continue
+        probe = Problem.build(frame.parts, frame.camera, track_prior, options.lambda_3d, options.lambda_px)
+        fit = starts.get(f)
+        p = fit.p.copy() if fit is not None else typical_p(probe)
+        p[:3] = dims
+        if probe.min_depth(R0[f], t0[f], p) <= MIN_DEPTH:
+            dropped.add(f)
+            frames[f] = TrackFrame(frame.frame, build_parts_model(()), frame.camera, frame.ground, frame.box2d)
+            p = dims.copy()
+        start_p.append(p)
     models = [frame.parts for frame in frames]
     layout = _Layout.of(models)
     shared = np.zeros(len(layout.shared))
@@ -613,11 +653,10 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
     for f, frame in enumerate(frames):
         problem = Problem.build(frame.parts, frame.camera, prior, options.lambda_3d, options.lambda_px, frame.ground,
                                 float(np.linalg.norm(t0[f])))
+        fit = starts.get(f)
+        mine = layout.to_own[f] >= 0
         values = np.zeros(layout.n_own(f))
-        fit = singles.get(f)
-        if fit is not None:  # its own unknowns start where its own fit put them
-            mine = layout.to_own[f] >= 0
-            values[layout.to_own[f][mine]] = fit.p[mine]
+        values[layout.to_own[f][mine]] = start_p[f][mine]
         if frame.parts.n_clicks:
             weights = fit.click_weights if fit is not None else soft_weights(problem, float(np.linalg.norm(t0[f])),
                                                                              options.click_sigma)
@@ -640,8 +679,8 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
         sides.append(used)
     problem = _TrackProblem(frames, problems, layout, prior, options.lambda_px, track_options, boxes, sides)
     state = (R0, t0, shared, own)
-    if not problem.feasible(state):
-        return TrackFit("failed", "the track's start puts a clicked point or the cuboid behind the camera",
+    if not problem.feasible(state):  # not expected: the clicks and boxes that would be are left out above
+        return TrackFit("failed", "the track's start puts its cuboid behind the camera in some frame",
                         timings={"single": t_single - started})
     state, cost, initial, iterations, stopped = _levenberg_marquardt(problem, state, track_options.max_iterations)
     t_joint = time.perf_counter()
@@ -665,8 +704,10 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
             box_r = np.where(sides[f], rb, np.nan)
         uncertainty = None if marginals is None else _frame_uncertainty(marginals, problem, f, R[f], t[f])
         pose_from = "clicks" if frame.parts.n_clicks else "box" if boxes[f] is not None else "interpolated"
+        warnings = ("its clicks are left out of the track's fit: at the track's start (interpolated from the frames "
+                    "its clicks fixed) they would lie behind the camera",) if f in dropped else ()
         out.append(FrameFit(R[f], t[f], p, pose_from, pixel, problems[f].click_weights, box_r, uncertainty,
-                            shares[f], singles.get(f)))
+                            shares[f], singles.get(f), warnings))
     inverse = np.argsort(order)
     named = {name: float(v) for name, v in zip(layout.shared, shared, strict=True)}
     return TrackFit("ok", None, tuple(out[i] for i in inverse), shared[:3].copy(), named, cost, initial, iterations,
