@@ -222,6 +222,51 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     }
 
 
+def long_tracks(lengths: tuple[int, ...] = (75, 150, 300, 600, 1200)) -> list[dict]:
+    """Time and peak memory of :func:`toosicubix.solver.track.fit_track` on a synthetic track of each length: a car
+    seen obliquely, moving and turning steadily, exact clicks on every 10th frame, a box on the others. Linear in the
+    frames is the target (issue 32: a 600-frame track well under a second per frame)."""
+    import time
+    import tracemalloc
+
+    from toosicubix.camera import Camera
+    from toosicubix.geometry import R_cam_vehicle_from_ypr, cuboid_corners_cam
+    from toosicubix.parts.linear import build_parts_model
+    from toosicubix.parts.synthesis import PartSpec, render_parts
+    from toosicubix.size_priors import SizePrior
+    from toosicubix.solver.track import TrackFrame, fit_track
+
+    camera = Camera(K=np.array([[720.0, 0.0, 620.0], [0.0, 720.0, 180.0], [0.0, 0.0, 1.0]]), image_size=(1240, 375))
+    d = np.array([4.3, 1.8, 1.5])
+    prior = SizePrior.from_mean_cov("Car", np.array([4.2, 1.75, 1.5]), np.diag([0.09, 0.01, 0.01]))
+    specs = [PartSpec("point", "wheel-front-left"), PartSpec("point", "wheel-rear-left"),
+             PartSpec("point", "wheel-front-right"), PartSpec("point", "edge-front-left", {"Z": 0.8}),
+             PartSpec("point", "edge-rear-left", {"Z": 0.8}), PartSpec("point", "corner-top-front-left"),
+             PartSpec("point", "corner-top-rear-left"), PartSpec("symmetry", "front", {"Y": 0.7, "Z": 0.8})]
+    out = []
+    for n in lengths:
+        frames = []
+        for f in range(n):
+            angle = 2 * np.pi * f / 600.0  # a slow circle around a point 25 m ahead: stays in view
+            R = R_cam_vehicle_from_ypr(3 * np.pi / 4 + angle)
+            t = np.array([6.0 * np.sin(angle) - 2.0, 1.6, 25.0 + 6.0 * np.cos(angle)])
+            parts = render_parts(specs, R, t, d, camera, (1.4, -1.3)) if f % 10 == 0 else []
+            uv = camera.project(cuboid_corners_cam(R, t, d))
+            box = None if f % 10 == 0 else np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+            frames.append(TrackFrame(f, build_parts_model(parts), camera, None, box))
+        tracemalloc.start()
+        start = time.perf_counter()
+        fit = fit_track(frames, prior)
+        seconds = time.perf_counter() - start
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        out.append({"frames": n, "ok": fit.ok, "seconds": seconds, "ms_per_frame": 1000 * seconds / n,
+                    "iterations": fit.iterations, "peak_mb": peak / 2**20, "timings": fit.timings})
+        print(f"{n:5d} frames: {seconds:6.2f} s, {1000 * seconds / n:5.1f} ms/frame, {fit.iterations} iterations, "
+              f"peak {peak / 2**20:.1f} MB (traced)", flush=True)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, default=default_data_dir())
@@ -229,8 +274,11 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--split", choices=sorted(SPLITS), default="test")
+    parser.add_argument("--long", action="store_true", help="time synthetic tracks of 75 to 1,200 frames instead")
     args = parser.parse_args()
-    if args.motion_model:
+    if args.long:
+        out = {"machine": machine(), "long_tracks": long_tracks()}
+    elif args.motion_model:
         out = {"machine": machine(), "motion": motion_statistics(args.data, SPLITS["tuning"]),
                "box": box_statistics(args.data, SPLITS["tuning"])}
         print(json.dumps({"motion": out["motion"], "box": out["box"]}, indent=1))
