@@ -518,8 +518,11 @@ def _consistent_rotations(fits: dict[int, FitResult], times: np.ndarray, lambda_
     for f in order:
         fit = fits[f]
         own = [(fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions, 0.0)]
+        size, distance = float(np.linalg.norm(fit.dimensions)), float(np.linalg.norm(fit.t_cam_vehicle))
         own += [(a.R_cam_vehicle, a.t_cam_vehicle, a.dimensions, max(a.cost - fit.cost, 0.0) / lambda_px)
-                for a in fit.alternatives if a.close and a.implausible is None]
+                for a in fit.alternatives if a.close and a.implausible is None and np.all(a.dimensions > 0)
+                and 0.5 <= float(np.linalg.norm(a.dimensions)) / size <= 2.0  # the turn, not another size ...
+                and 0.5 <= float(np.linalg.norm(a.t_cam_vehicle)) / distance <= 2.0]  # ... or another distance
         options.append(own)
     best = [np.array([c for *_, c in options[0]])]
     back: list[np.ndarray] = []
@@ -535,6 +538,44 @@ def _consistent_rotations(fits: dict[int, FitResult], times: np.ndarray, lambda_
         pick.append(int(back[j - 1][pick[-1]]))
     pick.reverse()
     return {f: options[j][pick[j]][:3] for j, f in enumerate(order)}
+
+
+#: A frame's own fit lying farther than this share of its distance (or of the predicted one, the smaller) from where
+#: the track's other starts put it (by
+#: :func:`_interpolated`) is not a start: one vehicle's fit from poor clicks can be off in depth several times over
+#: (its scale is the prior's alone), where its neighbours' are within some 10 %.
+OUTLYING_START = 0.25
+
+
+def _without_outlying_starts(known: dict[int, tuple[np.ndarray, np.ndarray]], times: np.ndarray
+                             ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The starts without those that lie far from the others (:data:`OUTLYING_START`), dropped one at a time, worst
+    first, while at least three are left: each compared with the others' positions linearly inter- or extrapolated
+    to its time (a start poisoned by one gross outlier interpolates it into its neighbours' frames)."""
+    known = dict(known)
+    while len(known) >= 3:
+        worst, worst_off = None, OUTLYING_START
+        for f in known:
+            others = {k: v for k, v in known.items() if k != f}
+            predicted = _linear_position(times, others, f)
+            off = np.linalg.norm(known[f][1] - predicted) / min(np.linalg.norm(known[f][1]), np.linalg.norm(predicted))
+            if off > worst_off:
+                worst, worst_off = f, off
+        if worst is None:
+            break
+        del known[worst]
+    return known
+
+
+def _linear_position(times: np.ndarray, known: dict[int, tuple[np.ndarray, np.ndarray]], f: int) -> np.ndarray:
+    """The position at frame ``f`` on the least-squares line (position against time) through the four known frames
+    nearest to it in time (as many as there are, at least two)."""
+    nearest = sorted(known, key=lambda k: abs(times[k] - times[f]))[:4]
+    tau = times[nearest] - times[f]
+    positions = np.array([known[k][1] for k in nearest])
+    A = np.column_stack([np.ones(len(tau)), tau])
+    coefficients, *_ = np.linalg.lstsq(A, positions, rcond=None)
+    return coefficients[0]  # the line's value at tau = 0
 
 
 def _interpolated(times: np.ndarray, known: dict[int, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -620,6 +661,7 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
     known = {}
     for f, (R, t, d) in chosen.items():
         known[f] = (R, t * float(np.linalg.norm(dims) / np.linalg.norm(d)))  # at the track's one size
+    known = _without_outlying_starts(known, times)
     R0, t0 = _interpolated(times, known)
 
     # Each clicked frame's unknowns start at its own fit's values, else at their typical places on the track's cuboid;
