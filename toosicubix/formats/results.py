@@ -125,6 +125,9 @@ class VehicleResult:
         gives them), or None when not asked for; next_clicks_error : why there are none
     extra : keys of the JSON object this type does not know (kept, written last)
     track : the track it is a frame of (annotation file's ``track``), or None
+    implausible : why its pose is one no person could have clicked (tilted, clicked parts on faces turned away:
+        :mod:`toosicubix.solver.plausibility`), when no plausible pose fits its clicks; its confidence is then at most
+        0.2 and a warning names the likely cause; None (not written) for a plausible fit
     pose_from : for a tracked vehicle, what determined its pose in this frame: 'clicks' (clicked here), 'box' (only
         its 2D box here, and the track's other frames), 'interpolated' (nothing here: the track's motion between
         its other frames); None for a vehicle fitted alone
@@ -169,6 +172,7 @@ class VehicleResult:
     extra: dict[str, Any] = field(default_factory=dict)
     track: str | None = None
     pose_from: str | None = None
+    implausible: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -201,6 +205,8 @@ class VehicleResult:
                 "ambiguous": self.ambiguous, "alternatives": [a.to_json() for a in self.alternatives],
                 "warnings": list(self.warnings),
             })
+            if self.implausible is not None:
+                out["implausible"] = self.implausible
             if self.click_weights is not None:
                 out["click_weights"] = _array(self.click_weights)
             if self.downweighted:
@@ -238,6 +244,7 @@ class VehicleResult:
                 prototype=str(v.get("prototype", "")),
                 track=v["track"] if isinstance(v.get("track"), str) else None,
                 pose_from=v["pose_from"] if isinstance(v.get("pose_from"), str) else None,
+                implausible=v["implausible"] if isinstance(v.get("implausible"), str) else None,
                 R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{where}.R_cam_vehicle")
                 if posed else None,
                 t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{where}.t_cam_vehicle")

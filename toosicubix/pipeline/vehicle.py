@@ -23,6 +23,7 @@ from toosicubix.formats.results import (
 from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cuboid_corners_cam, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane, Vehicle
 from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
+from toosicubix.parts.mirror import mirrored
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
@@ -51,6 +52,8 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
     try:
         parts = build_parts_model(vehicle.parts, vehicle.known_dimensions)
         fit = fit_vehicle(parts, camera, prior, options, ground)
+        if fit.ok and fit.implausible is not None:
+            fit = with_likely_cause(fit, vehicle, camera, prior, options, ground)
         if box_cue and vehicle.box2d is not None:
             fit = with_box_cue(fit, parts, camera, prior, options, ground, vehicle.box2d)
         with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
@@ -62,6 +65,29 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return failed_result(vehicle, prior, f"internal error: {type(exc).__name__}: {exc} "
                                        f"(at {Path(where.filename).name}:{where.lineno})")
+
+
+#: The highest confidence (the KITTI score) of a fit no person could have clicked (:attr:`FitResult.implausible`): below
+#: any threshold a KITTI tool would keep a label at, whatever its sigmas say.
+IMPLAUSIBLE_CONFIDENCE = 0.2
+#: How a fit whose left and right look swapped is described (results.json's warnings, fit's summary, the page).
+SWAPPED = ("left and right look swapped: named as the vehicle's own left and right (its driver's: seen from the front, "
+           "its left is on the image's right) the clicks fit a plausible pose; rename them, or press s on the page to "
+           "swap them")
+
+
+def with_likely_cause(fit: FitResult, vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions,
+                      ground: GroundPlane | None) -> FitResult:
+    """An implausible fit (:attr:`FitResult.implausible`) with its likely cause among its warnings: when the same
+    clicks with the vehicle's left and right swapped (:func:`toosicubix.parts.mirror.mirrored`) fit a plausible pose,
+    left and right look swapped (:data:`SWAPPED`); else the clicks contradict the cuboid another way."""
+    swapped = fit_vehicle(build_parts_model(mirrored(vehicle.parts), vehicle.known_dimensions), camera, prior, options,
+                          ground)
+    if swapped.ok and swapped.implausible is None:
+        return replace(fit, warnings=(*fit.warnings, SWAPPED))
+    return replace(fit, warnings=(*fit.warnings, "the clicks fit no upright cuboid with every clicked part on a face "
+                                                 "turned to the camera: check their names (front and rear, left and "
+                                                 "right) and that they are on this vehicle"))
 
 
 class UnusableFit(ValueError):
@@ -149,7 +175,10 @@ def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: Part
         scale_from=fit.scale_from,
         scale_shares=fit.scale_shares,
         sigma=fit.uncertainty,
-        confidence=confidence(fit.uncertainty) if fit.uncertainty is not None else None,
+        confidence=None if fit.uncertainty is None else (
+            confidence(fit.uncertainty) if fit.implausible is None
+            else min(confidence(fit.uncertainty), IMPLAUSIBLE_CONFIDENCE)),
+        implausible=fit.implausible,
         observability=fit.observability,
         ambiguous=fit.ambiguous,
         alternatives=tuple(fit.alternatives),

@@ -139,6 +139,8 @@ class FitResult:
         the batch's click-noise estimate pools
     residual_test : the chi-square test of the residuals (:mod:`.misfit`), or None when not made; a misfit's
         ``uncertainty`` is already widened
+    implausible : why the answer is one no person could have clicked (:mod:`.plausibility`: tilted, or clicked
+        parts on faces turned away), when no plausible answer was found; None for a plausible answer
     """
 
     status: str
@@ -167,6 +169,7 @@ class FitResult:
     downweighted: tuple[str, ...] = ()
     residual_dof: float | None = None
     residual_test: ResidualTest | None = None
+    implausible: str | None = None
 
     @property
     def ambiguous(self) -> bool:
@@ -324,9 +327,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         refine_iterations += extra_iterations
         best, best_any = _cheapest(converged)
     warnings: tuple[str, ...] = ()
+    implausible = None
     if best is None:
-        best = best_any[0]
-        warnings = (f"no plausible answer found; returning one that is {best_any[1]}",)
+        best, implausible = best_any
+        warnings = (f"no plausible answer found; returning one that is {implausible}",)
     chosen = ordered
     robust = options.robust_loss == "cauchy" or (options.robust_loss == "auto" and any(
         vocabulary.soft(label) for label in parts.click_labels))
@@ -346,7 +350,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
-                  timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings)
+                  timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings,
+                  implausible=implausible)
     degenerate = degenerate or absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
     if degenerate:
         return FitResult("failed", degenerate, **common)
