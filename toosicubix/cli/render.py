@@ -45,6 +45,11 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
     contradicts its clicks, as `eval` flags it, with a note of why, by its id). Beside each overlay a
     bird's-eye view shows the footprints in metres with heading, depth and yaw sigmas.
 
+    Frames of a sequence (a fit with tracks): a tracked vehicle keeps its track's colour in every frame, its
+    label ends with its track and how this frame's pose was determined (clicks, box or interp.), and the
+    bird's-eye view draws each of the frame's tracks over all the sequence's frames: its positions relative to
+    the camera, a dot per frame, clicked frames ringed, this frame's a larger dot.
+
     Images come from each image's `file` relative to the annotation file, or from --images; a missing image
     gets a warning and a blank canvas. Files are written atomically; rendering twice gives identical files.
 

@@ -5,15 +5,22 @@ cameras with their lens distortion, and each image's ``file`` relative to the an
 files themselves when they can be found (else a blank canvas of the image's size), and optionally ground
 truth opened as ``toosicubix eval`` opens it.
 
+Sequences: the bird's-eye view of a frame draws the positions of each of its tracks over every frame of the
+sequence that results.json holds (:func:`track_paths`, a few numbers per vehicle per frame, collected once before
+the pictures are drawn one at a time), and a tracked vehicle keeps its track's colour in every frame
+(:func:`track_colours`).
+
 Every PNG is written atomically (temporary file, then rename); the same inputs give byte-identical files.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 import re
-from collections.abc import Callable
+import zlib
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,7 +35,9 @@ from toosicubix.formats.atomic import atomic_write_bytes, remove_stale_temporari
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
 from toosicubix.model import Image
 from toosicubix.render.overlay import (
+    PALETTE_BGR,
     DrawnCuboid,
+    DrawnTrack,
     DrawnVehicle,
     OverlayOptions,
     birds_eye_side,
@@ -112,9 +121,14 @@ def encode_png(image_bgr: np.ndarray, compression: int = PNG_COMPRESSION) -> byt
     return buffer.tobytes()
 
 
+#: How a tracked vehicle's label says what determined its pose in a frame (results.json's ``pose_from``).
+POSE_FROM_SHORT = {"clicks": "clicks", "box": "box", "interpolated": "interp."}
+
+
 def vehicle_label(v: VehicleResult) -> str:
-    """The short text beside a fitted cuboid: id, prototype, dimensions, depth, yaw sigma, confidence, and
-    AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so."""
+    """The short text beside a fitted cuboid: id, prototype, dimensions, depth, yaw sigma, confidence,
+    AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so, and for a
+    tracked vehicle its track and what determined this frame's pose: ``track 0003-7 (clicks|box|interp.)``."""
     dx, dy, dz = v.dimensions
     parts = [f"{v.id} {v.prototype} {dx:.1f}x{dy:.1f}x{dz:.1f}m z{v.t_cam_vehicle[2]:.1f}m"]
     if v.sigma is not None and math.isfinite(v.sigma.yaw_deg):
@@ -125,7 +139,106 @@ def vehicle_label(v: VehicleResult) -> str:
         parts.append("AMBIGUOUS")
     if v.residual_test is not None and v.residual_test.misfit:
         parts.append("MISFIT")
+    if v.track is not None:
+        parts.append(f"track {v.track}")
+        if v.pose_from is not None:
+            parts.append(f"({POSE_FROM_SHORT.get(v.pose_from, v.pose_from)})")
     return " ".join(parts)
+
+
+#: A track by its sequence (None for an image of no sequence) and name.
+TrackKey = tuple[str | None, str]
+
+
+@dataclass(frozen=True)
+class TrackPath:
+    """One track's positions over the frames results.json holds, in frame order.
+
+    Attributes
+    ----------
+    image_ids : (n,) the frames' image ids
+    frames : (n,) frame numbers (the image's ``frame``, else its place in the sequence's images)
+    xz : (n, 2) ``t_cam_vehicle``'s x and z in each frame's camera frame, metres
+    pose_from : (n,) results.json's ``pose_from`` of each frame ('clicks', 'box', 'interpolated' or None)
+    first, last : the frame span of the track, failed frames included (what :func:`track_colours` compares)
+    """
+
+    image_ids: tuple[str, ...]
+    frames: np.ndarray
+    xz: np.ndarray
+    pose_from: tuple[str | None, ...]
+    first: int
+    last: int
+
+
+def track_paths(results: Sequence[ImageResult]) -> dict[TrackKey, TrackPath]:
+    """Every track's fitted positions, from one pass over the results (failed frames have none).
+
+    Returns
+    -------
+    paths : by ``(sequence, track)``, in the order the results first name them
+    """
+    rows: dict[TrackKey, list[tuple[int, str, float, float, str | None]]] = {}
+    spans: dict[TrackKey, list[int]] = {}
+    order: dict[str | None, int] = {}
+    for result in results:
+        place = order[result.sequence] = order.get(result.sequence, -1) + 1
+        frame = result.frame if result.frame is not None else place
+        for v in result.vehicles:
+            if v.track is None:
+                continue
+            key = (result.sequence, v.track)
+            span = spans.setdefault(key, [frame, frame])
+            span[0], span[1] = min(span[0], frame), max(span[1], frame)
+            if v.ok and v.t_cam_vehicle is not None:
+                rows.setdefault(key, []).append((frame, result.id, float(v.t_cam_vehicle[0]),
+                                                 float(v.t_cam_vehicle[2]), v.pose_from))
+            else:
+                rows.setdefault(key, [])
+    out = {}
+    for key, found in rows.items():
+        found.sort(key=lambda row: row[0])
+        out[key] = TrackPath(
+            image_ids=tuple(row[1] for row in found), frames=np.array([row[0] for row in found], dtype=int),
+            xz=np.array([row[2:4] for row in found], dtype=float).reshape(-1, 2),
+            pose_from=tuple(row[4] for row in found), first=spans[key][0], last=spans[key][1])
+    return out
+
+
+def track_colours(paths: Mapping[TrackKey, TrackPath]) -> dict[TrackKey, int]:
+    """Each track's palette index (into :data:`toosicubix.render.overlay.PALETTE_BGR`), the same in every frame.
+
+    A track takes the colour its name hashes to (CRC-32, the same on every run and machine), unless a track of its
+    sequence whose frames overlap its own took that colour first (tracks in order of their first frame, then name);
+    then the next colour none of those took, else the one the fewest took. Tracks seen in one picture thus differ
+    in colour while a sequence has at most as many tracks at once as the palette has colours.
+    """
+    n = len(PALETTE_BGR)
+    out: dict[TrackKey, int] = {}
+    by_sequence: dict[str | None, list[TrackKey]] = {}
+    for key in sorted(paths, key=lambda k: (paths[k].first, k[1])):
+        by_sequence.setdefault(key[0], []).append(key)
+    for keys in by_sequence.values():
+        for k, key in enumerate(keys):
+            path = paths[key]
+            taken = [out[other] for other in keys[:k] if paths[other].last >= path.first]  # they start no later
+            wanted = zlib.crc32(key[1].encode("utf-8")) % n
+            out[key] = min(((wanted + j) % n for j in range(n)), key=taken.count)  # the first of equal counts
+    return out
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """What the pictures of a fit's sequences need of all its frames: each track's positions and colour."""
+
+    paths: dict[TrackKey, TrackPath]
+    colours: dict[TrackKey, int]
+
+    @classmethod
+    def of(cls, results: Sequence[ImageResult]) -> Tracks:
+        """:func:`track_paths` and :func:`track_colours` of the results."""
+        paths = track_paths(results)
+        return cls(paths, track_colours(paths))
 
 
 def _fitted_uv(camera: Camera, clicks_uv: np.ndarray, residuals: Any) -> np.ndarray | None:
@@ -142,11 +255,18 @@ def _fitted_uv(camera: Camera, clicks_uv: np.ndarray, residuals: Any) -> np.ndar
     return camera.project(normalized)
 
 
-def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera) -> list[DrawnVehicle]:
-    """The vehicles of one image as the overlay draws them: fits from results.json, clicks from the annotations."""
+def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera,
+                   colours: Mapping[TrackKey, int] | None = None) -> list[DrawnVehicle]:
+    """The vehicles of one image as the overlay draws them: fits from results.json, clicks from the annotations.
+
+    With ``colours`` (:func:`track_colours`), a tracked vehicle takes its track's colour and, in an image with
+    one, the others take the palette's remaining colours in image order; in an image without a tracked vehicle
+    every vehicle takes the colour of its place, as the overlay gives it.
+    """
     annotated = {v.id: v for v in image.vehicles} if image is not None else {}
+    palette = _palette_indices(result, colours or {})
     out = []
-    for v in result.vehicles:
+    for v, colour in zip(result.vehicles, palette, strict=True):
         a = annotated.get(v.id)
         clicks = np.concatenate([p.uv for p in a.parts]) if a is not None and a.parts else np.zeros((0, 2))
         sigma = v.sigma
@@ -161,14 +281,40 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera) -> 
             label=vehicle_label(v) if v.ok and v.dimensions is not None else "", error=v.error,
             sigma_yaw=np.deg2rad(sigma.yaw_deg) if sigma is not None else None,
             sigma_depth=sigma.depth_m if sigma is not None else None,
-            next_clicks=next_clicks,
+            next_clicks=next_clicks, colour=None if colour is None else PALETTE_BGR[colour],
         ))
+    return out
+
+
+def _palette_indices(result: ImageResult, colours: Mapping[TrackKey, int]) -> list[int | None]:
+    """Each vehicle's palette index: its track's, or the next colour no track of the image has; all None (the
+    overlay's colours by place) when no vehicle of the image has a track colour."""
+    tracked = [colours.get((result.sequence, v.track)) if v.track is not None else None for v in result.vehicles]
+    if all(c is None for c in tracked):
+        return tracked
+    free = [c for c in range(len(PALETTE_BGR)) if c not in tracked] or list(range(len(PALETTE_BGR)))
+    others = itertools.cycle(free)  # more vehicles than free colours: they repeat
+    return [c if c is not None else next(others) for c in tracked]
+
+
+def drawn_tracks(result: ImageResult, tracks: Tracks) -> list[DrawnTrack]:
+    """The tracks of one frame's vehicles as the bird's-eye view draws them, over every frame the results hold,
+    in the image's vehicle order (a track without a fitted frame is left out)."""
+    out = []
+    for v in result.vehicles:
+        key = (result.sequence, v.track)
+        path = tracks.paths.get(key) if v.track is not None else None  # type: ignore[arg-type]
+        if path is None or len(path.xz) == 0:
+            continue
+        current = path.image_ids.index(result.id) if result.id in path.image_ids else None
+        out.append(DrawnTrack(v.track, PALETTE_BGR[tracks.colours[key]], path.xz,  # type: ignore[arg-type]
+                              np.array([p == "clicks" for p in path.pose_from], dtype=bool), current))
     return out
 
 
 def render_image(result: ImageResult, image: Image | None, background: np.ndarray | None,
                  ground_truth: list[DrawnCuboid] | None = None, options: OverlayOptions | None = None,
-                 note: str | None = None) -> np.ndarray:
+                 note: str | None = None, tracks: Tracks | None = None) -> np.ndarray:
     """One image's picture: the overlay (on ``background`` or a blank canvas) and the bird's-eye view.
 
     Parameters
@@ -178,6 +324,8 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
     background : (H, W, 3) uint8 BGR photo, or None for a blank canvas of the image's size
     ground_truth : cuboids in the camera frame of the image's ``K``
     note : a line written in the canvas's bottom-left corner (e.g. why it is blank)
+    tracks : every track's positions and colour (:meth:`Tracks.of` all the results): the image's tracked
+        vehicles take their track's colour, and the bird's-eye view draws their tracks
 
     Returns
     -------
@@ -187,7 +335,7 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
     camera = image.camera if image is not None else Camera(K=result.K, image_size=result.image_size)
     size = image_size_of(result, image)
     canvas = background.copy() if background is not None else blank_canvas(size)
-    vehicles = drawn_vehicles(image, result, camera)
+    vehicles = drawn_vehicles(image, result, camera, tracks.colours if tracks is not None else None)
     gt = ground_truth or []
     draw_overlay(canvas, camera, vehicles, gt, options)
     if note:
@@ -195,7 +343,8 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
         cv2.putText(canvas, note, (6, canvas.shape[0] - int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX, scale,
                     (200, 200, 200), line_thickness(canvas.shape[0]), cv2.LINE_AA)
     panel = draw_birds_eye(birds_eye_side(canvas.shape[0]), camera, vehicles, gt, canvas.shape[1],
-                           height=canvas.shape[0]) if options.birds_eye else None
+                           height=canvas.shape[0], tracks=drawn_tracks(result, tracks) if tracks is not None else ()) \
+        if options.birds_eye else None
     return compose(canvas, panel)
 
 
@@ -386,6 +535,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)  # once here; each picture is then written without scanning the folder again
     summary.out_dir = out
+    tracks = Tracks.of(results)  # every frame's, also those --only leaves out: a track's colour and its whole path
     chosen = [r for r in results if selected(r, options.only)]
     summary.skipped = len(results) - len(chosen)
     if on_start is not None:
@@ -415,7 +565,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
         if background is None:
             summary.blank.append(result.id)
         gt = ground_truth_cuboids(source, result, summary.warnings) if source is not None else []
-        picture = render_image(result, image, background, gt, options.overlay, note)
+        picture = render_image(result, image, background, gt, options.overlay, note, tracks)
         target = out / f"{result.id}.png"
         atomic_write_bytes(target, encode_png(picture, options.png_compression), clean=False)
         summary.written.append(target)

@@ -10,7 +10,8 @@ With lens distortion every edge is projected as a polyline of samples (edges ben
 distortion polynomial is valid: samples farther from the axis than the image's own corners (plus a margin)
 are dropped, because there the polynomial folds back and would paint far-away points inside the image.
 
-Colours are BGR (OpenCV's order).
+Colours are BGR (OpenCV's order). A vehicle is drawn in its own colour (:attr:`DrawnVehicle.colour`, which a
+tracked vehicle takes from its track) or else in the palette's colour of its place in the image.
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ class DrawnVehicle:
     error : why the fit failed, or None
     sigma_yaw : radians or None; sigma_depth : metres or None (bird's-eye view)
     next_clicks : ``[(label, uv (k, 2)), ...]`` the parts suggested next, best first
+    colour : BGR, or None for the palette's colour of its place in the image (:func:`colour_of`)
     """
 
     id: str
@@ -106,6 +108,28 @@ class DrawnVehicle:
     sigma_yaw: float | None = None
     sigma_depth: float | None = None
     next_clicks: tuple[tuple[str, np.ndarray], ...] = ()
+    colour: tuple[int, int, int] | None = None
+
+
+@dataclass(frozen=True)
+class DrawnTrack:
+    """One track's positions over the frames of its sequence, as the bird's-eye view draws them.
+
+    Attributes
+    ----------
+    name : the track
+    colour : BGR, its vehicle's colour
+    xz : (n, 2) bottom centre (``t_cam_vehicle``'s x and z) in each frame's own camera frame, metres, in frame
+        order: the motion relative to the camera (which may move itself)
+    clicked : (n,) bool, the frames whose pose came from clicks (drawn ringed)
+    current : index into ``xz`` of the frame drawn, or None when the track has no pose in it
+    """
+
+    name: str
+    colour: tuple[int, int, int]
+    xz: np.ndarray
+    clicked: np.ndarray
+    current: int | None = None
 
 
 @dataclass(frozen=True)
@@ -123,6 +147,11 @@ class DrawnCuboid:
 def colour_of(index: int) -> tuple[int, int, int]:
     """The BGR colour of the ``index``-th vehicle of an image."""
     return PALETTE_BGR[index % len(PALETTE_BGR)]
+
+
+def _colours(vehicles: Sequence[DrawnVehicle]) -> list[tuple[int, int, int]]:
+    """Each vehicle's colour: its own, else :func:`colour_of` its place in the image."""
+    return [v.colour if v.colour is not None else colour_of(i) for i, v in enumerate(vehicles)]
 
 
 def blank_canvas(size: tuple[int, int]) -> np.ndarray:
@@ -331,7 +360,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     ----------
     canvas : (H, W, 3) uint8 BGR, drawn on in place and returned
     camera : the camera the poses and clicks refer to (lens distortion is applied)
-    vehicles : the vehicles in image order; the ``i``-th gets :func:`colour_of` ``(i)``
+    vehicles : the vehicles in image order; the ``i``-th gets its ``colour``, else :func:`colour_of` ``(i)``
     ground_truth : cuboids in the same camera frame, drawn dashed in white, each with its note
 
     Returns
@@ -339,6 +368,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     canvas
     """
     options = options or OverlayOptions()
+    colours = _colours(vehicles)
     size = (canvas.shape[1], canvas.shape[0])
     max_radius = valid_radius(camera, size)
     scale = text_scale(size[1])
@@ -352,7 +382,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
         edges, front, heading = cuboid_polylines(camera, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, options,
                                                  max_radius)
         if front:
-            cv2.fillPoly(fills, [_fixed(front[0])], colour_of(i), cv2.LINE_AA, SHIFT)
+            cv2.fillPoly(fills, [_fixed(front[0])], colours[i], cv2.LINE_AA, SHIFT)
             any_fill = True
         drawn.append((i, v, edges, heading))
     if any_fill:
@@ -362,19 +392,19 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
                                              max_radius)
         _polylines(canvas, _dashed_all(edges + heading), GROUND_TRUTH_BGR, 1)
     for i, _v, edges, heading in drawn:
-        colour = colour_of(i)
+        colour = colours[i]
         _polylines(canvas, edges, colour, thick + 1)
         _polylines(canvas, heading, colour, thick + 1)
     labels = _LabelPlacer(canvas)
     for i, v in enumerate(vehicles):
-        _draw_clicks(canvas, v, colour_of(i), thick)
+        _draw_clicks(canvas, v, colours[i], thick)
         if options.next_clicks:
-            _draw_next_clicks(canvas, v, colour_of(i), scale, labels)
+            _draw_next_clicks(canvas, v, colours[i], scale, labels)
     for i, v in enumerate(vehicles):
         if v.ok and v.R_cam_vehicle is not None:
             anchor = _label_anchor(camera, v, max_radius, options.z_near)
             if anchor is not None:
-                labels.put(v.label, anchor, colour_of(i), scale)
+                labels.put(v.label, anchor, colours[i], scale)
         else:
             _draw_failed(canvas, v, scale, thick, labels)
     for g in ground_truth:  # after the fits' labels, which keep their places
@@ -464,37 +494,57 @@ def _nice_step(span: float) -> float:
     return 200.0
 
 
-def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
-                   ground_truth: Sequence[DrawnCuboid] = (), image_width: int | None = None,
-                   height: int | None = None) -> np.ndarray:
-    """A top view of the camera's x-z plane: each cuboid's footprint with its heading, depth and yaw sigmas.
+@dataclass(frozen=True)
+class BirdsEyeLayout:
+    """Where things go in a bird's-eye panel (:func:`birds_eye_layout`).
 
-    The footprint is the bottom face's corners with their camera y dropped (exact for a level camera).
-    Depth sigma: a bar along the ray through the footprint's centre, from ``z - sigma`` to ``z + sigma``.
-    Yaw sigma: two thin lines from the centre at the heading plus and minus sigma.
+    Attributes
+    ----------
+    width, height : the panel's size, pixels
+    frame : camera x and z, metres, to panel pixels
+    z_max, x_half : metres shown ahead and to each side
+    scale : font scale; m : how much larger than on KITTI's 375 px panel everything is drawn; lw : line width
+    margin_left, margin_bottom, margin_top : pixels round the plot (tick labels, axis names, title)
+    """
+
+    width: int
+    height: int
+    frame: _BevFrame
+    z_max: float
+    x_half: float
+    scale: float
+    m: float
+    lw: int
+    margin_left: int
+    margin_bottom: int
+    margin_top: int
+
+
+def _footprints_xz(vehicles: Sequence[DrawnVehicle]) -> list[tuple[int, np.ndarray, DrawnVehicle]]:
+    """``(index, (4, 2) footprint corners' camera x and z, vehicle)`` of each fitted vehicle."""
+    out = []
+    for i, v in enumerate(vehicles):
+        if v.ok and v.R_cam_vehicle is not None:
+            out.append((i, cuboid_corners_cam(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)[:4][:, [0, 2]], v))
+    return out
+
+
+def birds_eye_layout(side: int, vehicles: Sequence[DrawnVehicle], ground_truth: Sequence[DrawnCuboid] = (),
+                     height: int | None = None, tracks: Sequence[DrawnTrack] = ()) -> BirdsEyeLayout:
+    """The scale and placement of the panel :func:`draw_birds_eye` draws for the same arguments: the view holds
+    the camera, every footprint, and every track's positions that are not behind the camera (z > -2 m).
 
     Parameters
     ----------
     side : the panel's width (and height unless ``height`` is given), pixels
-    image_width : to draw the camera's field of view, or None
-    height : a taller panel's height, pixels (beside a tall image): the view then reaches farther forward at
-        the scale its width allows, instead of leaving the space below empty
-
-    Returns
-    -------
-    (height, side, 3) uint8 BGR panel
+    height : a taller panel's height, pixels
     """
     width = side
     height = side if height is None else max(int(height), side)
-    panel = np.full((height, width, 3), PANEL_GREY, dtype=np.uint8)
-    footprints: list[tuple[int, np.ndarray, DrawnVehicle | None]] = []
-    for i, v in enumerate(vehicles):
-        if v.ok and v.R_cam_vehicle is not None:
-            corners = cuboid_corners_cam(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)[:4][:, [0, 2]]
-            footprints.append((i, corners, v))
     gt_prints = [cuboid_corners_cam(g.R_cam_vehicle, g.t_cam_vehicle, g.dimensions)[:4][:, [0, 2]]
                  for g in ground_truth]
-    all_xz = np.concatenate([f[1] for f in footprints] + gt_prints + [np.zeros((1, 2))])
+    track_xz = [t.xz[t.xz[:, 1] > -2.0] for t in tracks]
+    all_xz = np.concatenate([f[1] for f in _footprints_xz(vehicles)] + gt_prints + track_xz + [np.zeros((1, 2))])
     z_max = max(20.0, float(np.max(all_xz[:, 1])) * 1.1)
     x_half = max(z_max / 2.0, float(np.max(np.abs(all_xz[:, 0]))) * 1.1)
     scale = float(np.clip(width / 1000.0, 0.38, 1.2))
@@ -505,6 +555,52 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     s = min(usable / (2.0 * x_half), (height - margin_bottom - margin_top) / (z_max + 2.0))
     z_max = max(z_max, (height - margin_bottom - margin_top) / s - 2.0)  # a tall panel shows farther ahead
     frame = _BevFrame(s, margin_left + usable / 2.0, height - margin_bottom - 2.0 * s)
+    return BirdsEyeLayout(width, height, frame, z_max, x_half, scale, m, lw, margin_left, margin_bottom, margin_top)
+
+
+#: The caption of a bird's-eye panel with tracks, line by line.
+TRACKS_CAPTION = ("tracks: positions relative", "to the camera, every frame", "ring: clicked frame",
+                  "big dot: this frame")
+
+
+def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
+                   ground_truth: Sequence[DrawnCuboid] = (), image_width: int | None = None,
+                   height: int | None = None, tracks: Sequence[DrawnTrack] = ()) -> np.ndarray:
+    """A top view of the camera's x-z plane: each cuboid's footprint with its heading, depth and yaw sigmas, and
+    each track's positions over its sequence.
+
+    The footprint is the bottom face's corners with their camera y dropped (exact for a level camera).
+    Depth sigma: a bar along the ray through the footprint's centre, from ``z - sigma`` to ``z + sigma``.
+    Yaw sigma: two thin lines from the centre at the heading plus and minus sigma.
+    A track: a thin polyline through its bottom centres in frame order, a dot per frame, a ring round the frames
+    whose pose came from clicks, a larger dot at this frame's position; drawn under the footprints and cut at the
+    plot's edges, with a caption saying that the positions are relative to the (perhaps moving) camera.
+
+    Parameters
+    ----------
+    side : the panel's width (and height unless ``height`` is given), pixels
+    image_width : to draw the camera's field of view, or None
+    height : a taller panel's height, pixels (beside a tall image): the view then reaches farther forward at
+        the scale its width allows, instead of leaving the space below empty
+    tracks : the tracks of the image's vehicles (positions in each frame's camera frame, metres)
+
+    Returns
+    -------
+    (height, side, 3) uint8 BGR panel
+
+    See Also
+    --------
+    birds_eye_layout : the panel's scale and placement
+    """
+    layout = birds_eye_layout(side, vehicles, ground_truth, height, tracks)
+    width, height, frame = layout.width, layout.height, layout.frame
+    z_max, x_half, scale, m, lw = layout.z_max, layout.x_half, layout.scale, layout.m, layout.lw
+    margin_left, margin_bottom, margin_top = layout.margin_left, layout.margin_bottom, layout.margin_top
+    panel = np.full((height, width, 3), PANEL_GREY, dtype=np.uint8)
+    colours = _colours(vehicles)
+    footprints = _footprints_xz(vehicles)
+    gt_prints = [cuboid_corners_cam(g.R_cam_vehicle, g.t_cam_vehicle, g.dimensions)[:4][:, [0, 2]]
+                 for g in ground_truth]
     step = _nice_step(max(z_max, 2.0 * x_half))
     grid = (70, 70, 70)
     for z in np.arange(0.0, z_max + 1e-9, step):
@@ -535,9 +631,11 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
     cv2.circle(panel, tuple(_fixed(cam)), int(3 * m) << SHIFT, TEXT_BGR, -1, cv2.LINE_AA, SHIFT)
     for corners in gt_prints:
         _polylines(panel, _dashed(np.vstack([frame.uv(corners), frame.uv(corners[:1])]), 5.0), GROUND_TRUTH_BGR, 1)
+    if tracks:
+        _draw_tracks(panel, layout, tracks)
     labels = _LabelPlacer(panel)
     for i, corners, v in footprints:
-        colour = colour_of(i)
+        colour = colours[i]
         _polylines(panel, [frame.uv(corners)], colour, lw + 1, closed=True)
         centre = corners.mean(axis=0)
         front = corners[[0, 3]].mean(axis=0)
@@ -555,12 +653,50 @@ def draw_birds_eye(side: int, camera: Camera, vehicles: Sequence[DrawnVehicle],
             sd = float(v.sigma_depth) * depth / max(centre[1], 1e-6)  # sigma of z -> along the ray
             near, far = centre - sd * ray, centre + sd * ray
             _polylines(panel, [frame.uv(np.array([near, far]))], colour, lw)
-            normal = np.array([-ray[1], ray[0]]) * (3.0 * m / s)
+            normal = np.array([-ray[1], ray[0]]) * (3.0 * m / frame.s)
             for end in (near, far):
                 _polylines(panel, [frame.uv(np.array([end - normal, end + normal]))], colour, lw)
         label_uv = frame.uv(corners).max(axis=0)  # beside the footprint, moved off earlier labels, in the panel
         labels.put(v.id, (label_uv[0] + 2 * m, label_uv[1]), colour, scale)
+    for track in tracks:  # this frame's position over its footprint's outline, ringed in black
+        if track.current is not None:
+            centre = tuple(_fixed(frame.uv(track.xz[track.current])[0]))
+            r = 3.5 * m
+            cv2.circle(panel, centre, round((r + 1.5) * (1 << SHIFT)), (0, 0, 0), -1, cv2.LINE_AA, SHIFT)
+            cv2.circle(panel, centre, round(r * (1 << SHIFT)), track.colour, -1, cv2.LINE_AA, SHIFT)
+            if track.clicked[track.current]:  # its ring, which the dot covers, round the dot
+                cv2.circle(panel, centre, round((r + 3.5) * (1 << SHIFT)), track.colour, lw, cv2.LINE_AA, SHIFT)
     return panel
+
+
+def _draw_tracks(panel: np.ndarray, layout: BirdsEyeLayout, tracks: Sequence[DrawnTrack]) -> None:
+    """Each track's polyline, dots and rings, cut at the plot's edges (never over the axes' labels), and the
+    caption in the plot's bottom-left corner (outside the camera's view, where nothing visible stands)."""
+    m, frame = layout.m, layout.frame
+    left, bottom = layout.margin_left, layout.height - layout.margin_bottom  # the plot: z >= -2 m, right of ticks
+    plot = panel[:bottom, left:]  # a view: drawing on it draws on the panel
+    offset = np.array([left, 0.0])
+    dot, ring = 1.6 * m, 4.0 * m
+    for track in tracks:
+        uv = frame.uv(track.xz) - offset
+        if len(uv) >= 2:
+            _polylines(plot, [uv], track.colour, 1)
+        for k, p in enumerate(uv):
+            centre = tuple(_fixed(p))
+            cv2.circle(plot, centre, round(dot * (1 << SHIFT)), track.colour, -1, cv2.LINE_AA, SHIFT)
+            if track.clicked[k]:
+                cv2.circle(plot, centre, round(ring * (1 << SHIFT)), track.colour, max(1, round(m)), cv2.LINE_AA,
+                           SHIFT)
+    # The caption: bottom left, left of the camera, shrunk to fit there.
+    room = frame.u0 - 6.0 * m - (left + 2)
+    caption_scale = layout.scale * 0.8
+    widest = max(cv2.getTextSize(line, _FONT, caption_scale, 1)[0][0] for line in TRACKS_CAPTION)
+    caption_scale *= min(1.0, room / widest)
+    (_, th), base = cv2.getTextSize(TRACKS_CAPTION[0], _FONT, caption_scale, 1)
+    y = bottom - base - 2
+    for line in reversed(TRACKS_CAPTION):
+        cv2.putText(panel, line, (left + 2, int(y)), _FONT, caption_scale, TEXT_BGR, 1, cv2.LINE_AA)
+        y -= th + base + 2
 
 
 def compose(overlay: np.ndarray, panel: np.ndarray | None) -> np.ndarray:
