@@ -81,6 +81,14 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
         )
         for line in summary.pilot.describe() if summary.pilot is not None else ():
             click.echo(line, err=True)
+        if summary.implausible:
+            swapped = sum(why == "left and right look swapped" for *_, why in summary.implausible)
+            click.echo(f"IMPLAUSIBLE: {len(summary.implausible)} fitted vehicle(s) in a pose no person could have "
+                       f"clicked ({swapped} with left and right that look swapped: the vehicle's own left, its "
+                       "driver's, is on the image's right when it faces the camera); their KITTI score is at most "
+                       "0.2 (results.json: implausible, warnings):", err=True)
+            for image_id, vehicle_id, why in summary.implausible[:20]:
+                click.echo(f"  image {image_id} vehicle {vehicle_id}: {why}", err=True)
         if summary.tracks:
             counts = ", ".join(f"{summary.pose_from.get(k, 0)} {what}" for k, what in (
                 ("clicks", "from their clicks"), ("box", "from a box alone"), ("interpolated", "interpolated")))

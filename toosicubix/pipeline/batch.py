@@ -62,6 +62,7 @@ class BatchSummary:
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     pilot: PilotFindings | None = None  # the click noise and road normals the batch was fitted with, and whence
     misfits: int | None = None  # fitted vehicles whose residuals failed the chi-square test; None: not tested
+    implausible: list[tuple[str, str, str]] = field(default_factory=list)  # (image, vehicle, why), first FAILED_KEPT
     tracks: int = 0  # tracks fitted as tracks
     pose_from: dict[str, int] = field(default_factory=dict)  # tracked frames fitted, by what their pose came from
 
@@ -247,6 +248,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     misfits = [0]
     tracks: set[str] = set()
     pose_from: dict[str, int] = {}
+    implausible: list[tuple[str, str, str]] = []
 
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
@@ -254,6 +256,9 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
                 tracks.add(v.track)
                 if v.ok:
                     pose_from[v.pose_from] = pose_from.get(v.pose_from, 0) + 1
+            if v.ok and v.implausible is not None and len(implausible) < FAILED_KEPT:
+                swapped = any(w.startswith("left and right look swapped") for w in v.warnings)
+                implausible.append((im.id, v.id, "left and right look swapped" if swapped else v.implausible))
             if not v.ok:
                 if len(failed) < FAILED_KEPT:
                     failed.append((im.id, v.id, v.error or ""))
@@ -266,7 +271,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,
                         misfits=misfits[0] if options.misfit_level is not None else None, tracks=len(tracks),
-                        pose_from=pose_from)
+                        pose_from=pose_from, implausible=implausible)
 
 
 def _sha256(path: Path) -> str:
