@@ -140,9 +140,10 @@ def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, 
         key = (sv.source.image_id, sv.source.vehicle_id)
         v = fitted[key]
         if not v.ok:
-            kind = failure_kind(v.error or "")
+            why = v.error_detail or v.error or ""  # the technical account names the unknowns involved
+            kind = failure_kind(why)
             failures.setdefault(kind, {})
-            short = (v.error or "").split(":")[0] if kind == "too few clicks" else (v.error or "")[:70]
+            short = why.split(":")[0] if kind == "too few clicks" else why[:70]
             failures[kind][short] = failures[kind].get(short, 0) + 1
             continue
         n_ok += 1

@@ -77,11 +77,12 @@ def test_one_unsolvable_vehicle_does_not_stop_the_batch(tmp_path):
     out = tmp_path / "out"
     result = run("fit", str(write_doc(tmp_path, doc)), "-o", str(out))
     assert result.exit_code == 1
-    assert "failed: image 000001 vehicle lonely: too few constraints" in result.output
+    assert ("failed: image 000001 vehicle lonely: too few clicks: 1 clicked point cannot place a cuboid; click at "
+            "least 3 more") in result.output
     images = read_results(out / "results.json")
     statuses = [(v.id, v.status) for v in images[0].vehicles]
     assert statuses == [("1", "ok"), ("lonely", "failed"), ("2", "ok"), ("3", "ok")]
-    assert images[0].vehicles[1].error.startswith("too few constraints")
+    assert images[0].vehicles[1].error_detail.startswith("too few constraints")
     assert len((out / "label_2" / "000001.txt").read_text().splitlines()) == 3
     assert sum(v.ok for im in images for v in im.vehicles) == 6
 

@@ -70,7 +70,7 @@ def test_validate_counts_a_vehicle_with_too_few_clicks_as_failed(tmp_path):
     vehicles.append({"id": "lonely", "prototype": "Car", "parts": [vehicles[0]["parts"][0]]})
     result = run("validate", str(write_doc(tmp_path, doc)), *LOOSE)
     assert result.exit_code == 1
-    assert "vehicle lonely (Car, $.images[0].vehicles[3]): NOT well determined: failed: too few constraints" in (
+    assert "vehicle lonely (Car, $.images[0].vehicles[3]): NOT well determined: failed: too few clicks" in (
         result.output)
     assert "7 vehicles: 6 well determined, 0 not, 1 failed" in result.output
 

@@ -102,5 +102,6 @@ def test_symmetry_pairs_alone_leave_the_distance_undetermined_and_say_so():
              Part("symmetry", "roof", uv([-1.0, 0.6, d[2]], [-1.0, -0.6, d[2]]), "d")]
     fit = fit_vehicle(build_parts_model(parts), CAMERA, exact_prior(d))
     assert not fit.ok
-    assert "no start led to a cuboid in front of the camera" not in fit.reason
-    assert "do not determine" in fit.reason
+    assert "no start led to a cuboid in front of the camera" not in fit.detail
+    assert "do not determine" in fit.detail
+    assert fit.reason.startswith("seen only from behind, the clicks do not fix ")

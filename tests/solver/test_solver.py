@@ -250,7 +250,9 @@ def test_too_few_constraints_fail_with_the_count():
              Part("point", "wheel-rear-right", np.array([[600.0, 252.0]]), "$")]
     fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR)
     assert fit.status == "failed"
-    assert fit.reason.startswith("too few constraints: 2 clicked points give 3")
+    assert fit.detail.startswith("too few constraints: 2 clicked points give 3")
+    # In plain words: 3 of the 7 constraints needed, so 2 more clicks (2 each).
+    assert fit.reason.startswith("too few clicks: 2 clicked points cannot place a cuboid; click at least 2 more")
     assert fit.R_cam_vehicle is None
 
 
@@ -260,7 +262,8 @@ def test_degenerate_clicks_fail_without_an_exception():
              ["corner-top-front-left", "corner-top-rear-left", "corner-bottom-front-left", "corner-top-front-right"]]
     fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR)
     assert fit.status == "failed"
-    assert fit.reason.startswith("degenerate clicks")
+    assert fit.detail.startswith("degenerate clicks: all 4 clicks lie in one cluster")
+    assert fit.reason.startswith("all 4 clicks are within a few pixels of each other")
 
 
 def test_fit_is_deterministic(rng):
@@ -314,5 +317,7 @@ def test_an_arrow_without_length_fails_the_vehicle_not_the_file():
     parts.append(Part("direction", "forward", np.array([[500.0, 260.0], [500.3, 260.2]]), "$"))
     fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR)
     assert fit.status == "failed"
-    assert fit.reason == ("degenerate clicks: the forward arrow of annotation parts[4] is 0.36 px long "
+    assert fit.detail == ("degenerate clicks: the forward arrow of annotation parts[4] is 0.36 px long "
                           "(an arrow needs at least 1 px)")
+    assert fit.reason == ("the forward arrow (parts[4]) has no length: draw each arrow from its tail to its head "
+                          "along the vehicle, at least 1 px long")

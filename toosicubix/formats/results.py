@@ -123,6 +123,8 @@ class VehicleResult:
     warnings : what the solver warned about; solver : its statistics
     next_clicks : the best parts to click next (as :meth:`toosicubix.solver.guidance.Suggestion.to_json`
         gives them), or None when not asked for; next_clicks_error : why there are none
+    error, error_detail : for a failed vehicle, why in plain words (what to click or add) and the technical
+        account for experts (the unknowns involved, the numbers; written only when set)
     extra : keys of the JSON object this type does not know (kept, written last)
     track : the track it is a frame of (annotation file's ``track``), or None
     implausible : why its pose is one no person could have clicked (tilted, clicked parts on faces turned away:
@@ -173,6 +175,7 @@ class VehicleResult:
     track: str | None = None
     pose_from: str | None = None
     implausible: str | None = None
+    error_detail: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -181,7 +184,9 @@ class VehicleResult:
     def to_json(self) -> dict[str, Any]:
         """The JSON object of one vehicle, keys in results.json's order."""
         out: dict[str, Any] = {
-            "id": self.id, "status": self.status, "error": self.error, "prototype": self.prototype,
+            "id": self.id, "status": self.status, "error": self.error,
+            **({"error_detail": self.error_detail} if self.error_detail is not None else {}),
+            "prototype": self.prototype,
             **({"track": self.track} if self.track is not None else {}),
             **({"pose_from": self.pose_from} if self.pose_from is not None else {}),
             "R_cam_vehicle": _array(self.R_cam_vehicle), "t_cam_vehicle": _array(self.t_cam_vehicle),
@@ -241,6 +246,7 @@ class VehicleResult:
         try:
             return cls(
                 id=str(json_field(v, "id", str, path, where)), status=status, error=v.get("error"),
+                error_detail=v["error_detail"] if isinstance(v.get("error_detail"), str) else None,
                 prototype=str(v.get("prototype", "")),
                 track=v["track"] if isinstance(v.get("track"), str) else None,
                 pose_from=v["pose_from"] if isinstance(v.get("pose_from"), str) else None,

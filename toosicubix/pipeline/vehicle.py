@@ -94,10 +94,10 @@ class UnusableFit(ValueError):
     """A vehicle's fit that cannot be written: behind the camera, or with a non-finite number."""
 
 
-def failed_result(vehicle: Vehicle, prior: SizePrior, reason: str) -> VehicleResult:
-    """A vehicle that failed, and why."""
+def failed_result(vehicle: Vehicle, prior: SizePrior, reason: str, detail: str | None = None) -> VehicleResult:
+    """A vehicle that failed, why in plain words, and the technical ``detail`` (or None)."""
     return VehicleResult(id=vehicle.id, status="failed", prototype=vehicle.prototype, error=reason,
-                         kitti_type=prior.kitti_type)
+                         error_detail=detail, kitti_type=prior.kitti_type)
 
 
 def checked_result(result: VehicleResult) -> VehicleResult:
@@ -116,7 +116,7 @@ def checked_result(result: VehicleResult) -> VehicleResult:
         if finite or non_finite_path(result.to_json()) is None:
             return result
         return VehicleResult(id=result.id, status=result.status, error=result.error, prototype=result.prototype,
-                             kitti_type=result.kitti_type)
+                             kitti_type=result.kitti_type, error_detail=result.error_detail)
     for name in ("R_cam_vehicle", "t_cam_vehicle", "dimensions", "box2d"):
         value = getattr(result, name)
         if value is None or not (finite or np.all(np.isfinite(value))):
@@ -152,7 +152,8 @@ def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: Part
               "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
               "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
     if not fit.ok:
-        return VehicleResult(status="failed", error=fit.reason, box2d=vehicle.box2d, **common)
+        return VehicleResult(status="failed", error=fit.reason, error_detail=fit.detail, box2d=vehicle.box2d,
+                             **common)
     R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
     box2d, truncated = _box2d(vehicle, camera, R, t, d)
     ry, pitch, roll = ypr_from_R_cam_vehicle(R)

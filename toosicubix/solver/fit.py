@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,16 @@ from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, yp
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
 from toosicubix.size_priors import SizePrior
-from toosicubix.solver.degenerate import absurd_depth, degeneracy, degenerate_spread, short_arrows, too_few
+from toosicubix.solver.degenerate import (
+    Refusal,
+    absurd_depth,
+    degeneracy,
+    degenerate_spread,
+    no_start,
+    short_arrows,
+    too_far,
+    too_few,
+)
 from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
@@ -141,6 +151,8 @@ class FitResult:
         ``uncertainty`` is already widened
     implausible : why the answer is one no person could have clicked (:mod:`.plausibility`: tilted, or clicked
         parts on faces turned away), when no plausible answer was found; None for a plausible answer
+    reason, detail : for a failed fit, why in plain words (what is missing and what would fix it) and the
+        technical account (the unknowns involved, the numbers); None for a fit (:mod:`.degenerate`)
     """
 
     status: str
@@ -170,6 +182,12 @@ class FitResult:
     residual_dof: float | None = None
     residual_test: ResidualTest | None = None
     implausible: str | None = None
+    detail: str | None = None
+
+    @classmethod
+    def refused(cls, refusal: Refusal, **fields: Any) -> FitResult:
+        """A failed result: the refusal's plain ``reason`` and its technical ``detail``."""
+        return cls("failed", refusal.reason, detail=refusal.detail, **fields)
 
     @property
     def ambiguous(self) -> bool:
@@ -266,10 +284,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_start = time.perf_counter()
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
     if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
-        return FitResult("failed", too_few(parts, options.min_constraints), **counts)
+        return FitResult.refused(too_few(parts, options.min_constraints), **counts)
     short = short_arrows(parts) or degenerate_spread(parts.uv)
     if short:
-        return FitResult("failed", f"degenerate clicks: {short}", **counts)
+        return FitResult.refused(short, **counts)
 
     problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px, ground)
     max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
@@ -292,8 +310,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_descent = time.perf_counter()
     base = {"starts": len(yaws), "starts_from_lines": from_lines, "descent_iterations": descent_iterations}
     if not candidates:
-        return FitResult("failed", "degenerate clicks: no start led to a cuboid in front of the camera",
-                         **counts, **base)
+        return FitResult.refused(no_start(parts), **counts, **base)
 
     # Refine the best distinct starts in lockstep, plausible ones first; a start still far above the
     # best after a few iterations is abandoned. A second batch runs when the first found nothing plausible,
@@ -352,9 +369,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
                   timings={**timings, "total": time.perf_counter() - t_start}, warnings=warnings,
                   implausible=implausible)
-    degenerate = degenerate or absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
+    far = absurd_depth(camera, best.t_cam_vehicle, best.p[:3])
+    degenerate = degenerate or (too_far(far) if far else None)
     if degenerate:
-        return FitResult("failed", degenerate, **common)
+        return FitResult.refused(degenerate, **common)
     shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     scale_source = max(shares, key=shares.get) if shares else None
     u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source,
@@ -364,9 +382,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         common["warnings"] = (*warnings, test.sentence())
     if collapsed and not (u is not None and np.isfinite(u.depth_rel) and u.depth_rel <= COLLAPSED_MAX_DEPTH_REL):
         depth = "not determined" if u is None or not np.isfinite(u.depth_rel) else f"uncertain by {u.depth_rel:.0%}"
-        return FitResult("failed", f"degenerate clicks: every start collapsed onto the camera, and from typical part "
-                                   f"positions the distance is {depth}: the clicks hardly tie the vehicle to its size",
-                         **common)
+        return FitResult.refused(collapsed(depth), **common)
     downweighted = () if factors is None else tuple(
         parts.click_labels[i] for i in np.flatnonzero(factors < DOWNWEIGHTED_BELOW))
     return FitResult(

@@ -722,7 +722,9 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
     problem = _TrackProblem(frames, problems, layout, prior, options.lambda_px, track_options, boxes, sides)
     state = (R0, t0, shared, own)
     if not problem.feasible(state):  # not expected: the clicks and boxes that would be are left out above
-        return TrackFit("failed", "the track's start puts its cuboid behind the camera in some frame",
+        why = ("the track's frames cannot be joined into one motion in front of the camera: check that every "
+               "frame's clicks are on the same vehicle, named as its driver sees it")
+        return TrackFit("failed", why,
                         timings={"single": t_single - started})
     state, cost, initial, iterations, stopped = _levenberg_marquardt(problem, state, track_options.max_iterations)
     t_joint = time.perf_counter()

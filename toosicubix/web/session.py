@@ -541,7 +541,7 @@ class Session:
         result = self._fit(image, j, v)
         parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None}
                  for k, p in enumerate(v.parts)]
-        fit: dict[str, Any] = {"status": result.status, "error": result.error}
+        fit: dict[str, Any] = {"status": result.status, "error": result.error, "error_detail": result.error_detail}
         if result.ok:
             residuals = np.asarray(result.residuals_px).tolist()
             row = 0
