@@ -1,7 +1,8 @@
 """A real browser on the annotate page: headless Chromium from the system's packages, driven by playwright.
 
 It clicks the synthetic vehicle's parts where they appear on its rendered image (named ones by hotkey, then
-unnamed ones left to auto-naming), and checks the cuboid and the saved file. Skipped, saying why, where
+unnamed ones left to auto-naming), and checks the cuboid and the saved file; on a sequence, it confirms a track's
+predicted cuboid and draws another's box. Skipped, saying why, where
 playwright or the browser is missing (``pip install '.[browser]'`` and ``apt-get install chromium``).
 """
 
@@ -15,10 +16,12 @@ import numpy as np
 import pytest
 
 from tests.web.conftest import make_session
-from tests.web.synthetic import NAMED, R_CAM_VEHICLE, UNNAMED, clicks
+from tests.web.synthetic import NAMED, R_CAM_VEHICLE, UNNAMED, clicks, sequence_pose, write_sequence
 from toosicubix.annotations.convert import load_images
+from toosicubix.annotations.priors_file import load_priors
 from toosicubix.geometry import geodesic_angle
 from toosicubix.web.server import serve_in_thread
+from toosicubix.web.session import Session, load_cameras
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
@@ -172,6 +175,59 @@ def test_click_keypoints_of_a_mapping_in_the_browser(page, scene, tmp_path: Path
         parts = load_images(out)[0].vehicles[0].parts
         assert [(p.kind, p.name) for p in parts] == [("keypoint", n) for n in (*KEYPOINTS, runner_up)]
         assert session.image_view(0)["vehicles"][0]["fit"]["status"] == "ok"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_confirm_and_box_predictions_of_a_sequence_in_the_browser(page, tmp_path: Path):
+    """A sequence of three frames, the first clicked (through the API): on the next frame the track is a dashed,
+    predicted cuboid, selected; Enter confirms it and it is drawn solid, a vehicle of that track without clicks in the
+    file. On the third frame the box tool draws the prediction's box: a vehicle of that track with a box only."""
+    paths, cameras = write_sequence(tmp_path, frames=3)
+    out = tmp_path / "annotations.json"
+    session = Session(paths, out, load_cameras(cameras, [p.stem for p in paths]), load_priors(), sequence="0003")
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    for c in clicks([*NAMED, *UNNAMED], *sequence_pose(0)):
+        session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": c.kind,
+                         "name": c.name, "uv": c.uv})
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.locator("#image-name").inner_text() == "sequence 0003, frame 0 (1 of 3)"
+        assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": "1", "style": "solid"}]
+        page.keyboard.press("]")
+        page.wait_for_function("state.view.frame === 1 && state.image.complete", timeout=20000)
+        assert page.locator("#image-name").inner_text() == "sequence 0003, frame 1 (2 of 3)"
+        assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": None, "style": "dashed"}]
+        assert page.evaluate("state.prediction") == "0003-1"  # a frame opens on its first prediction
+        assert page.locator("#tracks").inner_text() == "0003-1 predicted"
+        page.screenshot(path=str(tmp_path / "predicted.png"))
+        if os.environ.get("TOOSICUBIX_SCREENSHOT"):  # to look at: where to copy the screenshot
+            shutil.copy(tmp_path / "predicted.png", os.environ["TOOSICUBIX_SCREENSHOT"])
+        revision = page.evaluate("state.revision")
+        page.keyboard.press("Enter")
+        _wait_revision(page, revision + 1)
+        assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": "1", "style": "solid"}]
+        assert page.locator("#tracks").inner_text() == "0003-1 interpolated"
+        (confirmed,) = load_images(out)[1].vehicles
+        assert confirmed.track == "0003-1" and confirmed.parts == () and confirmed.box2d is None
+        # Frame 2: b, then drag the prediction's box.
+        page.keyboard.press("]")
+        page.wait_for_function("state.view.frame === 2 && state.image.complete", timeout=20000)
+        assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": None, "style": "dashed"}]
+        corners = np.array(page.evaluate("state.view.predictions[0].fit.corners_uv"))
+        page.keyboard.press("b")
+        page.mouse.move(*_screen(page, corners.min(axis=0).tolist()))
+        page.mouse.down()
+        page.mouse.move(*_screen(page, corners.max(axis=0).tolist()), steps=4)
+        page.mouse.up()
+        _wait_revision(page, revision + 2)
+        (boxed,) = load_images(out)[2].vehicles
+        assert boxed.track == "0003-1" and boxed.parts == () and boxed.box2d is not None
+        assert page.evaluate("state.view.vehicles[0].fit.pose_from") == "box"
+        assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": "1", "style": "solid"}]
     finally:
         server.shutdown()
         server.server_close()

@@ -44,13 +44,21 @@ from toosicubix.cli.options import (
                          "e.g. from `toosicubix learn-parts`): a click named one takes its typical position for the "
                          "vehicle's prototype, unnamed clicks are named among them, and the parts to click next are "
                          "them.")
+@click.option("--sequence", default=None, metavar="NAME",
+              help="The IMAGES are the frames of sequence NAME, in frame order: each frame number is the last run of "
+                   "digits in its file name when every name has one (000123.png -> 123), else its position. Images "
+                   "the file has keep their own sequence and frame. A new vehicle gets a new track; a track with a "
+                   "vehicle on another frame but not this one is shown predicted, to confirm (Enter), box (b), "
+                   "click, or dismiss (x).")
+@click.option("--frame-rate", type=click.FloatRange(min=0.0, min_open=True), default=10.0, show_default=True,
+              help="Frames per second of the sequences, as `fit --frame-rate` (the tracks' motion model's clock).")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8017, show_default=True, help="Port; 0: any free one.")
 def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: Path, prototype: str,
                      priors_path: Path | None, kitti_ground: bool, road_normal: str | None,
-                     camera_height: float | None, click_sigma: float | None, mapping: Any, host: str,
-                     port: int) -> None:
+                     camera_height: float | None, click_sigma: float | None, mapping: Any, sequence: str | None,
+                     frame_rate: float, host: str, port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
     --kitti-ground, --road-normal x,y,z and --camera-height give the images the file does not have yet a ground
@@ -68,9 +76,15 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     names unnamed clicks among them (the most probable visible one, given its spread and how often people click
     it) and suggests them as the next clicks.
 
+    With --sequence, the images are the frames of one video and vehicles are tracks across them (saved with their
+    sequence, frame and track, so `fit` fits each track as one vehicle): `[` `]` step through the frames, and each
+    frame shows every nearby track not on it yet as a dashed, predicted cuboid from the track's other frames, to
+    confirm, box or click instead of clicking ten parts again.
+
     \b
     Example:
       toosicubix annotate image_2/*.png --cameras cameras.json -o annotations.json
+      toosicubix annotate frames/*.png --sequence 0003 --cameras cameras.json -o annotations.json
       toosicubix annotate frames/*.jpg --cameras cameras.json --road-normal 0.04,-0.99,0.15
       toosicubix annotate frames/*.jpg --cameras cameras.json --mapping apollocar3d-66
     """
@@ -78,6 +92,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.errors import InputFileError
     from toosicubix.pipeline.settings import ground_overrides
+    from toosicubix.solver.track import TrackOptions
     from toosicubix.web.request_fields import ApiError
     from toosicubix.web.server import serve
     from toosicubix.web.session import Session, load_cameras
@@ -105,9 +120,11 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         try:
             session = Session(list(images), out, cameras, priors, prototype, options, ground=ground,
                               road_grounds=road_grounds, estimate=worker if estimate is not None else None,
-                              mapping=mapping)
+                              mapping=mapping, sequence=sequence, track_options=TrackOptions(frame_rate=frame_rate))
         except (InputFileError, ApiError) as exc:
             raise BadInput(str(exc)) from None
+        if sequence is not None:
+            click.echo(_sequence_line(session, sequence), err=True)
         try:
             server = serve(session, host, port)
         except OSError as exc:
@@ -122,6 +139,19 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
             click.echo("stopped", err=True)
         finally:
             server.server_close()
+
+
+def _sequence_line(session: Any, sequence: str) -> str:
+    """What the terminal says at start of a sequence: its frames and how they were numbered."""
+    new = [im for im in session.images if im.sequence == sequence and im.id in session.new_ids]
+    kept = len(session.images) - len(new)
+    how = ("by the last run of digits in each file name (e.g. "
+           f"{new[-1].path.name} -> frame {new[-1].frame})" if session.frames_from_names else
+           "by their position in the given order (not every file name has digits, or two give the same number)")
+    line = f"sequence {sequence}: {len(new)} new frame(s), numbered {how}" if new else f"sequence {sequence}:"
+    if kept:
+        line += f"; {kept} image(s) already in {session.out.name} keep their own sequence and frame"
+    return line
 
 
 def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road: bool):

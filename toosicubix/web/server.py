@@ -10,7 +10,8 @@ Routes (every answer is JSON except the page, its files and the images; errors a
 - ``GET /`` the page; ``GET /static/<name>`` its files (only those shipped in ``static/``)
 - ``GET /images/<index>`` the image with that index on the command line (never a path from the client)
 - ``GET /api/session`` images (ids, sizes), prototypes, vocabulary, thresholds, revision
-- ``GET /api/images/<index>`` its vehicles, clicks, fits, cuboids, sigmas, targets
+- ``GET /api/images/<index>`` its vehicles, clicks, fits, cuboids, sigmas, targets; on a frame of a sequence also
+  its sequence and frame, each vehicle's track, and the predictions of the tracks carried to it
 - ``POST /api/images/<index>/edit`` one change, ``{"revision": r, "op": ..., ...}`` (:meth:`.Session.edit`);
   409 when ``revision`` is stale or the file changed on disk
 - ``POST /api/fit`` fit a vehicle given in the body without storing it:

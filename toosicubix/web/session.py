@@ -19,6 +19,12 @@ clicks fix a cuboid (its fit succeeds), after the part most probably clicked the
 a face turned to the camera. The response names the choice and the runner-up. The requests' fields are checked by
 :mod:`toosicubix.web.request_fields`.
 
+Sequences (``annotate --sequence``, or a file's images that are frames): a vehicle of a frame carries a track (a new
+vehicle a new one, :func:`toosicubix.web.sequence.new_track_name`) and is fitted with its track's nearby frames as
+``fit`` fits tracks (:meth:`Session._track_fit`); a track with a vehicle near a frame but none on it is shown there as
+a prediction, the track's fit with that frame added empty, which the person confirms (a vehicle of the track without
+clicks), boxes, clicks or dismisses (kept in the extras file).
+
 A keypoint mapping (``--mapping``, :class:`toosicubix.annotations.mapping.MappingFile`) adds its keypoints to what the
 page makes: a click named one is a ``keypoint`` part with the mapping's position for the vehicle's prototype,
 unnamed clicks are named among the mapping's keypoints instead of the point parts, and the next clicks suggested
@@ -36,6 +42,7 @@ import os
 import re
 import tempfile
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -52,7 +59,7 @@ from toosicubix.annotations.convert import (
     part_from_schema,
 )
 from toosicubix.annotations.mapping import MappingFile
-from toosicubix.annotations.schema import parse_annotations
+from toosicubix.annotations.schema import MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
@@ -65,10 +72,12 @@ from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
+from toosicubix.pipeline.tracks import results_of_track
 from toosicubix.pipeline.validation import Thresholds, judge
-from toosicubix.pipeline.vehicle import fit_one
+from toosicubix.pipeline.vehicle import fit_one, with_next_clicks
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
+from toosicubix.solver.track import TrackOptions
 from toosicubix.web.naming import naming_candidates, nearest_parts
 from toosicubix.web.request_fields import (
     ApiError,
@@ -78,6 +87,7 @@ from toosicubix.web.request_fields import (
     checked_known,
     checked_pixels,
 )
+from toosicubix.web.sequence import TRACK_WINDOW, frame_numbers, frames_to_fit, new_track_name, track_sort_key
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -85,6 +95,8 @@ UNDO_DEPTH = 500
 TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+#: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
+NEXT_CLICKS = 1000
 
 
 @dataclass
@@ -128,17 +140,24 @@ class ClickedPart:
 
 @dataclass
 class VehicleState:
+    """One vehicle as the page edits it; ``track`` names the physical vehicle across a sequence's frames."""
+
     id: str
     prototype: str
     box2d: list[float] | None = None
     done: bool = False
     parts: list[ClickedPart] = field(default_factory=list)
     known_dimensions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    track: str | None = None
 
 
 @dataclass
 class ImageState:
-    """One image given on the command line; ``path`` is never sent to or taken from a page."""
+    """One image given on the command line; ``path`` is never sent to or taken from a page.
+
+    ``sequence`` and ``frame``: the sequence it is a frame of and its number there, or None; ``dismissed``: the
+    tracks whose prediction the person dismissed on this frame (kept in the extras file, not the annotation file);
+    ``undo``: the vehicles and dismissed tracks before each change."""
 
     index: int
     id: str
@@ -148,7 +167,39 @@ class ImageState:
     ground_block: GroundBlock | None
     ground: GroundPlane | None
     vehicles: list[VehicleState] = field(default_factory=list)
-    undo: list[list[VehicleState]] = field(default_factory=list)
+    undo: list[tuple[list[VehicleState], list[str]]] = field(default_factory=list)
+    sequence: str | None = None
+    frame: int | None = None
+    dismissed: list[str] = field(default_factory=list)
+
+    def snapshot(self) -> tuple[list[VehicleState], list[str]]:
+        """What a change may alter, copied (for undo, and to restore after a refused change)."""
+        return copy.deepcopy(self.vehicles), list(self.dismissed)
+
+    def restore(self, snapshot: tuple[list[VehicleState], list[str]]) -> None:
+        self.vehicles, self.dismissed = copy.deepcopy(snapshot[0]), list(snapshot[1])
+
+
+@dataclass(frozen=True)
+class _TrackedOn:
+    """A track's vehicle on one frame: its image (served, or one of the file's others) and the vehicle there (as the
+    page edits it, the ``j``-th of a served image, or as the file has it)."""
+
+    image: ImageState | Image
+    vehicle: VehicleState | Vehicle
+    j: int | None = None
+
+    @property
+    def clicked(self) -> bool:
+        """Whether it has named clicks (what a track needs on some frame to be placed)."""
+        if isinstance(self.vehicle, VehicleState):
+            return any(p.named for p in self.vehicle.parts)
+        return bool(self.vehicle.parts)
+
+    def model(self, session: Session) -> Vehicle:
+        if isinstance(self.vehicle, VehicleState):
+            return session._model_vehicle(self.image, self.j, self.vehicle)
+        return self.vehicle
 
 
 def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None = None) -> dict[str, Camera]:
@@ -238,6 +289,12 @@ class Session:
         besides the vocabulary: a click named one takes its typical position for the vehicle's prototype (and
         again when the prototype changes), unnamed clicks are named among its keypoints, and the parts to click
         next are its keypoints. None, or a mapping without keypoint parts: the vocabulary alone
+    sequence : the name of the sequence whose frames ``image_paths`` are, in frame order (``annotate --sequence``):
+        the images the file does not have yet become its frames, numbered by :func:`.sequence.frame_numbers`
+        (:attr:`frames_from_names` says how); the file's images keep their own sequence and frame. Whatever it is,
+        the served images that are frames of a sequence show its tracks: a tracked vehicle is fitted with its
+        track's nearby frames, and a track with a vehicle near this frame but none in it is shown as predicted
+    track_options : the tracks' motion model and box cue, as ``fit`` takes them (its ``--frame-rate``)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
@@ -245,7 +302,8 @@ class Session:
                  thresholds: Thresholds | None = None, ground: GroundOverride | None = None,
                  road_grounds: dict[tuple, GroundOverride] | None = None,
                  estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, GroundOverride] | None]] | None = None,
-                 mapping: MappingFile | None = None):
+                 mapping: MappingFile | None = None, sequence: str | None = None,
+                 track_options: TrackOptions | None = None):
         self.out = Path(out)
         self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
         self._ground_block, self._ground = (None, None) if not ground else ground_with(None, ground, "ground")
@@ -270,6 +328,16 @@ class Session:
             raise ApiError(f"images with the same file stem (the image id): {', '.join(duplicates)}")
         self._paths = [Path(p) for p in image_paths]
         self._cameras = cameras
+        self.track_options = track_options or TrackOptions()
+        self.sequence = sequence
+        self.frames_from_names: bool | None = None
+        self._new_frames: dict[str, int] = {}
+        if sequence is not None:
+            if not isinstance(sequence, str) or not _IMAGE_ID.match(sequence) or len(sequence) > MAX_ID_LENGTH:
+                raise ApiError(f"sequence: expected a name of letters, digits, '_', '.', '-' (the first a letter or "
+                               f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {sequence!r:.60}")
+            numbers, self.frames_from_names = frame_numbers([p.name for p in self._paths])
+            self._new_frames = dict(zip(ids, numbers, strict=True))
         self.revision = 0
         self._load()
         self._estimated_from = self._vehicle_count()  # the vehicles the given options were estimated from
@@ -285,7 +353,13 @@ class Session:
         by_id = {im.id: im for im in loaded}
         served_ids = {p.stem for p in self._paths}
         self._others = [image_json(im) for im in loaded if im.id not in served_ids]
+        # The file's frames that are not served: their tracked vehicles are fitted with the served frames' (never
+        # changed here, so kept as read).
+        self._other_frames = [im for im in loaded if im.id not in served_ids and im.sequence is not None]
         self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
+        taken = {(im.sequence, im.frame): im.id for im in loaded if im.sequence is not None}
+        #: The served images the file did not have when it was read.
+        self.new_ids = {p.stem for p in self._paths} - set(by_id)
         self.images: list[ImageState] = []
         for index, path in enumerate(self._paths):
             image_id = path.stem
@@ -296,14 +370,33 @@ class Session:
                                 t_cam_rect=known.camera.t_cam_rect, image_size=size)
                 vehicles = [self._vehicle_state(v) for v in known.vehicles]
                 file, block, ground = known.file or self._relative(path), known.ground_block, known.ground
+                sequence, frame = known.sequence, known.frame
             else:
                 if image_id not in self._cameras:
                     raise InputFileError(path, [("$", "no camera for this image: give --cameras")])
                 c = self._cameras[image_id]
                 camera = Camera(K=c.K, distortion=c.distortion, t_cam_rect=c.t_cam_rect, image_size=size)
                 vehicles, file, block, ground = [], self._relative(path), self._ground_block, self._ground
-            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles))
+                sequence, frame = (self.sequence, self._new_frames[image_id]) if self.sequence is not None else (None,
+                                                                                                                  None)
+                if sequence is not None and (sequence, frame) in taken:
+                    raise ApiError(f"--sequence {sequence}: {path.name} would be frame {frame}, which is image "
+                                   f"{taken[(sequence, frame)]!r}'s in {self.out} already (the file's images keep "
+                                   "their frames): give the sequence another name, or files numbered as the file's")
+            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles,
+                                          sequence=sequence, frame=frame))
         self._restore_extras()
+
+    @property
+    def order(self) -> list[int]:
+        """The served images' indices in the order the page steps through them: the frames of a sequence together
+        (where its first one was given) and in frame order; other images where they were given."""
+        first: dict[Any, int] = {}
+        for im in self.images:
+            first.setdefault(im.sequence if im.sequence is not None else ("", im.index), im.index)
+        return [im.index for im in sorted(self.images, key=lambda im: (
+            first[im.sequence if im.sequence is not None else ("", im.index)],
+            im.frame if im.frame is not None else im.index))]
 
     def _vehicle_count(self) -> int:
         """The vehicles of the file as this session has it (served images and the others)."""
@@ -380,7 +473,7 @@ class Session:
         return VehicleState(
             id=v.id, prototype=v.prototype, box2d=None if v.box2d is None else [float(x) for x in v.box2d],
             parts=[ClickedPart.of(p) for p in v.parts],
-            known_dimensions=dict(v.known_dimensions))
+            known_dimensions=dict(v.known_dimensions), track=v.track)
 
     def document(self) -> dict[str, Any]:
         """The annotation file (v1) of the current state: named clicks only, images in the file's order."""
@@ -392,7 +485,8 @@ class Session:
                 im = served[image_id]
                 model = Image(im.id, im.file, im.camera, tuple(self._model_vehicle(im, j, v)
                                                                for j, v in enumerate(im.vehicles)),
-                              f"$.images[{len(images)}]", ground_block=im.ground_block)
+                              f"$.images[{len(images)}]", ground_block=im.ground_block, sequence=im.sequence,
+                              frame=im.frame)
                 images.append(image_json(model))
             else:
                 images.append(others[image_id])
@@ -418,7 +512,8 @@ class Session:
 
     @property
     def extras_path(self) -> Path:
-        """The file beside the annotation file that keeps what v1 cannot: unnamed clicks and done marks."""
+        """The file beside the annotation file that keeps what v1 cannot: unnamed clicks, done marks, and the
+        tracks whose prediction was dismissed on a frame."""
         return self.out.with_name(f"{self.out.name}.annotate.json")
 
     def _save_extras(self) -> None:
@@ -428,8 +523,12 @@ class Session:
                         for v in im.vehicles if v.done or any(not p.named for p in v.parts)}
             if vehicles:
                 images[im.id] = vehicles
-        if images:
-            atomic_write_json(self.extras_path, {"toosicubix_annotate": 1, "images": images})
+        dismissed = {im.id: list(im.dismissed) for im in self.images if im.dismissed}
+        if images or dismissed:
+            extras: dict[str, Any] = {"toosicubix_annotate": 1, "images": images}
+            if dismissed:
+                extras["dismissed"] = dismissed
+            atomic_write_json(self.extras_path, extras)
         else:
             self.extras_path.unlink(missing_ok=True)
 
@@ -449,6 +548,11 @@ class Session:
                         v.done = bool(extra["done"])
                         v.parts.extend(ClickedPart(None, None, checked_pixels([uv], 1, "uv"))
                                        for uv in extra["unnamed"])
+            for image_id, tracks in data.get("dismissed", {}).items():
+                if image_id in by_id:
+                    if not all(isinstance(t, str) for t in tracks):
+                        raise TypeError("a dismissed track that is not a string")
+                    by_id[image_id].dismissed = list(tracks)
         except (KeyError, TypeError, AttributeError, ApiError) as exc:
             raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
 
@@ -459,27 +563,102 @@ class Session:
         parts = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"{image.id}.vehicles[{j}].parts[{k}]",
                            p.known, **p.model_fields()) for k, p in enumerate(v.parts) if p.named)
         box = None if v.box2d is None else np.asarray(v.box2d, dtype=float)
-        return Vehicle(v.id, v.prototype, box, parts, f"vehicles[{j}]", dict(v.known_dimensions))
+        return Vehicle(v.id, v.prototype, box, parts, f"vehicles[{j}]", dict(v.known_dimensions), v.track)
 
     def _fit(self, image: ImageState, j: int, v: VehicleState) -> VehicleResult:
-        """The vehicle fitted as ``toosicubix fit`` fits it, with every suggestion (cached by its clicks)."""
+        """The vehicle fitted as ``toosicubix fit`` fits it, with every suggestion (cached by its clicks): alone, or
+        on a frame of a sequence, with its track (:meth:`_track_fit`)."""
+        if v.track is not None and image.sequence is not None:
+            return self._track_fit(image, v.track, self._model_vehicle(image, j, v))["result"]
         vehicle = self._model_vehicle(image, j, v)
         key = json.dumps([image.index, v.prototype, [(p.kind, p.name, p.uv.tolist()) for p in vehicle.parts],
                           sorted(v.known_dimensions.items())])
         cached = self._fits.get(key)
         if cached is None:
-            cached = self._fits[key] = {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                          self.options, self._ground_of(image), next_clicks=1000,
-                                                          keypoints=self._keypoints(v.prototype))}
-            if len(self._fits) > 2000:
-                self._fits.pop(next(iter(self._fits)))
+            cached = self._cache(key, {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
+                                                         self.options, self._ground_of(image),
+                                                         next_clicks=NEXT_CLICKS,
+                                                         keypoints=self._keypoints(v.prototype))})
         return cached["result"]
 
-    def _ground_of(self, image: ImageState) -> GroundPlane | None:
+    def _cache(self, key: str, entry: dict[str, Any]) -> dict[str, Any]:
+        self._fits[key] = entry
+        if len(self._fits) > 2000:
+            self._fits.pop(next(iter(self._fits)))
+        return entry
+
+    def _ground_of(self, image: ImageState | Image) -> GroundPlane | None:
         """The image's own ground, else its camera's estimated road (as ``fit`` fits it), else None."""
         if image.ground is not None or not self._road_grounds:
             return image.ground
         return self._road_grounds.get(camera_key(image.camera))
+
+    # -- tracks -----------------------------------------------------------------------------------------------
+
+    def _tracks(self, sequence: str) -> dict[str, dict[int, _TrackedOn]]:
+        """Per track of ``sequence``, its frames in the file as this session has it: frame number -> where it is
+        (its image, a served one or one of the file's others, and its vehicle there)."""
+        out: dict[str, dict[int, _TrackedOn]] = {}
+        for im in self.images:
+            if im.sequence == sequence:
+                for j, v in enumerate(im.vehicles):
+                    if v.track is not None:
+                        out.setdefault(v.track, {})[im.frame] = _TrackedOn(im, v, j)
+        for other in self._other_frames:
+            if other.sequence == sequence:
+                for v in other.vehicles:
+                    if v.track is not None:
+                        out.setdefault(v.track, {})[other.frame] = _TrackedOn(other, v)
+        return out
+
+    def _frame_image(self, image: ImageState | Image) -> Image:
+        """A frame as the track fit reads it: its camera, the ground it is fitted on, its sequence and frame."""
+        return Image(image.id, image.file, image.camera, (), image.id, ground=self._ground_of(image),
+                     sequence=image.sequence, frame=image.frame)
+
+    def _track_fit(self, image: ImageState, track: str, vehicle: Vehicle | None,
+                   tracks: dict[str, dict[int, _TrackedOn]] | None = None) -> dict[str, Any]:
+        """Frame ``image`` of ``track`` fitted with the track's frames near it (:func:`.sequence.frames_to_fit`), as
+        ``fit`` fits a track (:func:`toosicubix.pipeline.tracks.results_of_track`), with every suggestion; cached by
+        what those frames hold. ``vehicle``: the track's vehicle on this frame, or None for its prediction here
+        (the frame added with nothing on it: its pose interpolated, or held beyond the track's ends).
+
+        Returns ``{"result": VehicleResult, "frames": [frame numbers fitted together], "seconds": the fit's}``."""
+        if tracks is None:
+            tracks = self._tracks(image.sequence)
+        frames = tracks.get(track, {})
+        chosen = frames_to_fit(image.frame, {f: on.clicked for f, on in frames.items() if f != image.frame})
+        if vehicle is None:
+            vehicle = Vehicle("predicted", next(iter(frames.values())).vehicle.prototype, None, (), "predicted",
+                              track=track)
+        pairs = [(self._frame_image(frames[f].image), frames[f].model(self)) for f in chosen]
+        pairs.append((self._frame_image(image), vehicle))
+        key = json.dumps(["track", track, image.index, [[im.id, im.frame, _vehicle_key(v)] for im, v in pairs]])
+        cached = self._fits.get(key)
+        if cached is None:
+            prior = self.priors[vehicle.prototype]
+            started = time.perf_counter()
+            result = results_of_track(track, pairs, prior, self.options, self.track_options)[-1]
+            result = with_next_clicks(vehicle, image.camera, prior, result, self.options, self._ground_of(image),
+                                      NEXT_CLICKS, self._keypoints(vehicle.prototype))
+            cached = self._cache(key, {"result": result, "frames": sorted(im.frame for im, _ in pairs),
+                                       "seconds": time.perf_counter() - started})
+        return cached
+
+    def _carried(self, image: ImageState, tracks: dict[str, dict[int, _TrackedOn]]) -> list[str]:
+        """The tracks shown as predicted on ``image``: those with a vehicle within :data:`TRACK_WINDOW` frames of it
+        and none on it, in natural order (dismissed ones included)."""
+        return sorted((t for t, frames in tracks.items() if image.frame not in frames
+                       and any(abs(f - image.frame) <= TRACK_WINDOW for f in frames)), key=track_sort_key)
+
+    def _all_tracks(self) -> dict[str, str]:
+        """Every track of the file as this session has it, with its sequence."""
+        out = {}
+        for im in [*self.images, *self._other_frames]:
+            for v in im.vehicles:
+                if v.track is not None:
+                    out.setdefault(v.track, im.sequence)
+        return out
 
     def _auto_name(self, image: ImageState, j: int, v: VehicleState) -> list[dict[str, Any]]:
         """Name the vehicle's unnamed clicks, oldest first, while its fit succeeds; what was named."""
@@ -522,7 +701,10 @@ class Session:
                 "prototypes": sorted(self.priors),
                 "images": [{"index": im.index, "id": im.id, "size": list(im.camera.image_size),
                             "vehicles": len(im.vehicles),
-                            "done": sum(v.done for v in im.vehicles)} for im in self.images],
+                            "done": sum(v.done for v in im.vehicles),
+                            **({} if im.sequence is None else {"sequence": im.sequence, "frame": im.frame})}
+                           for im in self.images],
+                "order": self.order,
                 "vocabulary": {k.kind: {"clicks": list(k.clicks), "names": list(k.names)}
                                for k in vocabulary.KINDS.values() if not k.known},
                 "mapping": None if self.mapping is None else self.mapping.name,
@@ -531,47 +713,91 @@ class Session:
             }
 
     def image_view(self, index: int) -> dict[str, Any]:
-        """One image: its vehicles, each with its clicks, fit, cuboid, sigmas and targets."""
+        """One image: its vehicles, each with its clicks, fit, cuboid, sigmas and targets; on a frame of a sequence
+        also the predictions of the tracks carried to it and how each track's pose here is determined."""
         with self._lock:
             image = self.image(index)
-            return {"revision": self.revision, "index": index, "id": image.id, "size": list(image.camera.image_size),
-                    "vehicles": [self._vehicle_view(image, j, v) for j, v in enumerate(image.vehicles)]}
+            view: dict[str, Any] = {"revision": self.revision, "index": index, "id": image.id,
+                                    "size": list(image.camera.image_size), "sequence": image.sequence,
+                                    "frame": image.frame}
+            if image.sequence is None:
+                view["vehicles"] = [self._vehicle_view(image, j, v) for j, v in enumerate(image.vehicles)]
+                return {**view, "predictions": [], "dismissed": [], "tracks": []}
+            tracks = self._tracks(image.sequence)
+            view["vehicles"] = [self._vehicle_view(image, j, v, tracks) for j, v in enumerate(image.vehicles)]
+            carried = self._carried(image, tracks)
+            view["predictions"] = [self._prediction_view(image, t, tracks) for t in carried
+                                   if t not in image.dismissed]
+            view["dismissed"] = [t for t in carried if t in image.dismissed]
+            states = [{"track": v["track"], "vehicle": v["id"], "pose_from": v["fit"].get("pose_from") or "not fitted"}
+                      for v in view["vehicles"] if v["track"] is not None]
+            states += [{"track": p["track"], "vehicle": None, "pose_from": "predicted"} for p in view["predictions"]]
+            states += [{"track": t, "vehicle": None, "pose_from": "dismissed"} for t in view["dismissed"]]
+            view["tracks"] = sorted(states, key=lambda s: track_sort_key(s["track"]))
+            return view
 
-    def _vehicle_view(self, image: ImageState, j: int, v: VehicleState) -> dict[str, Any]:
-        result = self._fit(image, j, v)
+    def _vehicle_view(self, image: ImageState, j: int, v: VehicleState,
+                      tracks: dict[str, dict[int, _TrackedOn]] | None = None) -> dict[str, Any]:
+        tracked = v.track is not None and image.sequence is not None
+        entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
+        result = entry["result"] if entry is not None else self._fit(image, j, v)
         parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None}
                  for k, p in enumerate(v.parts)]
-        fit: dict[str, Any] = {"status": result.status, "error": result.error, "error_detail": result.error_detail}
-        if result.ok:
+        fit = self._fit_view(image, result)
+        if result.ok and len(result.residuals_px) == sum(len(p.uv) for p in v.parts if p.named):
+            # (a track's frame whose clicks it left out has none)
             residuals = np.asarray(result.residuals_px).tolist()
             row = 0
             for view, p in zip(parts, v.parts, strict=True):
                 if p.named:
                     view["residuals_px"] = residuals[row:row + len(p.uv)]
                     row += len(p.uv)
-            corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
-            sigma = result.sigma
-            problems = judge(result, self.thresholds)
-            fit.update({
-                "corners_uv": (image.camera.project(corners_cam).round(2).tolist()
-                               if np.all(corners_cam[:, 2] > 0.1) else None),
-                "front_face": list(FRONT_FACE),
-                "yaw_pitch_roll_deg": [round(a, 2) for a in result.yaw_pitch_roll_deg],
-                "depth_m": round(float(result.t_cam_vehicle[2]), 3),
-                "dimensions": [round(float(x), 3) for x in result.dimensions],
-                "rms_px": result.rms_px,
-                "sigma": {"yaw_deg": _finite(sigma.yaw_deg), "depth_rel": _finite(sigma.depth_rel),
-                          "depth_m": _finite(sigma.depth_m)} if sigma is not None else None,
-                "confidence": result.confidence, "ambiguous": result.ambiguous,
-                "well_determined": not problems, "problems": list(problems),
-                "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
-                "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
-                "click_sigma_px": self.options.click_sigma,
-                "road": _road_kind(self._ground_of(image)),
-            })
+        if entry is not None:
+            fit.update({"pose_from": result.pose_from, "track_frames": entry["frames"]})
         targets = [s for s in (result.next_clicks or []) if s["visible"] and s["inside_image"]][:TARGETS]
-        return {"id": v.id, "prototype": v.prototype, "box2d": v.box2d, "done": v.done, "parts": parts,
-                "unnamed": sum(not p.named for p in v.parts), "fit": fit, "targets": targets}
+        return {"id": v.id, "prototype": v.prototype, "track": v.track, "box2d": v.box2d, "done": v.done,
+                "parts": parts, "unnamed": sum(not p.named for p in v.parts), "fit": fit, "targets": targets}
+
+    def _prediction_view(self, image: ImageState, track: str, tracks: dict[str, dict[int, _TrackedOn]]
+                         ) -> dict[str, Any]:
+        """A track carried to ``image``: its pose here from its other frames (interpolated between them, or held
+        beyond its ends), the cuboid and sigmas, and the frames it comes from."""
+        entry = self._track_fit(image, track, None, tracks)
+        result = entry["result"]
+        own = [f for f in tracks[track] if f != image.frame]
+        before = max((f for f in own if f < image.frame), default=None)
+        after = min((f for f in own if f > image.frame), default=None)
+        return {"track": track, "prototype": result.prototype,
+                "source": "interpolated" if before is not None and after is not None else "held",
+                "from_frames": [before, after], "fit": {**self._fit_view(image, result), "pose_from": "predicted",
+                                                        "track_frames": entry["frames"]}}
+
+    def _fit_view(self, image: ImageState, result: VehicleResult) -> dict[str, Any]:
+        """A fit as the page draws it: the cuboid's corners in pixels, the pose, size and sigmas, the verdict."""
+        fit: dict[str, Any] = {"status": result.status, "error": result.error, "error_detail": result.error_detail}
+        if not result.ok:
+            return fit
+        corners_cam = cuboid_corners_cam(result.R_cam_vehicle, result.t_cam_vehicle, result.dimensions)
+        sigma = result.sigma
+        problems = judge(result, self.thresholds)
+        fit.update({
+            "corners_uv": (image.camera.project(corners_cam).round(2).tolist()
+                           if np.all(corners_cam[:, 2] > 0.1) else None),
+            "front_face": list(FRONT_FACE),
+            "yaw_pitch_roll_deg": [round(a, 2) for a in result.yaw_pitch_roll_deg],
+            "depth_m": round(float(result.t_cam_vehicle[2]), 3),
+            "dimensions": [round(float(x), 3) for x in result.dimensions],
+            "rms_px": result.rms_px,
+            "sigma": {"yaw_deg": _finite(sigma.yaw_deg), "depth_rel": _finite(sigma.depth_rel),
+                      "depth_m": _finite(sigma.depth_m)} if sigma is not None else None,
+            "confidence": result.confidence, "ambiguous": result.ambiguous,
+            "well_determined": not problems, "problems": list(problems),
+            "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
+            "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
+            "click_sigma_px": self.options.click_sigma,
+            "road": _road_kind(self._ground_of(image)),
+        })
+        return fit
 
     # -- changes ----------------------------------------------------------------------------------------------
 
@@ -585,10 +811,13 @@ class Session:
         """Apply one change to an image and save; the image view with what the change did.
 
         ``request``: ``{"revision": int, "op": str, ...}`` with ``op`` one of ``add_vehicle`` (``prototype``,
-        ``box2d``), ``set_vehicle`` (``vehicle``; ``prototype``, ``box2d``, ``done``), ``delete_vehicle``
+        ``box2d``, ``track``: on a frame of a sequence, a track of it not on this frame yet, else a new track),
+        ``set_vehicle`` (``vehicle``; ``prototype``, ``box2d``, ``done``, ``track``), ``delete_vehicle``
         (``vehicle``), ``add_click`` (``vehicle``, ``uv`` [[x, y], ...]; ``kind`` and ``name``, or neither for a
         point to be auto-named), ``move_click`` (``vehicle``, ``part``, ``click``, ``uv`` [x, y]), ``rename``
-        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``), ``undo``.
+        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``),
+        ``confirm_prediction`` (``track``: a vehicle of that track without clicks, its pose interpolated),
+        ``dismiss_prediction`` and ``restore_prediction`` (``track``: not shown on this frame, or again), ``undo``.
 
         Raises
         ------
@@ -611,13 +840,13 @@ class Session:
             handler = _OPS.get(op) if isinstance(op, str) else None
             if handler is None:
                 raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r}")
-            before = copy.deepcopy(image.vehicles)
+            before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
                 auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
                 self._save()
             except BaseException:
-                image.vehicles = before
+                image.restore(before)
                 raise
             if op == "undo":
                 image.undo.pop()
@@ -671,29 +900,60 @@ class Session:
     # -- the operations (under the lock; they may raise ApiError before changing anything) ----------------------
 
     def _op_add_vehicle(self, image: ImageState, r: dict) -> dict[str, Any]:
-        prototype = r.get("prototype", self.prototype)
-        self._check_prototype(prototype)
+        track = r.get("track")
+        if track is not None:
+            prototype = self._check_carried(image, track)
+            if r.get("prototype", prototype) != prototype:
+                raise ApiError(f"prototype: track {track!r} is a {prototype} (one prototype per track), got "
+                               f"{r['prototype']!r:.60}")
+        else:
+            prototype = r.get("prototype", self.prototype)
+            self._check_prototype(prototype)
+            if image.sequence is not None:
+                track = new_track_name(image.sequence, self._all_tracks())
         box = checked_box2d(r.get("box2d"))
+        vehicle_id = self._new_vehicle_id(image)
+        image.vehicles.append(VehicleState(vehicle_id, prototype, box, track=track))
+        if track in image.dismissed:
+            image.dismissed.remove(track)
+        return {"vehicle": vehicle_id, "track": track}
+
+    @staticmethod
+    def _new_vehicle_id(image: ImageState) -> str:
         used = {int(v.id) for v in image.vehicles if v.id.isdigit()}
-        vehicle_id = str(max(used, default=0) + 1)
-        image.vehicles.append(VehicleState(vehicle_id, prototype, box))
-        return {"vehicle": vehicle_id}
+        return str(max(used, default=0) + 1)
 
     def _op_set_vehicle(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
-        if "prototype" in r:
+        if "track" in r and r["track"] != v.track:  # another track of the sequence: its prototype too
+            prototype = self._check_carried(image, r["track"])
+            if r.get("prototype", prototype) != prototype:
+                raise ApiError(f"prototype: track {r['track']!r} is a {prototype} (one prototype per track), got "
+                               f"{r['prototype']!r:.60}")
+            v.track = r["track"]
+            self._set_prototype(v, prototype)
+        elif "prototype" in r:
             self._check_prototype(r["prototype"])
-            v.prototype = r["prototype"]
-            for part in v.parts:  # the mapping's keypoints sit where they sit on that prototype
-                if part.kind == "keypoint":
-                    extra = self._keypoint_extra(v.prototype, part.name, (part.extra or {}).get("visible"))
-                    part.extra = extra or part.extra
+            if v.track is not None and r["prototype"] != v.prototype:
+                elsewhere = [f for f in self._tracks(image.sequence).get(v.track, {}) if f != image.frame]
+                if elsewhere:
+                    raise ApiError(f"prototype: vehicle {v.id} is track {v.track!r}, a {v.prototype} on "
+                                   f"{len(elsewhere)} other frame(s) too (one prototype per track): change it where "
+                                   "the track has no other frame, or delete those")
+            self._set_prototype(v, r["prototype"])
         if "box2d" in r:
             v.box2d = checked_box2d(r["box2d"])
         if "done" in r:
             if not isinstance(r["done"], bool):
                 raise ApiError(f"done: expected true or false, got {r['done']!r}")
             v.done = r["done"]
+
+    def _set_prototype(self, v: VehicleState, prototype: str) -> None:
+        v.prototype = prototype
+        for part in v.parts:  # the mapping's keypoints sit where they sit on that prototype
+            if part.kind == "keypoint":
+                extra = self._keypoint_extra(v.prototype, part.name, (part.extra or {}).get("visible"))
+                part.extra = extra or part.extra
 
     def _op_delete_vehicle(self, image: ImageState, r: dict) -> None:
         image.vehicles.remove(self._vehicle(image, r))
@@ -757,10 +1017,32 @@ class Session:
         v = self._vehicle(image, r)
         v.parts.remove(self._part(v, r))
 
+    def _op_confirm_prediction(self, image: ImageState, r: dict) -> dict[str, Any]:
+        track = r.get("track")
+        prototype = self._check_carried(image, track)
+        vehicle_id = self._new_vehicle_id(image)
+        image.vehicles.append(VehicleState(vehicle_id, prototype, track=track))
+        if track in image.dismissed:
+            image.dismissed.remove(track)
+        return {"vehicle": vehicle_id, "track": track}
+
+    def _op_dismiss_prediction(self, image: ImageState, r: dict) -> None:
+        track = r.get("track")
+        self._check_carried(image, track)
+        if track not in image.dismissed:
+            image.dismissed.append(track)
+
+    def _op_restore_prediction(self, image: ImageState, r: dict) -> None:
+        track = r.get("track")
+        if track not in image.dismissed:
+            raise ApiError(f"track: {track!r:.60} is not dismissed on image {image.id} (dismissed: "
+                           f"{', '.join(image.dismissed) or 'none'})")
+        image.dismissed.remove(track)
+
     def _op_undo(self, image: ImageState, r: dict) -> dict[str, Any]:
         if not image.undo:
             raise ApiError("nothing to undo on this image")
-        image.vehicles = copy.deepcopy(image.undo[-1])  # popped once the change is saved
+        image.restore(image.undo[-1])  # popped once the change is saved
         return {}
 
     # -- checks -----------------------------------------------------------------------------------------------
@@ -768,6 +1050,25 @@ class Session:
     def _check_prototype(self, prototype: Any) -> None:
         if not isinstance(prototype, str) or prototype not in self.priors:
             raise ApiError(f"prototype: unknown {prototype!r:.60}; known: {', '.join(sorted(self.priors))}")
+
+    def _check_carried(self, image: ImageState, track: Any) -> str:
+        """``track`` may get a vehicle on ``image`` (ApiError otherwise): a frame of a sequence, a track of that
+        sequence, none of whose vehicles is on it yet. Its prototype."""
+        if image.sequence is None:
+            raise ApiError(f"track: image {image.id} is not a frame of a sequence (start the page with --sequence, or "
+                           "give the file's image a sequence and frame)")
+        if not isinstance(track, str):
+            raise ApiError(f"track: expected the name of a track of sequence {image.sequence}, got {track!r:.60}")
+        frames = self._tracks(image.sequence).get(track)
+        if not frames:
+            names = sorted(self._tracks(image.sequence), key=track_sort_key)
+            raise ApiError(f"track: no track {track!r:.60} in sequence {image.sequence} (its tracks: "
+                           f"{', '.join(names) or 'none yet'})")
+        if image.frame in frames:
+            here = next(v.id for v in image.vehicles if v.track == track)
+            raise ApiError(f"track: {track} is on this frame already (vehicle {here}): one vehicle per track in a "
+                           "frame")
+        return next(iter(frames.values())).vehicle.prototype
 
     @staticmethod
     def _vehicle(image: ImageState, r: dict) -> VehicleState:
@@ -825,3 +1126,12 @@ def _road_kind(ground: GroundPlane | None) -> str | None:
 
 def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
+
+
+def _vehicle_key(v: Vehicle) -> list[Any]:
+    """What a fit of ``v`` depends on, as JSON: its prototype, box, clicks (with a keypoint's position) and known
+    sizes."""
+    return [v.prototype, None if v.box2d is None else [float(x) for x in v.box2d],
+            [[p.kind, p.name, p.uv.tolist(), p.known, None if p.at is None else p.at.tolist(),
+              None if p.spread is None else p.spread.tolist(), p.visible] for p in v.parts],
+            sorted(v.known_dimensions.items())]

@@ -16,11 +16,21 @@ const CLICK_NAMES = { symmetry: ["left light", "right light"], direction: ["tail
 const oneClick = (kind) => kind === "point" || kind === "keypoint";
 const partLabel = (kind, name) => (oneClick(kind) ? name : `${kind} ${name}`);
 
+// In a sequence the selection is a vehicle (state.vehicle) or a track's prediction (state.prediction), never both.
 const state = {
-  session: null, index: 0, view: null, revision: 0, vehicle: null, armed: null, pending: [],
-  selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0, mode: "click",
-  drag: null,
+  session: null, index: 0, view: null, revision: 0, vehicle: null, prediction: null, preferPrediction: false,
+  armed: null, pending: [], selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0,
+  mode: "click", drag: null, drawn: [],
 };
+// A track's colour: its number's (a name "<sequence>-<k>"), else its name's hash. No red (the front face), magenta
+// (residuals), yellow (targets) or orange (unnamed clicks).
+const TRACK_COLOURS = ["#38d9ff", "#69f0ae", "#b388ff", "#ff80ab", "#8c9eff", "#a7ffeb", "#c6ff00", "#80d8ff"];
+function trackColour(track) {
+  if (!track) return "#38d9ff";
+  const m = /(\d+)$/.exec(track);
+  let k = m ? Number(m[1]) : [...track].reduce((h, c) => (h * 31 + c.charCodeAt(0)) >>> 0, 7);
+  return TRACK_COLOURS[k % TRACK_COLOURS.length];
+}
 const $ = (id) => document.getElementById(id);
 const canvas = $("canvas");
 const ctx = canvas.getContext("2d");
@@ -64,13 +74,15 @@ async function start() {
     });
   }
   buildPalette();
-  await showImage(0);
+  await showImage(doc.order[0]);
 }
 
 async function showImage(index) {
   const n = state.session.images.length;
   state.index = (index + n) % n;
   state.vehicle = null;
+  state.prediction = null;
+  state.preferPrediction = true;  // a frame opens on its first prediction, if it has one: Enter confirms it
   state.pending = [];
   state.selectedPart = null;
   await loadView();
@@ -88,14 +100,52 @@ async function loadView() {
   applyView(doc);
 }
 
+// Step through the images in the session's order (a sequence's frames in frame order).
+function step(delta) {
+  const order = state.session.order;
+  const n = order.length;
+  return showImage(order[(order.indexOf(state.index) + delta + n) % n]);
+}
+
 function applyView(doc) {
   state.view = doc;
   state.revision = doc.revision;
   const ids = doc.vehicles.map((v) => v.id);
-  if (!ids.includes(state.vehicle)) state.vehicle = ids.length ? ids[ids.length - 1] : null;
-  const im = state.session.images[state.index];
-  $("image-name").textContent = `${im.id}  (${state.index + 1} / ${state.session.images.length})`;
+  const tracks = doc.predictions.map((p) => p.track);
+  if (state.prediction !== null && !tracks.includes(state.prediction)) state.prediction = null;
+  if (state.prediction !== null) state.vehicle = null;
+  else if (!ids.includes(state.vehicle)) {
+    state.vehicle = null;
+    if (state.preferPrediction && tracks.length) state.prediction = tracks[0];
+    else if (ids.length) state.vehicle = ids[ids.length - 1];
+  }
+  state.preferPrediction = false;
+  header();
   render();
+}
+
+function header() {
+  const doc = state.view;
+  const im = state.session.images[state.index];
+  const tracks = $("tracks");
+  tracks.textContent = "";
+  $("sequence-tools").hidden = doc.sequence === null;
+  if (doc.sequence === null) {
+    $("image-name").textContent = `${im.id}  (${state.index + 1} / ${state.session.images.length})`;
+    return;
+  }
+  const frames = state.session.images.filter((i) => i.sequence === doc.sequence).sort((a, b) => a.frame - b.frame);
+  const position = frames.findIndex((i) => i.index === state.index) + 1;
+  $("image-name").textContent = `sequence ${doc.sequence}, frame ${doc.frame} (${position} of ${frames.length})`;
+  $("image-name").title = im.id;
+  for (const t of doc.tracks) {  // how each track's pose on this frame is determined now
+    const span = document.createElement("span");
+    span.textContent = `${t.track} ${t.pose_from}`;
+    span.style.color = trackColour(t.track);
+    span.className = t.pose_from;
+    tracks.appendChild(span);
+  }
+  $("confirm").disabled = $("dismiss").disabled = state.prediction === null;
 }
 
 // -- changes -----------------------------------------------------------------------------------------------
@@ -125,15 +175,73 @@ function currentVehicle() {
   return state.view && state.view.vehicles.find((v) => v.id === state.vehicle);
 }
 
-async function newVehicle(box2d) {
-  const change = { op: "add_vehicle", prototype: $("prototype").value };
+function currentPrediction() {
+  return state.view && state.view.predictions.find((p) => p.track === state.prediction);
+}
+
+function select(vehicle, prediction = null) {
+  state.vehicle = prediction === null ? vehicle : null;
+  state.prediction = prediction;
+  state.selectedPart = null;
+  buildPalette();
+  header();
+  render();
+}
+
+// A new vehicle: of the given track (a prediction's), else a new one (a new track, in a sequence).
+async function newVehicle(box2d, track = null) {
+  const change = { op: "add_vehicle" };
+  if (track !== null) change.track = track;
+  else change.prototype = $("prototype").value;
   if (box2d) change.box2d = box2d;
   const doc = await edit(change);
-  if (doc) { state.vehicle = doc.vehicle; say(`vehicle ${doc.vehicle} added`); render(); }
+  if (doc) {
+    select(doc.vehicle);
+    say(`vehicle ${doc.vehicle} added` + (doc.track ? ` (track ${doc.track})` : ""));
+  }
+}
+
+// After a prediction is confirmed or dismissed: the next one, else the given vehicle.
+function selectNext(vehicle) {
+  const next = state.view.predictions.length ? state.view.predictions[0].track : null;
+  select(vehicle, next);
+  return next;
+}
+
+async function confirmPrediction() {
+  const track = state.prediction;
+  if (track === null) { say("no prediction selected (Tab selects one)", true); return; }
+  const doc = await edit({ op: "confirm_prediction", track });
+  if (!doc) return;
+  const next = selectNext(doc.vehicle);
+  say(`track ${track} confirmed on this frame (its pose interpolated from the track)` +
+      (next ? `; next: ${next} (Enter)` : ""));
+}
+
+async function dismissPrediction() {
+  const track = state.prediction;
+  if (track === null) { say("no prediction selected", true); return; }
+  const doc = await edit({ op: "dismiss_prediction", track });
+  if (!doc) return;
+  const ids = doc.vehicles.map((v) => v.id);
+  selectNext(ids.length ? ids[ids.length - 1] : null);
+  say(`track ${track} dismissed on this frame (not saved to the annotation file; u undoes)`);
+}
+
+// Tab: the next vehicle or prediction of the image.
+function cycleSelection(delta) {
+  const items = [...state.view.vehicles.map((v) => [v.id, null]),
+    ...state.view.predictions.map((p) => [null, p.track])];
+  if (!items.length) return;
+  const at = items.findIndex(([v, p]) => (p !== null ? p === state.prediction : v === state.vehicle));
+  const [v, p] = items[(at + delta + items.length) % items.length];
+  select(v, p);
+  say(p !== null ? `prediction ${p}: Enter confirms, b draws its box, a click starts its parts, x dismisses`
+    : `vehicle ${v}`);
 }
 
 async function addClick(uv) {
-  if (!currentVehicle()) await newVehicle();
+  if (!currentVehicle()) await newVehicle(null, state.prediction);
   if (!currentVehicle()) return;
   if (state.armed && !oneClick(state.armed[0])) {
     state.pending.push(uv);
@@ -240,18 +348,53 @@ function panels() {
   list.textContent = "";
   for (const v of state.view ? state.view.vehicles : []) {
     const li = document.createElement("li");
-    li.textContent = `${v.id} ${v.prototype}: ${v.parts.length} clicks` + (v.unnamed ? ` (${v.unnamed} unnamed)` : "") +
+    const swatch = `<span class="swatch" style="border-color:${trackColour(v.track)}"></span>`;
+    const track = v.track ? ` · ${swatch}${escapeHtml(v.track)}` +
+      (v.fit.pose_from ? ` (${v.fit.pose_from})` : "") : "";
+    li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${v.parts.length} clicks` +
+      (v.unnamed ? ` (${v.unnamed} unnamed)` : "") + (v.box2d ? ", box" : "") +
       (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.well_determined ? ", well determined" : ", fitted");
     if (v.id === state.vehicle) li.classList.add("selected");
     if (v.done) li.classList.add("done");
-    li.onclick = () => { state.vehicle = v.id; state.selectedPart = null; buildPalette(); render(); };
+    li.onclick = () => select(v.id);
+    list.appendChild(li);
+  }
+  for (const p of state.view ? state.view.predictions : []) {  // tracks carried to this frame, not on it yet
+    const li = document.createElement("li");
+    const [before, after] = p.from_frames;
+    const from = p.source === "interpolated" ? `between frames ${before} and ${after}`
+      : `held from frame ${before !== null ? before : after}`;
+    li.innerHTML = `<span class="swatch dashed" style="border-color:${trackColour(p.track)}"></span>` +
+      `${escapeHtml(p.track)} ${escapeHtml(p.prototype)}: ` +
+      (p.fit.status === "ok" ? `predicted, ${from}` : `cannot be predicted: ${escapeHtml(p.fit.error || "")}`);
+    li.classList.add("prediction");
+    if (p.track === state.prediction) li.classList.add("selected");
+    li.onclick = () => select(null, p.track);
+    list.appendChild(li);
+  }
+  for (const track of state.view ? state.view.dismissed : []) {
+    const li = document.createElement("li");
+    li.textContent = `${track} dismissed on this frame (click: show it again)`;
+    li.classList.add("dismissed");
+    li.onclick = () => edit({ op: "restore_prediction", track });
     list.appendChild(li);
   }
   const v = currentVehicle();
   const fit = $("fit");
   const clicks = $("clicks");
   clicks.textContent = "";
-  if (!v) { fit.textContent = "no vehicle: click the image or press n"; return; }
+  const p = currentPrediction();
+  if (p) {
+    fit.innerHTML = `<span class="predicted">predicted: track ${escapeHtml(p.track)}</span> ` +
+      "(Enter confirms it, b draws its box, a click starts its parts, x dismisses it on this frame)" +
+      (p.fit.status === "ok" ? fitTable(p.fit) : `<br>${escapeHtml(p.fit.error || "")}`);
+    return;
+  }
+  if (!v) {
+    fit.textContent = "no vehicle: click the image or press n" + (state.view && state.view.predictions.length ?
+      "; Tab selects a prediction" : "");
+    return;
+  }
   $("prototype").value = v.prototype;
   const f = v.fit;
   if (f.status !== "ok") {
@@ -259,12 +402,9 @@ function panels() {
   } else {
     const verdict = f.well_determined ? '<span class="ok">well determined</span>'
       : `<span class="bad">not well determined</span>: ${escapeHtml(f.problems.join("; "))}`;
-    fit.innerHTML = `${verdict}<table>
-      <tr><td>yaw</td><td>${f.yaw_pitch_roll_deg[0].toFixed(1)}°</td><td>σ ${fmt(f.sigma.yaw_deg)}°</td></tr>
-      <tr><td>depth</td><td>${f.depth_m.toFixed(2)} m</td><td>σ ${fmt(f.sigma.depth_rel, 1, 100)} %</td></tr>
-      <tr><td>size</td><td colspan="2">${f.dimensions.map((d) => d.toFixed(2)).join(" × ")} m</td></tr>
-      <tr><td>rms</td><td colspan="2">${fmt(f.rms_px, 2)} px</td></tr>
-      <tr><td>for</td><td colspan="2">clicks σ ${fmt(f.click_sigma_px, 2)} px${f.road ? `, upright on the road (${f.road})` : ""}</td></tr></table>`;
+    const track = v.track ? `<br>track ${escapeHtml(v.track)} (pose: ${f.pose_from}), fitted with frames ` +
+      `${f.track_frames[0]} to ${f.track_frames[f.track_frames.length - 1]} (${f.track_frames.length})` : "";
+    fit.innerHTML = `${verdict}${track}${fitTable(f)}`;
   }
   v.parts.forEach((p) => {
     const li = document.createElement("li");
@@ -275,6 +415,17 @@ function panels() {
     li.onclick = () => { state.selectedPart = p.index; render(); };
     clicks.appendChild(li);
   });
+}
+
+function fitTable(f) {
+  const sigma = f.sigma || {};
+  return `<table>
+      <tr><td>yaw</td><td>${f.yaw_pitch_roll_deg[0].toFixed(1)}°</td><td>σ ${fmt(sigma.yaw_deg)}°</td></tr>
+      <tr><td>depth</td><td>${f.depth_m.toFixed(2)} m</td><td>σ ${fmt(sigma.depth_rel, 1, 100)} %</td></tr>
+      <tr><td>size</td><td colspan="2">${f.dimensions.map((d) => d.toFixed(2)).join(" × ")} m</td></tr>
+      ${f.rms_px === null || f.rms_px === undefined ? "" :  // no clicks on a track's frame: no rms
+    `<tr><td>rms</td><td colspan="2">${fmt(f.rms_px, 2)} px</td></tr>`}
+      <tr><td>for</td><td colspan="2">clicks σ ${fmt(f.click_sigma_px, 2)} px${f.road ? `, upright on the road (${f.road})` : ""}</td></tr></table>`;
 }
 
 function escapeHtml(text) {
@@ -350,7 +501,9 @@ function render() {
     ctx.drawImage(state.image, state.panX, state.panY, state.image.naturalWidth * state.zoom,
       state.image.naturalHeight * state.zoom);
   }
+  state.drawn = [];  // what this frame shows, for tests: {track, vehicle, style: "solid" | "dashed"}
   if (state.view) {
+    for (const p of state.view.predictions) drawPrediction(p, p.track === state.prediction);
     for (const v of state.view.vehicles) drawVehicle(v, v.id === state.vehicle);
   }
   for (const p of state.pending) dot(p, "#ffd479", 4);
@@ -385,7 +538,11 @@ function drawVehicle(v, selected) {
     ctx.fill();
     for (const [i, j] of EDGES) {
       const front = f.front_face.includes(i) && f.front_face.includes(j);
-      line(c[i], c[j], front ? "#ff5050" : "#38d9ff", front ? 2.5 : 1.5);
+      line(c[i], c[j], front ? "#ff5050" : trackColour(v.track), front ? 2.5 : 1.5);
+    }
+    state.drawn.push({ track: v.track, vehicle: v.id, style: "solid" });
+    if (v.track) {
+      label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), trackColour(v.track), selected);
     }
   }
   if (selected) {
@@ -419,6 +576,32 @@ function drawVehicle(v, selected) {
     }
   }
   ctx.globalAlpha = 1;
+}
+
+// The corner drawn highest on the screen: where a cuboid's track label goes.
+function topCorner(c) {
+  return c.reduce((best, p) => (p[1] < best[1] ? p : best), c[0]);
+}
+
+// A track carried to this frame: its predicted cuboid, dashed, in the track's colour (thicker when selected).
+function drawPrediction(p, selected) {
+  const f = p.fit;
+  if (f.status !== "ok" || !f.corners_uv) return;
+  const c = f.corners_uv;
+  const colour = trackColour(p.track);
+  ctx.globalAlpha = selected ? 1 : 0.75;
+  ctx.fillStyle = selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)";
+  ctx.beginPath();
+  f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
+  ctx.closePath();
+  ctx.fill();
+  for (const [i, j] of EDGES) {
+    const front = f.front_face.includes(i) && f.front_face.includes(j);
+    line(c[i], c[j], front ? "#ff8a80" : colour, selected ? 2.5 : 1.5, [7, 5]);
+  }
+  label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour, selected);
+  ctx.globalAlpha = 1;
+  state.drawn.push({ track: p.track, vehicle: null, style: "dashed" });
 }
 
 // -- mouse and keys ------------------------------------------------------------------------------------------
@@ -475,7 +658,11 @@ canvas.addEventListener("mouseup", async (e) => {
     const [u0, v0] = d.from, [u1, v1] = toImage(e.offsetX, e.offsetY);
     const box = [Math.min(u0, u1), Math.min(v0, v1), Math.max(u0, u1), Math.max(v0, v1)];
     if (box[2] - box[0] < 2 || box[3] - box[1] < 2) { say("box too small", true); render(); return; }
-    if (currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d) {
+    if (state.prediction !== null) {  // the prediction's box: its track gets a vehicle with that box only
+      const track = state.prediction;
+      await newVehicle(box, track);
+      say(`track ${track}: box drawn on this frame (its pose from the box and the track)`);
+    } else if (currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d) {
       await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box });
     } else {
       await newVehicle(box);
@@ -505,17 +692,24 @@ canvas.addEventListener("wheel", (e) => {
 document.addEventListener("keydown", async (e) => {
   if (e.target.tagName === "SELECT" || e.target.tagName === "INPUT") return;
   const key = e.key;
+  if (key === "Enter" && e.target.tagName === "BUTTON") return;  // the focused button's own click, not a confirm too
   if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   if (HOTKEYS[key]) arm(HOTKEYS[key]);
   else if (key === "Escape") { state.mode = "click"; arm(null); }
   else if (key === "u") await edit({ op: "undo" });
-  else if (key === "x") await takeRunnerUp();
+  else if (key === "Enter" && state.prediction !== null) await confirmPrediction();
+  else if (key === "Tab") { e.preventDefault(); cycleSelection(e.shiftKey ? -1 : 1); }
+  else if ((key === "x" || key === "Delete" || key === "Backspace") && state.prediction !== null) {
+    await dismissPrediction();
+  } else if (key === "x") await takeRunnerUp();
   else if (key === "n") await newVehicle();
-  else if (key === "b") { state.mode = "box"; say("drag the vehicle's box"); }
-  else if (key === "d") await toggleDone();
-  else if (key === "]" || key === "PageDown") await showImage(state.index + 1);
-  else if (key === "[" || key === "PageUp") await showImage(state.index - 1);
+  else if (key === "b") {
+    state.mode = "box";
+    say(state.prediction !== null ? `drag the box of track ${state.prediction}` : "drag the vehicle's box");
+  } else if (key === "d") await toggleDone();
+  else if (key === "]" || key === "PageDown") await step(1);
+  else if (key === "[" || key === "PageUp") await step(-1);
   else if (key === "0") fitToView();
   else if ((key === "Delete" || key === "Backspace") && state.selectedPart !== null && currentVehicle()) {
     await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
@@ -529,8 +723,10 @@ async function toggleDone() {
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
 }
 
-$("prev").onclick = () => showImage(state.index - 1);
-$("next").onclick = () => showImage(state.index + 1);
+$("prev").onclick = () => step(-1);
+$("next").onclick = () => step(1);
+$("confirm").onclick = confirmPrediction;
+$("dismiss").onclick = dismissPrediction;
 $("new-vehicle").onclick = () => newVehicle();
 $("draw-box").onclick = () => { state.mode = "box"; say("drag the vehicle's box"); };
 $("done").onclick = toggleDone;
