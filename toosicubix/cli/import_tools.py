@@ -139,6 +139,10 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
     original_height) belong to the box named by their parentID, else to the box a relation ties them to,
     else to the one box that contains them. Old exports with 'completions' are read too.
 
+    Image ids are the stems of the file names as the person gave them: an upload's
+    /data/upload/<project>/<8 hex>-<name> gives <name>, a local-files ?d=<path> its path (refused if it holds
+    '..'), an s3://, gs:// or azure-blob:// object its key's base name (docs/tools.md).
+
     \b
     Example:
       toosicubix import label-studio export.json --cameras cameras.json -o annotations.json
