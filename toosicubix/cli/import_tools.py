@@ -102,7 +102,8 @@ def _sequence_name(ctx: click.Context, param: click.Parameter, value: str | None
                    "job_<id>].")
 def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Path, default_prototype: str,
                  lengths: tuple[str, ...], strict: bool, quiet: bool, sequence: str | None) -> None:
-    """Import a CVAT for images 1.1 or CVAT for video 1.1 export (annotations.xml) as an annotation file.
+    """Import a CVAT for images 1.1 or CVAT for video 1.1 export as an annotation file: its annotations.xml, or
+    the .zip CVAT downloads (read as it is; it needs exactly one annotations.xml).
 
     Skeletons (from `toosicubix template cvat`) are vehicles, their points the keypoints; points marked
     outside are not clicked. Loose points are grouped into vehicles by group_id (a box in the group gives
@@ -118,6 +119,7 @@ def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Pat
     \b
     Example:
       toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
+      toosicubix import cvat task_7-cvat_for_images.zip --cameras cameras.json -o annotations.json
       toosicubix import cvat video/annotations.xml --sequence drive3 --cameras cameras.json -o drive3.json
     """
     from toosicubix.formats.cvat import read_cvat
