@@ -32,9 +32,11 @@ def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:
 
 
 _COMMON = [
-    click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                 help='Cameras file: {"cameras": [{"match": GLOB on the image name, "K": 3x3, "distortion": [...]}]}, '
-                      "first match wins. Every image needs a camera."),
+    click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
+                 help='Cameras: a JSON file {"cameras": [{"match": GLOB on the image name, "K": 3x3 or 9 numbers, '
+                      '"distortion": [...]}]} (first match wins), a KITTI calib file (its P2 for every image) or a '
+                      "folder of them (<image stem>.txt), or an OpenCV or ROS camera YAML (one camera for every "
+                      "image). Every image needs a camera."),
     click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
                  help="The annotation file to write (v1)."),
     click.option("--default-prototype", default="Car", show_default=True,
@@ -161,9 +163,10 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
 @click.option("--mapping", "mapping_name", required=True,
               help="A bundled mapping (apollocar3d-66, apollocar3d-66-paper, toosicubix) or a mapping file (JSON, "
                    "schema in schemas/mapping.schema.json): which keypoints make which parts.")
-@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help='Cameras file: {"cameras": [{"match": GLOB on file_name, "K": 3x3, "distortion": [...]}]}, the '
-                   "first match wins; else every image needs its own K (images[].K).")
+@click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
+              help='Cameras: a JSON file {"cameras": [{"match": GLOB on file_name, "K": 3x3 or 9 numbers, '
+                   '"distortion": [...]}]} (first match wins), a KITTI calib file or a folder of them (<image '
+                   "stem>.txt), or an OpenCV or ROS camera YAML; else every image needs its own K (images[].K).")
 @click.option("--option", "options", multiple=True,
               help="Use the mapping's optional parts with this option, e.g. --option plates (licence-plate "
                    "corners as a known-width feature). Repeatable.")

@@ -199,7 +199,7 @@ class DocumentBuilder:
             out_vehicles.append(converted)
         camera = self.cameras.camera_for(file_name) if self.cameras is not None else None
         if camera is None:
-            hint = f"no entry of {self.cameras.source} matches it" if self.cameras else "give --cameras CAMERAS.json"
+            hint = self.cameras.why_none(file_name) if self.cameras is not None else "give --cameras CAMERAS.json"
             if not out_vehicles:
                 self.warn(file_name, "image", f"no vehicles and no camera ({hint}): image left out")
                 return
