@@ -87,6 +87,17 @@ def _write(doc: dict, summary, out_path: Path, quiet: bool) -> None:
         click.echo(f"wrote {out_path}", err=True)
 
 
+def foreign_file(path: Path) -> None:
+    """For ``fit`` and ``validate`` when ``path`` is no annotation file: if it is a labelling tool's file (COCO,
+    Label Studio, CVAT, KITTI labels), raise :class:`BadInput` with the one line saying which ``toosicubix
+    import`` turns it into one, instead of the schema's errors."""
+    from toosicubix.formats.tool_import import import_hint
+
+    hint = import_hint(path)
+    if hint is not None:
+        raise BadInput(hint) from None
+
+
 def _sequence_name(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     from toosicubix.formats.tool_import import check_sequence_name
 
