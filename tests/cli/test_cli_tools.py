@@ -96,3 +96,44 @@ def test_export_openlabel_and_cvat_from_a_fit(tmp_path, monkeypatch):
     result = run("export", "cvat", "nowhere", "-o", "review2.xml")
     assert result.exit_code == 2 and "results.json: missing" in result.output
     assert not (tmp_path / "labels2.json").exists() and not (tmp_path / "review2.xml").exists()
+
+
+def _calib(P) -> str:
+    rows = " ".join(f"{v:.12e}" for row in P for v in row)
+    other = " ".join(f"{v:.12e}" for v in (1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0))
+    return f"P0: {other}\nP1: {other}\nP2: {rows}\nP3: {other}\nR0_rect: 1 0 0 0 1 0 0 0 1\n"
+
+
+def test_import_takes_a_folder_of_kitti_calib_files_or_a_camera_yaml(tmp_path):
+    doc = sample_doc()
+    (tmp_path / "annotations.xml").write_text(cvat_xml(doc))
+    calib = tmp_path / "calib"
+    calib.mkdir()
+    for image in doc["images"][:2]:
+        camera = image["camera"]
+        P = camera.get("P") or [[*row, 0.0] for row in camera["K"]]
+        (calib / f"{image['id']}.txt").write_text(_calib(P))
+    out = tmp_path / "imported.json"
+    result = run("import", "cvat", str(tmp_path / "annotations.xml"), "--cameras", str(calib), "-o", str(out))
+    assert result.exit_code == 2
+    assert f"image 'frames/000003.png': no camera (no KITTI calib file {calib / '000003.txt'})" in result.output
+    (calib / "000003.txt").write_text(_calib([[*row, 0.0] for row in doc["images"][2]["camera"]["K"]]))
+    result = run("import", "cvat", str(tmp_path / "annotations.xml"), "--cameras", str(calib), "-o", str(out))
+    assert result.exit_code == 0, result.output
+    imported = json.loads(out.read_text())
+    assert imported["images"][0]["camera"] == {"P": doc["images"][0]["camera"]["P"]}
+    assert same_clicks(imported, doc)
+    yaml = tmp_path / "camera.yaml"
+    yaml.write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                    "   data: [ 1000., 0., 640., 0., 1000., 360., 0., 0., 1. ]\n")
+    path = write_json(tmp_path / "export.json", label_studio_export(doc))
+    result = run("import", "label-studio", str(path), "--cameras", str(yaml), "-o", str(out))
+    assert result.exit_code == 0, result.output
+    cameras = [im["camera"] for im in json.loads(out.read_text())["images"]]
+    assert cameras == [{"K": [[1000.0, 0.0, 640.0], [0.0, 1000.0, 360.0], [0.0, 0.0, 1.0]]}] * 3
+    (tmp_path / "calib.bin").write_bytes(bytes(range(256)))
+    result = run("import", "cvat", str(tmp_path / "annotations.xml"), "--cameras", str(tmp_path / "calib.bin"), "-o",
+                 str(out))
+    assert result.exit_code == 2
+    assert "not a cameras file: expected a cameras JSON file" in result.output
+    assert "a KITTI calib file (a line 'P2:' with 12 numbers)" in result.output

@@ -352,3 +352,94 @@ group_id="2">
             {"id": "2", "prototype": "Truck", "box2d": [5.0, 6.0, 70.0, 80.0],
              "parts": [{"kind": "point", "part": "rear-center", "xy": [30.0, 21.0]}]}]}]}
     assert out.read_text() == json.dumps(expected, indent=1) + "\n"
+
+
+# --- the zip CVAT downloads ---------------------------------------------------------------------------------------
+# CVAT's exporters (_export_task / _export_project in cvat/apps/dataset_manager/formats/cvat.py; the format pages
+# of its documentation) write annotations.xml at the zip's root and, with "Save images", the frames under images/
+# (a project's under images/<subset>/; a video's as images/frame_<N:06d>.PNG).
+
+def _zip(path, members: dict[str, bytes | str]):
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
+
+
+PNG = b"\x89PNG\r\n\x1a\n" + bytes(64)  # the images' bytes do not matter: only annotations.xml is read
+
+
+@pytest.mark.parametrize("layout", ["task", "project", "video"])
+def test_the_export_zip_imports_as_its_xml(tmp_path, layout):
+    if layout == "video":
+        xml, cameras = VIDEO.read_text(), write_json(tmp_path / "c.json", {"cameras": [{"match": "*", "K": VIDEO_K}]})
+        images = {f"images/frame_{n:06d}.PNG": PNG for n in range(3)}
+    else:
+        doc = sample_doc()
+        xml, cameras = cvat_xml(doc, project=layout == "project"), write_json(tmp_path / "c.json", cameras_doc(doc))
+        folder = "images/default/" if layout == "project" else "images/"
+        images = {folder + file_name(im): PNG for im in doc["images"]}
+    (tmp_path / "annotations.xml").write_text(xml)
+    archive = _zip(tmp_path / "export.zip", {"annotations.xml": xml, **images})
+    outputs = []
+    for source in ("annotations.xml", "export.zip"):
+        out = tmp_path / f"{source}.json"
+        result = CliRunner().invoke(main, ["import", "cvat", str(tmp_path / source), "--cameras", str(cameras), "-o",
+                                           str(out)])
+        assert result.exit_code == 0, result.output
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]  # byte for byte
+    doc, _ = read_cvat(archive, load_cameras(cameras))
+    assert doc["images"]
+
+
+@pytest.mark.parametrize(("members", "message"), [
+    ({"images/a.png": PNG},
+     r"expected the zip CVAT downloads .* with one annotations.xml; found none \(images/a.png\)"),
+    ({"annotations.xml": "<annotations/>", "old/annotations.xml": "<annotations/>"},
+     r"found 2 of them \(annotations.xml, old/annotations.xml\)"),
+    ({"annotations/person_keypoints_default.json": "{}"}, r"found none .*a COCO or Datumaro export\? unzip it"),
+    ({}, r"found none \(nothing\)"),
+])
+def test_a_zip_without_one_annotations_xml_is_refused(tmp_path, members, message):
+    archive = _zip(tmp_path / "export.zip", members)
+    with pytest.raises(FormatError, match=message) as info:
+        read_cvat(archive, None)
+    assert str(info.value).startswith(f"{archive}: ")
+    result = CliRunner().invoke(main, ["import", "cvat", str(archive), "-o", str(tmp_path / "o.json")])
+    assert result.exit_code == 2 and "with one annotations.xml" in result.output
+
+
+def test_zip_members_are_read_within_the_xml_limit(tmp_path, monkeypatch):
+    import io
+
+    from toosicubix.formats import cvat
+
+    monkeypatch.setattr(cvat, "MAX_XML_BYTES", 10_000)
+    big = "<annotations>" + " " * 20_000 + "</annotations>"
+    archive = _zip(tmp_path / "bomb.zip", {"annotations.xml": big})  # 20 kB that deflate to a few dozen bytes
+    assert archive.stat().st_size < 1_000
+    with pytest.raises(FormatError, match=rf"{archive}/annotations.xml: 20027 bytes uncompressed: larger than the "
+                                          "10000 bytes"):
+        read_cvat(archive, None)
+    # A member whose header understates its size is stopped while it is read.
+    with pytest.raises(FormatError, match=r"x.xml: more than 10000 bytes of XML"):
+        cvat._parse_stream(io.BytesIO(big.encode()), tmp_path / "x.xml")
+    (tmp_path / "big.xml").write_text(big)
+    with pytest.raises(FormatError, match=r"big.xml: 20027 bytes: larger than the 10000 bytes"):
+        read_cvat(tmp_path / "big.xml", None)
+
+
+def test_a_damaged_zip_or_a_doctype_inside_it_is_refused(tmp_path):
+    archive = _zip(tmp_path / "export.zip", {"annotations.xml": cvat_xml(sample_doc())})
+    (tmp_path / "cut.zip").write_bytes(archive.read_bytes()[:200])
+    with pytest.raises(FormatError, match=r"cut.zip: a damaged zip archive"):
+        read_cvat(tmp_path / "cut.zip", None)
+    doctype = _zip(tmp_path / "doctype.zip", {"annotations.xml": '<!DOCTYPE a [<!ENTITY x "y">]><annotations/>'})
+    with pytest.raises(FormatError, match=r"doctype.zip/annotations.xml: a DOCTYPE is not allowed"):
+        read_cvat(doctype, None)
+    broken = _zip(tmp_path / "broken.zip", {"annotations.xml": "<annotations><image></annotations>"})
+    with pytest.raises(FormatError, match=r"broken.zip/annotations.xml:1: not valid XML"):
+        read_cvat(broken, None)

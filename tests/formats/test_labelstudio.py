@@ -2,6 +2,7 @@
 
 import json
 from pathlib import Path
+from urllib.parse import quote
 
 import pytest
 
@@ -68,7 +69,7 @@ def test_percent_become_pixels_of_the_original_size(tmp_path):
                                                    _kp("k", "top-center", 25, 50, parent="b")])])
     doc, _ = read_label_studio(path, _any_camera(tmp_path))
     image = doc["images"][0]
-    assert image["id"] == "5f3a2b1c-a" and image["file"] == "/data/upload/3/5f3a2b1c-a.png"
+    assert image["id"] == "a" and image["file"] == "a.png"  # Label Studio's upload prefix 5f3a2b1c- stripped
     assert image["size"] == [1000, 500]
     assert image["vehicles"] == [{"id": "1", "prototype": "Van", "box2d": [100.0, 100.0, 600.0, 400.0],
                                   "parts": [{"kind": "point", "part": "top-center", "xy": [250.0, 250.0]}]}]
@@ -82,7 +83,7 @@ def test_without_parent_ids_keypoints_go_to_the_box_that_holds_them(tmp_path):
     car, van = doc["images"][0]["vehicles"]
     assert car["parts"][0]["part"] == "wheel-front-left" and van["parts"][0]["part"] == "wheel-rear-left"
     assert summary.warnings == [
-        f"{tmp_path / 'e.json'}: image '/data/upload/3/5f3a2b1c-a.png', task 7, keypoint k3 'rear-center' "
+        f"{tmp_path / 'e.json'}: image 'a.png', task 7, keypoint k3 'rear-center' "
         "($[0].annotations[0].result[4]): cannot be grouped to a vehicle (no parentID, no relation, inside no "
         "vehicle box): left out"]
 
@@ -124,7 +125,7 @@ def test_errors_name_the_file_and_json_path(tmp_path):
     with pytest.raises(FormatError, match=r"\$\[0\].annotations\[0\].result\[0\].value.x: expected a number"):
         read_label_studio(write_json(tmp_path / "e.json", [bad]), _any_camera(tmp_path))
     good = _task([_kp("k", "top-center", 20, 20)])
-    with pytest.raises(FormatError, match=r"image '/data/upload/3/5f3a2b1c-a.png': no camera"):
+    with pytest.raises(FormatError, match=r"image 'a.png': no camera"):
         read_label_studio(write_json(tmp_path / "e.json", [good]), None)
     with pytest.raises(FormatError, match=r"\$: expected a list of tasks"):
         read_label_studio(write_json(tmp_path / "e.json", "tasks"), None)
@@ -148,5 +149,72 @@ def test_an_image_without_vehicles_needs_no_camera(tmp_path):
         {"match": "frames/*", "K": [[800, 0, 500], [0, 800, 250], [0, 0, 1]]}]}))
     doc, summary = read_label_studio(write_json(tmp_path / "e.json", [empty, labelled]), cameras)
     assert [im["id"] for im in doc["images"]] == ["b"]
-    assert summary.warnings == [f"{tmp_path / 'e.json'}: image '/data/upload/3/5f3a2b1c-a.png', image: no vehicles and "
+    assert summary.warnings == [f"{tmp_path / 'e.json'}: image 'a.png', image: no vehicles and "
                                 f"no camera (no entry of {tmp_path / 'c.json'} matches it): image left out"]
+
+
+# How Label Studio names an image in a task's data (and so in its export), from its code:
+# - an upload: FileUpload's upload_name_generator (label_studio/data_import/models.py) stores
+#   upload/<project id>/<str(uuid4())[0:8]>-<file name>, served at MEDIA_URL /data/ (a host before it when
+#   HOSTNAME is set, a script name when FORCE_SCRIPT_NAME is);
+# - a local-files storage: f"{HOSTNAME}/data/local-files/?d={quote(relative path)}" (io_storages/localfiles);
+# - a cloud storage: f"{url_scheme}://{bucket}/{key}" with url_scheme s3, gs, azure-blob (io_storages/*/models.py).
+def _as_label_studio_names(name: str) -> dict[str, tuple[str, str]]:
+    """Each way Label Studio names the image ``frames/<name>``: its URL and the file name the import gives."""
+    return {
+        "upload": (f"/data/upload/1/9f834e14-{name}", name),
+        "upload, hostname": (f"http://localhost:8080/data/upload/1/0a1b2c3d-{name}", name),
+        "upload, script name": (f"/label-studio/data/upload/1/deadbeef-{name}", name),
+        "local files": (f"/data/local-files/?d={quote('frames/' + name)}", f"frames/{name}"),
+        "local files, hostname": (f"http://localhost:8080/data/local-files/?d={quote('frames/' + name)}",
+                                  f"frames/{name}"),
+        "s3": (f"s3://toosicubix-data/kitti/frames/{name}", name),
+        "gs": (f"gs://toosicubix-data/frames/{name}", name),
+        "azure-blob": (f"azure-blob://container/frames/{name}", name),
+        "url": (f"https://example.invalid/frames/{name}", f"/frames/{name}"),  # as the fixture has them
+    }
+
+
+@pytest.mark.parametrize("how", list(_as_label_studio_names("x.png")))
+def test_image_ids_are_the_original_file_names_of_a_real_export(tmp_path, how):
+    # The real Label Studio 1.23.2 export, its image URLs rewritten as Label Studio writes each kind of source:
+    # the same image ids (the files' stems, as KITTI's ground truth names them) and clicks come out of each.
+    path = Path(__file__).parent / "fixtures" / "labelstudio-1.23.2-export.json"
+    tasks = json.loads(path.read_text())
+    expected = []
+    for task in tasks:
+        name = task["data"]["image"].rsplit("/", 1)[1]
+        task["data"]["image"], file = _as_label_studio_names(name)[how]
+        expected.append(file)
+    imported, summary = read_label_studio(write_json(tmp_path / "export.json", tasks), _cameras(tmp_path))
+    assert summary.warnings == []
+    assert [im["file"] for im in imported["images"]] == expected
+    assert [im["id"] for im in imported["images"]] == [im["id"] for im in sample_doc()["images"]]
+    assert same_clicks(imported, sample_doc())
+
+
+@pytest.mark.parametrize(("url", "file"), [
+    ("/data/upload/3/5f3a2b1c-my_car.png", "my_car.png"),
+    ("/data/upload/3/5f3a2b1c-9f834e14-a.png", "9f834e14-a.png"),  # one prefix only: the rest is the name
+    ("/data/upload/3/5f3a2b1c-stra%C3%9Fe.png", "straße.png"),  # the URL is percent-encoded
+    ("/data/upload/3/000001.png", "/data/upload/3/000001.png"),  # no prefix: kept as it is
+    ("/data/upload/3/5F3A2B1C-a.png", "/data/upload/3/5F3A2B1C-a.png"),  # not what Label Studio writes
+    ("/data/upload/3/5f3a2b1-a.png", "/data/upload/3/5f3a2b1-a.png"),  # 7 digits
+    ("frames/5f3a2b1c-a.png", "frames/5f3a2b1c-a.png"),  # not an upload
+    ("/data/local-files/?d=kitti%20set/image_2/000001.png", "kitti set/image_2/000001.png"),
+    ("s3://bucket/a%20b.png", "a%20b.png"),  # an object key is the key, not URL-encoded
+])
+def test_the_file_name_rule(tmp_path, url, file):
+    task = _task([_box("b", "Car", 10, 10, 20, 20), _kp("k", "top-center", 20, 20, parent="b")])
+    task["data"]["image"] = url
+    doc, _ = read_label_studio(write_json(tmp_path / "e.json", [task]), _any_camera(tmp_path))
+    assert doc["images"][0]["file"] == file
+
+
+@pytest.mark.parametrize("d", ["../../etc/x.png", "frames/../../x.png", "frames%2F..%2F..%2Fx.png", "..\\x.png"])
+def test_a_local_files_path_that_climbs_is_refused(tmp_path, d):
+    task = _task([_kp("k", "top-center", 20, 20)])
+    task["data"]["image"] = f"/data/local-files/?d={d}"
+    with pytest.raises(FormatError, match=r"\$\[0\]\.data\.image \(task 7\): the local-files path .* has a '\.\.' "
+                                          r"component: refused"):
+        read_label_studio(write_json(tmp_path / "e.json", [task]), _any_camera(tmp_path))

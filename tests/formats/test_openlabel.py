@@ -118,3 +118,85 @@ def test_sample_fit_exports_a_valid_file(tmp_path):
             expected = cuboid_val(np.array(v["R_cam_vehicle"]), np.array(v["t_cam_vehicle"]),
                                   np.array(v["dimensions"]))
             assert val == expected
+
+
+# --- keypoints and plates (ApolloCar3D-style fits) -----------------------------------------------------------------
+
+def _point2d(doc: dict, frame: int = 0) -> list[list[dict]]:
+    """The point2d entries of each object of a frame, in object order."""
+    objects = doc["openlabel"]["frames"][str(frame)].get("objects", {})
+    return [o["object_data"].get("point2d", []) for o in objects.values()]
+
+
+def test_keypoints_and_plates_are_named_points_with_their_attributes():
+    image = _known_image()
+    keypoint = {"kind": "keypoint", "name": "top_left_c_left_front_car_light", "xy": [610.0, 350.0],
+                "at": [0.45, 0.4, 0.6], "spread": [0.01, 0.03, 0.04], "visible": False}
+    plate = {"kind": "plate", "face": "rear", "a": [600.0, 380.0], "b": [640.0, 381.0], "metres": 0.44,
+             "sigma": 0.01, "at": [-0.47, 0.0, 0.55], "spread": [0.006, 0.037, 0.036]}
+    unknown = {"kind": "wheel-ellipse", "part": "wheel-front-left", "box": [1, 2, 3, 4]}  # no OpenLABEL form
+    vehicles = [FittedVehicle(image.vehicles[0].result, [*image.vehicles[0].parts, keypoint, plate, unknown]),
+                FittedVehicle(image.vehicles[1].result, [keypoint, unknown, unknown])]
+    doc, warnings = openlabel_document([FittedImage(image.id, image.file, image.size, image.camera, vehicles)])
+    jsonschema.Draft7Validator(SCHEMA).validate(doc)
+    first, second = _point2d(doc)
+    assert [p["name"] for p in first] == ["wheel-rear-left", "rear-pair1-left", "rear-pair1-right",
+                                          "top_left_c_left_front_car_light", "plate-rear-a", "plate-rear-b"]
+    assert first[3] == {"name": "top_left_c_left_front_car_light", "val": [610.0, 350.0],
+                        "coordinate_system": "camera1", "attributes": {"vec": [{"name": "at", "val": [0.45, 0.4, 0.6]},
+                                               {"name": "spread", "val": [0.01, 0.03, 0.04]}],
+                                       "boolean": [{"name": "visible", "val": False}]}}
+    assert first[5]["val"] == [640.0, 381.0]
+    assert first[5]["attributes"]["num"] == [{"name": "metres", "val": 0.44}, {"name": "sigma", "val": 0.01}]
+    assert [p["name"] for p in second] == ["top_left_c_left_front_car_light"]
+    # Said once for the kind, with its count, not once per part or vehicle.
+    assert warnings == ["part kind 'wheel-ellipse' has no OpenLABEL form here: 3 parts on 2 vehicles left out"]
+
+
+def test_an_apollocar3d_keypoint_fit_exports_every_keypoint(tmp_path):
+    # Real human keypoints (ApolloCar3D, the shared data) imported with the apollocar3d-66 mapping and its plates,
+    # fitted, exported: a valid OpenLABEL file holding every click of every car, and no warning.
+    from click.testing import CliRunner
+
+    from tests.conftest import shared_data_dir
+    from toosicubix.cli import main
+
+    folder = shared_data_dir() / "apollocar3d"
+    if not (folder / "apollocar3d_val_dev.json").is_file():
+        pytest.skip(f"{folder} not found")
+    coco = json.loads((folder / "apollocar3d_val_dev.json").read_text())
+    ids = {im["id"] for im in coco["images"][:2]}
+    coco["images"] = [im for im in coco["images"] if im["id"] in ids]
+    coco["annotations"] = [a for a in coco["annotations"] if a["image_id"] in ids]
+    keypoints = write_json(tmp_path / "apollo.json", coco)
+    annotations = tmp_path / "annotations.json"
+    runner = CliRunner()
+    for args in (["import", "coco", str(keypoints), "--mapping", "apollocar3d-66", "--option", "plates", "--cameras",
+                  str(folder / "cameras.json"), "-o", str(annotations), "-q"],
+                 ["fit", str(annotations), "-o", str(tmp_path / "out"), "-q"]):
+        result = runner.invoke(main, args)
+        assert result.exit_code in (0, 1), result.output
+    result = runner.invoke(main, ["export", "openlabel", str(tmp_path / "out"), "-o", str(tmp_path / "labels.json")])
+    assert result.exit_code == 0, result.output
+    assert "warning" not in result.output
+    doc = json.loads((tmp_path / "labels.json").read_text())
+    jsonschema.Draft7Validator(SCHEMA).validate(doc)
+    written = {o["name"]: [] for o in doc["openlabel"]["objects"].values()}
+    names = [o["name"] for o in doc["openlabel"]["objects"].values()]
+    for f in range(len(doc["openlabel"]["frames"])):
+        for uid, data in doc["openlabel"]["frames"][str(f)].get("objects", {}).items():
+            written[names[int(uid)]] = [(p["name"], p["val"]) for p in data["object_data"].get("point2d", [])]
+    expected, kinds = {}, set()
+    for image in json.loads(annotations.read_text())["images"]:
+        for v in image["vehicles"]:
+            clicks = []
+            for p in v["parts"]:
+                kinds.add(p["kind"])
+                if p["kind"] == "keypoint":
+                    clicks.append((p["name"], p["xy"]))
+                else:
+                    clicks += [(f"plate-{p['face']}-{end}", p[end]) for end in ("a", "b")]
+            expected[f"{image['id']}/{v['id']}"] = clicks
+    assert kinds == {"keypoint", "plate"}
+    assert sum(map(len, expected.values())) > 100
+    assert {k: sorted(v) for k, v in written.items()} == {k: sorted(v) for k, v in expected.items()}

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from toosicubix.cli.import_tools import foreign_file
 from toosicubix.cli.options import (
     EXIT_OK,
     EXIT_SOME_FAILED,
@@ -15,6 +16,7 @@ from toosicubix.cli.options import (
     fitting_options,
     keypoint_mapping_option,
 )
+from toosicubix.errors import InputError
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -54,7 +56,8 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
     turns it off.
 
     Exit code 0 when every vehicle was fitted, 1 when some failed (their reasons are in results.json
-    and on stderr; the others are written), 2 for a bad input file or option.
+    and on stderr; the others are written), 2 for a bad input file or option. A COCO, Label Studio, CVAT
+    or KITTI file given as ANNOTATIONS is named with the `toosicubix import` that turns it into one.
 
     \b
     Example:
@@ -70,6 +73,9 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
     try:
         summary = fit_file(annotations, out_dir, replace(settings, next_clicks=next_clicks, keypoints=mapping),
                            progress=bar.update, on_start=bar.start)
+    except InputError:
+        foreign_file(annotations)
+        raise
     finally:
         bar.finish()
     if not quiet:

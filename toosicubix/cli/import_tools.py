@@ -32,9 +32,11 @@ def _lengths(values: tuple[str, ...]) -> dict[str, tuple[float, float]]:
 
 
 _COMMON = [
-    click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                 help='Cameras file: {"cameras": [{"match": GLOB on the image name, "K": 3x3, "distortion": [...]}]}, '
-                      "first match wins. Every image needs a camera."),
+    click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
+                 help='Cameras: a JSON file {"cameras": [{"match": GLOB on the image name, "K": 3x3 or 9 numbers, '
+                      '"distortion": [...]}]} (first match wins), a KITTI calib file (its P2 for every image) or a '
+                      "folder of them (<image stem>.txt), or an OpenCV or ROS camera YAML (one camera for every "
+                      "image). Every image needs a camera."),
     click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
                  help="The annotation file to write (v1)."),
     click.option("--default-prototype", default="Car", show_default=True,
@@ -85,6 +87,17 @@ def _write(doc: dict, summary, out_path: Path, quiet: bool) -> None:
         click.echo(f"wrote {out_path}", err=True)
 
 
+def foreign_file(path: Path) -> None:
+    """For ``fit`` and ``validate`` when ``path`` is no annotation file: if it is a labelling tool's file (COCO,
+    Label Studio, CVAT, KITTI labels), raise :class:`BadInput` with the one line saying which ``toosicubix
+    import`` turns it into one, instead of the schema's errors."""
+    from toosicubix.formats.tool_import import import_hint
+
+    hint = import_hint(path)
+    if hint is not None:
+        raise BadInput(hint) from None
+
+
 def _sequence_name(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     from toosicubix.formats.tool_import import check_sequence_name
 
@@ -102,7 +115,8 @@ def _sequence_name(ctx: click.Context, param: click.Parameter, value: str | None
                    "job_<id>].")
 def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Path, default_prototype: str,
                  lengths: tuple[str, ...], strict: bool, quiet: bool, sequence: str | None) -> None:
-    """Import a CVAT for images 1.1 or CVAT for video 1.1 export (annotations.xml) as an annotation file.
+    """Import a CVAT for images 1.1 or CVAT for video 1.1 export as an annotation file: its annotations.xml, or
+    the .zip CVAT downloads (read as it is; it needs exactly one annotations.xml).
 
     Skeletons (from `toosicubix template cvat`) are vehicles, their points the keypoints; points marked
     outside are not clicked. Loose points are grouped into vehicles by group_id (a box in the group gives
@@ -118,6 +132,7 @@ def cvat_command(annotations_xml: Path, cameras_path: Path | None, out_path: Pat
     \b
     Example:
       toosicubix import cvat annotations.xml --cameras cameras.json -o annotations.json
+      toosicubix import cvat task_7-cvat_for_images.zip --cameras cameras.json -o annotations.json
       toosicubix import cvat video/annotations.xml --sequence drive3 --cameras cameras.json -o drive3.json
     """
     from toosicubix.formats.cvat import read_cvat
@@ -139,6 +154,10 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
     original_height) belong to the box named by their parentID, else to the box a relation ties them to,
     else to the one box that contains them. Old exports with 'completions' are read too.
 
+    Image ids are the stems of the file names as the person gave them: an upload's
+    /data/upload/<project>/<8 hex>-<name> gives <name>, a local-files ?d=<path> its path (refused if it holds
+    '..'), an s3://, gs:// or azure-blob:// object its key's base name (docs/tools.md).
+
     \b
     Example:
       toosicubix import label-studio export.json --cameras cameras.json -o annotations.json
@@ -155,9 +174,10 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
 @click.option("--mapping", "mapping_name", required=True,
               help="A bundled mapping (apollocar3d-66, apollocar3d-66-paper, toosicubix) or a mapping file (JSON, "
                    "schema in schemas/mapping.schema.json): which keypoints make which parts.")
-@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help='Cameras file: {"cameras": [{"match": GLOB on file_name, "K": 3x3, "distortion": [...]}]}, the '
-                   "first match wins; else every image needs its own K (images[].K).")
+@click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
+              help='Cameras: a JSON file {"cameras": [{"match": GLOB on file_name, "K": 3x3 or 9 numbers, '
+                   '"distortion": [...]}]} (first match wins), a KITTI calib file or a folder of them (<image '
+                   "stem>.txt), or an OpenCV or ROS camera YAML; else every image needs its own K (images[].K).")
 @click.option("--option", "options", multiple=True,
               help="Use the mapping's optional parts with this option, e.g. --option plates (licence-plate "
                    "corners as a known-width feature). Repeatable.")

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from toosicubix.cli.import_tools import foreign_file
 from toosicubix.cli.options import (
     EXIT_OK,
     EXIT_SOME_FAILED,
@@ -15,6 +16,7 @@ from toosicubix.cli.options import (
     fitting_options,
     keypoint_mapping_option,
 )
+from toosicubix.errors import InputError
 from toosicubix.pipeline.validation import Thresholds
 
 
@@ -50,7 +52,8 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     much each would shrink the yaw and depth uncertainty.
 
     Exit code 0 when every vehicle is well determined, 1 when some are not (or cannot be fitted), 2 for a
-    bad input file or option.
+    bad input file or option. A COCO, Label Studio, CVAT or KITTI file given as ANNOTATIONS is named with the
+    `toosicubix import` that turns it into one.
 
     \b
     Example:
@@ -68,6 +71,9 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     try:
         report = validate_file(annotations, replace(settings, next_clicks=next_clicks, keypoints=mapping), thresholds,
                                progress=bar.update, on_start=bar.start)
+    except InputError:
+        foreign_file(annotations)
+        raise
     finally:
         bar.finish()
     if not quiet and not as_json and report.pilot is not None:  # the JSON report holds them

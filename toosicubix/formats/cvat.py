@@ -66,15 +66,22 @@ its next keyframe). The import reads them so:
   prototype per track), naming the JSON path.
 
 Project exports of video tasks are refused (export each task: one sequence each).
+
+Either format is read from the XML or from the zip CVAT downloads (``annotations.xml`` at its root, the images
+under ``images/``): a zip needs exactly one ``annotations.xml``; the XML may have at most :data:`MAX_XML_BYTES`
+(a zip member's uncompressed size is checked before it is read). A DOCTYPE is refused (no entities expanded).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import xml.etree.ElementTree as ET
+import zipfile
+import zlib
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from pathlib import Path, PurePosixPath
+from typing import IO, Any
 
 import numpy as np
 
@@ -96,15 +103,80 @@ from toosicubix.formats.tool_import import (
 FRAME_FILE = "images/frame_{frame:06d}.PNG"
 
 
-def _parse(path: Path) -> ET.Element:
+#: The largest CVAT XML read, in bytes: a file, or the ``annotations.xml`` of an export zip (its uncompressed size,
+#: checked before it is read and while it is read, so a zip bomb is refused rather than unpacked). CVAT writes some
+#: 150 bytes per keypoint: this holds over 3 million; the parsed tree needs several times the text's size in memory.
+MAX_XML_BYTES = 512 * 1024 * 1024
+#: What CVAT names the XML inside the zip it downloads for "CVAT for images 1.1" and "CVAT for video 1.1"
+#: (``_export_task`` / ``_export_project`` in cvat/apps/dataset_manager/formats/cvat.py: ``annotations.xml`` at the
+#: root, the frames under ``images/``).
+ZIP_ANNOTATIONS = "annotations.xml"
+_CHUNK = 1 << 16
+
+
+def _parse_stream(handle: IO[bytes], source: Path) -> ET.Element:
+    """Parse CVAT XML from an open binary stream, refusing a DOCTYPE and more than :data:`MAX_XML_BYTES`."""
+    head = handle.read(4096)
+    if "<!DOCTYPE" in head.decode("utf-8", errors="replace").upper():
+        raise FormatError(source, "a DOCTYPE is not allowed in CVAT XML (entities are not expanded)")
+    parser = ET.XMLParser()
+    read = len(head)
     try:
-        if "<!DOCTYPE" in path.read_text(encoding="utf-8", errors="replace")[:4096].upper():
-            raise FormatError(path, "a DOCTYPE is not allowed in CVAT XML (entities are not expanded)")
-        return ET.parse(path).getroot()
+        parser.feed(head)
+        while chunk := handle.read(_CHUNK):
+            read += len(chunk)
+            if read > MAX_XML_BYTES:
+                raise FormatError(source, f"more than {MAX_XML_BYTES} bytes of XML: larger than a CVAT export this "
+                                          "reader takes")
+            parser.feed(chunk)
+        return parser.close()
+    except ET.ParseError as exc:
+        raise FormatError(source, f"not valid XML: {exc}", exc.position[0]) from None
+
+
+def _parse_zip(path: Path) -> tuple[ET.Element, Path]:
+    """The root of the one ``annotations.xml`` in a CVAT export zip, and its name for messages (``zip/member``)."""
+    expected = (f"expected the zip CVAT downloads for CVAT for images 1.1 or CVAT for video 1.1, with one "
+                f"{ZIP_ANNOTATIONS}")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            files = [info for info in archive.infolist() if not info.is_dir()]
+            found = [info for info in files if PurePosixPath(info.filename).name == ZIP_ANNOTATIONS]
+            if len(found) != 1:
+                names = ", ".join(info.filename for info in (found or files)[:5]) or "nothing"
+                more = f" and {len(found or files) - 5} more" if len(found or files) > 5 else ""
+                what = f"{len(found)} of them" if found else "none"
+                hint = ""
+                if not found and any(info.filename.endswith(".json") for info in files):
+                    hint = " (a COCO or Datumaro export? unzip it: `toosicubix import coco` reads a COCO keypoint file)"
+                raise FormatError(path, f"{expected}; found {what} ({names}{more}){hint}")
+            info = found[0]
+            source = Path(f"{path}/{info.filename}")
+            if info.file_size > MAX_XML_BYTES:
+                raise FormatError(source, f"{info.file_size} bytes uncompressed: larger than the {MAX_XML_BYTES} "
+                                          "bytes of XML this reader takes")
+            with archive.open(info) as handle:
+                return _parse_stream(handle, source), source
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise FormatError(path, f"a damaged zip archive ({exc}): {expected}") from None
+    except (RuntimeError, NotImplementedError) as exc:  # encrypted, or a compression zipfile cannot read
+        raise FormatError(path, f"cannot unpack: {exc}") from None
+
+
+def _parse(path: Path) -> tuple[ET.Element, Path]:
+    """The root element of a CVAT XML file or of the ``annotations.xml`` in a CVAT export zip, and the name
+    messages give it (the file, or ``zip/annotations.xml``)."""
+    try:
+        with open(path, "rb") as handle:
+            if handle.read(4) in (b"PK\x03\x04", b"PK\x05\x06"):  # a zip (or an empty one)
+                return _parse_zip(path)
+            handle.seek(0)
+            size = os.fstat(handle.fileno()).st_size
+            if size > MAX_XML_BYTES:
+                raise FormatError(path, f"{size} bytes: larger than the {MAX_XML_BYTES} bytes of XML this reader takes")
+            return _parse_stream(handle, path), path
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
-    except ET.ParseError as exc:
-        raise FormatError(path, f"not valid XML: {exc}", exc.position[0]) from None
 
 
 def _xy_list(text: str | None, path: Path, where: str) -> list[tuple[float, float]]:
@@ -124,11 +196,13 @@ def _attributes(element: ET.Element) -> dict[str, str]:
 def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: str = "Car",
               lengths: dict[str, tuple[float, float]] | None = None,
               sequence: str | None = None) -> tuple[dict[str, Any], ImportSummary]:
-    """Read a CVAT for images 1.1 or CVAT for video 1.1 ``annotations.xml`` into an annotation file v1 document.
+    """Read a CVAT for images 1.1 or CVAT for video 1.1 ``annotations.xml``, or the zip CVAT downloads that holds
+    it, into an annotation file v1 document.
 
     Parameters
     ----------
-    path : the XML file (from a task, job or project export; a video only from a task or job)
+    path : the XML file or the export zip (from a task, job or project export; a video only from a task or job);
+        messages name a zip's XML ``<zip>/annotations.xml``
     cameras : intrinsics by image name (for a video: by :data:`FRAME_FILE`); every image with vehicles needs one
     default_prototype : for vehicles without a prototype attribute or box
     lengths : known sizes of length features, feature -> (metres, sigma)
@@ -143,13 +217,13 @@ def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: 
     ------
     FormatError
         Not XML, not CVAT 1.1, malformed shapes or frame numbers, an image without a camera: naming the file
-        and the image, track and element; a ``sequence`` for a file without tracks.
+        and the image, track and element; a ``sequence`` for a file without tracks; a zip without exactly one
+        ``annotations.xml``, or XML larger than :data:`MAX_XML_BYTES`.
     InputFileError
         A video whose imported document breaks the annotation file's rules (e.g. a prototype that changes
         along a track), naming the file ("as imported") and the JSON path.
     """
-    path = Path(path)
-    root = _parse(path)
+    root, path = _parse(Path(path))
     if root.tag != "annotations":
         raise FormatError(path, f"expected <annotations> (CVAT for images 1.1), found <{root.tag}>")
     version = (root.findtext("version") or "").strip()

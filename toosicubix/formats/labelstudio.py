@@ -13,11 +13,24 @@ A keypoint belongs to the box named by its ``parentID`` (set when the point is n
 to the box a relation ties it to, else to the one box that contains it (grown by 10 % each way); an image
 without any box makes one vehicle of all its keypoints. Anything else is a warning naming the task, the
 image and the region id.
+
+The image's file name (the annotation file's ``file``; its stem is the image id) is what the person named the
+file, not what Label Studio made of it (:func:`original_file_name`):
+
+- an uploaded file, ``/data/upload/<project id>/<8 hex>-<name>`` (the 8 lowercase hex digits are the start of a
+  uuid4 Label Studio adds: ``upload_name_generator`` in ``label_studio/data_import/models.py``), also after a
+  host or a script name: ``<name>``, percent-decoded;
+- a local file, ``/data/local-files/?d=<path>`` (``io_storages/localfiles/models.py``): ``<path>``,
+  percent-decoded; a path with a ``..`` component is refused;
+- a cloud storage object, ``s3://<bucket>/<key>``, ``gs://<bucket>/<key>``, ``azure-blob://<container>/<key>``
+  (``io_storages/{s3,gcs,azure_blob}/models.py``): the key's base name;
+- any other http(s) URL: its path, percent-decoded; anything else as it is.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+import re
+from pathlib import Path, PurePosixPath
 from typing import Any
 from urllib.parse import unquote, urlparse
 
@@ -36,18 +49,56 @@ def _number(value: Any, path: Path, where: str) -> float:
     return float(value)
 
 
-def _file_name(data: dict[str, Any], image_key: str | None) -> str | None:
-    value = data.get(image_key) if image_key else data.get("image")
+#: An uploaded file as Label Studio names it: ``/data/upload/<project id>/<8 lowercase hex digits>-<name>``
+#: (``upload_name_generator``, label_studio/data_import/models.py: ``str(uuid.uuid4())[0:8] + '-' + filename``
+#: under ``UPLOAD_DIR`` 'upload', served at ``MEDIA_URL`` '/data/'); anything may come before ``/data``
+#: (a host, a script name).
+UPLOAD_NAME = re.compile(r"(?:^|/)data/upload/[0-9]+/[0-9a-f]{8}-(?P<name>[^/]+)$")
+#: Label Studio's cloud storage URLs, ``<scheme>://<bucket or container>/<object key>`` (``get_data`` of
+#: io_storages/s3, gcs and azure_blob).
+STORAGE_SCHEMES = ("s3", "gs", "azure-blob")
+
+
+def original_file_name(value: str, path: Path, where: str) -> str:
+    """The file name the person gave an image, from a task's image URL as Label Studio exports it (the rule of
+    the module's docstring).
+
+    Parameters
+    ----------
+    value : the task's ``data`` value, e.g. ``/data/upload/3/9f834e14-000001.png``
+    path, where : the export and the JSON path (and task), for the error
+
+    Raises
+    ------
+    FormatError
+        A local-files path with a ``..`` component.
+    """
+    parsed = urlparse(value)
+    if parsed.scheme in STORAGE_SCHEMES:  # the object key as Label Studio keeps it, not percent-decoded
+        return PurePosixPath(urlparse(value, allow_fragments=False).path).name or value
+    local = [item[2:] for item in parsed.query.split("&") if item.startswith("d=")] if parsed.query else []
+    if local:  # local files: /data/local-files/?d=folder/image.png
+        name = unquote(local[0])
+        if ".." in re.split(r"[/\\]", name):
+            raise FormatError(path, f"{where}: the local-files path {name!r} has a '..' component: refused (expected "
+                                    "a path inside Label Studio's LOCAL_FILES_DOCUMENT_ROOT)")
+        return name
+    if parsed.scheme in ("http", "https"):
+        value = unquote(parsed.path)
+    upload = UPLOAD_NAME.search(parsed.path if parsed.scheme else value)
+    if upload is not None:
+        return unquote(upload.group("name"))
+    return value
+
+
+def _file_name(data: dict[str, Any], image_key: str | None, path: Path, where: str, task_id: Any) -> str | None:
+    key = image_key or "image"
+    value = data.get(key)
     if value is None and image_key is None:
-        value = next((v for v in data.values() if isinstance(v, str)), None)
+        key, value = next(((k, v) for k, v in data.items() if isinstance(v, str)), (key, None))
     if not isinstance(value, str):
         return None
-    parsed = urlparse(value)
-    if parsed.query and "d=" in parsed.query:  # local files: /data/local-files/?d=folder/image.png
-        value = unquote(parsed.query.split("d=", 1)[1].split("&", 1)[0])
-    elif parsed.scheme in ("http", "https", "s3", "gs"):
-        value = unquote(parsed.path)
-    return value
+    return original_file_name(value, path, f"{where}.data.{key} (task {task_id})")
 
 
 def _pick_annotation(task: dict[str, Any], where: str, builder: DocumentBuilder, name: str,
@@ -146,7 +197,7 @@ def read_label_studio(path: str | Path, cameras: CameraTable | None, default_pro
         where = f"$[{t}]"
         if not isinstance(task, dict) or not isinstance(task.get("data"), dict):
             raise FormatError(path, f"{where}.data: missing (not a Label Studio task)")
-        name = _file_name(task["data"], image_key)
+        name = _file_name(task["data"], image_key, path, where, task.get("id"))
         if name is None:
             raise FormatError(path, f"{where}.data: no image ({image_key or 'image'})")
         annotation, awhere = _pick_annotation(task, where, builder, name, path)

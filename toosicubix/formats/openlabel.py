@@ -22,14 +22,19 @@ Layout::
   quaternion of ``R_cam_vehicle`` (``qw >= 0``); the dimensions (length, width, height) along the vehicle's
   own axes X forward, Y left, Z up (ISO 8855 like). The uncertainty (``results.json``'s ``sigma`` and
   ``confidence``), ``rms_px`` and ``ambiguous`` are the cuboid's attributes.
-- Every click is a ``point2d`` named by its keypoint (:mod:`toosicubix.parts.keypoints`), pixels as clicked;
-  the annotated box is a ``bbox`` ``[cx, cy, w, h]``; ``status``, ``prototype`` and (for failed vehicles,
-  which get no cuboid) ``error`` are ``text`` entries.
+- Every click is a ``point2d``, pixels as clicked: the cuboid vocabulary's parts (point, symmetry, direction,
+  length) named by their keypoint (:mod:`toosicubix.parts.keypoints`), after them a ``keypoint`` part by its
+  name with ``at`` and ``spread`` (``vec``) and ``visible`` (``boolean``) as attributes, and a ``plate`` as
+  ``plate-<face>-a`` and ``plate-<face>-b`` (as the flat vocabulary names a plate's ends) with ``metres`` and
+  ``sigma`` (``num``), ``at`` and ``spread`` as attributes. A part kind with no such form is left out and said
+  once per kind, with how many parts on how many vehicles. The annotated box is a ``bbox`` ``[cx, cy, w, h]``;
+  ``status``, ``prototype`` and (for failed vehicles, which get no cuboid) ``error`` are ``text`` entries.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from typing import Any
 
 import numpy as np
@@ -109,13 +114,63 @@ def _cuboid_attributes(v: VehicleResult) -> dict[str, Any]:
     return out
 
 
+#: The part kinds the flat keypoint vocabulary names click by click (:func:`keypoints_from_parts`).
+FLAT_KINDS = ("point", "symmetry", "direction", "length")
+
+
+def _attributes(num: dict[str, Any], vec: dict[str, Any], boolean: dict[str, Any]) -> dict[str, Any]:
+    """OpenLABEL ``attributes`` of the given values (None left out)."""
+    out: dict[str, Any] = {}
+    for key, values, cast in (("num", num, float), ("vec", vec, lambda v: [float(x) for x in v]),
+                              ("boolean", boolean, bool)):
+        items = [{"name": name, "val": cast(value)} for name, value in values.items() if value is not None]
+        if items:
+            out[key] = items
+    return out
+
+
+def _point2d(name: str, xy: Any, cam: str, attributes: dict[str, Any] | None = None) -> dict[str, Any]:
+    point: dict[str, Any] = {"name": name, "val": [float(xy[0]), float(xy[1])], "coordinate_system": cam}
+    if attributes:
+        point["attributes"] = attributes
+    return point
+
+
+def _clicks(parts: list[dict[str, Any]], cam: str, where: str, warnings: list[str],
+            formless: Counter) -> list[dict[str, Any]]:
+    """The ``point2d`` entries of one vehicle's parts (see the module); counts parts of kinds without one in
+    ``formless`` (kind -> parts) and warns of flat-vocabulary parts it cannot name (their clicks left out)."""
+    flat = [p for p in parts if p["kind"] in FLAT_KINDS]
+    try:
+        out = [_point2d(kp, xy, cam) for kp, xy in keypoints_from_parts(flat)]
+    except KeypointProblem as exc:
+        warnings.append(f"{where}: {exc}: its clicks are left out")
+        out = []
+    for part in parts:
+        kind = part["kind"]
+        if kind == "keypoint":
+            attributes = _attributes({}, {"at": part.get("at"), "spread": part.get("spread")},
+                                     {"visible": part.get("visible", True)})
+            out.append(_point2d(part["name"], part["xy"], cam, attributes))
+        elif kind == "plate":
+            attributes = _attributes({"metres": part.get("metres"), "sigma": part.get("sigma")},
+                                     {"at": part.get("at"), "spread": part.get("spread")}, {})
+            out += [_point2d(f"plate-{part['face']}-{end}", part[end], cam, attributes) for end in ("a", "b")]
+        elif kind not in FLAT_KINDS:
+            formless[kind] += 1
+    return out
+
+
 def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[str, Any], list[str]]:
-    """The OpenLABEL 1.0.0 document of fitted images, and warnings (clicks the flat vocabulary cannot name)."""
+    """The OpenLABEL 1.0.0 document of fitted images, and warnings: clicks the flat vocabulary cannot name (per
+    vehicle), part kinds without an OpenLABEL form (once per kind, with counts)."""
     streams: dict[str, Any] = {}
     stream_of: dict[tuple, str] = {}
     objects: dict[str, Any] = {}
     frames: dict[str, Any] = {}
     warnings: list[str] = []
+    formless: Counter = Counter()  # kind -> parts left out
+    formless_vehicles: Counter = Counter()  # kind -> vehicles with such parts
     for f, image in enumerate(images):
         key = _camera_key(image)
         if key not in stream_of:
@@ -136,13 +191,11 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
                 if attributes:
                     cuboid["attributes"] = attributes
                 data["cuboid"] = [cuboid]
-            try:
-                clicks = keypoints_from_parts(fv.parts)
-            except KeypointProblem as exc:
-                warnings.append(f"image {image.id!r}, vehicle {v.id!r}: {exc}: its clicks are left out")
-                clicks = []
+            before = Counter(formless)
+            clicks = _clicks(fv.parts, cam, f"image {image.id!r}, vehicle {v.id!r}", warnings, formless)
+            formless_vehicles.update(kind for kind in formless if formless[kind] > before[kind])
             if clicks:
-                data["point2d"] = [{"name": kp, "val": [x, y], "coordinate_system": cam} for kp, (x, y) in clicks]
+                data["point2d"] = clicks
             if fv.box2d is not None:
                 x1, y1, x2, y2 = fv.box2d
                 data["bbox"] = [{"name": "box2d", "val": [(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1],
@@ -156,6 +209,9 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
         if frame_objects:
             frame["objects"] = frame_objects
         frames[str(f)] = frame
+    for kind, n in sorted(formless.items()):
+        warnings.append(f"part kind {kind!r} has no OpenLABEL form here: {n} parts on {formless_vehicles[kind]} "
+                        "vehicles left out")
     metadata = {"schema_version": SCHEMA_VERSION, "annotator": f"toosicubix {__version__}",
                 "comment": "cuboid val = [x, y, z, qx, qy, qz, qw, dx, dy, dz]: box centre in the camera frame "
                            "(x right, y down, z forward), scalar-last quaternion of R_cam_vehicle, dimensions along "

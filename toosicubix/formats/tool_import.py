@@ -10,21 +10,27 @@ Videos: an image may be a frame of a sequence (``add_image(..., sequence=, frame
 interpolates its pose from the track's other frames); an untracked one without usable keypoints is left out.
 :func:`sequence_id_for` makes a sequence name from a tool's video or task name, :func:`check_imported` checks
 a finished document, the rules across frames (one prototype per track, ...) first.
+
+:func:`import_hint` recognises a tool's file given where an annotation file belongs (``fit``, ``validate``)
+and says which ``toosicubix import`` turns it into one.
 """
 
 from __future__ import annotations
 
 import re
+import shlex
+import zipfile
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from pydantic import ValidationError
 
 from toosicubix.annotations.schema import MAX_FRAME, MAX_ID_LENGTH, ImageAnnotation, TrackBook, parse_annotations
-from toosicubix.errors import FormatError, InputFileError
+from toosicubix.errors import FormatError, InputError, InputFileError
 from toosicubix.formats.cameras import CameraTable
+from toosicubix.jsonfile import read_json
 from toosicubix.parts.keypoints import parts_from_keypoints
 
 
@@ -199,7 +205,7 @@ class DocumentBuilder:
             out_vehicles.append(converted)
         camera = self.cameras.camera_for(file_name) if self.cameras is not None else None
         if camera is None:
-            hint = f"no entry of {self.cameras.source} matches it" if self.cameras else "give --cameras CAMERAS.json"
+            hint = self.cameras.why_none(file_name) if self.cameras is not None else "give --cameras CAMERAS.json"
             if not out_vehicles:
                 self.warn(file_name, "image", f"no vehicles and no camera ({hint}): image left out")
                 return
@@ -253,3 +259,96 @@ class DocumentBuilder:
     def document(self) -> dict[str, Any]:
         """The annotation file v1 document (JSON-ready)."""
         return {"toosicubix": 1, "images": self._images}
+
+
+#: The first bytes :func:`import_hint` looks at for XML, zip and KITTI files.
+_HEAD_BYTES = 1 << 16
+_XML_ROOT = re.compile(r"<([A-Za-z_][\w.:-]*)")
+
+
+def _kitti_label_line(line: str) -> str | None:
+    """'kitti' for a KITTI object label line (``type`` and 14 or 15 numbers), 'kitti-tracking' for a tracking one
+    (``frame track_id`` in front), else None."""
+    fields = line.split()
+    kind = "kitti"
+    if len(fields) in (17, 18) and fields[0].isdigit() and fields[1].lstrip("-").isdigit():
+        fields, kind = fields[2:], "kitti-tracking"
+    if len(fields) not in (15, 16):
+        return None
+    try:
+        float(fields[0])
+        return None  # a number where the type belongs
+    except ValueError:
+        pass
+    try:
+        [float(v) for v in fields[1:]]
+    except ValueError:
+        return None
+    return kind
+
+
+def _tool_of(path: Path) -> str | None:
+    """'coco', 'label-studio', 'cvat', 'kitti' or 'kitti-tracking' when ``path`` has that tool's top-level shape,
+    else None."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(_HEAD_BYTES)
+    except OSError:
+        return None
+    if head.startswith(b"PK\x03\x04"):
+        try:
+            with zipfile.ZipFile(path) as archive:
+                names = archive.namelist()
+        except (zipfile.BadZipFile, OSError):
+            return None
+        return "cvat" if any(PurePosixPath(n).name == "annotations.xml" for n in names) else None
+    text = head.decode("utf-8-sig", errors="replace").lstrip()
+    if text.startswith("<"):
+        root = _XML_ROOT.search(re.sub(r"<\?.*?\?>|<!--.*?-->", "", text, flags=re.DOTALL))
+        return "cvat" if root is not None and root.group(1) == "annotations" else None
+    if text.startswith(("{", "[")):
+        try:
+            doc = read_json(path)
+        except InputError:
+            return None
+        if isinstance(doc, dict) and "toosicubix" not in doc and isinstance(doc.get("images"), list) \
+                and isinstance(doc.get("annotations"), list):
+            return "coco"
+        tasks = doc if isinstance(doc, list) else [doc]
+        if tasks and all(isinstance(t, dict) and isinstance(t.get("data"), dict) for t in tasks[:10]) \
+                and (isinstance(doc, list) or {"annotations", "completions", "predictions"} & set(doc)):
+            return "label-studio"
+        return None
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    return _kitti_label_line(first)
+
+
+def import_hint(path: str | Path) -> str | None:
+    """One line for a labelling tool's file given where an annotation file belongs: what it is and which
+    ``toosicubix import`` turns it into an annotation file; None when ``path`` is none of them (an annotation
+    file, or anything else).
+
+    Recognised by the top-level shape: a COCO file (``images`` and ``annotations`` lists), a Label Studio
+    export (a list of tasks with ``data``), a CVAT XML (root ``<annotations>``) or its export zip (holding
+    ``annotations.xml``), a KITTI label file (lines of ``type truncated occluded alpha`` and 11 numbers).
+    """
+    path = Path(path)
+    name = shlex.quote(str(path))
+    tool = _tool_of(path)
+    if tool == "coco":
+        return (f"{path}: a COCO keypoint file, not an annotation file: turn it into one with `toosicubix import coco "
+                f"{name} --mapping MAPPING --cameras CAMERAS -o annotations.json` (MAPPING: apollocar3d-66, "
+                "toosicubix or a mapping file)")
+    if tool == "label-studio":
+        return (f"{path}: a Label Studio JSON export, not an annotation file: turn it into one with `toosicubix "
+                f"import label-studio {name} --cameras CAMERAS -o annotations.json`")
+    if tool == "cvat":
+        return (f"{path}: a CVAT for images or video 1.1 export, not an annotation file: turn it into one with "
+                f"`toosicubix import cvat {name} --cameras CAMERAS -o annotations.json`")
+    if tool in ("kitti", "kitti-tracking"):
+        option = f"--{tool}"
+        return (f"{path}: a {'KITTI tracking' if tool == 'kitti-tracking' else 'KITTI'} label file (3D boxes, no "
+                f"clicks), not an annotation file: no `toosicubix import` reads it; `toosicubix simulate {option} DIR "
+                f"-o annotations.json` makes clicks on such labels and `toosicubix eval {option} DIR` scores a fit "
+                "against them")
+    return None
