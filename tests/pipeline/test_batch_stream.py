@@ -120,13 +120,13 @@ def test_a_pilot_whose_fits_are_not_reused_suggests_nothing(tmp_path, monkeypatc
     pilot's fits not the batch's; the sample's 6 vehicles are then fitted twice and given suggestions once.
     When the pilot's fits are reused (several processes too), each vehicle is given suggestions once."""
     suggested: list[int] = []
-    suggest = vehicle.suggest_clicks
+    suggest = vehicle.guide
 
     def counted(*args, **kwargs):
         suggested.append(1)
         return suggest(*args, **kwargs)
 
-    monkeypatch.setattr(vehicle, "suggest_clicks", counted)
+    monkeypatch.setattr(vehicle, "guide", counted)
     calls = _counting_fits(monkeypatch)
     fit_file(SAMPLE, tmp_path / "robust",
              BatchSettings(options=SolverOptions(robust_loss="cauchy"), estimate_road_normal=True, next_clicks=2))

@@ -56,3 +56,10 @@ def test_fit_names_the_implausible_vehicles(tmp_path):
     label = (tmp_path / "out" / "label_2" / "im.txt").read_text().splitlines()
     scores = sorted(float(line.split()[-1]) for line in label)
     assert scores[0] <= IMPLAUSIBLE_CONFIDENCE < 0.3 < scores[1]
+    # The render's label says it where the cuboid is drawn.
+    from toosicubix.formats.results import read_results
+    from toosicubix.render.folder import vehicle_label
+
+    labels = {v.id: vehicle_label(v) for im in read_results(tmp_path / "out" / "results.json") for v in im.vehicles}
+    assert labels["swapped"].endswith(" IMPLAUSIBLE: LEFT/RIGHT SWAPPED?")
+    assert "IMPLAUSIBLE" not in labels["ok"]

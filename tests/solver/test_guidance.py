@@ -8,7 +8,7 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.model import Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.solver.fit import SolverOptions, fit_vehicle
-from toosicubix.solver.guidance import suggest_clicks
+from toosicubix.solver.guidance import ALREADY_CLICKED_PX, guide, suggest_clicks
 
 CAR = load_priors()["Car"]
 OPTIONS = SolverOptions()
@@ -193,3 +193,43 @@ def test_targets_are_ranked_by_the_gain_to_expect_from_how_often_people_click_th
     assert names.index(best.name) < names.index("rarely")
     assert by_name[best.name].to_json()["clicked_share"] == 0.5
     assert "clicked_share" not in best.to_json()  # 1: not written
+
+
+@pytest.mark.parametrize(("view", "seed", "k"), [("rear", 1, 4), ("oblique-front-left", 3, 4)])
+def test_clicking_every_visible_suggestion_gives_the_reachable_uncertainty(view, seed, k):
+    """Issue 33, item 4: ``reachable`` is what clicking every visible suggestion inside the image gives. Clicked
+    exactly where predicted, they all lie on the fitted cuboid, so the refit does not move and its uncertainty is
+    the reachable one (up to the solver's convergence: 1e-3 relative, as for one suggestion)."""
+    scene = random_scene(np.random.default_rng(seed), view)
+    parts = tuple(scene.parts[:k])
+    fit = _fit(parts)
+    guidance = guide(parts, CAMERA, CAR, fit, OPTIONS)
+    seen = [s for s in guidance.suggestions if s.visible and s.inside]
+    assert len(seen) >= 3
+    refit = _fit((*parts, *(Part(s.kind, s.name, s.uv, "$") for s in seen)))
+    assert refit.ok
+    assert refit.uncertainty.yaw_deg == pytest.approx(guidance.reachable.yaw_deg, rel=1e-3)
+    assert refit.uncertainty.depth_rel == pytest.approx(guidance.reachable.depth_rel, rel=1e-3)
+    assert guidance.reachable.yaw_deg <= min(s.yaw_sigma_deg for s in seen)
+
+
+def test_no_suggestion_where_the_person_clicked_already():
+    """A wheel's hub clicked counts as that wheel clicked, and no part is suggested within ALREADY_CLICKED_PX of
+    a click: a person sees a click there already."""
+    scene = random_scene(np.random.default_rng(3), "oblique-front-left")
+    parts = tuple(scene.parts[:5])
+    fit = _fit(parts)
+    before = guide(parts, CAMERA, CAR, fit, OPTIONS).suggestions
+    wheel = next(s for s in before if s.name.startswith("wheel-"))
+    hub = Part("point", wheel.name.replace("wheel-", "hub-"), wheel.uv - np.array([0.0, 25.0]), "$")
+    refit = _fit((*parts, hub))
+    assert refit.ok
+    assert wheel.name not in {s.name for s in guide((*parts, hub), CAMERA, CAR, refit, OPTIONS).suggestions}
+    # A corner (no unknowns of its own: the same fit) clicked 5 px from where a suggestion would go hides it.
+    target = next(s for s in before if s.kind == "point" and s.name != wheel.name)
+    near = Part("point", "corner-top-front-right", target.uv + np.array([[3.0, 4.0]]), "$")
+    after = guide((*parts, near), CAMERA, CAR, fit, OPTIONS).suggestions
+    assert target.name not in {s.name for s in after}
+    clicked = np.concatenate([p.uv for p in (*parts, near)])
+    for s in after:
+        assert np.min(np.linalg.norm(s.uv[:, None] - clicked[None], axis=2)) >= ALREADY_CLICKED_PX

@@ -30,6 +30,10 @@ from toosicubix.pipeline.validation import Thresholds
               help="... its depth standard deviation at most this share of its depth ...")
 @click.option("--allow-ambiguous", is_flag=True,
               help="... and (unless this flag is given) no second answer fits the clicks about as well.")
+@click.option("--reach-factor", type=click.FloatRange(min=0.0), default=Thresholds.reach_factor, show_default=True,
+              help="Where no click can reach those limits (a far vehicle, a scale only the size prior sets), each is "
+                   "raised to this times what clicking every visible part would give, and the report says so; 0 "
+                   "keeps the limits fixed. Needs --next-clicks above 0.")
 @click.option("--next-clicks", type=click.IntRange(min=0), default=3, show_default=True,
               help="How many parts to suggest clicking next, per vehicle.")
 @keypoint_mapping_option("Suggest this keypoint mapping's keypoints (e.g. apollocar3d-66, or a mapping file) as the "
@@ -39,7 +43,7 @@ from toosicubix.pipeline.validation import Thresholds
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout instead of text.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar on stderr.")
 def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigma_rel: float, allow_ambiguous: bool,
-                     next_clicks: int, mapping: Any, settings: Any, show_all: bool, as_json: bool,
+                     reach_factor: float, next_clicks: int, mapping: Any, settings: Any, show_all: bool, as_json: bool,
                      quiet: bool) -> None:
     """Check an annotation file and say which vehicles need more clicks; writes nothing.
 
@@ -66,7 +70,7 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
 
     from toosicubix.pipeline.validation import validate_file
 
-    thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous)
+    thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous, reach_factor)
     bar = ProgressBar(quiet)
     try:
         report = validate_file(annotations, replace(settings, next_clicks=next_clicks, keypoints=mapping), thresholds,

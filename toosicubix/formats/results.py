@@ -123,6 +123,9 @@ class VehicleResult:
     warnings : what the solver warned about; solver : its statistics
     next_clicks : the best parts to click next (as :meth:`toosicubix.solver.guidance.Suggestion.to_json`
         gives them), or None when not asked for; next_clicks_error : why there are none
+    reachable_sigma : the sigmas with every visible part inside the image clicked too
+        (:attr:`toosicubix.solver.guidance.Guidance.reachable`): what clicks can reach at this distance; set with
+        ``next_clicks`` (written only when set)
     error, error_detail : for a failed vehicle, why in plain words (what to click or add) and the technical
         account for experts (the unknowns involved, the numbers; written only when set)
     extra : keys of the JSON object this type does not know (kept, written last)
@@ -176,6 +179,7 @@ class VehicleResult:
     pose_from: str | None = None
     implausible: str | None = None
     error_detail: str | None = None
+    reachable_sigma: Uncertainty | None = None
 
     @property
     def ok(self) -> bool:
@@ -224,6 +228,8 @@ class VehicleResult:
             out["next_clicks"] = list(self.next_clicks)
         if self.next_clicks_error is not None:
             out["next_clicks_error"] = self.next_clicks_error
+        if self.reachable_sigma is not None:
+            out["reachable_sigma"] = self.reachable_sigma.to_json()
         out.update(self.extra)
         return out
 
@@ -268,6 +274,7 @@ class VehicleResult:
                 prior_mahalanobis2=v.get("prior_mahalanobis2"), parameters=dict(v.get("parameters") or {}),
                 scale_from=v.get("scale_from"), scale_shares=dict(v.get("scale_shares") or {}),
                 sigma=get("sigma", Uncertainty.from_json), confidence=v.get("confidence"),
+                reachable_sigma=get("reachable_sigma", Uncertainty.from_json),
                 observability=get("observability", Observability.from_json), ambiguous=bool(v.get("ambiguous")),
                 alternatives=tuple(Alternative.from_json(a) for a in v.get("alternatives") or ()),
                 residual_test=get("residual_test", ResidualTest.from_json),

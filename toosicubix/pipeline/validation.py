@@ -35,20 +35,36 @@ class Thresholds:
     The depth's is loose because no click fixes the scale: with the size prior alone, a car's depth is
     uncertain by about 7 %; a ground block (the camera height) brings it to 2 to 4 %.
 
+    Where no click can get there (a far vehicle, a scale only the size prior sets), a limit is raised to
+    ``reach_factor`` times what clicking every visible part would give at that distance (the vehicle's
+    ``reachable_sigma``, :class:`toosicubix.solver.guidance.Guidance`; benchmarks/decisions.md, rule 20), and the
+    report says so: "well determined" stays reachable, and honest about what limits it.
+
     Attributes
     ----------
     max_yaw_sigma_deg : largest yaw standard deviation, degrees
     max_depth_sigma_rel : largest depth standard deviation, relative to the depth
     allow_ambiguous : a second answer about as good as the best does not count against the vehicle
+    reach_factor : each limit is at least this times the vehicle's reachable sigma, when known (0: fixed limits)
     """
 
     max_yaw_sigma_deg: float = 5.0
     max_depth_sigma_rel: float = 0.10
     allow_ambiguous: bool = False
+    reach_factor: float = 1.25
 
     def to_json(self) -> dict[str, Any]:
         return {"max_yaw_sigma_deg": self.max_yaw_sigma_deg, "max_depth_sigma_rel": self.max_depth_sigma_rel,
-                "allow_ambiguous": self.allow_ambiguous}
+                "allow_ambiguous": self.allow_ambiguous, "reach_factor": self.reach_factor}
+
+    def limits(self, result: VehicleResult) -> tuple[float, float]:
+        """The yaw (degrees) and relative depth limits for this vehicle: the fixed ones, raised to
+        ``reach_factor`` times its reachable sigmas when those are larger."""
+        reach = result.reachable_sigma
+        if reach is None or self.reach_factor <= 0:
+            return self.max_yaw_sigma_deg, self.max_depth_sigma_rel
+        return (max(self.max_yaw_sigma_deg, self.reach_factor * _value(reach.yaw_deg)),
+                max(self.max_depth_sigma_rel, self.reach_factor * _value(reach.depth_rel)))
 
 
 @dataclass(frozen=True)
@@ -60,12 +76,14 @@ class VehicleCheck:
     image_id : its image; json_path : where it stands in the annotation file
     result : its fit, as results.json would have it (with ``next_clicks``)
     problems : why it is not well determined; empty when it is
+    limited : what no click can fix at its distance (:func:`limited_by_distance`)
     """
 
     image_id: str
     json_path: str
     result: VehicleResult
     problems: tuple[str, ...]
+    limited: tuple[str, ...] = ()
 
     @property
     def well_determined(self) -> bool:
@@ -76,9 +94,11 @@ class VehicleCheck:
         return {
             "image": self.image_id, "id": r.id, "json_path": self.json_path, "prototype": r.prototype,
             "status": r.status, "error": r.error, "well_determined": self.well_determined,
-            "problems": list(self.problems), "constraints": r.constraints, "clicks": r.clicks,
+            "problems": list(self.problems), "limited": list(self.limited), "constraints": r.constraints,
+            "clicks": r.clicks,
             "aux_unknowns": r.aux_unknowns, "sigma": None if r.sigma is None else r.sigma.to_json(),
             "confidence": r.confidence,
+            "reachable_sigma": None if r.reachable_sigma is None else r.reachable_sigma.to_json(),
             "observability": None if r.observability is None else r.observability.to_json(),
             "ambiguous": r.ambiguous if r.ok else None,
             "alternatives": [_brief(a) for a in r.alternatives], "warnings": list(r.warnings),
@@ -111,12 +131,40 @@ def judge(result: VehicleResult, thresholds: Thresholds) -> tuple[str, ...]:
     if sigma is None:
         return ("no uncertainty could be computed",)
     yaw, depth = _value(sigma.yaw_deg), _value(sigma.depth_rel)
-    if not yaw <= thresholds.max_yaw_sigma_deg:
-        out.append(f"yaw sigma {_show(yaw)} deg > {thresholds.max_yaw_sigma_deg:g}")
-    if not depth <= thresholds.max_depth_sigma_rel:
-        out.append(f"depth sigma {_show(100 * depth)} % > {100 * thresholds.max_depth_sigma_rel:g}")
+    max_yaw, max_depth = thresholds.limits(result)
+    if not yaw <= max_yaw:
+        out.append(f"yaw sigma {_show(yaw)} deg > {max_yaw:.3g}"
+                   f"{_raised(max_yaw, thresholds.max_yaw_sigma_deg, f'{thresholds.max_yaw_sigma_deg:g}')}")
+    if not depth <= max_depth:
+        out.append(f"depth sigma {_show(100 * depth)} % > {100 * max_depth:.3g}"
+                   f"{_raised(max_depth, thresholds.max_depth_sigma_rel, f'{100 * thresholds.max_depth_sigma_rel:g}')}")
     if result.ambiguous and not thresholds.allow_ambiguous:
         out.append("ambiguous: another answer fits the clicks about as well")
+    return tuple(out)
+
+
+def _raised(limit: float, fixed: float, shown: str) -> str:
+    """Words saying a limit was raised from the ``fixed`` one (``shown`` as the report writes it), or nothing."""
+    return f" (raised from {shown} to what clicks can reach here)" if limit > fixed else ""
+
+
+def limited_by_distance(result: VehicleResult, thresholds: Thresholds) -> tuple[str, ...]:
+    """Plain sentences, one per sigma that no click can bring within its fixed limit at this vehicle's distance
+    (its reachable sigma is beyond the limit): what limits it, and that no click fixes it."""
+    reach = result.reachable_sigma
+    if not result.ok or reach is None or thresholds.reach_factor <= 0:
+        return ()
+    out = []
+    if _value(reach.yaw_deg) > thresholds.max_yaw_sigma_deg:
+        out.append(f"yaw: even with every visible part clicked its sigma would be {_show(reach.yaw_deg)} deg "
+                   f"(> {thresholds.max_yaw_sigma_deg:g}) at this distance; no click can fix that, so it is judged "
+                   f"against {thresholds.limits(result)[0]:.3g} deg")
+    if _value(reach.depth_rel) > thresholds.max_depth_sigma_rel:
+        scale = ("the size prior sets the scale" if result.scale_from == "size prior" else
+                 f"the scale comes from {result.scale_from}" if result.scale_from else "the scale is loose")
+        out.append(f"depth: even with every visible part clicked its sigma would be {_show(100 * reach.depth_rel)} % "
+                   f"(> {100 * thresholds.max_depth_sigma_rel:g} %) at this distance, since {scale}; no click can "
+                   f"fix that, so it is judged against {100 * thresholds.limits(result)[1]:.3g} %")
     return tuple(out)
 
 
@@ -159,8 +207,17 @@ class ValidationReport:
         tail = (f"{self.source}: {s['vehicles']} vehicles: {s['well_determined']} well determined, "
                 f"{s['not_well_determined']} not, {s['failed']} failed (well determined: yaw sigma <= "
                 f"{t.max_yaw_sigma_deg:g} deg, depth sigma <= {100 * t.max_depth_sigma_rel:g} %"
-                f"{'' if t.allow_ambiguous else ', not ambiguous'}; {self._noise_phrase()})")
+                f"{self._reach_phrase()}{'' if t.allow_ambiguous else ', not ambiguous'}; {self._noise_phrase()})")
         return "\n\n".join([*blocks, tail]) + "\n"
+
+    def _reach_phrase(self) -> str:
+        """How the limits were raised where no click reaches them, when they were for any vehicle."""
+        t = self.thresholds
+        if not any(v.limited for v in self.vehicles):
+            return ""
+        n = sum(bool(v.limited) for v in self.vehicles)
+        return (f", or {t.reach_factor:g} x what every visible part clicked would give where that is more "
+                f"({n} vehicle{'s' if n != 1 else ''})")
 
     def _noise_phrase(self) -> str:
         """What the sigmas were computed for: the click noise, on cuboid parts ``part_sigma`` off the model, and on
@@ -192,6 +249,8 @@ def describe(check: VehicleCheck) -> str:
                      f"({_show(100 * _value(sigma.depth_rel))} %); size {dims} m; scale "
                      f"{_show(100 * _value(sigma.scale_rel))} %; confidence {r.confidence or 0.0:.2f}")
     for sentence in r.observability.sentences if r.observability is not None else ():
+        lines.append(f"  {sentence}")
+    for sentence in check.limited:
         lines.append(f"  {sentence}")
     for a in r.alternatives:
         if a.close:
@@ -246,7 +305,7 @@ def validate_file(annotations: str | Path, settings: BatchSettings | None = None
     # Read image by image, as fit does: the fitter and the checks read the same stream.
     pilot, for_checks, results = pilot_and_fits(index, settings, progress, on_start)
     options = pilot.options
-    checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds))
+    checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
     return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot)

@@ -26,7 +26,7 @@ from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_mod
 from toosicubix.parts.mirror import mirrored
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
-from toosicubix.solver.guidance import Fitted, is_box_shaped, suggest_clicks
+from toosicubix.solver.guidance import Fitted, guide, is_box_shaped
 from toosicubix.solver.misfit import ResidualTest
 from toosicubix.solver.track import with_box_cue
 from toosicubix.solver.uncertainty import Uncertainty, confidence
@@ -193,14 +193,14 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted
                  ground: GroundPlane | None, n: int,
                  keypoints: Keypoints | None = None) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
-    guidance failed); an error here never fails the vehicle."""
+    guidance failed) and what clicking every visible one would reach (``reachable_sigma``); an error here never
+    fails the vehicle."""
     try:
-        suggestions = suggest_clicks(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
-                                     box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type),
-                                     keypoints=keypoints)
+        guidance = guide(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
+                         box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type), keypoints=keypoints)
     except Exception as exc:  # guidance is advice: the fit stands without it
         return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
-    return {"next_clicks": [s.to_json() for s in suggestions[:n]]}
+    return {"next_clicks": [s.to_json() for s in guidance.suggestions[:n]], "reachable_sigma": guidance.reachable}
 
 
 @dataclass(frozen=True)

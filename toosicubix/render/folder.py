@@ -127,7 +127,8 @@ POSE_FROM_SHORT = {"clicks": "clicks", "box": "box", "interpolated": "interp."}
 
 def vehicle_label(v: VehicleResult) -> str:
     """The short text beside a fitted cuboid: id, prototype, dimensions, depth, yaw sigma, confidence,
-    AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so, and for a
+    AMBIGUOUS or MISFIT (its residuals failed the chi-square test, ``fit --misfit-level``) when so, IMPLAUSIBLE
+    (no person could have clicked that pose) with "LEFT/RIGHT SWAPPED?" when swapping them fits, and for a
     tracked vehicle its track and what determined this frame's pose: ``track 0003-7 (clicks|box|interp.)``."""
     dx, dy, dz = v.dimensions
     parts = [f"{v.id} {v.prototype} {dx:.1f}x{dy:.1f}x{dz:.1f}m z{v.t_cam_vehicle[2]:.1f}m"]
@@ -139,6 +140,9 @@ def vehicle_label(v: VehicleResult) -> str:
         parts.append("AMBIGUOUS")
     if v.residual_test is not None and v.residual_test.misfit:
         parts.append("MISFIT")
+    if v.implausible is not None:  # mirrored or turned away (issue 33): the likely cause, in a word
+        parts.append("IMPLAUSIBLE: LEFT/RIGHT SWAPPED?" if any(w.startswith("left and right look swapped")
+                                                                for w in v.warnings) else "IMPLAUSIBLE")
     if v.track is not None:
         parts.append(f"track {v.track}")
         if v.pose_from is not None:

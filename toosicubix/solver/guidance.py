@@ -41,7 +41,7 @@ from toosicubix.solver.plausibility import faces_turned_to_camera
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import MIN_DEPTH
 from toosicubix.solver.robust import soft_weights, with_weights
-from toosicubix.solver.uncertainty import finite_or_none, uncertainties_with_added_clicks
+from toosicubix.solver.uncertainty import Uncertainty, finite_or_none, uncertainties_with_added_clicks
 
 
 class Fitted(Protocol):
@@ -72,6 +72,8 @@ class Fitted(Protocol):
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
+#: A part predicted this close to a click (pixels) is not suggested: the person sees a click there already.
+ALREADY_CLICKED_PX = 6.0
 TINY = 1e-12
 
 
@@ -142,7 +144,8 @@ _SUGGEST = {"always": lambda side: True, "never": lambda side: False,
 
 def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> list[tuple[str, str]]:
     """The annotations not made yet, as (kind, name), in the vocabulary's order; a wheelbase counts as its two
-    wheels clicked. Parts that suit only some prototypes (corners) when ``corners`` or one is clicked already;
+    wheels clicked, and a wheel's hub or its contact with the road as that wheel clicked. Parts that suit only
+    some prototypes (corners) when ``corners`` or one is clicked already;
     of a kind suggested once (arrows), none when one is clicked, else those its ``suggest`` admits for the
     camera's side (``camera_side`` +1: the camera is on the vehicle's left)."""
     clicked = {(p.kind, p.name) for p in parts}
@@ -151,6 +154,8 @@ def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> l
         e = vocabulary.entry(p.kind, p.name)
         if e.get("shape") == "wheelbase":
             clicked |= {("point", f"wheel-{axle}-{e.get('side')}") for axle in ("front", "rear")}
+        elif e.get("shape") in ("wheel", "hub"):  # one wheel, whichever of its two points was clicked
+            clicked |= {("point", f"{shape}-{e.get('axle')}-{e.get('side')}") for shape in ("wheel", "hub")}
     kinds_clicked = {p.kind for p in parts}
     out = []
     for kind in vocabulary.KINDS.values():
@@ -165,12 +170,36 @@ def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> l
     return out
 
 
+@dataclass(frozen=True)
+class Guidance:
+    """What to click next (``suggestions``, best first) and what clicking every visible part inside the image would
+    give (``reachable``: the fit's uncertainty with every suggestion that is visible and inside clicked too, where
+    predicted, at the same click noise; the fit's own when there is none): how far clicks can take this vehicle at
+    its distance, and so what no click can fix."""
+
+    suggestions: list[Suggestion]
+    reachable: Uncertainty | None
+
+
 def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted,
                    options: SolverOptions | None = None, ground: GroundPlane | None = None,
                    known_dimensions: dict[str, tuple[float, float]] | None = None,
                    box_shaped: bool = False,
                    keypoints: Mapping[str, TypicalKeypoint] | None = None) -> list[Suggestion]:
-    """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty.
+    """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty
+    (:func:`guide`'s suggestions)."""
+    return guide(parts, camera, prior, fit, options, ground, known_dimensions, box_shaped, keypoints).suggestions
+
+
+def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted,
+          options: SolverOptions | None = None, ground: GroundPlane | None = None,
+          known_dimensions: dict[str, tuple[float, float]] | None = None,
+          box_shaped: bool = False,
+          keypoints: Mapping[str, TypicalKeypoint] | None = None) -> Guidance:
+    """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty, and say what
+    clicking all the visible ones would reach. A part is not suggested where the person has clicked already: a
+    wheel whose hub is clicked (or the hub of a clicked wheel), or a part of the vocabulary predicted within
+    :data:`ALREADY_CLICKED_PX` of a click (a mapping's keypoints sit closer together than that on far cars).
 
     Parameters
     ----------
@@ -185,12 +214,13 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
 
     Returns
     -------
-    list of Suggestion, best first (by :attr:`Suggestion.expected_score`); visible parts inside the image before
-    the others
+    Guidance
+        The suggestions, best first (by :attr:`Suggestion.expected_score`), visible parts inside the image before
+        the others; none, and no reachable uncertainty, for a failed fit.
     """
     options = options or SolverOptions()
     if not fit.ok or fit.uncertainty is None:
-        return []
+        return Guidance([], None)
     R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
     base = build_parts_model(parts, known_dimensions)
     values = dict(zip(base.param_names, fit.p, strict=True))
@@ -208,13 +238,18 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         typical = [(Part("keypoint", name, np.empty((0, 2)), "$", at=np.asarray(k.at, dtype=float),
                          spread=np.asarray(k.spread, dtype=float)), (d * np.asarray(k.at, dtype=float))[None])
                    for name, k in keypoints.items() if name not in clicked]
+    clicked_uv = np.concatenate([p.uv for p in parts]) if parts else np.empty((0, 2))
     for part, points_vehicle in typical:
         points_cam = points_vehicle @ R.T + t
         if np.all(points_cam[:, 2] > MIN_DEPTH):
-            placed.append(replace(part, uv=camera.project(points_cam)))
+            uv = camera.project(points_cam)
+            gaps = np.linalg.norm(uv[:, None] - clicked_uv[None], axis=2) if len(clicked_uv) else np.empty((0, 0))
+            if keypoints is None and gaps.size and np.any(gaps.min(axis=1) < ALREADY_CLICKED_PX):
+                continue  # the person sees a click there already
+            placed.append(replace(part, uv=uv))
             placed_vehicle.append(points_vehicle)
     if not placed:
-        return []
+        return Guidance([], fit.uncertainty)
     combined = build_parts_model((*parts, *placed), known_dimensions)
     index = {name: i for i, name in enumerate(combined.param_names)}
     p = np.full(combined.n_params, np.nan)
@@ -236,25 +271,31 @@ def suggest_clicks(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fi
         added_weights = soft[base.n_clicks:] if soft is not None else np.ones(combined.n_clicks - base.n_clicks)
         problem = with_weights(problem, np.concatenate([own, added_weights]))
     base_params = np.array([index[name] for name in base.param_names])
-    now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks, rows,
-                                                 options.click_sigma, options.part_sigma)
-    test = fit.residual_test
-    if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
-        now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]
     size = camera.image_size
-    out = []
-    for part, u in zip(placed, added, strict=True):
+    seen = []
+    for part in placed:
         faces = ([keypoints[part.name].faces] if keypoints is not None and part.kind == "keypoint"
                  else map(vocabulary.faces_of_click, part.click_labels))
         visible = all(f is None or any(facing[x] for x in f) for f in faces)
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
+        seen.append((visible, inside))
+    every = [np.arange(*r) for r, (visible, inside) in zip(rows, seen, strict=True) if visible and inside]
+    now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks,
+                                                 [*rows, np.concatenate(every) if every else np.empty(0, int)],
+                                                 options.click_sigma, options.part_sigma)
+    test = fit.residual_test
+    if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
+        now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]
+    added, reachable = added[:-1], added[-1]
+    out = []
+    for part, u, (visible, inside) in zip(placed, added, seen, strict=True):
         score = (math.log(_bounded(now.yaw_deg) / _bounded(u.yaw_deg))
                  + math.log(_bounded(now.depth_rel) / _bounded(u.depth_rel)))
         share = keypoints[part.name].clicked_share if keypoints is not None else 1.0
         out.append(Suggestion(part.kind, part.name, part.uv, visible, inside, u.yaw_deg, u.depth_rel,
                               now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score, share))
     out.sort(key=lambda s: (not (s.visible and s.inside), -s.expected_score))
-    return out
+    return Guidance(out, reachable)
 
 
 def _bounded(sigma: float) -> float:

@@ -205,7 +205,7 @@ def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: f
 
 def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
                                     base_params: np.ndarray, n_base_clicks: int,
-                                    added: list[tuple[int, int]], click_sigma: float,
+                                    added: list[tuple[int, int] | np.ndarray], click_sigma: float,
                                     part_sigma: float = 0.0) -> tuple[Uncertainty, list[Uncertainty]]:
     """The uncertainty of a fit, and of the same fit with each of some candidate annotations added, from one
     Jacobian of a model that holds them all (:mod:`toosicubix.solver.guidance`).
@@ -215,7 +215,7 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     problem : its parts model holds the fit's clicks first (``n_base_clicks``), then every candidate's
     R, t, p : the pose (3, 3), (3,) and every parameter (P,) of that model
     base_params : (P0,) indices in ``p`` of the fit's own parameters, in its own order
-    added : per candidate, its click indices ``[first, last)``
+    added : per candidate, its click indices ``[first, last)``, or an array of them (several candidates at once)
     click_sigma, part_sigma : as :func:`row_sigmas`
 
     Returns
@@ -232,10 +232,11 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
                                      sigmas[base_rows], G, t)
     out = []
-    for first, last in added:
-        own = np.flatnonzero(np.any(A[first:last] != 0, axis=(0, 1)))
+    for entry in added:
+        clicks = np.arange(*entry) if isinstance(entry, tuple) else np.asarray(entry, dtype=int)
+        own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
-        r = np.concatenate([base_rows, np.arange(2 * first, 2 * last)])
+        r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
         out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t))
     return now, out
 
@@ -274,7 +275,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     u = uncertainty_from_covariance(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
     return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
-                             problem.upright_sigma is not None)
+                             problem.upright_sigma is not None, tuple(problem.row_cues))
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -356,12 +357,13 @@ class Observability:
 
 
 def observability_sentences(status: dict[str, str], scale_from: str | None, keypoints_only: bool = False,
-                            upright: bool = False) -> tuple[str, ...]:
+                            upright: bool = False, scale_cues: tuple[str, ...] = ()) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
     ground block): pitch and roll left to the cues are one sentence saying the road sets them, with no advice,
-    since that is its job."""
+    since that is its job. ``scale_cues``: the cues that share the scale (:attr:`~toosicubix.solver.fit.FitResult.
+    scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
     on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
@@ -376,14 +378,27 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
             out.append(f"{name} mostly set by the prior: {hints[name]}")
     if scale_from:
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
-        hint = (": a ground block (the camera height) or a known size (licence plate, wheelbase, tyre, known "
-                "dimensions) pins it better" if scale_from == "size prior" else "")
-        out.append(f"scale set by {source} (no click fixes it){hint}")
+        out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
     return tuple(out)
 
 
+def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
+    """What would pin a scale the size prior sets: the cues the vehicle lacks (a ground block's camera height, a
+    known size); when it has them all, that they weigh less than the prior here."""
+    if scale_from != "size prior":
+        return ""
+    lacking = []
+    if "ground contact" not in scale_cues:
+        lacking.append("a ground block (the camera height)")
+    if not any(cue.startswith(("length ", "known ", "plate")) for cue in scale_cues):
+        lacking.append("a known size (licence plate, wheelbase, tyre, known dimensions)")
+    if lacking:
+        return f": {' or '.join(lacking)} pins it better"
+    return ": the camera height and the known sizes given weigh less than it at this distance"
+
+
 def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
-                   keypoints_only: bool, upright: bool) -> Observability:
+                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = ()) -> Observability:
     ratios, status = {}, {}
     for name, v_full in full.items():
         v_clicks = clicks_only[name]
@@ -391,7 +406,8 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         ratios[name] = ratio
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
-    return Observability(ratios, status, observability_sentences(status, scale_from, keypoints_only, upright))
+    return Observability(ratios, status,
+                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues))
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
