@@ -9,6 +9,8 @@ projections). Simulated clicks are not human clicks.
 Rows (each through the product's own pipeline: simulate, fit, eval):
 
 - ``alone``: clicks on every frame, every frame fitted alone (``fit --tracks off``): today's way, the baseline;
+- ``alone+box``: the same, each frame's person's box as a cue too (``fit --tracks off --box-cue``: issue 32's
+  item 3, the box cue for single images, rule 19c);
 - ``k=1``, ``k=2``, ``k=5``, ``k=10``: clicks on every k-th frame of each track (its first and its last too) and a
   person's box on every frame, fitted as tracks (``fit``'s default).
 
@@ -141,7 +143,9 @@ def box_statistics(data: Path, sequences: tuple[str, ...], seed: int = 0) -> dic
 
 
 #: The rows: (label, clicks on every k-th frame, fitted as tracks).
-ROWS = (("alone", 1, False), ("k=1", 1, True), ("k=2", 2, True), ("k=5", 5, True), ("k=10", 10, True))
+#: (label, clicks on every k-th frame, fitted as tracks, the box as a cue for frames fitted alone)
+ROWS = (("alone", 1, False, False), ("alone+box", 1, False, True), ("k=1", 1, True, False), ("k=2", 2, True, False),
+        ("k=5", 5, True, False), ("k=10", 10, True, False))
 #: Frames per track: the issue's 30 (KITTI tracking cars with a run of 30 eligible frames, cut to its first 30).
 FRAMES_PER_TRACK = 30
 NOISE_PX = 1.5
@@ -161,7 +165,8 @@ def select_tracks(data: Path, sequences: tuple[str, ...]) -> list:
     return [gt for gt in vehicles if counts[gt.track] == FRAMES_PER_TRACK]
 
 
-def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder: Path, jobs: int) -> dict:
+def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder: Path, jobs: int,
+            box_cue: bool = False) -> dict:
     """Simulate, fit and score one row (see the module docstring)."""
     import time
 
@@ -176,7 +181,8 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     options = AnnotatorOptions(noise_px=NOISE_PX, seed=0)
     simulated = simulate_tracks(vehicles, options, TrackOptions(keyframes, "person"))
     write_simulation(simulated, work / "annotations.json", work / "gt")
-    settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_road_normal=True, tracks=as_tracks)
+    settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_road_normal=True, tracks=as_tracks,
+                             box_cue=box_cue)
     start = time.perf_counter()
     summary = fit_file(work / "annotations.json", work / "out", settings)
     seconds = time.perf_counter() - start
@@ -275,6 +281,7 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--split", choices=sorted(SPLITS), default="test")
     parser.add_argument("--long", action="store_true", help="time synthetic tracks of 75 to 1,200 frames instead")
+    parser.add_argument("--rows", nargs="*", default=None, help="only these rows (default: all)")
     args = parser.parse_args()
     if args.long:
         out = {"machine": machine(), "long_tracks": long_tracks()}
@@ -288,8 +295,10 @@ def main() -> None:
         vehicles = select_tracks(args.data, SPLITS[args.split])
         rows = []
         with tempfile.TemporaryDirectory() as tmp:
-            for label, keyframes, as_tracks in ROWS:
-                row = run_row(label, keyframes, as_tracks, vehicles, Path(tmp), args.jobs)
+            for label, keyframes, as_tracks, box_cue in ROWS:
+                if args.rows and label not in args.rows:
+                    continue
+                row = run_row(label, keyframes, as_tracks, vehicles, Path(tmp), args.jobs, box_cue)
                 rows.append(row)
                 print(f"{label:6s} fitted {row['fitted']}/{row['frames']}  E_R mean {row['e_r_mean_deg']:.2f} median "
                       f"{row['e_r_median_deg']:.2f}  E_t mean {row['e_t_mean']:.3f} median {row['e_t_median']:.3f}  "

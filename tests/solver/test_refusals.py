@@ -13,7 +13,7 @@ from tests.scenes import CAMERA
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import Part
 from toosicubix.parts.linear import build_parts_model
-from toosicubix.solver.degenerate import collapsed, no_start, seen_only_from, too_far
+from toosicubix.solver.degenerate import no_start, seen_only_from, starts_collapsed, too_far
 from toosicubix.solver.fit import fit_vehicle
 
 #: What a person reading a refusal should never see: unknowns' names, linear algebra, RMS thresholds.
@@ -96,7 +96,30 @@ def test_too_few_clicks_say_how_many_more():
 
 def test_the_other_refusals_are_plain_and_keep_the_detail():
     model = build_parts_model([Part("point", "wheel-rear-left", np.array([[500.0, 250.0]]), "$")])
-    for refusal in (no_start(model), collapsed("not determined"), too_far("degenerate clicks: absurd depth (3500 m)")):
+    far = too_far("degenerate clicks: the fit is at an absurd depth (3500 m)")
+    for refusal in (no_start(model), starts_collapsed("not determined"), far):
         assert TECHNICAL.search(refusal.reason) is None, refusal.reason
         assert refusal.detail.startswith("degenerate clicks")
     assert "left and right are the vehicle's own" in no_start(model).reason
+
+
+def test_clicks_that_hardly_tie_the_vehicle_to_its_size_are_refused_in_plain_words():
+    """Three noisy clicks on a car seen from the side, fitted with the track solver's relaxed single-frame options:
+    every start collapses onto the camera and from typical part positions the distance is uncertain by far more
+    than COLLAPSED_MAX_DEPTH_REL (this path once raised a TypeError, the local flag shadowing the refusal)."""
+    from dataclasses import replace
+
+    from tests.scenes import random_scene
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.solver.fit import SolverOptions
+    from toosicubix.solver.track import RELAXED
+
+    rng = np.random.default_rng(2)
+    scene = random_scene(rng, "side")
+    parts = [replace(p, uv=p.uv + rng.normal(0.0, 1.5, p.uv.shape)) for p in scene.parts[:3]]
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, load_priors()["Car"], replace(SolverOptions(), **RELAXED))
+    assert not fit.ok
+    assert fit.detail.startswith("degenerate clicks: every start collapsed onto the camera, and from typical part "
+                                 "positions the distance is uncertain by")
+    assert fit.reason.startswith("these clicks hardly tie the vehicle to its size, so its distance is uncertain by")
+    assert TECHNICAL.search(fit.reason) is None, fit.reason

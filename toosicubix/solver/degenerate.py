@@ -133,7 +133,7 @@ def no_start(parts: PartsModel) -> Refusal:
                    "degenerate clicks: no start led to a cuboid in front of the camera")
 
 
-def collapsed(depth: str) -> Refusal:
+def starts_collapsed(depth: str) -> Refusal:
     """The refusal when every start collapsed onto the camera and the typical parts' start leaves the distance
     ``depth`` ('not determined' or 'uncertain by N %')."""
     return Refusal("these clicks hardly tie the vehicle to its size, so its distance is " + depth + ": click "

@@ -35,6 +35,7 @@ from toosicubix.solver.degenerate import (
     degenerate_spread,
     no_start,
     short_arrows,
+    starts_collapsed,
     too_far,
     too_few,
 )
@@ -382,7 +383,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         common["warnings"] = (*warnings, test.sentence())
     if collapsed and not (u is not None and np.isfinite(u.depth_rel) and u.depth_rel <= COLLAPSED_MAX_DEPTH_REL):
         depth = "not determined" if u is None or not np.isfinite(u.depth_rel) else f"uncertain by {u.depth_rel:.0%}"
-        return FitResult.refused(collapsed(depth), **common)
+        return FitResult.refused(starts_collapsed(depth), **common)
     downweighted = () if factors is None else tuple(
         parts.click_labels[i] for i in np.flatnonzero(factors < DOWNWEIGHTED_BELOW))
     return FitResult(
