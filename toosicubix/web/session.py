@@ -203,27 +203,38 @@ class _TrackedOn:
 
 
 def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None = None) -> dict[str, Camera]:
-    """Cameras per image id from a cameras file: the cameras file of the importers
-    (``{"cameras": [{"match": GLOB, "K": ...}]}``, :mod:`toosicubix.formats.cameras`, matched on each image's file
-    name, ``file_names``, by default its id), one camera block as the annotation file has it (``{"K": ...}`` or
-    ``{"P": ...}``, optional ``distortion``) for every image, or ``{"<image id or file name>": block, ...}``.
+    """Cameras per image id from ``--cameras``, in any form the importers take
+    (:func:`toosicubix.formats.cameras.load_cameras`: the cameras JSON file ``{"cameras": [{"match": GLOB, "K": ...}]}``
+    matched on each image's file name, a KITTI calibration file for every image, a folder of them matched by image
+    file stem, an OpenCV or ROS camera YAML for every image), or the page's own JSON forms: one camera block as the
+    annotation file has it (``{"K": ...}`` or ``{"P": ...}``, optional ``distortion``) for every image, or
+    ``{"<image id or file name>": block, ...}``. ``file_names``: each image's file name (by default its id).
 
     Raises
     ------
     InputFileError
-        Naming the file and the JSON path of each problem, or the images without a camera.
+        Naming the file and the JSON path or line of each problem, or the images without a camera.
     """
-    data = read_json(path, at_root=True)
-    if not isinstance(data, dict):
-        raise InputFileError(path, [("$", "expected an object: a camera block or image id -> camera block")])
-    if "cameras" in data:  # the importers' cameras file: one reader for every command's --cameras
+    path = Path(path)
+    names = file_names if file_names is not None else image_ids
+    data: Any = None
+    if path.is_file() and _looks_like_json(path):
+        data = read_json(path, at_root=True)
+        if not isinstance(data, dict):
+            raise InputFileError(path, [("$", "expected an object: a camera block, image id -> camera block, or "
+                                              '{"cameras": [...]}')])
+    if data is None or "cameras" in data:  # the importers' reader: one for every command's --cameras
         try:
             table = load_camera_table(path)
         except FormatError as exc:
-            raise InputFileError(path, [("$", exc.message)]) from None
-        names = file_names if file_names is not None else image_ids
-        blocks = {image_id: ("$.cameras", camera) for image_id, name in zip(image_ids, names, strict=True)
+            where = "$" if exc.line is None else f"line {exc.line}"
+            raise InputFileError(path, [(where, exc.message)]) from None
+        blocks = {image_id: ("$.cameras" if table.by_stem is None else "$", camera)
+                  for image_id, name in zip(image_ids, names, strict=True)
                   if (camera := table.camera_for(name)) is not None}
+        missing = [(i, n) for i, n in zip(image_ids, names, strict=True) if i not in blocks]
+        if missing:
+            raise InputFileError(path, [("$", f"no camera for image {i!r}: {table.why_none(n)}") for i, n in missing])
     elif "K" in data or "P" in data:
         blocks = {image_id: ("$", data) for image_id in image_ids}
     else:
@@ -244,6 +255,13 @@ def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None 
                                         for p, m in exc.problems]) from None
         cameras[image_id] = camera_from_schema(doc.images[0].camera, None)
     return cameras
+
+
+def _looks_like_json(path: Path) -> bool:
+    """Whether a file starts (after white space) as a JSON object or array does."""
+    with open(path, "rb") as handle:
+        head = handle.read(256).decode("utf-8-sig", errors="replace").lstrip()
+    return head[:1] in ("{", "[")
 
 
 def _image_size(path: Path) -> tuple[int, int]:
