@@ -79,8 +79,11 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     each camera's road normal are first estimated from them, as `fit` estimates them (the road normal only for
     images without a ground block of their own, and never written to the file); they are estimated again, in
     the background, each time the file's vehicles double from 30 on, up to the 400 that `fit`'s pilot takes
-    (each fit on the page says what it was made for). A click left unnamed takes the
-    name of the nearest predicted part once the named clicks fix a cuboid. The file is written after every
+    (each fit on the page says what it was made for). Click first or choose a name first:
+    a click left unnamed is named from where it is (before a fit exists, by the prototype's prior cuboid placed by
+    the box and the named clicks), or the page asks, offering the few names that fit there; s swaps a vehicle's
+    left and right (the vehicle's own, as its driver sees them), and a banner says when the clicks fit no cuboid a
+    person could have clicked, with the likely cause. The file is written after every
     change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
     after a reload). With --mapping, the page offers that mapping's keypoints too (a filter box above them),
     names unnamed clicks among them (the most probable visible one, given its spread and how often people click
