@@ -202,6 +202,7 @@ async function newVehicle(box2d, track = null) {
     select(doc.vehicle);
     say(`vehicle ${doc.vehicle} added` + (doc.track ? ` (track ${doc.track})` : ""));
   }
+  return doc;
 }
 
 // After a prediction is confirmed or dismissed: the next one, else the given vehicle.
@@ -463,9 +464,11 @@ function panels() {
   $("prototype").value = v.prototype;
   const f = v.fit;
   if (f.status !== "ok") {
-    const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose it under Naming); with the named ` +
-      "ones: " : "";
-    fit.innerHTML = `<span class="bad">not fitted yet</span>: ${waiting}${escapeHtml(f.error || "")}`;
+    const named = v.parts.length - v.unnamed;
+    const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
+    fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
+      "ones: " : "") + escapeHtml(f.error || "") : (waiting || "no click yet") + ". A fit needs about five named " +
+      "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
       (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
@@ -811,10 +814,11 @@ canvas.addEventListener("mouseup", async (e) => {
       const track = state.prediction;
       await newVehicle(box, track);
       say(`track ${track}: box drawn on this frame (its pose from the box and the track)`);
-    } else if (currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d) {
-      await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box });
     } else {
-      await newVehicle(box);
+      const doc = currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d ?
+        await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box }) : await newVehicle(box);
+      if (doc) say(`box drawn for vehicle ${state.vehicle}: the page places its prototype's cuboid in it and ` +
+                   "can name your clicks from the first one");
     }
   } else if (d.kind === "move") {
     state.selectedPart = d.part;
