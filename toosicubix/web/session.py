@@ -101,6 +101,9 @@ TARGETS = 5
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 #: How many names the page offers for a click it did not name (or instead of the name it gave).
 CHOICES = 5
+#: How far (fractions of the dimensions) a mapping's keypoint may lie from another's mirror place to be its mirror
+#: partner: apollocar3d-66's partners lie within 0.046 of each other's mirror places (median 0.023).
+MIRROR_TOLERANCE = 0.1
 #: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
 NEXT_CLICKS = 1000
 
@@ -1098,19 +1101,23 @@ class Session:
         """Swap the vehicle's left and right in its named clicks (:func:`toosicubix.parts.mirror.mirrored`: the
         ``-left`` and ``-right`` parts, the two clicks of a pair, ``leftward`` and ``rightward``; a mapping's
         keypoint becomes the keypoint at its mirror place, :meth:`_mirror_keypoint`), as the person's own names.
-        Unnamed clicks stay. How many clicks changed."""
+        Unnamed clicks stay, and so does a keypoint with no keypoint of the mapping at its mirror place. How many
+        clicks changed, and those keypoints."""
         v = self._vehicle(image, r)
         named = [(k, p) for k, p in enumerate(v.parts) if p.named]
         if not named:
             raise ApiError(f"vehicle {v.id} has no named click to swap")
         model = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"parts[{k}]", p.known,
                            **p.model_fields()) for k, p in named)
-        changed = 0
+        changed, unpaired = 0, []
         for (_, part), swapped in zip(named, mirrored(model), strict=True):
             name, uv, extra = swapped.name, swapped.uv.tolist(), part.extra
             if part.kind == "keypoint" and self.mapping is not None:
                 name = self._mirror_keypoint(v.prototype, part.name)
-                if name != part.name:
+                if name is None:  # no keypoint of the mapping there: left as it is, and said
+                    unpaired.append(part.name)
+                    name = part.name
+                elif name != part.name:
                     extra = self._keypoint_extra(v.prototype, name, (part.extra or {}).get("visible"))
             elif swapped.at is not None:  # a keypoint or plate of the file: its typical place mirrored
                 extra = {**(part.extra or {}), "at": swapped.at.tolist()}
@@ -1121,16 +1128,18 @@ class Session:
         if twice:
             raise ApiError(f"swapping left and right would name two clicks {', '.join(twice)}; rename them one by "
                            "one instead")
-        return {"swapped": changed}
+        return {"swapped": changed, "unpaired": unpaired}
 
-    def _mirror_keypoint(self, prototype: str, name: str) -> str:
-        """The mapping's keypoint at the mirror place of keypoint ``name`` (its typical place with Y negated), or
-        ``name`` itself when no other keypoint lies nearer to that place."""
+    def _mirror_keypoint(self, prototype: str, name: str) -> str | None:
+        """The mapping's keypoint at the mirror place of keypoint ``name`` (its typical place with Y negated: the
+        nearest keypoint, within :data:`MIRROR_TOLERANCE`), or None when the mapping has none there."""
         positions = self.mapping.keypoint_positions(prototype) if self.mapping is not None else {}
         if name not in positions:
-            return name
+            return None
         at = np.asarray(positions[name].at, dtype=float) * np.array([1.0, -1.0, 1.0])
-        return min(positions, key=lambda k: float(np.linalg.norm(np.asarray(positions[k].at, dtype=float) - at)))
+        distance, nearest = min((float(np.linalg.norm(np.asarray(p.at, dtype=float) - at)), k)
+                                for k, p in positions.items())
+        return nearest if distance <= MIRROR_TOLERANCE else None
 
     def _op_confirm_prediction(self, image: ImageState, r: dict) -> dict[str, Any]:
         track = r.get("track")

@@ -322,7 +322,9 @@ async function swapSides() {
   const v = currentVehicle();
   if (!v) { say("no vehicle selected", true); return; }
   const doc = await edit({ op: "swap_sides", vehicle: v.id });
-  if (doc) say(`left and right swapped in ${doc.swapped} click(s) of vehicle ${v.id} (u undoes)`);
+  if (doc) say(`left and right swapped in ${doc.swapped} click(s) of vehicle ${v.id} (u undoes)` +
+    (doc.unpaired.length ? `; the mapping has no keypoint at the mirror place of ${doc.unpaired.join(", ")}: ` +
+      "rename those yourself" : ""));
 }
 
 async function takeRunnerUp() {
