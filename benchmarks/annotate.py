@@ -4,7 +4,7 @@ the page's HTTP JSON API.
 KITTI has no human part clicks, so the clicks are the simulated annotator's (:mod:`toosicubix.simulate.annotator`:
 real ground-truth cuboids of the KITTI tracking *test* sequences 0010-0020, or with ``--split tuning`` the tuning
 sequences 0000-0009, realistic part placement, 1 px noise, every visible part available). Each vehicle is annotated
-in three modes, each stopping as soon as the fit is **right** (benchmarks/decisions.md, rule 20): after an annotation
+in three modes, each stopping as soon as the fit is **right** (benchmarks/decisions.md, rule 24): after an annotation
 is complete (clicked, its name the true one), the page's fit has its yaw within 5 degrees and its depth within 10 %
 of KITTI's ground truth, whatever the page's own sigmas say. Counted: clicks and naming actions (choosing a name by
 hotkey or palette, or renaming a click the page named wrong or left unnamed):
@@ -16,7 +16,7 @@ hotkey or palette, or renaming a click the page named wrong or left unnamed):
   annotator can see (falling back to its own order when none of the five is visible to it).
 
 Auto-naming accuracy is how often the name the page gave an unnamed click is the true one. The script uses the
-page's API only, so it runs on older code too (rule 20 item 5: a page that names no click before a fit exists leaves
+page's API only, so it runs on older code too (rule 24 item 5: a page that names no click before a fit exists leaves
 those clicks to the person).
 
 ``--apollocar3d`` measures it on ApolloCar3D's real keypoints instead (no replay through the page): every car of
@@ -105,7 +105,7 @@ def _timed_edit(client: Client, change: dict, image: int) -> tuple[int, dict]:
     return out
 
 
-#: Rule 20's criterion: the fit is right when its yaw is within this many degrees of the ground truth's ...
+#: Rule 24's criterion: the fit is right when its yaw is within this many degrees of the ground truth's ...
 RIGHT_YAW_DEG = 5.0
 #: ... and its depth within this share of the ground truth's.
 RIGHT_DEPTH_REL = 0.10
@@ -123,7 +123,7 @@ def fit_errors(fit: dict, truth: tuple[float, float]) -> tuple[float, float] | N
 
 
 def is_right(fit: dict, truth: tuple[float, float]) -> bool:
-    """Rule 20's criterion: the fit's yaw within :data:`RIGHT_YAW_DEG` and its depth within :data:`RIGHT_DEPTH_REL`
+    """Rule 24's criterion: the fit's yaw within :data:`RIGHT_YAW_DEG` and its depth within :data:`RIGHT_DEPTH_REL`
     of the ground truth's."""
     errors = fit_errors(fit, truth)
     return errors is not None and errors[0] <= RIGHT_YAW_DEG and errors[1] <= RIGHT_DEPTH_REL
@@ -217,10 +217,10 @@ def main() -> None:
     parser.add_argument("--naming-after-fit", choices=("prior", "fit"), default=None,
                         help="how the page names a click once a fit exists [default: the page's]")
     parser.add_argument("--naming-grid", action="store_true",
-                        help="rule 20a: the auto mode under every naming setting of GRID (run with --split tuning)")
+                        help="rule 24a: the auto mode under every naming setting of GRID (run with --split tuning)")
     parser.add_argument("--split", choices=sorted(SPLITS), default="test",
                         help="KITTI tracking sequences to draw from: test (0010-0020, the figures) or tuning "
-                             "(0000-0009, for choosing the page's settings; rule 20)")
+                             "(0000-0009, for choosing the page's settings; rule 24)")
     parser.add_argument("--apollocar3d", action="store_true",
                         help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
     parser.add_argument("--out-of-sample", action="store_true",
@@ -284,13 +284,13 @@ def _naming_settings(args):
     return replace(NAMING_SETTINGS, **given)
 
 
-#: Rule 20a's grid of the page's naming settings, run on the tuning sequences.
+#: Rule 24a's grid of the page's naming settings, run on the tuning sequences.
 GRID = {"after_fit": ("prior", "fit"), "camera_height_sigma_m": (None, 0.25, 0.5, 1.0),
         "confidence": (0.0, 0.5, 0.7, 0.9)}
 
 
 def naming_grid(args) -> dict:
-    """Rule 20a: every setting of :data:`GRID` on ``args.split`` (the tuning sequences), the *auto* mode's figures of
+    """Rule 24a: every setting of :data:`GRID` on ``args.split`` (the tuning sequences), the *auto* mode's figures of
     each, and the choice the rule makes."""
     import itertools
 
@@ -333,7 +333,7 @@ def kitti_run(data: Path, split: str, vehicles: int, seed: int, kitti_ground: bo
             cameras[gt.image_id] = gt.camera
             images.append(path)
         ground = KITTI_GROUND if kitti_ground else None
-        given = {} if naming is None else {"naming": naming}  # older code takes no naming settings (rule 20 item 5)
+        given = {} if naming is None else {"naming": naming}  # older code takes no naming settings (rule 24 item 5)
         session = Session(images, folder / "annotations.json", cameras, load_priors(), ground=ground, **given)
         server = serve_in_thread(session)
         client = Client(*server.server_address[:2])
@@ -360,7 +360,7 @@ def kitti_run(data: Path, split: str, vehicles: int, seed: int, kitti_ground: bo
                             "one frame per track, seeded sample"),
               "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": kitti_ground,
               "stop": (f"the fit is right: yaw within {RIGHT_YAW_DEG:g} deg and depth within "
-                       f"{100 * RIGHT_DEPTH_REL:g} % of the ground truth's (rule 20)"),
+                       f"{100 * RIGHT_DEPTH_REL:g} % of the ground truth's (rule 24)"),
               "naming": naming.to_json() if naming is not None else naming_settings(),
               "summary": summary, "rows": rows}
     return report
@@ -629,7 +629,7 @@ def naming_settings() -> dict | None:
     """The page's naming settings, for the report (None on code older than them)."""
     try:
         from toosicubix.web.placement import NAMING_SETTINGS
-    except ImportError:  # code older than them (rule 20 item 5)
+    except ImportError:  # code older than them (rule 24 item 5)
         return None
     return NAMING_SETTINGS.to_json()
 

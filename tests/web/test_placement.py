@@ -70,7 +70,7 @@ def test_named_clicks_place_the_prior_cuboid_and_name_the_next_clicks(car):
 
 def test_without_a_ground_block_the_assumed_camera_height_ranks_but_is_less_sure(car):
     """Without a ground block the camera is assumed 1.5 +- 1 m above the road: the second wheel's true name still
-    comes first, with less of the probability (the page asks below rule 20a's 0.5) than with KITTI's block."""
+    comes first, with less of the probability (the page asks below rule 24a's 0.5) than with KITTI's block."""
     (_, best, p), *_ = propose(CAMERA, car, _named("wheel-front-left"), _uv("wheel-rear-left")[0]).choices
     assert best == "wheel-rear-left" and 0.25 < p < 0.9
 

@@ -37,7 +37,7 @@ __all__ = ["NAMING_SETTINGS", "OUTLIER_MAHALANOBIS2", "SPREADS", "NamingSettings
 
 @dataclass(frozen=True)
 class NamingSettings:
-    """How the page names a click before a fit exists (benchmarks/decisions.md, rule 20a).
+    """How the page names a click before a fit exists (benchmarks/decisions.md, rule 24a).
 
     Attributes
     ----------
