@@ -44,6 +44,8 @@ cuboid vocabulary's), :class:`RoadUserClass`:
   modulo 180 degrees) or ``none`` (rotationally symmetric: no yaw);
 - ``box`` and ``front``: what its box encloses and which way its X axis points, in words;
 - ``vocabulary``: ``keypoints`` (its own named keypoints, below) or ``cuboid`` (the parts of ``kinds``);
+- ``palette``: the colours (``#rrggbb``) its objects are drawn in, one after another in an image (overlays,
+  templates): each class its own hues, apart from the vehicles' palette;
 - ``keypoints``: per name (COCO's person keypoint names for a pedestrian) its typical position ``at`` and
   ``spread``, fractions of ``(dx, dy, dz)`` as a ``keypoint`` annotation carries them, and a ``description``;
   ``edges``: pairs of them drawn as a skeleton (templates, overlays); ``about`` and ``sources``: where the
@@ -173,6 +175,7 @@ class RoadUserClass:
     box: str
     front: str
     vocabulary: str
+    palette: tuple[str, ...]
     keypoints: dict[str, ClassKeypoint]
     edges: tuple[tuple[str, str], ...]
     about: str
@@ -213,8 +216,8 @@ def _load_classes() -> dict[str, RoadUserClass]:
         out[name] = RoadUserClass(
             name=name, family=c["family"], heading=c["heading"], kitti_type=c["kitti_type"],
             prototypes=tuple(c["prototypes"]), box=c["box"], front=c["front"], vocabulary=c["vocabulary"],
-            keypoints=keypoints, edges=tuple((a, b) for a, b in c.get("edges", ())), about=c.get("about", ""),
-            sources=tuple(c.get("sources", ())))
+            palette=tuple(c["palette"]), keypoints=keypoints, edges=tuple((a, b) for a, b in c.get("edges", ())),
+            about=c.get("about", ""), sources=tuple(c.get("sources", ())))
     return out
 
 
