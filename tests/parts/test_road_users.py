@@ -171,3 +171,14 @@ def test_a_traffic_cone_s_yaw_is_reported_undetermined(tmp_path):
     fields = cone_line.split()
     assert fields[0] == "Misc" and float(fields[3]) == -10.0 and float(fields[14]) == -10.0  # alpha, rotation_y
     assert person_line.split()[0] == "Pedestrian" and abs(float(person_line.split()[14]) - 0.7) < 1e-4
+
+
+def test_a_pedestrian_is_offered_its_own_keypoints_to_click_next():
+    """Without the left arm, the suggestions are COCO keypoints of a person, never a car's wheels or lamps."""
+    prior = load_priors()["Pedestrian"]
+    t = np.array([1.5, 1.6, 12.0])
+    parts = tuple(p for p in _clicks("Pedestrian", R_cam_vehicle_from_ypr(0.7), t, prior.mean)
+                  if p.name not in ("left_elbow", "left_wrist"))
+    result = fit_one(Vehicle("1", "Pedestrian", None, parts, "$"), CAMERA, prior, SolverOptions(), next_clicks=3)
+    names = [s["name"] for s in result.next_clicks]
+    assert names and set(names) <= {"left_elbow", "left_wrist"}

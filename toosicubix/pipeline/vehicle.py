@@ -24,7 +24,7 @@ from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cubo
 from toosicubix.model import GroundPlane, Vehicle
 from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
 from toosicubix.parts.mirror import mirrored
-from toosicubix.parts.road_users import class_notes
+from toosicubix.parts.road_users import class_keypoints, class_notes
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, guide, is_box_shaped
@@ -202,7 +202,9 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted
                  keypoints: Keypoints | None = None) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
     guidance failed) and what clicking every visible one would reach (``reachable_sigma``); an error here never
-    fails the vehicle."""
+    fails the vehicle. A road user with a keypoint vocabulary of its own (a pedestrian) is offered its class's
+    keypoints, whatever mapping the batch names."""
+    keypoints = class_keypoints(vehicle.prototype) or keypoints
     try:
         guidance = guide(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
                          box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type), keypoints=keypoints)
