@@ -78,7 +78,8 @@ def test_eval_breaks_down_by_labelled_keypoints_and_states_no_occlusion(tmp_path
     text = format_report(result)
     assert "By keypoints labelled on the ground-truth object" in text and "occlusion" not in text
     doc = result_to_json(result)
-    assert set(doc["breakdowns"]) == {"depth", "keypoints", "ground_truth_shows_keypoints", "ground_truth_twin"}
+    assert set(doc["breakdowns"]) == {"depth", "class", "keypoints", "ground_truth_shows_keypoints",
+                                      "ground_truth_twin"}
     assert [o["keypoints"] for o in doc["objects"]] == [12, 31]
     assert [r["keypoints"] for r in csv.DictReader(io.StringIO(result_to_csv(result)))] == ["12", "31"]
 

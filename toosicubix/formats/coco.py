@@ -5,6 +5,7 @@ A COCO keypoint file has ``images[]`` (``id``, ``file_name``, optional per-image
 (``id``, ``image_id``, ``category_id``, ``keypoints``: x, y, v triplets, ``bbox``: x, y, w, h). The image id
 becomes the file name's stem, the vehicle id the annotation id (as a string), ``box2d`` the ``bbox``.
 ``v = 0`` (not labelled) is skipped, ``v = 1`` (labelled, not visible) is kept and counted, ``v = 2`` kept.
+Crowd annotations (``iscrowd`` 1: a region of many people, with no keypoints) are skipped and counted.
 
 A *mapping* (:class:`MappingFile`, JSON Schema in ``schemas/mapping.schema.json``) says which keypoints make
 which parts, and which category gets which prototype. Its parts are tried in file order: a part is made when
@@ -62,6 +63,7 @@ from toosicubix.errors import InputFileError
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.tool_import import check_imported, frame_image_id, sequence_id_for
 from toosicubix.jsonfile import read_json
+from toosicubix.parts.road_users import import_notes
 from toosicubix.vocabulary import KINDS
 
 
@@ -79,6 +81,8 @@ class ImportSummary:
     vehicles_without_parts: int = 0
     tracks: set[str] = field(default_factory=set)
     tracked_without_parts: int = 0
+    crowd_skipped: int = 0
+    notes: Counter = field(default_factory=Counter)
 
     def lines(self) -> list[str]:
         kinds = ", ".join(f"{n} {k}" for k, n in sorted(self.parts.items())) or "none"
@@ -90,6 +94,9 @@ class ImportSummary:
         if self.tracks:
             out.append(f"{len(self.tracks)} tracks; {self.tracked_without_parts} of their vehicle frames have no part "
                        "(a box only, or the solver interpolates them)")
+        if self.crowd_skipped:
+            out.append(f"{self.crowd_skipped} crowd annotations (iscrowd 1) skipped")
+        out += [f"{n} {note}" for note, n in sorted(self.notes.items())]
         if self.unused:
             out.append(f"{sum(self.unused.values())} labelled keypoints no part used, by name: "
                        + ", ".join(f"{name} {n}" for name, n in sorted(self.unused.items())))
@@ -188,6 +195,9 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
         image_id = _field(ann, "image_id", (int, str), coco_path, where)
         if image_id not in images:
             raise _fail(coco_path, f"{where}.image_id", f"no image has id {image_id!r}")
+        if ann.get("iscrowd") in (1, True):
+            summary.crowd_skipped += 1
+            continue
         category = ann.get("category_id")
         cat_name, names = categories.get(category, (str(category), None))
         track = _track_of(ann, images[image_id], coco_path, where)
@@ -219,6 +229,8 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
         images[image_id]["vehicles"].append(vehicle)
         summary.vehicles += 1
         summary.vehicles_without_parts += not parts and track is None
+        for note in import_notes(prototype, labelled):
+            summary.notes[note] += 1
         for part in parts:
             summary.parts[part["kind"]] += 1
             summary.clicks += len(KINDS[part["kind"]].clicks)

@@ -136,6 +136,9 @@ class VehicleResult:
     pose_from : for a tracked vehicle, what determined its pose in this frame: 'clicks' (clicked here), 'box' (only
         its 2D box here, and the track's other frames), 'interpolated' (nothing here: the track's motion between
         its other frames); None for a vehicle fitted alone
+    heading : how its yaw is determined when not by a front (:data:`toosicubix.vocabulary.HEADINGS`): 'none' (a
+        traffic cone: rotationally symmetric, the yaw in its pose is a convention and its KITTI angles are written as
+        -10) or 'axial' (a barrier: known modulo 180 degrees); None (not written) for everything with a front
     """
 
     id: str
@@ -180,6 +183,7 @@ class VehicleResult:
     implausible: str | None = None
     error_detail: str | None = None
     reachable_sigma: Uncertainty | None = None
+    heading: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -205,6 +209,7 @@ class VehicleResult:
             out.update({
                 "box2d_source": self.box2d_source, "truncated": self.truncated,
                 "yaw_pitch_roll_deg": None if self.yaw_pitch_roll_deg is None else list(self.yaw_pitch_roll_deg),
+                **({"heading": self.heading} if self.heading is not None else {}),
                 "rms_px": self.rms_px, "residuals_px": _array(self.residuals_px),
                 "click_labels": list(self.click_labels), "cost": self.cost,
                 "prior_mahalanobis2": self.prior_mahalanobis2, "parameters": dict(self.parameters),
@@ -257,6 +262,7 @@ class VehicleResult:
                 track=v["track"] if isinstance(v.get("track"), str) else None,
                 pose_from=v["pose_from"] if isinstance(v.get("pose_from"), str) else None,
                 implausible=v["implausible"] if isinstance(v.get("implausible"), str) else None,
+                heading=v["heading"] if isinstance(v.get("heading"), str) else None,
                 R_cam_vehicle=json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{where}.R_cam_vehicle")
                 if posed else None,
                 t_cam_vehicle=json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{where}.t_cam_vehicle")

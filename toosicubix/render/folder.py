@@ -48,6 +48,7 @@ from toosicubix.render.overlay import (
     line_thickness,
     text_scale,
 )
+from toosicubix.render.palette import class_colours
 
 #: ``--only`` choices: images with a failed vehicle, an ambiguous one, one not well determined (yaw or depth
 #: sigma beyond ``toosicubix validate``'s default thresholds), or a misfit (``fit --misfit-level``).
@@ -265,12 +266,14 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera,
 
     With ``colours`` (:func:`track_colours`), a tracked vehicle takes its track's colour and, in an image with
     one, the others take the palette's remaining colours in image order; in an image without a tracked vehicle
-    every vehicle takes the colour of its place, as the overlay gives it.
+    every vehicle takes the colour of its place, as the overlay gives it, and a road user of a class with a palette
+    of its own (a pedestrian, a cyclist, ...: :mod:`toosicubix.render.palette`) its class's colour.
     """
     annotated = {v.id: v for v in image.vehicles} if image is not None else {}
     palette = _palette_indices(result, colours or {})
+    by_class = class_colours([v.prototype for v in result.vehicles])  # road users: their class's own palette
     out = []
-    for v, colour in zip(result.vehicles, palette, strict=True):
+    for v, colour, own in zip(result.vehicles, palette, by_class, strict=True):
         a = annotated.get(v.id)
         clicks = np.concatenate([p.uv for p in a.parts]) if a is not None and a.parts else np.zeros((0, 2))
         sigma = v.sigma
@@ -285,7 +288,7 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera,
             label=vehicle_label(v) if v.ok and v.dimensions is not None else "", error=v.error,
             sigma_yaw=np.deg2rad(sigma.yaw_deg) if sigma is not None else None,
             sigma_depth=sigma.depth_m if sigma is not None else None,
-            next_clicks=next_clicks, colour=None if colour is None else PALETTE_BGR[colour],
+            next_clicks=next_clicks, colour=own if colour is None else PALETTE_BGR[colour],
         ))
     return out
 

@@ -84,6 +84,7 @@ from toosicubix.formats.ground_truth import open_ground_truth
 from toosicubix.formats.kitti import KittiObject, read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, rot_z
 from toosicubix.model import GroundOverride, Part, Vehicle
+from toosicubix.parts.road_users import keypoint_class
 from toosicubix.parts.synthesis import PartSpec, true_parameters
 from toosicubix.simulate.boxes import BodyShape, draw_body_shape, simulated_box2d
 
@@ -508,7 +509,13 @@ def _model_spec(spec: PartSpec, d: np.ndarray) -> PartSpec:
 
 
 def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> SimulatedVehicle:
-    """The clicks of the simulated person on one ground-truth vehicle (see the module's description)."""
+    """The clicks of the simulated person on one ground-truth vehicle (see the module's description); on a road
+    user with a keypoint vocabulary of its own (a Pedestrian, a Cyclist), the keypoints of
+    :func:`toosicubix.simulate.road_users.simulate_road_user`."""
+    if keypoint_class(gt.label.type) is not None:
+        from toosicubix.simulate.road_users import simulate_road_user  # it builds on this module
+
+        return simulate_road_user(gt, options)
     rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id)
     obj, camera = gt.label, gt.camera
     d = np.asarray(obj.dimensions, dtype=float)
