@@ -63,6 +63,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -263,9 +264,11 @@ def _select_kitti_object(folder: KittiObjectFolder, sel: SelectionOptions) -> li
     return out
 
 
-def _select_kitti_tracking(folder: KittiTrackingFolder, sel: SelectionOptions) -> list[GroundTruthVehicle]:
-    """At most ``frames_per_track`` eligible frames per track, evenly spread over its eligible frames."""
-    out = []
+def _sequence_tracks(folder: KittiTrackingFolder, sel: SelectionOptions,
+                     keep: Callable[[KittiObject, Camera], bool]
+                     ) -> Iterator[tuple[str, Camera, dict[int, list[KittiObject]]]]:
+    """Per selected sequence of a KITTI tracking folder: its name, its camera and its tracks (track id -> the objects
+    ``keep`` keeps, in frame order)."""
     for path in folder.label_files():
         sequence = path.stem
         if sel.sequences is not None and sequence not in sel.sequences:
@@ -274,8 +277,15 @@ def _select_kitti_tracking(folder: KittiTrackingFolder, sel: SelectionOptions) -
         tracks: dict[int, list[KittiObject]] = {}
         for frame in sorted(frames := read_tracking_file(path)):
             for obj in frames[frame]:
-                if _keep(obj, camera, sel):
+                if keep(obj, camera):
                     tracks.setdefault(int(obj.track_id), []).append(obj)  # type: ignore[arg-type]
+        yield sequence, camera, tracks
+
+
+def _select_kitti_tracking(folder: KittiTrackingFolder, sel: SelectionOptions) -> list[GroundTruthVehicle]:
+    """At most ``frames_per_track`` eligible frames per track, evenly spread over its eligible frames."""
+    out = []
+    for sequence, camera, tracks in _sequence_tracks(folder, sel, lambda obj, camera: _keep(obj, camera, sel)):
         for track_id in sorted(tracks):
             objs = tracks[track_id]
             if sel.frames_per_track is not None and len(objs) > sel.frames_per_track:
@@ -337,16 +347,11 @@ def select_kitti_tracks(root: str | Path, sel: SelectionOptions | None = None) -
     sel = sel or SelectionOptions()
     folder = open_ground_truth("kitti-tracking", root, strict=True).folder  # type: ignore[attr-defined]
     out = []
-    for path in folder.label_files():
-        sequence = path.stem
-        if sel.sequences is not None and sequence not in sel.sequences:
-            continue
-        camera = folder.camera(sequence)
-        tracks: dict[int, list[KittiObject]] = {}
-        for frame in sorted(frames := read_tracking_file(path)):
-            for obj in frames[frame]:
-                if obj.track_id is not None and obj.track_id >= 0:
-                    tracks.setdefault(int(obj.track_id), []).append(obj)
+
+    def tracked(obj: KittiObject, camera: Camera) -> bool:  # every labelled track; runs are judged below
+        return obj.track_id is not None and obj.track_id >= 0
+
+    for sequence, camera, tracks in _sequence_tracks(folder, sel, tracked):
         for track_id in sorted(tracks):
             run = _longest_run(tracks[track_id], camera, sel)
             if sel.frames_per_track is not None:

@@ -685,15 +685,7 @@ function drawVehicle(v, selected) {
   }
   if (f.status === "ok" && f.corners_uv) {
     const c = f.corners_uv;
-    ctx.fillStyle = "rgba(255, 80, 80, 0.25)";
-    ctx.beginPath();
-    f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
-    ctx.closePath();
-    ctx.fill();
-    for (const [i, j] of EDGES) {
-      const front = f.front_face.includes(i) && f.front_face.includes(j);
-      line(c[i], c[j], front ? "#ff5050" : trackColour(v.track), front ? 2.5 : 1.5);
-    }
+    drawCuboid(f, "rgba(255, 80, 80, 0.25)", "#ff5050", trackColour(v.track), (front) => (front ? 2.5 : 1.5), []);
     state.drawn.push({ track: v.track, vehicle: v.id, style: "solid" });
     if (v.track) {
       label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), trackColour(v.track), selected);
@@ -738,21 +730,29 @@ function topCorner(c) {
 }
 
 // A track carried to this frame: its predicted cuboid, dashed, in the track's colour (thicker when selected).
-function drawPrediction(p, selected) {
-  const f = p.fit;
-  if (f.status !== "ok" || !f.corners_uv) return;
+// A fit's cuboid: its front face filled with `fill`, its front edges in `frontColour` and the others in `colour`,
+// each as wide as `width(isFront)`, dashed by `dash` ([] for solid).
+function drawCuboid(f, fill, frontColour, colour, width, dash) {
   const c = f.corners_uv;
-  const colour = trackColour(p.track);
-  ctx.globalAlpha = selected ? 1 : 0.75;
-  ctx.fillStyle = selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)";
+  ctx.fillStyle = fill;
   ctx.beginPath();
   f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
   ctx.closePath();
   ctx.fill();
   for (const [i, j] of EDGES) {
     const front = f.front_face.includes(i) && f.front_face.includes(j);
-    line(c[i], c[j], front ? "#ff8a80" : colour, selected ? 2.5 : 1.5, [7, 5]);
+    line(c[i], c[j], front ? frontColour : colour, width(front), dash);
   }
+}
+
+function drawPrediction(p, selected) {
+  const f = p.fit;
+  if (f.status !== "ok" || !f.corners_uv) return;
+  const c = f.corners_uv;
+  const colour = trackColour(p.track);
+  ctx.globalAlpha = selected ? 1 : 0.75;
+  drawCuboid(f, selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)", "#ff8a80", colour,
+    () => (selected ? 2.5 : 1.5), [7, 5]);
   label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour, selected);
   ctx.globalAlpha = 1;
   state.drawn.push({ track: p.track, vehicle: null, style: "dashed" });
