@@ -32,7 +32,7 @@ from collections.abc import Hashable
 from pathlib import Path
 from typing import Any
 
-from toosicubix.errors import InputError, Where
+from toosicubix.errors import InputFileError, Where
 
 #: The largest pixel coordinate (and image side) a file may hold. The largest camera images are some 10^5
 #: pixels across; a click a million pixels off is a typo, and the solver's squared pixel costs of larger
@@ -65,8 +65,9 @@ _ID_LIMIT = 10 ** MAX_ID_DIGITS
 _BAD_ID_CATEGORIES = ("Cc", "Cs")
 
 
-class FieldError(InputError):
+class FieldError(InputFileError):
     """A value that breaks a field rule: the file, the place and the message (what was expected, what was found).
+    An :class:`~toosicubix.errors.InputFileError`, so a reader raises it where it raised those before.
 
     Attributes
     ----------
@@ -77,7 +78,7 @@ class FieldError(InputError):
     def __init__(self, file: str | Path | None, where: Where, message: str):
         self.where = where
         self.message = message
-        super().__init__(file, [(where, message)])
+        super().__init__(file, [(where, message)])  # type: ignore[list-item]
 
 
 def shown(value: Any, limit: int = 60) -> str:
