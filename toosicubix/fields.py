@@ -134,6 +134,8 @@ def _plain(value: float) -> str:
 
 
 def _bounds(low: float, high: float) -> str:
+    if isinstance(high, int) and high >= 10**9 and str(high + 1).rstrip("0") == "1" and low in (0, -high):
+        return f" of at most {len(str(high))} digits"  # 10^k - 1: said as the count of digits
     if math.isinf(low) and math.isinf(high):
         return ""
     if math.isinf(low):
@@ -279,7 +281,9 @@ def text_integer(text: str | None, file: str | Path | None, where: Where, *, low
     FieldError
         Missing, other characters (``4_01``, ``'²'``, spaces), more than :data:`MAX_ID_DIGITS` digits, out of bounds.
     """
-    expected = f"{what} written in digits{_bounds(low, high)}"
+    bounds = _bounds(low, high)
+    expected = f"{what} written in{bounds[3:]}" if bounds.startswith(" of at most") else \
+        f"{what} written in digits{bounds}"
     if text is None or len(text) > MAX_ID_DIGITS + 1 or not _INTEGER_TEXT.fullmatch(text) \
             or not low <= int(text) <= high:
         raise _fail(file, where, label, expected, "nothing" if text is None else shown(text))
