@@ -32,7 +32,7 @@ from collections.abc import Hashable
 from pathlib import Path
 from typing import Any
 
-from toosicubix.errors import InputFileError, Where
+from toosicubix.errors import FormatError, InputError, InputFileError, Where
 
 #: The largest pixel coordinate (and image side) a file may hold. The largest camera images are some 10^5
 #: pixels across; a click a million pixels off is a typo, and the solver's squared pixel costs of larger
@@ -65,20 +65,25 @@ _ID_LIMIT = 10 ** MAX_ID_DIGITS
 _BAD_ID_CATEGORIES = ("Cc", "Cs")
 
 
-class FieldError(InputFileError):
-    """A value that breaks a field rule: the file, the place and the message (what was expected, what was found).
-    An :class:`~toosicubix.errors.InputFileError`, so a reader raises it where it raised those before.
+class FieldError(FormatError, InputFileError):
+    """A value that breaks a field rule: the file, the place and what was expected and found.
+
+    Readers of both kinds raise it where they raised their own before: it is a
+    :class:`~toosicubix.errors.FormatError` (whose ``message`` holds the JSON path, and ``line`` the line) and an
+    :class:`~toosicubix.errors.InputFileError` (whose ``problems`` hold the place apart).
 
     Attributes
     ----------
     where : the JSON path (str), the line (int, 1-based) or None
-    message : the message without the file and place
+    detail : what was expected and found, without the file and the place
     """
 
-    def __init__(self, file: str | Path | None, where: Where, message: str):
+    def __init__(self, file: str | Path | None, where: Where, detail: str):
         self.where = where
-        self.message = message
-        super().__init__(file, [(where, message)])  # type: ignore[list-item]
+        self.detail = detail
+        self.line = where if isinstance(where, int) else None
+        self.message = f"{where}: {detail}" if isinstance(where, str) else detail
+        InputError.__init__(self, file, [(where, detail)])
 
 
 def shown(value: Any, limit: int = 60) -> str:
@@ -185,10 +190,11 @@ def integer(value: Any, file: str | Path | None, where: Where, *, low: int, high
         Not an integer (booleans are none), a float with a fraction, or out of bounds.
     """
     expected = what + _bounds(low, high)
+    found = value
     if isinstance(value, float) and integral_floats and math.isfinite(value) and value == int(value):
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise _fail(file, where, label, expected, shown(value))
+        raise _fail(file, where, label, expected, shown(found))
     return value
 
 
