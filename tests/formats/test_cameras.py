@@ -317,3 +317,34 @@ def test_the_shared_kitti_calib_folder():
     P = np.array(table.camera_for(f"image_2/{stem}.png")["P"])
     offset = np.linalg.solve(P[:, :3], P[:, 3])  # camera 2 sits some 6 cm from camera 0
     assert 0.03 < np.linalg.norm(offset) < 0.1
+
+
+# --- hostile values (issue 34) ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("K", [[[10**400, 0, 600], [0, 700, 180], [0, 0, 1]], [10**400] * 9,
+                               [[700, 0, 600], [0, 700, 180], [0, 0, "1"]]])
+def test_a_huge_or_odd_K_entry_is_named(tmp_path, K):
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps({"cameras": [{"match": "*", "K": K}]}))
+    with pytest.raises(FormatError, match=r"cameras.json: \$.cameras\[0\].K: expected a 3x3 matrix"):
+        load_cameras(path)
+
+
+@pytest.mark.parametrize("value", ["4_01.2", "nan", "\u0664\u0660\u0661"])
+def test_kitti_and_yaml_numbers_are_read_strictly(tmp_path, value):
+    calib = tmp_path / "calib.txt"
+    calib.write_text(f"P2: {value} 0 600 0 0 700 180 0 0 0 1 0\n")
+    with pytest.raises(FormatError, match=r"calib.txt:1: P2: expected 12 numbers"):
+        load_cameras(calib)
+    yaml = tmp_path / "camera.yaml"
+    yaml.write_text(f"camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{value}, 0, 600, 0, 700, 180, 0, 0, 1]\n")
+    with pytest.raises(FormatError, match=r"camera_matrix.data: expected a list of finite numbers"):
+        load_cameras(yaml)
+
+
+def test_intrinsics_of_a_K_or_a_P_camera():
+    from toosicubix.formats.cameras import intrinsics
+
+    K = [[700.0, 0.0, 600.0], [0.0, 700.0, 180.0], [0.0, 0.0, 1.0]]
+    np.testing.assert_array_equal(intrinsics({"K": K}), K)
+    np.testing.assert_array_equal(intrinsics({"P": [[*K[0], 44.9], [*K[1], 0.2], [*K[2], 0.003]]}), K)
