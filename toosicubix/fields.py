@@ -211,9 +211,12 @@ def image_side(value: Any, file: str | Path | None, where: Where, label: str | N
 def metres(value: Any, file: str | Path | None, where: Where, *, low: float = 0.0, label: str | None = None,
            what: str = "a size in metres") -> float:
     """A size in metres: a finite number above ``low`` (exclusive) and at most :data:`MAX_METRES`."""
-    result = number(value, file, where, what=what, label=label, low=-math.inf, high=MAX_METRES)
+    expected = f"{what} greater than {_plain(low)} and at most {_plain(MAX_METRES)}"
+    try:
+        result = number(value, file, where, high=MAX_METRES)
+    except FieldError:
+        raise _fail(file, where, label, expected, shown(value)) from None
     if not result > low:
-        expected = f"{what} greater than {_plain(low)} and at most {_plain(MAX_METRES)}"
         raise _fail(file, where, label, expected, shown(value))
     return result
 

@@ -107,7 +107,23 @@ def long_integer_error(text: str, path: str | Path, offset: int = 0) -> FormatEr
                              f"(expected at most 4300)", line)
 
 
-def read_json(path: str | Path, at_root: bool = False) -> Any:
+class _DuplicateKey(ValueError):
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object hook of ``json.loads`` that refuses a key given twice in one object."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
+def read_json(path: str | Path, at_root: bool = False, unique_keys: bool = False) -> Any:
     """The parsed contents of a JSON file: the one JSON reader of every input file (checked first by
     :func:`read_json_text`).
 
@@ -115,6 +131,8 @@ def read_json(path: str | Path, at_root: bool = False) -> Any:
     ----------
     at_root : report a problem at the JSON path ``$`` (:class:`~toosicubix.errors.InputFileError`), as readers
         that name JSON paths do (annotation, priors, settings and mapping files), instead of at its line
+    unique_keys : refuse a key given twice in one object (Python's reader keeps the last silently), for files whose
+        keys are data (a dataset's model numbers); it slows reading, so large files leave it off
 
     Raises
     ------
@@ -127,7 +145,10 @@ def read_json(path: str | Path, at_root: bool = False) -> Any:
     try:
         text = read_json_text(path)
         try:
-            return json.loads(text)
+            return json.loads(text, object_pairs_hook=_unique_pairs) if unique_keys else json.loads(text)
+        except _DuplicateKey as exc:
+            raise FormatError(path, f"the key {exc.key[:60]!r} is given twice in one object (expected each key "
+                                    "once: a JSON reader keeps only the last)") from None
         except json.JSONDecodeError as exc:
             message = f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
             raise FormatError(path, message, exc.lineno) from None
