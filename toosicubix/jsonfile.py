@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from toosicubix.errors import FormatError, InputFileError
+from toosicubix.fields import shown
 
 #: The deepest nesting of JSON arrays and objects a file may have (an annotation file needs 7, results 6);
 #: far below the depth at which Python's JSON reader runs out of stack.
@@ -287,9 +288,9 @@ def json_numbers(value: Any, shape: tuple[int, ...], path: Path, where: str) -> 
     """
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond a float's range
         arr = np.zeros(0)
     if arr.shape != shape or not all(math.isfinite(x) for x in arr.ravel()) or isinstance(value, bool):
         what = "a finite number" if shape == () else f"finite numbers of shape {shape}"
-        raise FormatError(path, f"{where}: expected {what}, got {value!r:.60}")
+        raise FormatError(path, f"{where}: expected {what}, got {shown(value)}")
     return arr
