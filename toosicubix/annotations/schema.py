@@ -7,6 +7,7 @@ numpy dataclasses of :mod:`toosicubix.model`; nothing past that boundary imports
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar, Union
 
@@ -426,8 +427,13 @@ def _json_path(loc: tuple[int | str, ...]) -> str:
     return path
 
 
+#: A quoted value in a validator's message longer than this is cut (pydantic quotes the input: a 5,000-character
+#: ``kind`` made a 5,000-character message).
+_QUOTED = re.compile(r"'([^']{57})[^']{4,}'")
+
+
 def _describe(error: dict[str, Any]) -> str:
-    message = error["msg"].removeprefix("Value error, ")
+    message = _QUOTED.sub(r"'\1...'", error["msg"].removeprefix("Value error, "))
     if error["loc"] and error["loc"][-1] == "[key]":
         message = f"bad key: {message}"
     if error["type"] == "missing":
