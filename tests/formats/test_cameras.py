@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.conftest import shared_data_dir
 from toosicubix.errors import FormatError
@@ -348,3 +350,35 @@ def test_intrinsics_of_a_K_or_a_P_camera():
     K = [[700.0, 0.0, 600.0], [0.0, 700.0, 180.0], [0.0, 0.0, 1.0]]
     np.testing.assert_array_equal(intrinsics({"K": K}), K)
     np.testing.assert_array_equal(intrinsics({"P": [[*K[0], 44.9], [*K[1], 0.2], [*K[2], 0.003]]}), K)
+
+
+CAMERA_FILES = {
+    "cameras.json": json.dumps({"cameras": [{"match": "*", "K": [[700, 0, 600], [0, 700, 180], [0, 0, 1]],
+                                             "distortion": [0.1, 0.01, 0, 0]}]}),
+    "calib.txt": "P0: 700 0 600 0 0 700 180 0 0 0 1 0\nP2: 700 0 600 44.9 0 700 180 0.2 0 0 1 0.003\n",
+    "camera.yaml": "%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [700, 0, 600, 0, "
+                   "700, 180, 0, 0, 1]\ndistortion_coefficients: !!opencv-matrix\n  rows: 1\n  cols: 5\n  dt: d\n"
+                   "  data: [0.1, 0.01, 0, 0, 0]\n",
+}
+
+
+@settings(max_examples=150, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=st.sampled_from(sorted(CAMERA_FILES)), at=st.integers(0, 400), cut=st.integers(0, 12),
+       noise=st.one_of(st.binary(max_size=6), st.sampled_from([b"9" * 5000, b"4_01.2", b"nan", b"\xc2\xb2", b"1e999",
+                                                               b"[", b"{", b"-", b"\t"])))
+def test_any_camera_file_reads_as_a_camera_or_a_format_error(tmp_path, name, at, cut, noise):
+    from toosicubix.annotations.schema import CameraModel
+    from toosicubix.formats.cameras import intrinsics
+
+    data = CAMERA_FILES[name].encode()
+    path = tmp_path / name
+    path.write_bytes(data[:at] + noise + data[at + cut:])
+    try:
+        table = load_cameras(path)
+    except FormatError as exc:
+        assert str(exc).startswith(str(path))
+        return
+    camera = table.camera_for("a.png")
+    CameraModel.model_validate(camera)  # what the annotation file takes
+    assert np.isfinite(intrinsics(camera)).all()
