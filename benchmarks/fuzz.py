@@ -501,8 +501,12 @@ def run_target_chunk(job: tuple[str, list[int], int, float, str, float]) -> dict
             folder = work / f"c{index}"
             folder.mkdir()
             start = time.perf_counter()
-            records = target.run_case(index, seed, folder, timeout,
-                                      lambda c, t, f: run_isolated(c, t, f, address_limit))
+            try:
+                records = target.run_case(index, seed, folder, timeout,
+                                          lambda c, t, f: run_isolated(c, t, f, address_limit))
+            except Exception as exc:  # the case could not be made: the harness's fault, counted, the run goes on
+                records = [{"command": "(making the case)", "kind": "harness", "hang": False, "max_rss_mb": 0.0,
+                            "seconds": 0.0, "harness_error": f"{type(exc).__name__}: {str(exc)[:200]}"}]
             summary["seconds"] += time.perf_counter() - start
             summary["cases"][name] += 1
             for r in records:

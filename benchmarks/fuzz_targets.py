@@ -711,7 +711,8 @@ class RenderTarget(Target):
         annotations.write_bytes(json_bytes(doc, rng))
         out = folder / "fit"
         shutil.copytree(self.fit, out)
-        results["annotations"] = str(annotations)
+        if isinstance(results, dict):
+            results["annotations"] = str(annotations)
         (out / "results.json").write_bytes(json_bytes(results, rng))
         pictures = folder / "pictures"
         return "+".join(kinds), [Command("render", ["render", str(out), "--annotations", str(annotations), "-o",

@@ -325,7 +325,10 @@ MODEL = '{"type": "3x", "length": 4.8, "width_body": 1.8, "height": 1.5}'
     ('{"35": {"length": ' + "9" * 400 + ', "width_body": 1.8, "height": 1.5}}',
      "$.35.length: expected a size in metres greater than 0.1 and at most 100, got an integer of 400 digits"),
     ('{"35": {"length": 4.8, "width_body": 1.8, "height": 1.5, "name": ' + "9" * 400 + '}}',
-     "$.35.name: expected a string of at most 128 characters, got an integer of 400 digits"),
+     "$.35.name: expected a string of at most 128 characters (no control characters), got an integer of 400 "
+     "digits"),
+    ('{"35": {"length": 4.8, "width_body": 1.8, "height": 1.5, "type": "\\ud800"}}',  # not text: eval's CSV failed
+     "$.35.type: expected a string of at most 128 characters (no control characters), got '\\ud800'"),
 ])
 def test_car_model_keys_and_extents_are_checked(tmp_path, text, message):
     path = _models_text(tmp_path, text)

@@ -62,7 +62,11 @@ WHERE = "$.images[0].vehicles[0]"
     (lambda v: v.__setitem__("t_cam_vehicle", [10**400, 1, 1]), f"{WHERE}.t_cam_vehicle: expected finite numbers of "
                                                                  "shape (3,), got [an integer of 401 digits, 1, 1]"),
     (lambda v: v.__setitem__("dimensions", [0, 1, 1]), f"{WHERE}.dimensions: expected three sizes greater than 0"),
-    (lambda v: v.__setitem__("prototype", 10**400), f"{WHERE}.prototype: expected a string or null"),
+    (lambda v: v.__setitem__("prototype", 10**400), f"{WHERE}.prototype: expected a string (of text UTF-8 can write) "
+                                                    "or null, got an integer of 401 digits"),
+    (lambda v: v.__setitem__("id", "\ud800"), f"{WHERE}.id: expected a vehicle id: a string of 1 to 128 characters (no "
+                                              "control characters)"),
+    (lambda v: v.__setitem__("error", "\udc00"), f"{WHERE}.error: expected a string (of text UTF-8 can write)"),
     (lambda v: v.__setitem__("warnings", [1]), f"{WHERE}.warnings: expected a list of strings"),
     (lambda v: v.__setitem__("rms_px", math.inf), f"{WHERE}.rms_px: expected a finite number or null, got inf"),
 ])

@@ -53,6 +53,14 @@ def _key_path(key: str) -> str:
     return f"$.{key}" if len(key) <= 40 and re.fullmatch(r"\w+", key) else f"$[{shown(key, 40)}]"
 
 
+def _is_identifier(value: str) -> bool:
+    try:
+        fields.identifier(value, None, None)
+    except fields.FieldError:
+        return False
+    return True
+
+
 def read_car_models(path: str | Path) -> dict[int, CarModel]:
     """The car models of ``car_models.json`` by id.
 
@@ -82,9 +90,10 @@ def read_car_models(path: str | Path) -> dict[int, CarModel]:
         text = {}
         for name, default in (("name", key), ("type", "")):
             value = entry.get(name, default)
-            if not isinstance(value, str) or len(value) > fields.MAX_ID_LENGTH:
+            if value != "" and (not isinstance(value, str) or not _is_identifier(value)):
                 raise InputFileError(path, [(f"{where}.{name}", f"expected a string of at most {fields.MAX_ID_LENGTH} "
-                                                                f"characters, got {shown(value)}")])
+                                                                f"characters (no control characters), got "
+                                                                f"{shown(value)}")])
             text[name] = value
         out[model_id] = CarModel(model_id, text["name"], text["type"], **values)
     return out

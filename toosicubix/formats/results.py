@@ -323,9 +323,14 @@ def _check_fields(v: dict[str, Any], path: str | Path, where: str) -> None:
     FormatError
         Naming the JSON path and what was expected.
     """
+    for key in ("id", "status"):  # written into files and XML: the id rule (no control characters, no surrogates)
+        field_rules.identifier(v.get(key), path, f"{where}.{key}", what=f"a vehicle {key}")
+        if not isinstance(v[key], str):
+            raise FormatError(path, f"{where}.{key}: expected a string, got {shown(v[key])}")
     for key in _TEXT_KEYS:
-        if v.get(key) is not None and not isinstance(v[key], str):
-            raise FormatError(path, f"{where}.{key}: expected a string or null, got {shown(v[key])}")
+        if v.get(key) is not None and not (isinstance(v[key], str) and _encodable(v[key])):
+            raise FormatError(path, f"{where}.{key}: expected a string (of text UTF-8 can write) or null, got "
+                                    f"{shown(v[key])}")
     for key in _NUMBER_KEYS:
         if v.get(key) is not None:
             field_rules.number(v[key], path, f"{where}.{key}", what="a finite number or null")
@@ -349,6 +354,15 @@ def _check_fields(v: dict[str, Any], path: str | Path, where: str) -> None:
             raise FormatError(path, f"{where}.{key}: expected an object of finite numbers, got {shown(value)}")
     if v.get("status") == "ok":
         _check_pose(v, path, where)
+
+
+def _encodable(text: str) -> bool:
+    """Whether UTF-8 can write ``text`` (JSON's escapes let a file hold unpaired surrogates, which it cannot)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _is_finite(value: Any) -> bool:
@@ -645,8 +659,10 @@ def read_results(path: str | Path) -> list[ImageResult]:
                     for k, side in enumerate(size)]
         vehicles = [VehicleResult.from_json(v, path, f"{where}.vehicles[{j}]")
                     for j, v in enumerate(json_field(im, "vehicles", list, path, where))]
+        image_id = json_field(im, "id", str, path, where)
+        field_rules.identifier(image_id, path, f"{where}.id", what="an image id")
         images.append(ImageResult(
-            id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
+            id=image_id, K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=_road_plane(im.get("ground")),
             sequence=im["sequence"] if isinstance(im.get("sequence"), str) else None,
