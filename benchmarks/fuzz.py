@@ -621,7 +621,9 @@ def main_(argv: list[str] | None = None) -> int:
         parser.error(f"unknown targets {', '.join(sorted(unknown))}; expected fit, {', '.join(TARGETS)} or all")
     args.keep.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    figures: dict[str, Any] = {"seed": args.seed, "timeout_s": args.timeout}
+    figures: dict[str, Any] = {"command": "python benchmarks/fuzz.py " + " ".join(argv if argv is not None
+                                                                               else sys.argv[1:]),
+                               "seed": args.seed, "timeout_s": args.timeout}
     bad = 0
     if "fit" in names:
         end = args.start + args.files
