@@ -87,7 +87,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
     if n_arrow:
         w_arrow = w / ARROW_ZONE_SIGMA
-        outside, arrow_gradient = problem.arrow_zone_residuals(p)
+        outside, arrow_gradient = problem.arrow_zone_residuals(R, t, p, pivot)
         r[:, 2 * N + m + n_up:] = w_arrow * outside
     row_weights = problem.pixel_row_weights
     if row_weights is not None:  # per-click weights (:mod:`.robust`) on the pixel rows
@@ -131,7 +131,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         J[:, 2 * N + m:2 * N + m + n_up, 0] = -w_up * R[:, :, 1]
         J[:, 2 * N + m:2 * N + m + n_up, 1] = w_up * R[:, :, 0]
     if n_arrow:
-        J[:, 2 * N + m + n_up:, 6:] = w_arrow * arrow_gradient
+        J[:, 2 * N + m + n_up:] = w_arrow * arrow_gradient
     return r, J
 
 
