@@ -16,13 +16,16 @@ with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`
 road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
 does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
 
-Arrow zone: a direction arrow is drawn on the vehicle or on the ground beside it, so the midpoint ``c`` of each
-arrow (vehicle frame) is kept inside a zone around the cuboid, ``|c_x| <= 1.5 dx``, ``|c_y| <= 1.5 dy``,
-``-0.5 dz <= c_z <= 1.5 dz``: a row ``(distance outside the zone) / ARROW_ZONE_SIGMA`` per coordinate, zero
-inside (no pull on an arrow drawn anywhere near the vehicle). Without it an arrow seen nearly end-on (front
-and rear views) can slide along its rays tens of metres, under the road, at almost no cost: a flat valley
-with spurious minima that the starts cannot all reach. The rows are piecewise linear in ``p`` and, like the
-scale rows, change with the scale only through ``p``.
+Arrow rows: a direction arrow's two points are a gauge (the paper moves them along their rays until the segment is
+as long as the dimension it runs along), so only the rays say where the arrow was drawn. The arrow is drawn on the
+vehicle or on the ground beside it, so the midpoint's ray, taken at the distance of the vehicle's centre, passes
+through a zone around the cuboid, ``|c_x| <= 1.5 dx``, ``|c_y| <= 1.5 dy``, ``-0.5 dz <= c_z <= 1.5 dz``: a row
+``(distance outside the zone) / ARROW_ZONE_SIGMA`` per coordinate, zero inside (no pull on an arrow drawn anywhere
+near the vehicle). The gauge needs no pin: a segment as long as the dimension between the two rays, along the
+vehicle's axis, is one segment (its two points are determined). Without the zone an arrow seen nearly end-on
+(front and rear views) can slide along its rays tens of metres at almost no cost: a flat valley with spurious
+minima that the starts cannot all reach. Judging the gauge point itself (as this zone once did) pulls the pose
+whenever an arrow is drawn shorter or longer than the vehicle (rule 22 of benchmarks/decisions.md).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ from toosicubix.size_priors import SizePrior
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5
+#: Rows per arrow: the zone's three.
+ARROW_ROWS = 3
 #: The arrow zone, as multiples of (dx, dy, dz) per coordinate: (low, high).
 _ARROW_ZONE = ((-1.5, 1.5), (-1.5, 1.5), (-0.5, 1.5))
 
@@ -142,7 +147,7 @@ class Problem:
 
     @property
     def n_arrow_rows(self) -> int:
-        return len(self.arrow_mid)
+        return ARROW_ROWS * (len(self.arrow_mid) // 3)
 
     @cached_property
     def scale_rows_jacobian(self) -> np.ndarray:
@@ -163,19 +168,20 @@ class Problem:
         """(2N,) the click weights repeated for each click's two pixel rows, or None for all ones."""
         return None if self.click_weights is None else np.repeat(self.click_weights, 2)
 
-    def arrow_zone_residuals(self, R: np.ndarray, t: np.ndarray, p: np.ndarray,
-                             pivot: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """How far each arrow's midpoint, moved along its ray to the vehicle centre's distance from the camera,
-        lies outside its zone, metres (0 inside), and the rows' Jacobian over ``(delta, t, p)`` (the refinement's
-        step, rotations about ``pivot``): (B, k) and (B, k, 6 + P) for ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P)
-        and ``pivot`` (B, 3) or None, with ``k = n_arrow_rows``.
+    def arrow_rows(self, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+                   pivot: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The arrows' standardized rows (see the module docstring) and their Jacobian over ``(delta, t, p)`` (the
+        refinement's step, rotations about ``pivot``): (B, k) and (B, k, 6 + P) for ``R`` (B, 3, 3), ``t`` (B, 3),
+        ``p`` (B, P) and ``pivot`` (B, 3) or None, with ``k = n_arrow_rows``: per arrow, how far its midpoint, moved
+        along its ray to the vehicle centre's distance from the camera, lies outside its zone (three rows, metres
+        over ``ARROW_ZONE_SIGMA``, 0 inside).
 
         The arrow's own points are a gauge (the paper fixes the length of its 3D segment to the dimension, so a
         drawn arrow of another length sits farther along its rays); the ray is not, so the zone judges the point
         of the midpoint's ray at the distance of the vehicle's centre: ``c' = C + rho (c - C)`` with ``C`` the
         camera centre (vehicle frame) and ``rho = |v_cam| / |c_cam|``, ``v`` the centre ``(0, 0, dz / 2)``."""
         B, P = p.shape
-        n = self.n_arrow_rows // 3
+        n = self.n_arrow_rows // ARROW_ROWS
         mid = self.arrow_mid.reshape(n, 3, P)
         c = np.einsum("kip,bp->bki", mid, p)  # (B, n, 3) the gauge midpoints, vehicle frame
         v = np.zeros((B, 3))
@@ -217,9 +223,10 @@ class Problem:
         d_ray[..., 0:3] += _hat_batch(c_ray)
         bounds = np.where(is_above[..., None], self.arrow_high.reshape(n, 3, P)[None],
                           np.where(is_below[..., None], self.arrow_low.reshape(n, 3, P)[None], 0.0))
-        gradient = np.where((is_above | is_below)[..., None], d_ray, 0.0)
-        gradient[..., 6:] -= bounds
-        return outside.reshape(B, 3 * n), gradient.reshape(B, 3 * n, 6 + P)
+        zone_gradient = np.where((is_above | is_below)[..., None], d_ray, 0.0)
+        zone_gradient[..., 6:] -= bounds
+        return ((outside / ARROW_ZONE_SIGMA).reshape(B, 3 * n),
+                (zone_gradient / ARROW_ZONE_SIGMA).reshape(B, 3 * n, 6 + P))
 
     def with_contact_distance(self, distance: float) -> Problem:
         """The same problem with the ground contact's sigma widened for a vehicle ``distance`` metres away."""
@@ -285,8 +292,7 @@ class Problem:
         if self.upright_sigma is not None:
             cues += float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2)) / self.upright_sigma**2
         if self.n_arrow_rows:
-            outside = self.arrow_zone_residuals(R_cam_vehicle[None], t_cam_vehicle[None], p[None])[0]
-            cues += float(np.sum(outside**2)) / ARROW_ZONE_SIGMA**2
+            cues += float(np.sum(self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None])[0] ** 2))
         return float(np.sum(e * e) + self.lambda_px * cues)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
