@@ -17,9 +17,11 @@ from toosicubix.cli import main
 from toosicubix.evaluation import EvalOptions, evaluate_folder, summarize
 from toosicubix.formats.kitti import read_label_file, read_tracking_file
 from toosicubix.geometry import R_cam_vehicle_from_ypr, cuboid_corners_cam
+from toosicubix.parts.mirror import mirrored
 from toosicubix.parts.synthesis import render_parts
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.settings import BatchSettings
+from toosicubix.pipeline.vehicle import IMPLAUSIBLE_CONFIDENCE
 
 D = np.array([4.3, 1.8, 1.5])
 FRAMES, EVERY = 21, 10
@@ -126,3 +128,28 @@ def test_fit_says_how_the_tracks_frames_were_determined(tracked_file, tmp_path):
                                                                 "interpolated" in result.output
     off = CliRunner().invoke(main, ["fit", str(tracked_file), "-o", str(tmp_path / "off"), "--tracks", "off"])
     assert off.exit_code == 1 and "tracks:" not in off.output
+
+
+def test_a_track_clicked_with_left_and_right_swapped_is_flagged_with_its_likely_cause(tmp_path):
+    """A person who names left and right as the image's does so on every frame they click: the track's poses in its
+    clicked frames are then implausible, flagged as a vehicle fitted alone is (issue 33, item 2), with the cause."""
+    rng = np.random.default_rng(0)
+    specs = _specs("front", D, rng)
+    wheel_x = (0.32 * D[0], -0.3 * D[0])
+    images = []
+    for f in range(0, FRAMES, EVERY):
+        R, t = R_cam_vehicle_from_ypr(np.pi / 2 + 0.2), np.array([1.0, 1.6, 20.0 - 0.3 * f])  # driving at us
+        parts = mirrored(tuple(render_parts(specs, R, t, D, CAMERA, wheel_x)))
+        vehicle = {"id": "1", "prototype": "Car", "track": "0003-car", "parts": [part_json(p) for p in parts]}
+        images.append({"id": f"frame-{f}", "sequence": "0003", "frame": f, "size": list(CAMERA.image_size),
+                       "camera": {"K": CAMERA.K.tolist()}, "vehicles": [vehicle]})
+    path = tmp_path / "swapped.json"
+    path.write_text(json.dumps({"toosicubix": 1, "images": images}))
+    result = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    frames = [v for im in json.loads((tmp_path / "out" / "results.json").read_text())["images"] for v in im["vehicles"]]
+    assert len(frames) == 3 and all(v["pose_from"] == "clicks" for v in frames)
+    assert all(v.get("implausible") for v in frames)
+    assert all(any(w.startswith("left and right look swapped") for w in v["warnings"]) for v in frames)
+    assert all(v["confidence"] <= IMPLAUSIBLE_CONFIDENCE for v in frames)
+    assert "IMPLAUSIBLE: 3 fitted vehicle(s)" in result.output

@@ -21,9 +21,10 @@ from toosicubix.formats.results import VehicleResult
 from toosicubix.model import Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
 from toosicubix.pipeline.settings import BatchSettings
-from toosicubix.pipeline.vehicle import UnusableFit, checked_result, describe_fit, failed_result
+from toosicubix.pipeline.vehicle import UnusableFit, checked_result, describe_fit, failed_result, with_likely_cause
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions
+from toosicubix.solver.plausibility import implausibility
 from toosicubix.solver.track import FrameFit, TrackFit, TrackFrame, TrackOptions, fit_track
 
 #: One track as a worker takes it: (track, its frames as (image, vehicle) pairs, prior, solver settings, track
@@ -53,13 +54,32 @@ def results_of_track(track: str, frames: list[tuple[Image, Vehicle]], prior: Siz
         if frame.pose_from != "clicks" and model.n_clicks:  # its clicks were left out of the track's fit
             model = build_parts_model(())
         try:
-            result = describe_fit(v, im.camera, prior, model, _as_fit(model, frame, fit), im.ground, options,
-                                  next_clicks)
+            frame_fit = _as_fit(model, frame, fit)
+            if frame.pose_from == "clicks":
+                frame_fit = _checked_plausible(frame_fit, model, v, im, prior, options)
+            result = describe_fit(v, im.camera, prior, model, frame_fit, im.ground, options, next_clicks)
             with np.errstate(all="ignore"):
                 out.append(_tracked(checked_result(result), track, frame.pose_from))
         except UnusableFit as exc:
             out.append(_tracked(failed_result(v, prior, f"in its track's fit: {exc}"), track, frame.pose_from))
     return out
+
+
+def _checked_plausible(fit: FitResult, model: PartsModel, vehicle: Vehicle, image: Image, prior: SizePrior,
+                       options: SolverOptions) -> FitResult:
+    """A clicked frame's pose from the track, checked as a vehicle fitted alone is
+    (:mod:`toosicubix.solver.plausibility`: upright, every clicked part on a face turned to the camera): an implausible
+    one gets :attr:`FitResult.implausible` and its likely cause among its warnings, as
+    :func:`~toosicubix.pipeline.vehicle.fit_one` gives them (its clicks alone, with left and right swapped, fitting a
+    plausible pose: the sides look swapped)."""
+    max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
+    up = None if image.ground is None else image.ground.normal
+    why = implausibility(model.click_labels, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p[:3], max_tilt, up,
+                         model.click_faces)
+    if why is None:
+        return fit
+    flagged = replace(fit, implausible=why, warnings=(*fit.warnings, f"the track's pose in this frame is {why}"))
+    return with_likely_cause(flagged, vehicle, image.camera, prior, options, image.ground)
 
 
 def _tracked(result: VehicleResult, track: str, pose_from: str | None) -> VehicleResult:
