@@ -270,6 +270,8 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
         own = fit.click_weights if fit.click_weights is not None else np.ones(base.n_clicks)
         added_weights = soft[base.n_clicks:] if soft is not None else np.ones(combined.n_clicks - base.n_clicks)
         problem = with_weights(problem, np.concatenate([own, added_weights]))
+    if base.click_spread is not None and options.upright_weight == "clicks":  # as the fit weighed its upright term
+        problem = problem.upright_against_clicks(options.click_sigma)
     base_params = np.array([index[name] for name in base.param_names])
     size = camera.image_size
     seen = []

@@ -1,14 +1,16 @@
 """How well a fitted cuboid is determined: covariance, standard deviations, what the clicks fix, confidence.
 
-The fit minimizes ``F = |r_px|^2 + lambda_px |r_cue|^2`` (pixel residuals; size prior, known sizes, ground
-cues as standardized residuals). Linearized at the optimum, with clicks off by independent Gaussian noise of
-``click_sigma`` pixels per coordinate and the vehicle off its prior (and the road off its stated plane) by
-one standard deviation per standardized residual, the estimate's error has covariance
+The fit minimizes ``F = |r_px|^2 + sum_k lambda_k r_cue,k^2`` (pixel residuals; size prior, known sizes, ground
+cues as standardized residuals, each weighed by ``lambda_px``, or the upright rows of a vehicle of keypoints by the
+click noise squared: :attr:`.problem.Problem.cue_row_lambdas`, ``Lambda`` below). Linearized at the optimum, with
+clicks off by independent Gaussian noise of ``click_sigma`` pixels per coordinate and the vehicle off its prior (and
+the road off its stated plane) by one standard deviation per standardized residual, the estimate's error has
+covariance
 
-    Cov = H^-1 (click_sigma^2 J_px^T J_px + lambda_px^2 J_cue^T J_cue) H^-1,  H = J_px^T J_px + lambda_px J_cue^T J_cue
+    Cov = H^-1 (click_sigma^2 J_px^T J_px + J_cue^T Lambda^2 J_cue) H^-1,  H = J_px^T J_px + J_cue^T Lambda J_cue
 
 over ``theta = (delta, t, p)`` with ``R = R_hat exp([delta]x)``: the estimator's own spread, right whatever
-``lambda_px`` is (when ``lambda_px = click_sigma^2`` it is the Laplace posterior ``click_sigma^2 H^-1``).
+``Lambda`` is (when every ``lambda_k = click_sigma^2`` it is the Laplace posterior ``click_sigma^2 H^-1``).
 Reported quantities are functions of ``theta`` whose standard deviations follow by the chain rule.
 
 What the clicks determine: for each quantity, its posterior variance from the clicks' information alone
@@ -137,12 +139,15 @@ def finite_or_none(value: float) -> float | None:
 
 def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
               J: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot); ``J``
-    is that Jacobian when the caller has it already (:func:`.refine.residuals_and_jacobian` at the pose)."""
+    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot), each cue
+    row divided by the root of its weight (:attr:`.problem.Problem.cue_row_lambdas`); ``J`` is that Jacobian when
+    the caller has it already (:func:`.refine.residuals_and_jacobian` at the pose)."""
     if J is None:
         _, J = residuals_and_jacobian(problem, R, t, p)
     n_px = 2 * problem.parts.n_clicks
-    return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
+    if problem.upright_noise_px is None:  # every cue row weighed by lambda_px
+        return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
+    return J[:n_px], J[n_px:] / np.sqrt(problem.cue_row_lambdas)[:, None]
 
 
 def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
@@ -162,17 +167,24 @@ def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, cl
     return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
 
 
-def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float, sigmas: np.ndarray) -> np.ndarray:
-    """``H^-1 (J_px^T S^2 J_px + lam^2 J_cue^T J_cue) H^-1`` with ``H = J_px^T J_px + lam J_cue^T J_cue`` and
-    ``S`` the rows' noise (:func:`row_sigmas`).
+def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float | np.ndarray, sigmas: np.ndarray) -> np.ndarray:
+    """``H^-1 (J_px^T S^2 J_px + J_cue^T Lambda^2 J_cue) H^-1`` with ``H = J_px^T J_px + J_cue^T Lambda J_cue``,
+    ``S`` the rows' noise (:func:`row_sigmas`) and ``Lambda`` the cue rows' weights: ``lam`` for every row, or
+    per row (m,) (:attr:`.problem.Problem.cue_row_lambdas`).
 
     Computed as ``X X^T`` with ``X = H^-1 [J_px^T S, lam J_cue^T]``, ``H`` scaled to a unit diagonal first, so
     that no variance comes out negative however badly the fit is conditioned; a direction ``H`` does not
     determine at all gets infinite variance (never zero)."""
-    H = J_px.T @ J_px + lam * (J_cue.T @ J_cue)
+    if np.ndim(lam) == 0:
+        H = J_px.T @ J_px + lam * (J_cue.T @ J_cue)
+        weighted_cue_T = lam * J_cue.T
+    else:
+        weighted_cue = np.asarray(lam)[:, None] * J_cue
+        H = J_px.T @ J_px + J_cue.T @ weighted_cue
+        weighted_cue_T = weighted_cue.T
     scale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
     H_scaled = H * scale[:, None] * scale[None, :]
-    L = np.hstack([(J_px * sigmas[:, None]).T, lam * J_cue.T]) * scale[:, None]
+    L = np.hstack([(J_px * sigmas[:, None]).T, weighted_cue_T]) * scale[:, None]
     try:
         X = np.linalg.solve(H_scaled, L) * scale[:, None]
     except np.linalg.LinAlgError:
@@ -195,11 +207,12 @@ def ypr_gradient(R: np.ndarray) -> np.ndarray:
     return np.linalg.inv(np.column_stack([R.T @ e_y, rot_x(roll).T @ e_y, e_x]))
 
 
-def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float, sigmas: np.ndarray,
+def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float | np.ndarray, sigmas: np.ndarray,
                                G: np.ndarray, t: np.ndarray) -> Uncertainty:
     """Standard deviations of a fit from the rows :func:`jacobians` gives (any subset of clicks and of
-    parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
-    and ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
+    parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`),
+    the cue rows' weights ``lambda_px`` (one, or per row: :attr:`.problem.Problem.cue_row_lambdas`) and
+    ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
     return uncertainty_from_covariance(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
 
 
@@ -229,16 +242,21 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     base_rows = np.arange(2 * n_base_clicks)
     base_cols = 6 + np.asarray(base_params)
     cols0 = np.concatenate([np.arange(6), base_cols])
-    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
-                                     sigmas[base_rows], G, t)
+    lam = _cue_lambdas(problem)
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], lam, sigmas[base_rows], G, t)
     out = []
     for entry in added:
         clicks = np.arange(*entry) if isinstance(entry, tuple) else np.asarray(entry, dtype=int)
         own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
-        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t))
+        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], lam, sigmas[r], G, t))
     return now, out
+
+
+def _cue_lambdas(problem: Problem) -> float | np.ndarray:
+    """The cue rows' weights for :func:`_sandwich`: ``lambda_px`` when every row has it, else per row."""
+    return problem.lambda_px if problem.upright_noise_px is None else problem.cue_row_lambdas
 
 
 def uncertainty_from_covariance(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
@@ -272,7 +290,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     C = J_c.T @ J_c
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
-    u = uncertainty_from_covariance(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
+    u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
     return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
                              problem.upright_sigma is not None, tuple(problem.row_cues))
