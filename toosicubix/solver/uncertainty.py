@@ -29,9 +29,13 @@ import numpy as np
 
 from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
+from toosicubix.parts.linear import PartsModel
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 
+#: A vehicle's clicks are all on one end when each sits at least this fraction of its length from the middle, all on
+#: one side (:func:`one_end`): a rear view's lamps, plate, boot and rear glass; a door or a wheel is not.
+END_FRACTION = 0.15
 #: A quantity is "mostly set by the cues" when switching them off multiplies its variance by more than this
 #: (its standard deviation by 2).
 PRIOR_SET_RATIO = 4.0
@@ -293,7 +297,8 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
     return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
-                             problem.upright_sigma is not None, tuple(problem.row_cues))
+                             problem.upright_sigma is not None, tuple(problem.row_cues),
+                             one_end(problem.parts, p, R, t))
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -374,21 +379,48 @@ class Observability:
                    tuple(d["sentences"]))
 
 
+def one_end(parts: PartsModel, p: np.ndarray, R: np.ndarray | None = None, t: np.ndarray | None = None
+            ) -> tuple[str, str | None] | None:
+    """The end every click of a vehicle clicked in keypoints only sits on, 'front' or 'rear' (each click's typical
+    position at least :data:`END_FRACTION` of the length from the middle, on that side), and with a pose ``R``
+    (3, 3), ``t`` (3,) the side the camera sees, 'left' or 'right' (None without); None when the clicks span the
+    length or are not all keypoints. ``p`` (P,): the vehicle's unknowns, its dimensions first.
+
+    ApolloCar3D's end-on cars clicked on one end only (a rear view's lamps, plate, boot and rear glass) leave their
+    length and yaw to the size prior; what one keypoint toward the far end does for them is benchmarks/apollocar3d.py's
+    far-end diagnostic (benchmarks/decisions.md, rule 23's section)."""
+    if not parts.keypoints_only:
+        return None
+    x = (parts.A @ p)[:, 0] / p[0]  # (N,) each click's position along the length, fractions from the middle
+    end = "front" if x.min() > END_FRACTION else "rear" if x.max() < -END_FRACTION else None
+    if end is None:
+        return None
+    side = None if R is None or t is None else ("left" if (R.T @ -np.asarray(t))[1] >= 0.0 else "right")
+    return end, side
+
+
 def observability_sentences(status: dict[str, str], scale_from: str | None, keypoints_only: bool = False,
-                            upright: bool = False, scale_cues: tuple[str, ...] = ()) -> tuple[str, ...]:
+                            upright: bool = False, scale_cues: tuple[str, ...] = (),
+                            end: tuple[str, str | None] | None = None) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
     ground block): pitch and roll left to the cues are one sentence saying the road sets them, with no advice,
     since that is its job. ``scale_cues``: the cues that share the scale (:attr:`~toosicubix.solver.fit.FitResult.
-    scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks."""
+    scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks.
+    ``end``: the end every keypoint sits on and the side the camera sees (:func:`one_end`): when the clicks leave the
+    yaw or the length to the prior, one sentence says so and which click fixes both, in place of their hints."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
     on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
     if on_road:
         out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
+    on_one_end = ()
+    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
+        on_one_end = ("yaw", "length")
+        out.append(_far_end_sentence(*end))
     for name in QUANTITIES:
-        if name in on_road:
+        if name in on_road or name in on_one_end:
             continue
         if status[name] == "cues only":
             out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
@@ -398,6 +430,15 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
         out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
     return tuple(out)
+
+
+def _far_end_sentence(end: str, side: str | None) -> str:
+    """What to click on a vehicle whose keypoints all sit on its ``end``, seen from ``side`` (or None)."""
+    far = "front" if end == "rear" else "rear"
+    along = f"along its {side} side" if side else "along a side it shows"
+    example = f"its {side} {far} wheel centre" if side else f"a {far} wheel centre"
+    return (f"every keypoint is on its {end} end, so its yaw and length rest on the size prior: click one more "
+            f"toward the far end, the {far}, {along} ({example}, or a corner of a {far} door)")
 
 
 def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
@@ -416,7 +457,8 @@ def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
 
 
 def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
-                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = ()) -> Observability:
+                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = (),
+                   end: tuple[str, str | None] | None = None) -> Observability:
     ratios, status = {}, {}
     for name, v_full in full.items():
         v_clicks = clicks_only[name]
@@ -425,7 +467,7 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
     return Observability(ratios, status,
-                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues))
+                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues, end))
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
