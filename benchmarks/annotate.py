@@ -2,18 +2,22 @@
 the page's HTTP JSON API.
 
 KITTI has no human part clicks, so the clicks are the simulated annotator's (:mod:`toosicubix.simulate.annotator`:
-real ground-truth cuboids of the KITTI tracking *test* sequences 0010-0020, realistic part placement, 1 px noise,
-every visible part available). Each vehicle is annotated three ways, each until validate's "well determined"
-(yaw sigma <= 5 deg, depth sigma <= 10 %, not ambiguous), counting clicks and naming actions (choosing a name by
-hotkey or palette, or correcting an auto-given one):
+real ground-truth cuboids of the KITTI tracking *test* sequences 0010-0020, or with ``--split tuning`` the tuning
+sequences 0000-0009, realistic part placement, 1 px noise, every visible part available). Each vehicle is annotated
+in three modes, each stopping as soon as the fit is **right** (benchmarks/decisions.md, rule 24): after an annotation
+is complete (clicked, its name the true one), the page's fit has its yaw within 5 degrees and its depth within 10 %
+of KITTI's ground truth, whatever the page's own sigmas say. Counted: clicks and naming actions (choosing a name by
+hotkey or palette, or renaming a click the page named wrong or left unnamed):
 
-- ``named``: the annotator's parts in its order of preference, every one named (one naming action each);
-- ``auto``: the same order; a point part is clicked unnamed once the fit exists and the auto-given name is
-  corrected when wrong (one action); pairs and arrows, and points before the fit exists, are named;
+- ``named``: the annotator's parts in its order of preference, every one named first (one naming action each);
+- ``auto``: the same order; a point part is clicked unnamed, and the page's name is kept when right (no action) and
+  renamed when wrong or missing (one action); pairs and arrows are named first;
 - ``guided``: as ``auto``, but once the fit exists the next part is the best of the page's targets the
   annotator can see (falling back to its own order when none of the five is visible to it).
 
-Auto-naming accuracy is how often the name given to an unnamed click is the true one.
+Auto-naming accuracy is how often the name the page gave an unnamed click is the true one. The script uses the
+page's API only, so it runs on older code too (rule 24 item 5: a page that names no click before a fit exists leaves
+those clicks to the person).
 
 ``--apollocar3d`` measures it on ApolloCar3D's real keypoints instead (no replay through the page): every car of
 ``apollocar3d_val_dev.json`` with at least 10 labelled keypoints, imported with the bundled ``apollocar3d-66``
@@ -28,6 +32,7 @@ same 100 images: in-sample for the positions; ``--out-of-sample`` learns them on
 
     python benchmarks/annotate.py --vehicles 60 -o benchmarks/results/annotate.json
     python benchmarks/annotate.py --vehicles 60 --kitti-ground -o benchmarks/results/annotate-kitti-ground.json
+    python benchmarks/annotate.py --vehicles 60 --split tuning -o /tmp/annotate-tuning.json   # choosing settings
     python benchmarks/annotate.py --apollocar3d -o benchmarks/results/annotate-apollocar3d.json
     python benchmarks/annotate.py --apollocar3d --out-of-sample -o benchmarks/results/annotate-apollocar3d-odd.json
     python benchmarks/annotate.py --apollocar3d --guidance -o benchmarks/results/annotate-apollocar3d-guidance.json
@@ -100,17 +105,43 @@ def _timed_edit(client: Client, change: dict, image: int) -> tuple[int, dict]:
     return out
 
 
-def replay(client: Client, image: int, parts: list, prototype: str, strategy: str) -> dict:
-    """Annotate one vehicle with ``strategy``; the counts and auto-naming outcomes."""
+#: Rule 24's criterion: the fit is right when its yaw is within this many degrees of the ground truth's ...
+RIGHT_YAW_DEG = 5.0
+#: ... and its depth within this share of the ground truth's.
+RIGHT_DEPTH_REL = 0.10
+
+
+def fit_errors(fit: dict, truth: tuple[float, float]) -> tuple[float, float] | None:
+    """How far the page's fit (a vehicle's ``fit`` in ``GET /api/images/<i>``) is from the ground truth ``truth``
+    = (KITTI ry, radians; bottom-centre depth, metres, in the frame of the image's K): the yaw error in degrees
+    (wrapped, absolute) and the relative depth error; None when it is not fitted."""
+    if fit.get("status") != "ok":
+        return None
+    ry_gt, z_gt = truth
+    yaw = abs((fit["yaw_pitch_roll_deg"][0] - np.rad2deg(ry_gt) + 180.0) % 360.0 - 180.0)
+    return float(yaw), float(abs(fit["t_cam_vehicle"][2] - z_gt) / z_gt)
+
+
+def is_right(fit: dict, truth: tuple[float, float]) -> bool:
+    """Rule 24's criterion: the fit's yaw within :data:`RIGHT_YAW_DEG` and its depth within :data:`RIGHT_DEPTH_REL`
+    of the ground truth's."""
+    errors = fit_errors(fit, truth)
+    return errors is not None and errors[0] <= RIGHT_YAW_DEG and errors[1] <= RIGHT_DEPTH_REL
+
+
+def replay(client: Client, image: int, parts: list, prototype: str, strategy: str,
+           truth: tuple[float, float]) -> dict:
+    """Annotate one vehicle with ``strategy`` until its fit is right (:func:`is_right`) or the person has no part
+    left; the counts and auto-naming outcomes."""
     status, doc = client.edit({"op": "add_vehicle", "prototype": prototype}, image=image)
     assert status == 200, doc
     vehicle = doc["vehicle"]
     left = list(parts)
-    clicks = naming = auto_right = auto_wrong = 0
+    clicks = naming = auto_right = auto_wrong = asked = asked_offered = 0
     confusions: list[tuple[str, str]] = []  # (true part, auto-given name)
-    outcomes: list[tuple[int, bool]] = []  # (points clicked before, auto-given name right)
+    outcomes: list[tuple[int, bool, float | None]] = []  # (points clicked before, auto-given name right, its p)
     v = _state(client, image, vehicle)
-    while left and not v["fit"].get("well_determined"):
+    while left and not is_right(v["fit"], truth):
         fitted = v["fit"]["status"] == "ok"
         part = left[0]
         if strategy == "guided" and fitted:
@@ -119,38 +150,49 @@ def replay(client: Client, image: int, parts: list, prototype: str, strategy: st
                          if (t["kind"], t["name"]) in available), left[0])
         left.remove(part)
         uv = part.uv.tolist()
-        clicks += len(uv)
-        if strategy != "named" and fitted and part.kind == "point":
+        if strategy != "named" and part.kind == "point":
+            if any(p["kind"] == part.kind and p["name"] == part.name for p in v["parts"]):
+                continue  # clicked already (named so by the page before): the person leaves it
             status, doc = _timed_edit(client, {"op": "add_click", "vehicle": vehicle, "uv": uv}, image)
             assert status == 200, doc
+            clicks += len(uv)
             auto = [a for a in doc["auto_named"] if a["vehicle"] == vehicle]
-            if auto:
-                outcomes.append((clicks - len(uv), auto[0]["name"] == part.name))
-            if not auto:  # no visible part left to name it: name it by hand
-                index = len(next(x for x in doc["vehicles"] if x["id"] == vehicle)["parts"]) - 1
-                _rename(client, image, vehicle, index, part)
+            mine = next(x for x in doc["vehicles"] if x["id"] == vehicle)["parts"]
+            index = len(mine) - 1
+            given = next((a for a in auto if a["part"] == index), None)
+            if given is not None:
+                outcomes.append((clicks - len(uv), given["name"] == part.name, given.get("probability")))
+            if given is None:  # the page asked (or cannot name it yet): the person names it
+                asked += 1
+                offered = mine[index].get("choices") or []
+                asked_offered += any(c["name"] == part.name for c in offered)
                 naming += 1
-            elif auto[0]["name"] == part.name:
+                _rename(client, image, vehicle, index, part)
+            elif given["name"] == part.name:
                 auto_right += 1
             else:
                 auto_wrong += 1
-                confusions.append((part.name, auto[0]["name"]))
+                confusions.append((part.name, given["name"]))
                 naming += 1
-                _rename(client, image, vehicle, auto[0]["part"], part)
+                _rename(client, image, vehicle, index, part)
         else:
             change = {"op": "add_click", "vehicle": vehicle, "kind": part.kind, "name": part.name, "uv": uv}
             status, doc = _timed_edit(client, change, image)
             if status != 200:  # e.g. a part the annotator clicked twice: skip it
-                clicks -= len(uv)
                 continue
+            clicks += len(uv)
             naming += 1
         v = _state(client, image, vehicle)
-    done = bool(v["fit"].get("well_determined"))
+    right = is_right(v["fit"], truth)
+    errors = fit_errors(v["fit"], truth)
     client.edit({"op": "delete_vehicle", "vehicle": vehicle}, image=image)
-    problems = v["fit"].get("problems", [f"failed: {v['fit'].get('error')}"]) if not done else []
-    return {"well_determined": done, "clicks": clicks, "naming": naming, "actions": clicks + naming,
-            "auto_right": auto_right, "auto_wrong": auto_wrong, "confusions": confusions, "outcomes": outcomes,
-            "problems": problems}
+    return {"right": right, "clicks": clicks, "naming": naming, "actions": clicks + naming,
+            "auto_right": auto_right, "auto_wrong": auto_wrong, "asked": asked, "asked_offered": asked_offered,
+            "confusions": confusions, "outcomes": outcomes,
+            "yaw_error_deg": None if errors is None else round(errors[0], 2),
+            "depth_error_rel": None if errors is None else round(errors[1], 4),
+            "well_determined": bool(v["fit"].get("well_determined")),
+            "failed": None if v["fit"]["status"] == "ok" else v["fit"].get("error")}
 
 
 def _rename(client: Client, image: int, vehicle: str, index: int, part) -> None:
@@ -166,6 +208,19 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--kitti-ground", action="store_true",
                         help="give the images KITTI's ground block (as annotate --kitti-ground)")
+    parser.add_argument("--naming-confidence", type=float, default=None,
+                        help="the page names a click when its best name is at least this probable, else asks "
+                             "[default: the page's]")
+    parser.add_argument("--naming-camera-height-sigma", default=None, metavar="METRES|none",
+                        help="the camera height's sigma the page assumes before a fit (none: no height) "
+                             "[default: the page's]")
+    parser.add_argument("--naming-after-fit", choices=("prior", "fit"), default=None,
+                        help="how the page names a click once a fit exists [default: the page's]")
+    parser.add_argument("--naming-grid", action="store_true",
+                        help="rule 24a: the auto mode under every naming setting of GRID (run with --split tuning)")
+    parser.add_argument("--split", choices=sorted(SPLITS), default="test",
+                        help="KITTI tracking sequences to draw from: test (0010-0020, the figures) or tuning "
+                             "(0000-0009, for choosing the page's settings; rule 24)")
     parser.add_argument("--apollocar3d", action="store_true",
                         help="auto-naming on ApolloCar3D's real keypoints after the first k named clicks")
     parser.add_argument("--out-of-sample", action="store_true",
@@ -202,11 +257,69 @@ def main() -> None:
         print(json.dumps({k: v for k, v in report.items() if k != "cars"}, indent=1))
         return
 
-    chosen = select_kitti_tracking(args.data / "kitti_tracking",
-                                   SelectionOptions(sequences=SPLITS["test"], frames_per_track=1))
-    rng = np.random.default_rng(args.seed)
-    chosen = [chosen[i] for i in sorted(rng.choice(len(chosen), min(args.vehicles, len(chosen)), replace=False))]
-    options = AnnotatorOptions(noise_px=1.0, max_clicks=40, seed=args.seed)
+    naming = _naming_settings(args)
+    if args.naming_grid:
+        report = naming_grid(args)
+        if args.out:
+            args.out.write_text(json.dumps(report, indent=1) + "\n")
+        print(json.dumps(report, indent=1))
+        return
+    report = kitti_run(args.data, args.split, args.vehicles, args.seed, args.kitti_ground, naming)
+    if args.out:
+        args.out.write_text(_compact(report) + "\n")
+    print(json.dumps({k: report[k] for k in ("vehicles", "seconds", "naming", "summary")}, indent=1))
+
+
+def _naming_settings(args):
+    """The naming settings the flags give, or None (the page's own)."""
+    given = {"confidence": args.naming_confidence, "after_fit": args.naming_after_fit}
+    if args.naming_camera_height_sigma is not None:
+        given["camera_height_sigma_m"] = (None if args.naming_camera_height_sigma == "none"
+                                          else float(args.naming_camera_height_sigma))
+    given = {k: v for k, v in given.items() if v is not None}
+    if not given:
+        return None
+    from toosicubix.web.placement import NAMING_SETTINGS
+
+    return replace(NAMING_SETTINGS, **given)
+
+
+#: Rule 24a's grid of the page's naming settings, run on the tuning sequences.
+GRID = {"after_fit": ("prior", "fit"), "camera_height_sigma_m": (None, 0.25, 0.5, 1.0),
+        "confidence": (0.0, 0.5, 0.7, 0.9)}
+
+
+def naming_grid(args) -> dict:
+    """Rule 24a: every setting of :data:`GRID` on ``args.split`` (the tuning sequences), the *auto* mode's figures of
+    each, and the choice the rule makes."""
+    import itertools
+
+    from toosicubix.web.placement import NAMING_SETTINGS
+
+    rows = []
+    for after_fit, sigma, confidence in itertools.product(*GRID.values()):
+        settings = replace(NAMING_SETTINGS, after_fit=after_fit, camera_height_sigma_m=sigma, confidence=confidence)
+        report = kitti_run(args.data, args.split, args.vehicles, args.seed, args.kitti_ground, settings,
+                           strategies=("auto",))
+        auto = report["summary"]["auto"]
+        rows.append({"settings": settings.to_json(), **{k: auto[k] for k in (
+            "right", "right_share", "median_actions", "mean_actions", "auto_named", "auto_naming_accuracy",
+            "asked")}})
+        print(json.dumps(rows[-1]), file=sys.stderr)
+    return {"benchmark": "annotate --naming-grid", "split": args.split, "vehicles": args.vehicles,
+            "seed": args.seed, "machine": machine(), "grid": {k: list(v) for k, v in GRID.items()}, "rows": rows}
+
+
+def kitti_run(data: Path, split: str, vehicles: int, seed: int, kitti_ground: bool, naming=None,
+              strategies: tuple[str, ...] = STRATEGIES) -> dict:
+    """The simulated annotators on ``vehicles`` vehicles of the KITTI tracking ``split`` (see the module), the
+    page naming with ``naming`` (None: its own settings); the report."""
+    LATENCIES.clear()
+    chosen = select_kitti_tracking(data / "kitti_tracking",
+                                   SelectionOptions(sequences=SPLITS[split], frames_per_track=1))
+    rng = np.random.default_rng(seed)
+    chosen = [chosen[i] for i in sorted(rng.choice(len(chosen), min(vehicles, len(chosen)), replace=False))]
+    options = AnnotatorOptions(noise_px=1.0, max_clicks=40, seed=seed)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -219,8 +332,9 @@ def main() -> None:
             cv2.imwrite(str(path), np.zeros((h, w), np.uint8))
             cameras[gt.image_id] = gt.camera
             images.append(path)
-        ground = KITTI_GROUND if args.kitti_ground else None
-        session = Session(images, folder / "annotations.json", cameras, load_priors(), ground=ground)
+        ground = KITTI_GROUND if kitti_ground else None
+        given = {} if naming is None else {"naming": naming}  # older code takes no naming settings (rule 24 item 5)
+        session = Session(images, folder / "annotations.json", cameras, load_priors(), ground=ground, **given)
         server = serve_in_thread(session)
         client = Client(*server.server_address[:2])
         index = {p.stem: i for i, p in enumerate(images)}
@@ -230,24 +344,26 @@ def main() -> None:
                 sim = simulate_vehicle(gt, options)
                 row = {"image": gt.image_id, "vehicle": gt.vehicle_id, "type": gt.label.type,
                        "available_parts": len(sim.parts)}
-                for strategy in STRATEGIES:
-                    row[strategy] = replay(client, index[gt.image_id], sim.parts, gt.label.type, strategy)
+                truth = (float(gt.label.rotation_y), float(sim.t_cam_vehicle[2]))
+                for strategy in strategies:
+                    row[strategy] = replay(client, index[gt.image_id], sim.parts, gt.label.type, strategy, truth)
                 rows.append(row)
         finally:
             server.shutdown()
             server.server_close()
     seconds = time.perf_counter() - t0
-    summary = summarise(rows)
+    summary = summarise(rows, strategies)
     summary["add_click_seconds"] = {"n": len(LATENCIES), "median": round(float(np.median(LATENCIES)), 3),
                                     "p90": round(float(np.percentile(LATENCIES, 90)), 3)}
     report = {"benchmark": "annotate", "vehicles": len(rows), "seconds": round(seconds, 1), "machine": machine(),
-              "selection": "KITTI tracking test sequences 0010-0020, one frame per track, seeded sample",
-              "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": args.kitti_ground,
+              "selection": (f"KITTI tracking {split} sequences {SPLITS[split][0]}-{SPLITS[split][-1]}, "
+                            "one frame per track, seeded sample"),
+              "annotator": {"noise_px": 1.0, "placement": "realistic"}, "kitti_ground": kitti_ground,
+              "stop": (f"the fit is right: yaw within {RIGHT_YAW_DEG:g} deg and depth within "
+                       f"{100 * RIGHT_DEPTH_REL:g} % of the ground truth's (rule 24)"),
+              "naming": naming.to_json() if naming is not None else naming_settings(),
               "summary": summary, "rows": rows}
-    text = _compact(report)
-    if args.out:
-        args.out.write_text(text + "\n")
-    print(json.dumps({"vehicles": len(rows), "seconds": round(seconds, 1), "summary": summary}, indent=1))
+    return report
 
 
 APOLLO_KS = (4, 6, 8)
@@ -509,36 +625,61 @@ def _compact(report: dict) -> str:
     return head[:-2] + ',\n "rows": [\n  ' + rows + "\n ]\n}"
 
 
-def summarise(rows: list[dict]) -> dict:
+def naming_settings() -> dict | None:
+    """The page's naming settings, for the report (None on code older than them)."""
+    try:
+        from toosicubix.web.placement import NAMING_SETTINGS
+    except ImportError:  # code older than them (rule 24 item 5)
+        return None
+    return NAMING_SETTINGS.to_json()
+
+
+def summarise(rows: list[dict], strategies: tuple[str, ...] = STRATEGIES) -> dict:
     out = {}
-    for strategy in STRATEGIES:
-        reached = [r[strategy] for r in rows if r[strategy]["well_determined"]]
+    for strategy in strategies:
+        reached = [r[strategy] for r in rows if r[strategy]["right"]]
         right = sum(r[strategy]["auto_right"] for r in rows)
         wrong = sum(r[strategy]["auto_wrong"] for r in rows)
         out[strategy] = {
-            "well_determined": len(reached),
+            "right": len(reached), "right_share": round(len(reached) / len(rows), 3) if rows else None,
+            "median_actions": float(np.median([r["actions"] for r in reached])) if reached else None,
+            "mean_actions": _mean([r["actions"] for r in reached]),
             "mean_clicks": _mean([r["clicks"] for r in reached]),
             "mean_naming_actions": _mean([r["naming"] for r in reached]),
-            "mean_actions": _mean([r["actions"] for r in reached]),
-            "median_actions": float(np.median([r["actions"] for r in reached])) if reached else None,
             "auto_named": right + wrong,
             "auto_naming_accuracy": round(right / (right + wrong), 3) if right + wrong else None,
+            "asked": sum(r[strategy]["asked"] for r in rows),
+            "asked_true_name_offered": sum(r[strategy]["asked_offered"] for r in rows),
+            "well_determined_when_stopped": sum(r[strategy]["well_determined"] for r in rows),
         }
-    problems = Counter(p.split(" sigma")[0].split(":")[0] for r in rows for p in r["named"]["problems"])
-    out["named_not_reached_because"] = dict(problems.most_common())
-    confusions = Counter(f"{a} -> {b}" for r in rows for s in ("auto", "guided") for a, b in r[s]["confusions"])
+    never = [r["named"] for r in rows if "named" in r and not r["named"]["right"]]
+    out["named_not_right_because"] = dict(Counter(
+        "not fitted" if r["failed"] else "yaw and depth" if r["yaw_error_deg"] > RIGHT_YAW_DEG and
+        r["depth_error_rel"] > RIGHT_DEPTH_REL else "yaw" if r["yaw_error_deg"] > RIGHT_YAW_DEG else "depth"
+        for r in never).most_common())
+    confusions = Counter(f"{a} -> {b}" for r in rows for s in ("auto", "guided") if s in r
+                         for a, b in r[s]["confusions"])
     out["auto_naming_confusions"] = dict(confusions.most_common(8))
     by_k: dict[str, list[bool]] = {}
     for r in rows:
-        for k, right in r["auto"]["outcomes"]:
-            by_k.setdefault("6-7" if k < 8 else "8-9" if k < 10 else "10-11" if k < 12 else "12+", []).append(right)
+        for k, right, _ in r["auto"]["outcomes"]:
+            by_k.setdefault("0-1" if k < 2 else "2-3" if k < 4 else "4-5" if k < 6 else "6-7" if k < 8 else "8+",
+                            []).append(right)
     out["auto_naming_accuracy_by_points_before"] = {
         k: {"n": len(v), "accuracy": round(sum(v) / len(v), 3)} for k, v in sorted(by_k.items(), key=lambda kv:
                                                                                    int(kv[0].rstrip("+").split("-")[0]))}
-    both = [r for r in rows if all(r[s]["well_determined"] for s in STRATEGIES)]
-    out["reached_by_all"] = len(both)
-    for strategy in STRATEGIES:
-        out[f"{strategy}_mean_actions_on_common"] = _mean([r[strategy]["actions"] for r in both])
+    by_p: dict[str, list[bool]] = {}
+    for r in rows:
+        for _, right, p in r["auto"]["outcomes"]:
+            if p is not None:
+                by_p.setdefault(f"{min(int(p * 10), 9) / 10:.1f}", []).append(right)
+    out["auto_naming_accuracy_by_probability"] = {
+        k: {"n": len(v), "accuracy": round(sum(v) / len(v), 3)} for k, v in sorted(by_p.items())}
+    both = [r for r in rows if all(r[s]["right"] for s in strategies)]
+    out["right_in_all"] = len(both)
+    for strategy in strategies:
+        out[f"{strategy}_median_actions_on_common"] = (float(np.median([r[strategy]["actions"] for r in both]))
+                                                       if both else None)
     return out
 
 

@@ -34,6 +34,23 @@ Per **name**:
 - attributes the linear form reads: ``shape``, ``end``, ``side``, ``axle``, ``height``, ``axis``, ``sign``;
 - ``description`` (length features): what its two clicks mark.
 
+Per **class of road user** (``classes``: Pedestrian, Cyclist, Motorcyclist, Bicycle, Motorcycle, Bus, Articulated bus
+section, Traffic cone, Barrier; the vehicles of KITTI and Cityscapes are classes of their own by default, the
+cuboid vocabulary's), :class:`RoadUserClass`:
+
+- ``prototypes``: the prototypes (size priors) that are this class; ``family``: which classes an evaluation may pair
+  (``person``, ``two-wheeler``, ``vehicle``, ``cone``, ``barrier``); ``kitti_type``: the type its KITTI label gets;
+- ``heading``: ``directed`` (it has a front: X points there), ``axial`` (its two ends are alike: the yaw is known
+  modulo 180 degrees) or ``none`` (rotationally symmetric: no yaw);
+- ``box`` and ``front``: what its box encloses and which way its X axis points, in words;
+- ``vocabulary``: ``keypoints`` (its own named keypoints, below) or ``cuboid`` (the parts of ``kinds``);
+- ``palette``: the colours (``#rrggbb``) its objects are drawn in, one after another in an image (overlays,
+  templates): each class its own hues, apart from the vehicles' palette;
+- ``keypoints``: per name (COCO's person keypoint names for a pedestrian) its typical position ``at`` and
+  ``spread``, fractions of ``(dx, dy, dz)`` as a ``keypoint`` annotation carries them, and a ``description``;
+  ``edges``: pairs of them drawn as a skeleton (templates, overlays); ``about`` and ``sources``: where the
+  positions come from.
+
 **Adding a kind** is one entry under ``kinds`` in ``vocabulary.json`` plus its linear form: a function in
 :mod:`toosicubix.parts.linear` decorated ``@linear_form("kind")`` that adds the kind's points ``X = A p`` (and
 any lines or measurements) to the model. The entry gives its names the attributes the linear form reads, their
@@ -123,6 +140,48 @@ class Click:
     label: str
 
 
+#: How a class's yaw is determined: it has a front; its two ends are alike (modulo 180 degrees); not at all.
+HEADINGS = ("directed", "axial", "none")
+
+
+@dataclass(frozen=True)
+class ClassKeypoint:
+    """A keypoint of a class's own vocabulary: where it typically is on the box and how far it strays.
+
+    Attributes
+    ----------
+    name : its name in annotation files (``keypoint`` annotations), e.g. COCO's ``left_shoulder``
+    at : (3,) typical position, fractions of ``(dx, dy, dz)``, vehicle frame (x from -0.5 rear to 0.5 front,
+        y from -0.5 right to 0.5 left, z from 0 bottom to 1 top)
+    spread : (3,) its standard deviation over objects of the class, same fractions, each > 0
+    description : what a person clicks
+    """
+
+    name: str
+    at: tuple[float, float, float]
+    spread: tuple[float, float, float]
+    description: str
+
+
+@dataclass(frozen=True)
+class RoadUserClass:
+    """A class of road users with its prototypes and click vocabulary (see the module's description)."""
+
+    name: str
+    family: str
+    heading: str
+    kitti_type: str
+    prototypes: tuple[str, ...]
+    box: str
+    front: str
+    vocabulary: str
+    palette: tuple[str, ...]
+    keypoints: dict[str, ClassKeypoint]
+    edges: tuple[tuple[str, str], ...]
+    about: str
+    sources: tuple[str, ...]
+
+
 def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
     text = (resources.files("toosicubix") / "vocabulary.json").read_text(encoding="utf-8")
     doc = json.loads(text)
@@ -147,8 +206,65 @@ def _load() -> tuple[dict[str, Kind], dict[str, frozenset[str]]]:
     return kinds, groups
 
 
+def _load_classes() -> dict[str, RoadUserClass]:
+    doc = json.loads((resources.files("toosicubix") / "vocabulary.json").read_text(encoding="utf-8"))
+    out = {}
+    for name, c in doc.get("classes", {}).items():
+        keypoints = {k: ClassKeypoint(k, tuple(float(v) for v in e["at"]), tuple(float(v) for v in e["spread"]),
+                                      str(e.get("description", k)))
+                     for k, e in c["keypoints"].items()}
+        out[name] = RoadUserClass(
+            name=name, family=c["family"], heading=c["heading"], kitti_type=c["kitti_type"],
+            prototypes=tuple(c["prototypes"]), box=c["box"], front=c["front"], vocabulary=c["vocabulary"],
+            palette=tuple(c["palette"]), keypoints=keypoints, edges=tuple((a, b) for a, b in c.get("edges", ())),
+            about=c.get("about", ""), sources=tuple(c.get("sources", ())))
+    return out
+
+
 #: Every kind by its name, in the file's order.
 KINDS, PROTOTYPE_GROUPS = _load()
+#: Every class of road user with a vocabulary or heading of its own, by name, in the file's order.
+CLASSES: dict[str, RoadUserClass] = _load_classes()
+_CLASS_OF_PROTOTYPE = {p.casefold(): c for c in CLASSES.values() for p in (c.name, *c.prototypes)}
+#: The family of the ground-truth classes that are no prototype (KITTI's and Cityscapes' type names), lower case.
+_FAMILY_OF_TYPE = {"person_sitting": "person", "person": "person", "pedestrian": "person", "cyclist": "two-wheeler",
+                   "bicycle": "two-wheeler", "motorcycle": "two-wheeler", "traffic_cone": "cone",
+                   "trafficcone": "cone", "barrier": "barrier"}
+
+
+def class_of(prototype: str | None) -> RoadUserClass | None:
+    """The class of road users a prototype (or class name, any case) belongs to; None for a vehicle prototype of
+    the cuboid vocabulary with no class entry (Car, Van, Truck, the Cityscapes cars)."""
+    return None if prototype is None else _CLASS_OF_PROTOTYPE.get(prototype.casefold())
+
+
+def family_of(*names: str | None) -> str:
+    """The family (``person``, ``two-wheeler``, ``vehicle``, ``cone``, ``barrier``) of the first of ``names`` (a
+    prototype, a class or a ground-truth type such as KITTI's ``Person_sitting``) that has one; ``vehicle``
+    otherwise. An evaluation pairs predictions and ground truth of one family only."""
+    for name in names:
+        if not name:
+            continue
+        c = class_of(name)
+        if c is not None:
+            return c.family
+        if name.casefold() in _FAMILY_OF_TYPE:
+            return _FAMILY_OF_TYPE[name.casefold()]
+    return "vehicle"
+
+
+def heading_of(prototype: str | None) -> str:
+    """How the yaw of a ``prototype`` is determined (:data:`HEADINGS`): its class's, ``directed`` for vehicles."""
+    c = class_of(prototype)
+    return "directed" if c is None else c.heading
+
+
+def class_keypoint_faces(name: str) -> tuple[bool, tuple[str, ...] | None]:
+    """``(named, faces)``: whether ``name`` is a keypoint of some class's own vocabulary, and then the faces it can
+    be seen on: None, any (a body is no box: a shoulder shows from behind, an ankle through the legs; the v = 1 flag
+    of a hidden one says the rest)."""
+    named = any(name in c.keypoints for c in CLASSES.values())
+    return named, None
 
 
 def names(kind: str) -> tuple[str, ...]:

@@ -121,7 +121,7 @@ def test_internal_error_in_one_vehicle_is_contained(tmp_path, monkeypatch):
         (lambda d: d["images"][0]["vehicles"][0].pop("parts") and d["images"][0]["vehicles"][0].pop("prototype"),
          "$.images[0].vehicles[0].prototype: missing required field"),
         (lambda d: d["images"][0]["vehicles"][2].update(prototype="Limousine"),
-         "$.images[0].vehicles[2].prototype: unknown prototype 'Limousine'; known: Bicycle, Box Wagon, Car"),
+         "$.images[0].vehicles[2].prototype: unknown prototype 'Limousine'; known: Barrier, Bicycle, Box Wagon"),
     ],
 )
 def test_bad_input_exits_2_names_file_and_path_and_writes_nothing(tmp_path, mutate, fragment):

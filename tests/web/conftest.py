@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -24,12 +25,19 @@ def make_session(scene: tuple[Path, Path], out: Path) -> Session:
     return Session([image], out, load_cameras(cameras, [image.stem]), load_priors())
 
 
-@pytest.fixture
-def served(scene: tuple[Path, Path], tmp_path: Path) -> Iterator[tuple[Client, Session]]:
-    session = make_session(scene, tmp_path / "annotations.json")
+@contextmanager
+def serving(session: Session) -> Iterator[Client]:
+    """``session`` served on an ephemeral 127.0.0.1 port for the block, and a client of it."""
     server = serve_in_thread(session)
     try:
-        yield Client(*server.server_address[:2]), session
+        yield Client(*server.server_address[:2])
     finally:
         server.shutdown()
         server.server_close()
+
+
+@pytest.fixture
+def served(scene: tuple[Path, Path], tmp_path: Path) -> Iterator[tuple[Client, Session]]:
+    session = make_session(scene, tmp_path / "annotations.json")
+    with serving(session) as client:
+        yield client, session

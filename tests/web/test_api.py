@@ -16,6 +16,7 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.errors import InputFileError
 from toosicubix.geometry import geodesic_angle
 from toosicubix.model import KITTI_GROUND
+from toosicubix.web.client import Client
 from toosicubix.web.request_fields import ApiError
 from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras
@@ -65,25 +66,82 @@ def test_clicks_refit_and_draw_the_true_cuboid(served, tmp_path):
     assert [p.name for p in images[0].vehicles[0].parts] == [s.name for s in NAMED]
 
 
-def test_unnamed_click_waits_then_is_auto_named(served):
+def test_an_unnamed_first_click_asks_and_the_prior_cuboid_names_the_next(scene, tmp_path):
+    """Issue 33 item 1: a first click, with nothing to place the vehicle, waits for a name and offers the wheels (the
+    parts that can be below the horizon of a camera above the road); once one click is named, the prior cuboid
+    names the next ones before any fit exists (here with KITTI's ground block: the synthetic camera is 1.65 m above
+    the road), each with its probability and the other names that fit there."""
+    image, cameras = scene
+    session = Session([image], tmp_path / "a.json", load_cameras(cameras, [image.stem]), load_priors(),
+                      ground=KITTI_GROUND)
+    server = serve_in_thread(session)
+    try:
+        client = Client(*server.server_address[:2])
+        vehicle = _add_vehicle(client)
+        first, second = clicks(NAMED)[:2]  # the front left and rear left wheels
+        status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": first.uv})
+        assert status == 200 and doc["auto_named"] == []
+        waiting = doc["vehicles"][0]["parts"][0]
+        assert waiting["name"] is None and doc["vehicles"][0]["unnamed"] == 1
+        offered = [c["name"] for c in waiting["choices"]]
+        assert set(offered[:4]) == {"wheel-front-left", "wheel-front-right", "wheel-rear-left", "wheel-rear-right"}
+        assert sum(c["probability"] for c in waiting["choices"][:4]) > 0.95  # the rest: a few per cent
+        status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point", "name": first.name})
+        assert status == 200 and doc["vehicles"][0]["parts"][0]["choices"] is None  # the person's name now
+        status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": second.uv})
+        (auto,) = doc["auto_named"]
+        assert doc["vehicles"][0]["fit"]["status"] == "failed"  # no fit yet: two clicks
+        assert (auto["name"], auto["how"]) == (second.name, "prior") and auto["probability"] > 0.5
+        assert auto["runner_up"] != second.name
+        part = doc["vehicles"][0]["parts"][1]
+        assert part["auto"]["name"] == second.name and second.name not in [c["name"] for c in part["choices"]]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_without_a_ground_block_the_page_asks_when_unsure_offering_the_true_name_first(served):
+    """The same second wheel without a ground block (the camera's height only assumed, 1.5 +- 1 m): less than half
+    the probability, so the page asks; the true name is the first it offers."""
     client, _ = served
     vehicle = _add_vehicle(client)
-    first = clicks(UNNAMED)[0]
-    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": first.uv})
+    first, second = clicks(NAMED)[:2]
+    client.edit({"op": "add_click", "vehicle": vehicle, "kind": "point", "name": first.name, "uv": first.uv})
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": second.uv})
     assert status == 200 and doc["auto_named"] == []
-    assert doc["vehicles"][0]["unnamed"] == 1  # no cuboid yet: the click waits for a name
+    part = doc["vehicles"][0]["parts"][1]
+    assert part["name"] is None and part["choices"][0]["name"] == second.name
+    assert part["choices"][0]["probability"] < 0.5
+
+
+def test_unnamed_clicks_are_named_as_they_come(served):
+    client, _ = served
+    vehicle = _add_vehicle(client)
     doc = _click_named(client, vehicle)
-    assert [a["name"] for a in doc["auto_named"]] == [first.name]
-    # The later unnamed clicks are named as they come, each with a runner-up.
-    for c in clicks(UNNAMED)[1:]:
+    for c in clicks(UNNAMED):
         status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": c.uv})
         assert status == 200
         (auto,) = doc["auto_named"]
-        assert auto["name"] == c.name and auto["distance_px"] < 10
-        assert auto["runner_up"] != c.name
+        assert (auto["name"], auto["how"]) == (c.name, "fit") and auto["runner_up"] != c.name
     parts = doc["vehicles"][0]["parts"]
     assert all(p["name"] is not None for p in parts)
     assert doc["vehicles"][0]["fit"]["well_determined"]
+
+
+def test_any_click_can_be_renamed(served, tmp_path):
+    """A click named by the person is renamed in place (its place kept), in the file too; a rename to a name another
+    click has is refused, naming it."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    _click_named(client, vehicle)
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point",
+                               "name": "wheel-front-right"})
+    assert status == 200
+    renamed = load_images(tmp_path / "annotations.json")[0].vehicles[0].parts[0]
+    assert renamed.name == "wheel-front-right" and renamed.uv.tolist() == clicks(NAMED)[0].uv
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point",
+                               "name": "wheel-rear-left"})
+    assert status == 400 and "has a point 'wheel-rear-left' already" in doc["error"]
 
 
 def test_auto_name_changed_to_runner_up(served):
@@ -377,3 +435,54 @@ def test_edits_are_checked_with_the_schemas_own_field_bounds(scene, tmp_path):
             session.edit(0, {"revision": revision, **edit})
         assert refused.value.status == 400
     assert session.revision == revision  # nothing changed
+
+
+def _mirrored_clicks() -> list:
+    """The synthetic vehicle's clicks named with its left and right swapped (the image's left taken for its own):
+    ``-left`` and ``-right`` exchanged, a pair's two clicks in the other order."""
+    out = []
+    for c in clicks([*NAMED, *UNNAMED]):
+        if c.kind == "symmetry":
+            out.append(type(c)(c.kind, c.name, c.uv[::-1]))
+        else:
+            other = c.name.replace("left", "@").replace("right", "left").replace("@", "right")
+            out.append(type(c)(c.kind, other, c.uv))
+    return out
+
+
+def test_swapped_sides_show_the_likely_cause_and_s_swaps_them_back(served, tmp_path):
+    """Issue 33 item 2: clicks named with left and right swapped give a fit no person could have clicked; the view
+    says so and that left and right look swapped; swap_sides renames them (pairs' clicks exchanged) in one edit,
+    after which the fit is the true one; undo takes the swap back in one step."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    for c in _mirrored_clicks():
+        status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "kind": c.kind, "name": c.name, "uv": c.uv})
+        assert status == 200, doc
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": [[20.0, 20.0]]})  # an unnamed click
+    assert status == 200, doc
+    fit = doc["vehicles"][0]["fit"]
+    assert fit["status"] == "ok" and fit["implausible"] is not None and fit["likely_cause"] == "swapped"
+    assert any(w.startswith("left and right look swapped") for w in fit["warnings"])
+    status, doc = client.edit({"op": "swap_sides", "vehicle": vehicle})
+    sided = [c for c in _mirrored_clicks() if c.kind == "symmetry" or "left" in c.name or "right" in c.name]
+    assert status == 200 and doc["swapped"] == len(sided) == 7  # all but the front badge
+    v = doc["vehicles"][0]
+    assert v["fit"]["implausible"] is None and v["fit"]["likely_cause"] is None
+    # Exact clicks on the modelled parts: the rotation comes back within a degree (the test above's bound).
+    assert np.rad2deg(geodesic_angle(np.array(v["fit"]["R_cam_vehicle"]), R_CAM_VEHICLE)) < 1.0
+    truth = clicks([*NAMED, *UNNAMED])
+    assert [(p["name"], p["uv"]) for p in v["parts"][:-1]] == [(c.name, c.uv) for c in truth]
+    assert v["parts"][-1]["name"] is None  # unnamed clicks stay as they are
+    saved = load_images(tmp_path / "annotations.json")[0].vehicles[0].parts
+    assert [p.name for p in saved] == [c.name for c in truth]
+    status, doc = client.edit({"op": "undo"})
+    assert [p["name"] for p in doc["vehicles"][0]["parts"][:-1]] == [c.name for c in _mirrored_clicks()]
+    assert doc["vehicles"][0]["fit"]["likely_cause"] == "swapped"
+
+
+def test_swap_needs_named_clicks(served):
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    status, doc = client.edit({"op": "swap_sides", "vehicle": vehicle})
+    assert status == 400 and doc["error"] == f"vehicle {vehicle} has no named click to swap"

@@ -87,7 +87,7 @@ def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
             page.mouse.click(*_screen(page, c.uv[0]))
             revision += 1
             _wait_revision(page, revision)
-            assert f"named {c.name}" in page.locator("#message").inner_text()
+            assert f"the page named it {c.name}, from the fit" in page.locator("#message").inner_text()
         page.wait_for_timeout(200)
         page.screenshot(path=str(tmp_path / "annotate.png"))
         if os.environ.get("TOOSICUBIX_SCREENSHOT"):  # to look at: where to copy the screenshot
@@ -161,14 +161,14 @@ def test_click_keypoints_of_a_mapping_in_the_browser(page, scene, tmp_path: Path
         for name in KEYPOINTS:
             page.fill("#keypoint-filter", name.replace("-", " "))
             page.press("#keypoint-filter", "Enter")
-            assert f"next click: keypoint {name}" in page.locator("#message").inner_text()
+            assert f"next click: {name} (you chose the name first)" in page.locator("#message").inner_text()
             page.mouse.click(*_screen(page, _uv(name)[0]))
             revision += 1 + (revision == 0)
             _wait_revision(page, revision)
         page.keyboard.press("Escape")
         page.mouse.click(*_screen(page, _uv("sill-left")[0]))
         _wait_revision(page, revision + 1)
-        assert "named sill-left" in page.locator("#message").inner_text()
+        assert "the page named it sill-left" in page.locator("#message").inner_text()
         runner_up = page.evaluate("state.lastAuto.runner_up")
         page.keyboard.press("x")
         _wait_revision(page, revision + 2)
@@ -228,6 +228,159 @@ def test_confirm_and_box_predictions_of_a_sequence_in_the_browser(page, tmp_path
         assert boxed.track == "0003-1" and boxed.parts == () and boxed.box2d is not None
         assert page.evaluate("state.view.vehicles[0].fit.pose_from") == "box"
         assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": "1", "style": "solid"}]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+# -- the newcomer (issue 33, item 6) ------------------------------------------------------------------------------
+
+#: The part's key on the page (app.js HOTKEYS), for naming a click the page asks about or named wrong.
+NEWCOMER_KEYS = {"wheel-front-left": "1", "wheel-front-right": "2", "wheel-rear-left": "3", "wheel-rear-right": "4",
+                 "edge-front-left": "5", "edge-front-right": "6", "edge-rear-left": "7", "edge-rear-right": "8",
+                 "front-center": "c", "rear-center": "v", "top-center": "t"}
+#: Where a newcomer clicks on each kind of part: edges at 60 % of the height, badges at 40 %, the roof's centre a
+#: little behind the middle (as the vocabulary's typical places); wheels where they touch the road.
+NEWCOMER_AUX = {"edge": {"Z": 0.6}, "end-center": {"Z": 0.4}, "top-center": {"X": -0.1}}
+#: The line colours app.js draws a selected vehicle's cuboid in (RGB): its sides (a track-less vehicle's colour,
+#: trackColour(null)) and its front face.
+SIDE_RGB, FRONT_RGB = (0x38, 0xD9, 0xFF), (0xFF, 0x50, 0x50)
+
+
+def _newcomer_scene(tmp_path: Path):
+    """A KITTI image with its calib file and a car's ground truth (object benchmark image 000008, the car 7.9 m away
+    facing the camera: its left is on the image's right), when the shared data is there; else the synthetic car's
+    rendered image. Returns (image, cameras file, R_cam_vehicle, t_cam_vehicle, dimensions, what it is)."""
+    from tests.conftest import shared_data_dir
+    from tests.web.synthetic import DIMENSIONS, T_CAM_VEHICLE, write_scene
+    from toosicubix.formats.kitti import read_label_file
+    from toosicubix.geometry import R_cam_vehicle_from_ypr
+
+    kitti = shared_data_dir() / "kitti"
+    if (kitti / "image_2" / "000008.png").is_file():
+        calib = kitti / "calib" / "000008.txt"
+        camera = load_cameras(calib, ["000008"])["000008"]
+        car = read_label_file(kitti / "label_2" / "000008.txt")[1]
+        return (kitti / "image_2" / "000008.png", calib, R_cam_vehicle_from_ypr(car.rotation_y),
+                car.t_cam_vehicle(camera.t_cam_rect), np.asarray(car.dimensions, dtype=float), "KITTI 000008")
+    image, cameras = write_scene(tmp_path)
+    return image, cameras, R_CAM_VEHICLE, T_CAM_VEHICLE, DIMENSIONS, "synthetic"
+
+
+def _newcomer_clicks(camera, R, t, d) -> list:
+    """The point parts on the faces turned to the camera, in the order a newcomer clicks them (wheels, then the
+    front or rear badge, the edges, the roof), at their typical places on the true cuboid."""
+    from toosicubix import vocabulary
+    from toosicubix.parts.synthesis import PartSpec, render_parts
+
+    seen = vocabulary.faces_seen_from(-R.T @ t, d)
+    names = [n for n in NEWCOMER_KEYS if any(seen[f] for f in vocabulary.entry("point", n).faces)]
+    specs = []
+    for name in names:
+        aux = NEWCOMER_AUX.get(vocabulary.entry("point", name).get("shape"), {})
+        specs.append(PartSpec("point", name, {k: v * d[2 if k == "Z" else 0] for k, v in aux.items()}))
+    return render_parts(specs, R, t, d, camera, (0.3 * d[0], -0.3 * d[0]))
+
+
+def _cuboid_pixels(page, shot: Path, corners_uv: list, front_face: list) -> float:
+    """The share of points along the cuboid's 12 edges (20 to 80 % of each, inside the canvas) at which the
+    screenshot ``shot`` has the edge's colour within a 5 x 5 pixel window (each channel within 40 of it: the lines
+    are anti-aliased and drawn over the photo)."""
+    import cv2
+
+    image = cv2.imread(str(shot))[..., ::-1].astype(int)  # RGB
+    box = page.locator("#canvas").bounding_box()
+    edges = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+    hits = total = 0
+    for i, j in edges:
+        colour = np.array(FRONT_RGB if i in front_face and j in front_face else SIDE_RGB)
+        for s in np.linspace(0.2, 0.8, 7):
+            x, y = _screen(page, (1 - s) * np.asarray(corners_uv[i]) + s * np.asarray(corners_uv[j]))
+            inside = (box["x"] + 3 <= x < box["x"] + box["width"] - 3
+                      and box["y"] + 3 <= y < box["y"] + box["height"] - 3)
+            if not inside:
+                continue
+            window = image[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3]
+            total += 1
+            hits += bool(np.any(np.all(np.abs(window - colour) <= 40, axis=-1)))
+    assert total >= 40, f"only {total} edge points inside the canvas"
+    return hits / total
+
+
+def test_a_newcomer_clicks_a_car_sees_its_cuboid_and_the_swapped_sides_banner(page, tmp_path: Path):
+    """Issue 33 item 6. A newcomer opens the page on a KITTI image and clicks the car's parts without naming them
+    first (the README: "about ten clicks on vehicle parts"): the page asks what the first click is (nothing places
+    the car yet), the newcomer presses its key on the parts diagram, and the page names the later clicks itself (a
+    wrong name is renamed: r, then the key). The cuboid is drawn, within 5 degrees and 10 % of the depth of KITTI's
+    ground truth (the benchmark's "right"), and its edges are in the screenshot's pixels. Pressing s swaps left and
+    right: the banner names the likely cause and the fix; u takes the swap back and the banner goes."""
+    image, cameras, R, t, d, what = _newcomer_scene(tmp_path)
+    camera = load_cameras(cameras, [image.stem])[image.stem]
+    out = tmp_path / "annotations.json"
+    session = Session([image], out, {image.stem: camera}, load_priors())
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.locator("#next-click").inner_text().startswith("Next click: click first, the page names it")
+        assert "left = the vehicle's left, as its driver sees it" in page.locator("aside").inner_text()
+        page.screenshot(path=str(tmp_path / "before.png"))
+        parts = _newcomer_clicks(camera, R, t, d)
+        revision, named_by_page, renamed = 0, 0, []
+        for k, part in enumerate(parts):
+            page.mouse.click(*_screen(page, part.uv[0]))
+            revision += 1 + (revision == 0)  # the first click also adds the vehicle
+            _wait_revision(page, revision)
+            given = page.evaluate(f"state.view.vehicles[0].parts[{k}]")
+            if k == 0:  # nothing places the car yet: the page asks, offering the wheels
+                assert given["name"] is None
+                assert page.locator("#message").inner_text().startswith("which part is this?")
+                assert page.locator("#next-click").inner_text().startswith(f"Naming click {k}")
+                offered = page.locator("#choices button").all_inner_texts()
+                assert any(o.startswith(part.name) for o in offered), offered
+            elif given["name"] is not None:
+                named_by_page += 1
+                if given["name"] == part.name:
+                    continue
+                renamed.append((part.name, given["name"]))
+                page.keyboard.press("r")
+            page.keyboard.press(NEWCOMER_KEYS[part.name])
+            revision += 1
+            _wait_revision(page, revision)
+        names = [p["name"] for p in page.evaluate("state.view.vehicles[0].parts")]
+        assert names == [p.name for p in parts]
+        # The newcomer named the first click and at most two more (asked, or named wrong): the page named the others
+        # itself, right (of the 7 clicks after the first: on KITTI 6 named right and 1 asked; on the synthetic car 7
+        # named, 1 of them wrong).
+        asked = len(parts) - named_by_page
+        assert asked + len(renamed) <= 3 and len(renamed) <= 1, (asked, renamed)
+        fit = page.evaluate("state.view.vehicles[0].fit")
+        assert fit["status"] == "ok" and fit["implausible"] is None
+        yaw_error = abs((fit["yaw_pitch_roll_deg"][0] - np.rad2deg(np.arctan2(-R[2, 0], R[0, 0])) + 180) % 360 - 180)
+        assert yaw_error < 5.0 and abs(fit["t_cam_vehicle"][2] / t[2] - 1) < 0.10, (what, fit)
+        page.wait_for_timeout(200)
+        page.screenshot(path=str(tmp_path / "newcomer.png"))
+        if os.environ.get("TOOSICUBIX_SCREENSHOT"):  # to look at: where to copy the screenshot
+            shutil.copy(tmp_path / "newcomer.png", os.environ["TOOSICUBIX_SCREENSHOT"])
+        drawn = _cuboid_pixels(page, tmp_path / "newcomer.png", fit["corners_uv"], fit["front_face"])
+        before = _cuboid_pixels(page, tmp_path / "before.png", fit["corners_uv"], fit["front_face"])
+        print(f"{what}: edge colour at {drawn:.0%} of the cuboid's edge points, {before:.0%} before; asked {asked}, "
+              f"renamed {renamed}")
+        # Labels and the targets' dashed lines cover up to a quarter of the edge points (81 to 94 % found on the KITTI
+        # and the synthetic image); the photo alone has the colours at none of them.
+        assert drawn >= 0.7 and before <= 0.1, (drawn, before)
+        # s: left and right swapped, the banner says so and how to fix it; u: back.
+        page.keyboard.press("s")
+        _wait_revision(page, revision + 1)
+        assert page.locator("#banner").is_visible()
+        text = page.locator("#banner").inner_text()
+        assert text.startswith("Left and right look swapped.") and "Press s to swap them" in text
+        assert "implausible" in page.locator("#fit").inner_text()
+        page.screenshot(path=str(tmp_path / "swapped.png"))
+        page.keyboard.press("u")
+        _wait_revision(page, revision + 2)
+        assert not page.locator("#banner").is_visible()
+        assert [p.name for p in load_images(out)[0].vehicles[0].parts] == [p.name for p in parts]
     finally:
         server.shutdown()
         server.server_close()

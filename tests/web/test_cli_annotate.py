@@ -10,6 +10,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
+import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from tests.conftest import REPO
@@ -26,7 +29,7 @@ def _run(*args: str):
 def test_missing_image(tmp_path):
     result = _run(str(tmp_path / "nothing.png"), "--cameras", str(tmp_path / "c.json"))
     assert result.exit_code == 2
-    assert "no such image:" in result.output and "nothing.png" in result.output
+    assert f"no such image or folder: {tmp_path / 'nothing.png'}" in result.output
 
 
 def test_bad_cameras_file_names_the_json_path(scene, tmp_path):
@@ -265,3 +268,71 @@ def test_mapping_gives_the_page_its_keypoints(monkeypatch, scene, tmp_path):
     assert "the mapping apollocar3d-66-paper has no keypoint parts" in result.output
     result = _run(*args, "--mapping", str(tmp_path / "none.json"))
     assert result.exit_code == 2 and "none.json" in result.output and "no such mapping file" in result.output
+
+
+def _write_image(path: Path) -> None:
+    cv2.imwrite(str(path), np.zeros((375, 1240, 3), np.uint8))
+
+
+def test_a_folder_gives_its_images_sorted_and_a_calib_folder_their_cameras(monkeypatch, tmp_path):
+    """Issue 33 item 5: ``annotate imgs/`` takes the folder's images (png, jpg, jpeg, bmp, webp in any case, not its
+    subfolders, not other files) sorted by file name; ``--cameras calib/`` gives each its KITTI P2 by file stem."""
+    from tests.formats.test_cameras import P2, _kitti_calib
+
+    images, calib = tmp_path / "imgs", tmp_path / "calib"
+    images.mkdir()
+    calib.mkdir()
+    (images / "sub").mkdir()
+    for name in ("000010.jpeg", "000002.png", "000001.JPG", "sub/000003.png"):
+        _write_image(images / name)
+    (images / "readme.txt").write_text("not an image")
+    for k, stem in enumerate(("000001", "000002", "000010")):
+        P = P2.copy()
+        P[0, 0] = P[1, 1] = 700.0 + k
+        (calib / f"{stem}.txt").write_text(_kitti_calib(P))
+    session, _ = _served_session(monkeypatch, str(images), "--cameras", str(calib), "-o", str(tmp_path / "a.json"))
+    assert [im.path.name for im in session.images] == ["000001.JPG", "000002.png", "000010.jpeg"]
+    assert [im.camera.K[0, 0] for im in session.images] == [700.0, 701.0, 702.0]
+    # P2's fourth column: the camera 2 frame is 6 cm off KITTI's rectified camera 0, as fit reads it.
+    assert abs(session.images[0].camera.t_cam_rect[0] - 721.5 * 0.06 / 700.0) < 1e-12
+
+
+def test_a_calib_folder_without_an_images_file_names_it(tmp_path):
+    from tests.formats.test_cameras import _kitti_calib
+
+    _write_image(tmp_path / "000001.png")
+    (tmp_path / "calib").mkdir()
+    (tmp_path / "calib" / "000002.txt").write_text(_kitti_calib())
+    result = _run(str(tmp_path / "000001.png"), "--cameras", str(tmp_path / "calib"), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2
+    assert (f"no camera for image '000001': no KITTI calib file {tmp_path / 'calib' / '000001.txt'}"
+            in result.output)
+
+
+@pytest.mark.parametrize("form", ["kitti", "ros"])
+def test_one_calib_file_or_camera_yaml_gives_every_image_its_camera(monkeypatch, tmp_path, form):
+    from tests.formats.test_cameras import ROS, _kitti_calib
+
+    for name in ("a.png", "b.png"):
+        _write_image(tmp_path / name)
+    cameras = tmp_path / ("calib.txt" if form == "kitti" else "camera.yaml")
+    cameras.write_text(_kitti_calib() if form == "kitti" else ROS)
+    session, _ = _served_session(monkeypatch, str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--cameras",
+                                 str(cameras), "-o", str(tmp_path / "out.json"))
+    for image in session.images:
+        assert image.camera.K[0, 0] == 721.5 and image.camera.K[1, 2] == 172.9
+        assert (image.camera.distortion is None) == (form == "kitti")
+
+
+def test_a_folder_without_images_and_a_bad_calib_file_are_refused(tmp_path):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "notes.txt").write_text("x")
+    result = _run(str(tmp_path / "empty"), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2
+    assert (f"{tmp_path / 'empty'}: a folder with no images in it (expected .png, .jpg, .jpeg, .bmp, .webp files; "
+            "its subfolders are not searched)") in result.output
+    _write_image(tmp_path / "a.png")
+    (tmp_path / "calib.txt").write_text("P2: 721.5 0 609.6\n")
+    result = _run(str(tmp_path / "a.png"), "--cameras", str(tmp_path / "calib.txt"), "-o", str(tmp_path / "a.json"))
+    assert result.exit_code == 2
+    assert f"{tmp_path / 'calib.txt'}: line 1: P2: expected 12 numbers" in result.output

@@ -189,3 +189,22 @@ def test_random_requests_get_only_clear_refusals(scene, tmp_path):
     from toosicubix.annotations.convert import load_images
 
     assert sum(len(v.parts) for v in load_images(tmp_path / "a.json")[0].vehicles) > 0  # fit reads the file
+
+
+def test_swapping_sides_renames_a_keypoint_to_the_one_at_its_mirror_place(scene, tmp_path):
+    """s on a mapping's keypoints: each becomes the keypoint whose typical place is its own mirrored across the
+    vehicle (lamp-front-left <-> lamp-front-right, mirror-left -> mirror-right), with that keypoint's position; one
+    on the centre line (plate-front) and one with no keypoint at its mirror place (sill-left) stay, the latter
+    said."""
+    out = tmp_path / "annotations.json"
+    session = _session(scene, out)
+    _edit(session, op="add_vehicle")
+    for name in ("lamp-front-left", "plate-front", "mirror-left", "sill-left"):
+        _edit(session, op="add_click", vehicle="1", kind="keypoint", name=name, uv=_uv(name))
+    doc = _edit(session, op="swap_sides", vehicle="1")
+    assert doc["swapped"] == 2 and doc["unpaired"] == ["sill-left"]
+    assert [(p["kind"], p["name"]) for p in doc["vehicles"][0]["parts"]] == [
+        ("keypoint", "lamp-front-right"), ("keypoint", "plate-front"), ("keypoint", "mirror-right"),
+        ("keypoint", "sill-left")]
+    saved = _file_parts(out)
+    assert saved[0]["at"] == list(AT["lamp-front-right"]) and saved[2]["at"] == list(AT["mirror-right"])

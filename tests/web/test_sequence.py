@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.web.conftest import serving
 from tests.web.synthetic import CAMERA, DIMENSIONS, FRAMES, NAMED, UNNAMED, clicks, sequence_pose, write_sequence
 from toosicubix.annotations.convert import load_images
 from toosicubix.annotations.priors_file import load_priors
@@ -19,7 +20,6 @@ from toosicubix.geometry import geodesic_angle
 from toosicubix.web.client import Client
 from toosicubix.web.request_fields import ApiError
 from toosicubix.web.sequence import frame_numbers, frames_to_fit, new_track_name, track_sort_key
-from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras
 
 SEQUENCE = "0003"
@@ -39,12 +39,8 @@ def _session(frames: tuple[list[Path], Path], out: Path, sequence: str | None = 
 @pytest.fixture
 def served(frames, tmp_path: Path) -> Iterator[tuple[Client, Session]]:
     session = _session(frames, tmp_path / "annotations.json")
-    server = serve_in_thread(session)
-    try:
-        yield Client(*server.server_address[:2]), session
-    finally:
-        server.shutdown()
-        server.server_close()
+    with serving(session) as client:
+        yield client, session
 
 
 def _ok(client: Client, change: dict, image: int) -> dict:

@@ -22,11 +22,14 @@ from toosicubix.annotations.schema import PositiveRow3, _Model, _validate
 from toosicubix.errors import InputFileError
 from toosicubix.jsonfile import read_json
 from toosicubix.parts.linear import TypicalKeypoint
+from toosicubix.parts.road_users import ROAD_USER_MAPPINGS
+from toosicubix.parts.road_users import mapping_document as road_user_mapping
 
 Row3 = tuple[float, float, float]
 
-#: The mappings shipped with the package, by name.
-BUNDLED_MAPPINGS = ("apollocar3d-66", "apollocar3d-66-paper", "toosicubix")
+#: The mappings shipped with the package, by name (``coco-person`` and ``two-wheeler`` are built from the
+#: vocabulary's road-user classes, :func:`toosicubix.parts.road_users.mapping_document`).
+BUNDLED_MAPPINGS = ("apollocar3d-66", "apollocar3d-66-paper", "toosicubix", "coco-person", "two-wheeler")
 
 
 class _MappingPart(_Model):
@@ -205,6 +208,9 @@ def load_mapping(name_or_path: str | Path) -> tuple[MappingFile, str]:
 
         source = "bundled mapping toosicubix"
         return _validate(MappingFile, mapping_document(), source), source
+    if str(name_or_path) in ROAD_USER_MAPPINGS:
+        source = f"bundled mapping {name_or_path}"
+        return _validate(MappingFile, road_user_mapping(str(name_or_path)), source), source
     if str(name_or_path) in BUNDLED_MAPPINGS:
         source = f"bundled mapping {name_or_path}"
         text = resources.files("toosicubix.parts").joinpath("mappings", f"{name_or_path}.json").read_text("utf-8")

@@ -19,13 +19,19 @@ from toosicubix.cli.options import (
     road_normal_option,
 )
 
+#: The image files a folder given to annotate contributes (case-insensitive): what OpenCV reads and a browser shows.
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".webp")
+
 
 @click.command("annotate")
-@click.argument("images", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Cameras file: one camera block ({\"K\": ...} or {\"P\": ...}, as in the annotation file) for "
-                   "every image, or {\"<image id or file name>\": block}. Needed for images the output file does "
-                   "not have yet.")
+@click.argument("images", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
+              help="Each image's camera, needed for images the output file does not have yet: a KITTI calib file "
+                   "(its P2, for every image), a folder of KITTI calib files (<image file stem>.txt, e.g. "
+                   "calib/000123.txt for image_2/000123.png), an OpenCV or ROS camera YAML (for every image), the "
+                   "importers' cameras file ({\"cameras\": [{\"match\": GLOB on the file name, \"K\": ...}]}, first "
+                   "match wins), one camera block ({\"K\": ...} or {\"P\": ...}, as in the annotation file) for "
+                   "every image, or {\"<image id or file name>\": block}.")
 @out_option("Annotation file (v1): read and continued when it exists, written atomically after every change.",
             type=click.Path(dir_okay=False, path_type=Path), default=Path("annotations.json"), show_default=True)
 @click.option("--prototype", default="Car", show_default=True, help="Prototype (size prior) of a new vehicle.")
@@ -61,6 +67,10 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
                      frame_rate: float, host: str, port: int) -> None:
     """Serve a local page to click vehicle parts on IMAGES and watch each cuboid form.
 
+    IMAGES are image files or folders: a folder gives its .png, .jpg, .jpeg, .bmp and .webp files (any letter case;
+    not its subfolders), sorted by file name; the page shows the images in the order given. Each image's id is its
+    file stem, and --cameras finds its camera by that stem or its file name (see --cameras).
+
     --kitti-ground, --road-normal x,y,z and --camera-height give the images the file does not have yet a ground
     block (its own blocks are kept); it is written to the file, so `fit` uses it too.
 
@@ -69,8 +79,11 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     each camera's road normal are first estimated from them, as `fit` estimates them (the road normal only for
     images without a ground block of their own, and never written to the file); they are estimated again, in
     the background, each time the file's vehicles double from 30 on, up to the 400 that `fit`'s pilot takes
-    (each fit on the page says what it was made for). A click left unnamed takes the
-    name of the nearest predicted part once the named clicks fix a cuboid. The file is written after every
+    (each fit on the page says what it was made for). Click first or choose a name first:
+    a click left unnamed is named from where it is (before a fit exists, by the prototype's prior cuboid placed by
+    the box and the named clicks), or the page asks, offering the few names that fit there; s swaps a vehicle's
+    left and right (the vehicle's own, as its driver sees them), and a banner says when the clicks fit no cuboid a
+    person could have clicked, with the likely cause. The file is written after every
     change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
     after a reload). With --mapping, the page offers that mapping's keypoints too (a filter box above them),
     names unnamed clicks among them (the most probable visible one, given its spread and how often people click
@@ -84,6 +97,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     \b
     Example:
       toosicubix annotate image_2/*.png --cameras cameras.json -o annotations.json
+      toosicubix annotate kitti/training/image_2 --cameras kitti/training/calib --kitti-ground
       toosicubix annotate frames/*.png --sequence 0003 --cameras cameras.json -o annotations.json
       toosicubix annotate frames/*.jpg --cameras cameras.json --road-normal 0.04,-0.99,0.15
       toosicubix annotate frames/*.jpg --cameras cameras.json --mapping apollocar3d-66
@@ -101,9 +115,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     road, normal = road_normal_choice(road_normal)
     estimate_road = road != "none"
     ground = ground_overrides(kitti_ground, normal, camera_height=camera_height)
-    missing = [str(p) for p in images if not p.is_file()]
-    if missing:
-        raise BadInput(f"no such image: {', '.join(missing)}")
+    images = expand_images(images)
     if not out.parent.is_dir():
         raise BadInput(f"{out}: the folder {out.parent} does not exist")
     try:
@@ -139,6 +151,25 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
             click.echo("stopped", err=True)
         finally:
             server.server_close()
+
+
+def expand_images(given: tuple[Path, ...]) -> tuple[Path, ...]:
+    """The image files of the command line: each file as given, each folder's :data:`IMAGE_EXTENSIONS` files sorted by
+    name. Exits 2 (:class:`BadInput`) naming what is missing, or a folder without images."""
+    out: list[Path] = []
+    for path in given:
+        if path.is_dir():
+            found = sorted((p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS),
+                           key=lambda p: p.name)
+            if not found:
+                raise BadInput(f"{path}: a folder with no images in it (expected {', '.join(IMAGE_EXTENSIONS)} files; "
+                               "its subfolders are not searched)")
+            out.extend(found)
+        elif path.is_file():
+            out.append(path)
+        else:
+            raise BadInput(f"no such image or folder: {path}")
+    return tuple(out)
 
 
 def _sequence_line(session: Any, sequence: str) -> str:

@@ -172,8 +172,9 @@ def label_studio_command(export_json: Path, cameras_path: Path | None, out_path:
 @click.command("coco")
 @click.argument("keypoints", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--mapping", "mapping_name", required=True,
-              help="A bundled mapping (apollocar3d-66, apollocar3d-66-paper, toosicubix) or a mapping file (JSON, "
-                   "schema in schemas/mapping.schema.json): which keypoints make which parts.")
+              help="A bundled mapping (apollocar3d-66, apollocar3d-66-paper, toosicubix, coco-person, two-wheeler) "
+                   "or a mapping file (JSON, schema in schemas/mapping.schema.json): which keypoints make which "
+                   "parts.")
 @click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), default=None,
               help='Cameras: a JSON file {"cameras": [{"match": GLOB on file_name, "K": 3x3 or 9 numbers, '
                    '"distortion": [...]}]} (first match wins), a KITTI calib file or a folder of them (<image '
@@ -189,8 +190,13 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     """Turn a COCO keypoint file into an annotation file v1.
 
     Image id = the file name's stem, vehicle id = the COCO annotation id, box2d from bbox. Keypoints with
-    v = 0 are skipped, v = 1 (labelled, not visible) kept. The summary on stderr counts every labelled
-    keypoint the mapping left unused, per name.
+    v = 0 are skipped, v = 1 (labelled, not visible) kept; crowd annotations (iscrowd 1) are skipped. The
+    summary on stderr counts every labelled keypoint the mapping left unused, per name, and the crowds.
+
+    Road users: --mapping coco-person makes every person of a COCO person-keypoint file a Pedestrian (its 17
+    keypoints by their COCO names; a person without a labelled ankle is fitted all the same, its feet placed by
+    the height prior, and the summary counts them); --mapping two-wheeler makes cyclists, motorcyclists,
+    bicycles and motorcycles (see docs/road-users.md).
 
     Videos (TAO, BDD100K): an image with video_id (named by videos[]), video_name or video, and frame_index
     or frame_id is a frame of a sequence (image id <sequence>_<frame:06d>); an annotation's track_id or
@@ -205,10 +211,11 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     \b
     Example:
       toosicubix import coco apollo_val.json --mapping apollocar3d-66 --cameras cameras.json -o ann.json
+      toosicubix import coco person_keypoints.json --mapping coco-person --cameras cameras.json -o ann.json
     """
     from toosicubix.annotations.mapping import load_mapping
     from toosicubix.formats.cameras import load_cameras
-    from toosicubix.formats.coco import coco_to_annotations
+    from toosicubix.formats.coco import CocoImport
 
     try:
         mapping, _ = load_mapping(mapping_name)
@@ -217,10 +224,16 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
             raise click.BadParameter(f"the mapping {mapping.name!r} has no parts with option "
                                      f"{', '.join(sorted(unknown))}", param_hint="--option")
         cameras = load_cameras(cameras_path) if cameras_path is not None else None
-        document, summary = coco_to_annotations(keypoints, mapping, cameras, options)
+        imported = CocoImport(keypoints, mapping, cameras, options)
+        imported.write(out_path)  # image by image, atomically: a problem found on the way leaves nothing written
     except InputError as exc:
         raise BadInput(str(exc)) from None
-    _write(document, summary, out_path, quiet)
+    except OSError as exc:
+        raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
+    if not quiet:
+        for line in imported.summary.lines():
+            click.echo(line, err=True)
+        click.echo(f"wrote {out_path}", err=True)
 
 
 #: The commands of the ``import`` group this module contributes.

@@ -27,12 +27,16 @@ def template_command(tool: str, prototypes: str, priors_path: Path | None, out_p
                   keypoints (nest each under its box in the Regions panel)
     coco          COCO 'categories' (one per prototype) with the keypoint names and a skeleton
 
-    Every template names one keypoint per click (see docs/tools.md for the keypoint vocabulary).
+    Every template names one keypoint per click (see docs/tools.md for the keypoint vocabulary). Road users
+    with a vocabulary of their own (Pedestrian: COCO's 17 keypoints; Cyclist, Motorcyclist, Bicycle,
+    Motorcycle; Traffic cone; Barrier) get it instead: a CVAT skeleton per class, their keypoint labels in
+    Label Studio, their keypoint lists in COCO (docs/road-users.md).
 
     \b
     Example:
       toosicubix template cvat --prototypes Car,Van -o labels.json
       toosicubix template label-studio > config.xml
+      toosicubix template cvat --prototypes Car,Pedestrian,Cyclist -o labels.json
     """
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.errors import InputFileError

@@ -20,10 +20,11 @@ import numpy as np
 
 from toosicubix.errors import EvaluationInputError
 from toosicubix.evaluation.matching import box_iou_matrix, match_boxes
-from toosicubix.evaluation.metrics import object_metrics, twin_rotation_error_deg
+from toosicubix.evaluation.metrics import heading_error_deg, object_metrics, twin_rotation_error_deg
 from toosicubix.evaluation.predictions import Predictions, PredImage, PredObject, load_predictions
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
 from toosicubix.formats.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
+from toosicubix.vocabulary import family_of, heading_of
 
 #: results.json's and the calib's camera offsets may differ by this much (metres) without a warning.
 T_CAM_RECT_TOLERANCE = 1e-3
@@ -124,41 +125,17 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
                 scored_gt.append(obj)
             else:
                 excluded[obj.cls] = excluded.get(obj.cls, 0) + 1
-        preds = [p for p in pred_image.objects if p.ok]
         failed_pred.extend(
             UnscoredObject(pred_image.id, p.id, p.cls, p.box2d, 0.0, _failure_reason(p), p.source)
             for p in pred_image.objects if not p.ok
         )
-        pred_boxes = np.array([p.box2d for p in preds]).reshape(-1, 4)
-        gt_boxes = np.array([g.box2d for g in scored_gt]).reshape(-1, 4)
-        matching = match_boxes(pred_boxes, gt_boxes, options.min_iou)
-        ious = box_iou_matrix(pred_boxes, gt_boxes)
-        for i, j, iou_2d in matching.pairs:
-            p, g = preds[i], scored_gt[j]
-            pred_cuboid = p.cuboid.translated(pred_offset)  # type: ignore[union-attr]
-            gt_cuboid = g.cuboid_rect.translated(gt_offset)  # type: ignore[union-attr]
-            matched.append(MatchedObject(
-                image_id=pred_image.id, pred_id=p.id, gt_index=g.index, gt_track_id=g.track_id, cls=g.cls,
-                pred_cls=p.cls, subtype=g.subtype, occlusion=g.occlusion, occlusion_fraction=g.occlusion_fraction,
-                truncation=g.truncation, depth=float(gt_cuboid.t_cam_vehicle[2]), iou_2d=iou_2d,
-                metrics=object_metrics(pred_cuboid, gt_cuboid), pred=pred_cuboid, gt=gt_cuboid,
-                yaw_only=pred_image.frame == "rect", pred_source=p.source, gt_source=g.source,
-                keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
-                e_r_twin_deg=None if g.keypoints_hidden is None else twin_rotation_error_deg(pred_cuboid, gt_cuboid),
-                keypoints_off_rays_m=g.keypoints_off_rays_m,
-            ))
-        reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
-        unmatched_pred.extend(
-            UnscoredObject(pred_image.id, preds[i].id, preds[i].cls, preds[i].box2d,
-                           float(ious[i].max()) if ious.shape[1] else 0.0, reason, preds[i].source)
-            for i in matching.unmatched_pred
-        )
-        reason = f"no prediction with 2D IoU >= {options.min_iou:g}"
-        unmatched_gt.extend(
-            UnscoredObject(pred_image.id, str(scored_gt[j].index), scored_gt[j].cls, scored_gt[j].box2d,
-                           float(ious[:, j].max()) if ious.shape[0] else 0.0, reason, scored_gt[j].source)
-            for j in matching.unmatched_gt
-        )
+        # Pair within each family of road users (a pedestrian with a pedestrian, never with a car's box).
+        families = dict.fromkeys([p.family for p in pred_image.objects if p.ok]
+                                 + [family_of(g.cls) for g in scored_gt])
+        for family in families:
+            _pair(pred_image, [p for p in pred_image.objects if p.ok and p.family == family],
+                  [g for g in scored_gt if family_of(g.cls) == family], gt_offset, pred_offset, options, matched,
+                  unmatched_pred, unmatched_gt)
     if missing:
         more = f" (and {len(missing) - _MAX_LISTED} more)" if len(missing) > _MAX_LISTED else ""
         raise EvaluationInputError(
@@ -179,6 +156,45 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
             "predictions_source": str(predictions.source),
             "rotations": "yaw only (KITTI labels)" if predictions.yaw_only else "full (results.json)",
         },
+    )
+
+
+def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObject], gt_offset: np.ndarray,
+          pred_offset: np.ndarray, options: EvalOptions, matched: list[MatchedObject],
+          unmatched_pred: list[UnscoredObject], unmatched_gt: list[UnscoredObject]) -> None:
+    """Match one image's predictions ``preds`` and ground truth ``scored_gt`` (one family of road users) by 2D box
+    IoU, appending the pairs with their metrics and the objects left without a partner."""
+    pred_boxes = np.array([p.box2d for p in preds]).reshape(-1, 4)
+    gt_boxes = np.array([g.box2d for g in scored_gt]).reshape(-1, 4)
+    matching = match_boxes(pred_boxes, gt_boxes, options.min_iou)
+    ious = box_iou_matrix(pred_boxes, gt_boxes)
+    for i, j, iou_2d in matching.pairs:
+        p, g = preds[i], scored_gt[j]
+        pred_cuboid = p.cuboid.translated(pred_offset)  # type: ignore[union-attr]
+        gt_cuboid = g.cuboid_rect.translated(gt_offset)  # type: ignore[union-attr]
+        metrics = object_metrics(pred_cuboid, gt_cuboid)
+        matched.append(MatchedObject(
+            image_id=pred_image.id, pred_id=p.id, gt_index=g.index, gt_track_id=g.track_id, cls=g.cls,
+            pred_cls=p.cls, subtype=g.subtype, occlusion=g.occlusion, occlusion_fraction=g.occlusion_fraction,
+            truncation=g.truncation, depth=float(gt_cuboid.t_cam_vehicle[2]), iou_2d=iou_2d,
+            metrics=metrics, pred=pred_cuboid, gt=gt_cuboid,
+            yaw_only=pred_image.frame == "rect", pred_source=p.source, gt_source=g.source,
+            keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
+            e_r_twin_deg=None if g.keypoints_hidden is None else twin_rotation_error_deg(pred_cuboid, gt_cuboid),
+            keypoints_off_rays_m=g.keypoints_off_rays_m,
+            e_heading_deg=heading_error_deg(metrics.e_yaw_deg, heading_of(p.prototype or g.cls)),
+        ))
+    reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
+    unmatched_pred.extend(
+        UnscoredObject(pred_image.id, preds[i].id, preds[i].cls, preds[i].box2d,
+                       float(ious[i].max()) if ious.shape[1] else 0.0, reason, preds[i].source)
+        for i in matching.unmatched_pred
+    )
+    reason = f"no prediction with 2D IoU >= {options.min_iou:g}"
+    unmatched_gt.extend(
+        UnscoredObject(pred_image.id, str(scored_gt[j].index), scored_gt[j].cls, scored_gt[j].box2d,
+                       float(ious[:, j].max()) if ious.shape[0] else 0.0, reason, scored_gt[j].source)
+        for j in matching.unmatched_gt
     )
 
 

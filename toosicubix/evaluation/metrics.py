@@ -45,6 +45,18 @@ def yaw_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
     return float(abs(np.degrees(wrap_angle(difference))))
 
 
+def heading_error_deg(e_yaw_deg: float, heading: str) -> float | None:
+    """The heading error (degrees) of a class whose yaw is determined as ``heading`` says
+    (:data:`toosicubix.vocabulary.HEADINGS`), from the KITTI yaw's error ``e_yaw_deg`` (0 to 180): that error for a
+    class with a front ('directed'), its distance from 0 or 180 for one whose ends are alike ('axial', 0 to 90), None
+    for one without a yaw ('none', a traffic cone)."""
+    if heading == "none":
+        return None
+    if heading == "axial":
+        return float(min(e_yaw_deg, 180.0 - e_yaw_deg))
+    return float(e_yaw_deg)
+
+
 def translation_error(t_pred: np.ndarray, t_gt: np.ndarray) -> float:
     """E_t = ||t_gt - t_pred|| / ||t_gt||: relative translation error, unitless, >= 0.
 

@@ -17,6 +17,7 @@ from toosicubix.errors import EvaluationInputError
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, read_results
 from toosicubix.geometry import Cuboid, box2d_of_points, clip_cuboid_to_near_plane, project_pinhole
+from toosicubix.vocabulary import family_of
 
 LABEL_DIR = "label_2"
 
@@ -34,6 +35,8 @@ class PredObject:
     cuboid : the pose, in the image's ``frame``; None when failed
     box2d : (4,) ``(x1, y1, x2, y2)`` pixels, or None (a failed vehicle without an annotated box)
     source : where it was read: ``file $.images[i].vehicles[j]`` or ``file:line``
+    prototype : its prototype (results.json), or None (KITTI labels): with ``cls`` it gives the family of road users
+        it may be paired within (:func:`toosicubix.vocabulary.family_of`)
     """
 
     id: str
@@ -43,6 +46,12 @@ class PredObject:
     cuboid: Cuboid | None
     box2d: np.ndarray | None
     source: str
+    prototype: str | None = None
+
+    @property
+    def family(self) -> str:
+        """The family of road users it belongs to: a pedestrian is paired with pedestrians only."""
+        return family_of(self.prototype, self.cls)
 
     @property
     def ok(self) -> bool:
@@ -141,10 +150,12 @@ def _image_from_result(im: ImageResult, i: int, path: Path) -> PredImage:
 def _object_from_vehicle(v: VehicleResult, im: ImageResult, source: str) -> PredObject:
     cls = str(v.kitti_type or v.prototype)
     if not v.ok:
-        return PredObject(id=v.id, cls=cls, status=v.status, error=v.error, cuboid=None, box2d=v.box2d, source=source)
+        return PredObject(id=v.id, cls=cls, status=v.status, error=v.error, cuboid=None, box2d=v.box2d, source=source,
+                          prototype=v.prototype or None)
     cuboid = Cuboid(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)  # type: ignore[arg-type]
     box2d = v.box2d if v.box2d is not None else projected_box2d(cuboid, im.K, im.image_size)
-    return PredObject(id=v.id, cls=cls, status=v.status, error=v.error, cuboid=cuboid, box2d=box2d, source=source)
+    return PredObject(id=v.id, cls=cls, status=v.status, error=v.error, cuboid=cuboid, box2d=box2d, source=source,
+                      prototype=v.prototype or None)
 
 
 def projected_box2d(cuboid: Cuboid, K: np.ndarray, image_size: tuple[int, int] | None) -> np.ndarray | None:

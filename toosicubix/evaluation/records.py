@@ -36,6 +36,8 @@ class MatchedObject:
         (:func:`toosicubix.geometry.depth_reversed_twin`) where ``keypoints_hidden`` is given, else None
     keypoints_off_rays_m : how far (metres, RMS) the labelled keypoints lie from their rays at the ground-truth pose
         (ApolloCar3D with its cameras), else None
+    e_heading_deg : the heading error of its class (:func:`toosicubix.evaluation.metrics.heading_error_deg`: the yaw's
+        error, modulo 180 degrees for a barrier), None for a class without a yaw (a traffic cone)
     """
 
     image_id: str
@@ -60,6 +62,7 @@ class MatchedObject:
     keypoints_hidden: int | None = None
     e_r_twin_deg: float | None = None
     keypoints_off_rays_m: float | None = None
+    e_heading_deg: float | None = None
 
     def row(self) -> dict[str, Any]:
         """The flat record (one CSV row): identifiers, conditions, then the metrics."""
@@ -73,7 +76,7 @@ class MatchedObject:
             "iou_kitti": m.iou_kitti, "e_yaw_deg": m.e_yaw_deg, "yaw_only": self.yaw_only,
             "pred_source": self.pred_source, "gt_source": self.gt_source, "keypoints": self.keypoints,
             "keypoints_hidden": self.keypoints_hidden, "e_r_twin_deg": self.e_r_twin_deg,
-            "keypoints_off_rays_m": self.keypoints_off_rays_m,
+            "keypoints_off_rays_m": self.keypoints_off_rays_m, "e_heading_deg": self.e_heading_deg,
         }
 
 

@@ -124,6 +124,26 @@ def keypoint_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]
     return _breakdown(records, bins)
 
 
+def heading_stats(records: Sequence[MatchedObject]) -> dict[str, float | int | None]:
+    """Mean and median heading error (degrees, :attr:`MatchedObject.e_heading_deg`) over the records whose class has
+    a heading, and how many those are (``n_heading``); None when none has."""
+    values = np.array([r.e_heading_deg for r in records if r.e_heading_deg is not None], dtype=float)
+    usable = len(values) > 0 and bool(np.all(np.isfinite(values)))
+    return {"n_heading": len(values), "e_heading_mean_deg": float(values.mean()) if usable else None,
+            "e_heading_median_deg": float(np.median(values)) if usable else None}
+
+
+def class_breakdown(records: Sequence[MatchedObject]) -> list[dict[str, Any]]:
+    """Statistics per ground-truth class (in the order the classes first appear), with the heading error of the
+    classes that have a heading (a traffic cone has none; a barrier's counts modulo 180 degrees)."""
+    classes = list(dict.fromkeys(r.cls for r in records))
+    rows = []
+    for cls in classes:
+        members = [r for r in records if r.cls == cls]
+        rows.append({"bin": cls, "n": len(members), **metric_stats(members), **heading_stats(members)})
+    return rows
+
+
 def _counts_keypoints(result: EvaluationResult) -> bool:
     return any(r.keypoints is not None for r in result.matched)
 
@@ -186,12 +206,13 @@ def _counts_off_rays(result: EvaluationResult) -> bool:
 
 
 def breakdowns(result: EvaluationResult) -> dict[str, Any]:
-    """``{"depth": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n", <stats>}``;
+    """``{"depth": [...], "class": [...], "occlusion": [...], "occlusion_kind": ...}``, each row ``{"bin", "n",
+    <stats>}`` (a class's row also its heading error, :func:`heading_stats`);
     ``occlusion`` and ``occlusion_kind`` only where the ground truth states occlusion, ``keypoints`` (rows per
     bin of labelled keypoints) only where it counts them, ``ground_truth_shows_keypoints`` and
     ``ground_truth_twin`` where it counts those its pose hides, ``ground_truth_on_keypoint_rays`` where it measures
     how far they lie from their rays (:func:`off_rays_breakdown`)."""
-    out: dict[str, Any] = {"depth": depth_breakdown(result.matched)}
+    out: dict[str, Any] = {"depth": depth_breakdown(result.matched), "class": class_breakdown(result.matched)}
     if result.occlusion_kind is not None:
         out["occlusion"] = occlusion_breakdown(result.matched, result.occlusion_kind)
         out["occlusion_kind"] = _OCCLUSION_TITLES[result.occlusion_kind]
@@ -250,6 +271,14 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
         *_table([(r["bin"], r["n"], r, "mean") for r in depth_breakdown(result.matched)], 20),
         "",
     ]
+    by_class = class_breakdown(result.matched)
+    if len(by_class) > 1:
+        lines += ["By ground-truth class (means):",
+                  *_table([(r["bin"], r["n"], r, "mean") for r in by_class], 20),
+                  "heading error (degrees, median / mean): " + "; ".join(
+                      f"{r['bin']} " + ("none (no yaw)" if r["e_heading_median_deg"] is None else
+                                        f"{r['e_heading_median_deg']:.2f} / {r['e_heading_mean_deg']:.2f}")
+                      for r in by_class), ""]
     if result.occlusion_kind is not None:
         lines += [f"By {_OCCLUSION_TITLES[result.occlusion_kind]} (means):",
                   *_table([(r["bin"], r["n"], r, "mean")
@@ -336,7 +365,7 @@ CSV_COLUMNS = (
     "image_id", "pred_id", "gt_index", "gt_track_id", "class", "pred_class", "subtype", "occlusion",
     "occlusion_fraction", "truncation", "depth", "iou_2d", "iou", "siou", "e_r_deg", "e_t", "e_d", "e_comb",
     "iou_kitti", "e_yaw_deg", "yaw_only", "pred_source", "gt_source", "keypoints", "keypoints_hidden",
-    "e_r_twin_deg", "keypoints_off_rays_m",
+    "e_r_twin_deg", "keypoints_off_rays_m", "e_heading_deg",
 )
 
 

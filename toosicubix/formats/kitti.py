@@ -87,6 +87,7 @@ def object_from_pose(
     truncated: float = 0.0,
     occluded: int = OCCLUSION_UNKNOWN,
     score: float | None = 1.0,
+    heading: str = "directed",
 ) -> KittiObject:
     """The KITTI label of a fitted cuboid; pitch and roll are dropped.
 
@@ -96,15 +97,25 @@ def object_from_pose(
         Pose in the frame where ``camera.K`` applies (camera 2 for ``P2``).
     dimensions : (3,) ``(dx, dy, dz)``
     camera : its ``t_cam_rect`` moves the location to camera 0.
+    heading : 'none' for an object without a yaw (a traffic cone): ``rotation_y`` and ``alpha`` are written as
+        :data:`ANGLE_NOT_GIVEN`, KITTI's value for an angle not given; else ('directed', 'axial') the fitted yaw
     """
     location_rect = np.asarray(t_cam_vehicle, dtype=float) - camera.t_cam_rect
     ry, _, _ = ypr_from_R_cam_vehicle(np.asarray(R_cam_vehicle, dtype=float))
+    ry = float(wrap_angle(ry))
     alpha = float(wrap_angle(ry - math.atan2(location_rect[0], location_rect[2])))
+    if heading == "none":
+        ry = alpha = ANGLE_NOT_GIVEN
     return KittiObject(
         type=type_, truncated=float(truncated), occluded=int(occluded), alpha=alpha,
         box2d=np.asarray(box2d, dtype=float), dimensions=np.asarray(dimensions, dtype=float),
-        location_rect=location_rect, rotation_y=float(wrap_angle(ry)), score=score,
+        location_rect=location_rect, rotation_y=ry, score=score,
     )
+
+
+#: KITTI's value for an angle not given (its DontCare rows carry it as alpha and rotation_y): what a label of an
+#: object without a yaw (a traffic cone) is written with.
+ANGLE_NOT_GIVEN = -10.0
 
 
 def format_label_line(obj: KittiObject) -> str:

@@ -10,6 +10,13 @@ click, and the vehicle prototypes (size classes of the priors table) to choose f
 - Label Studio: the labelling config XML: ``RectangleLabels`` (one box per vehicle, labelled with its
   prototype) and ``KeyPointLabels`` (the keypoints; nest each under its box, which sets ``parentID``).
 - COCO: ``categories``, one per prototype, each with the keypoint names and a 1-based skeleton.
+
+Road users with a keypoint vocabulary of their own (a Pedestrian's COCO keypoints, a Cyclist's wheels, handlebar,
+saddle, head and shoulders: :data:`toosicubix.vocabulary.CLASSES`) get that vocabulary instead of the flat one: in
+CVAT a skeleton label per class (``pedestrian``, ``cyclist``, ...) with its keypoints, its edges and a ``prototype``
+attribute of its prototypes among those asked for; in Label Studio their keypoint labels beside the vehicles' (each
+name once); in COCO their categories' keypoint lists. Vehicles of the cuboid vocabulary (Car, Van, Truck, a Bus)
+keep the flat vocabulary.
 """
 
 from __future__ import annotations
@@ -21,6 +28,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from toosicubix.parts.keypoints import KEYPOINTS, SLOTS, describe, skeleton_edges
+from toosicubix.parts.road_users import keypoint_class
+from toosicubix.vocabulary import CLASSES
 
 #: The CVAT label of the skeleton and the Label Studio / COCO name of a vehicle.
 VEHICLE_LABEL = "vehicle"
@@ -119,20 +128,92 @@ def cvat_skeleton_svg() -> str:
     return "".join(parts)
 
 
-def cvat_labels(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES, review_labels: bool = True) -> list[dict[str, Any]]:
-    """CVAT's Raw label JSON: the vehicle skeleton and, with ``review_labels``, the labels of the review export."""
-    kind_of = {keypoint: slot.kind for slot in SLOTS for keypoint in slot.keypoints}
-    skeleton = {
-        "name": VEHICLE_LABEL,
+def _by_vocabulary(prototypes: tuple[str, ...]) -> tuple[tuple[str, ...], dict[str, tuple[str, ...]]]:
+    """The prototypes of the flat (cuboid) vocabulary, and those of each class with a keypoint vocabulary of its own
+    (class name -> its prototypes among ``prototypes``), each in the order given."""
+    flat, own = [], {}
+    for p in prototypes:
+        cls = keypoint_class(p)
+        if cls is None:
+            flat.append(p)
+        else:
+            own.setdefault(cls.name, []).append(p)
+    return tuple(flat), {name: tuple(ps) for name, ps in own.items()}
+
+
+def class_layout_2d(class_name: str, size: float = 100.0, margin: float = 6.0) -> dict[str, tuple[float, float]]:
+    """Drawing positions of a class's keypoints in a ``size`` x ``size`` box: their typical places on its prior's
+    mean box, seen obliquely from the front left (the X axis to the right, a little of Y for depth, Z up)."""
+    cls = CLASSES[class_name]
+    d = np.array([1.0, 1.0, 1.0]) if not cls.prototypes else _mean_box(cls.prototypes[0])
+    names = list(cls.keypoints)
+    points_vehicle = np.array([np.array(cls.keypoints[n].at) * d for n in names])  # (K, 3) metres
+    uv = np.column_stack([points_vehicle[:, 0] - 0.45 * points_vehicle[:, 1],
+                          -points_vehicle[:, 2] + 0.15 * points_vehicle[:, 1]])
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    scale = (size - 2 * margin) / float(max(hi - lo))
+    uv = margin + (uv - lo) * scale
+    return {n: (round(float(u), 2), round(float(v), 2)) for n, (u, v) in zip(names, uv, strict=True)}
+
+
+def _mean_box(prototype: str) -> np.ndarray:
+    from toosicubix.annotations.priors_file import load_priors
+
+    priors = load_priors()
+    return np.asarray(priors[prototype].mean, dtype=float) if prototype in priors else np.ones(3)
+
+
+def _class_svg(class_name: str) -> str:
+    """The ``svg`` of a class's skeleton label (node ids 1-based in the class vocabulary's order)."""
+    cls = CLASSES[class_name]
+    xy = class_layout_2d(class_name)
+    node = {name: i + 1 for i, name in enumerate(cls.keypoints)}
+    parts = []
+    for a, b in cls.edges:
+        (x1, y1), (x2, y2) = xy[a], xy[b]
+        parts.append(f'<line x1="{x1}" y1="{y1}" x2="{x2}" y2="{y2}" stroke="black" data-type="edge" '
+                     f'data-node-from="{node[a]}" stroke-width="0.5" data-node-to="{node[b]}"></line>')
+    for name in cls.keypoints:
+        x, y = xy[name]
+        parts.append(f'<circle r="0.75" stroke="black" fill="#b3b3b3" cx="{x}" cy="{y}" stroke-width="0.1" '
+                     f'data-type="element node" data-element-id="{node[name]}" data-node-id="{node[name]}" '
+                     f'data-label-name="{name}"></circle>')
+    return "".join(parts)
+
+
+def _class_skeleton(class_name: str, prototypes: tuple[str, ...]) -> dict[str, Any]:
+    cls = CLASSES[class_name]
+    return {
+        "name": class_name.lower(),
         "type": "skeleton",
-        "color": "#ff6037",
+        "color": cls.palette[0],
         "attributes": [{"name": PROTOTYPE_ATTRIBUTE, "mutable": False, "input_type": "select",
                         "default_value": prototypes[0], "values": list(prototypes)}],
-        "sublabels": [{"name": name, "type": "points", "color": _COLORS[kind_of[name]], "attributes": []}
-                      for name in KEYPOINTS],
-        "svg": cvat_skeleton_svg(),
+        "sublabels": [{"name": name, "type": "points", "color": cls.palette[i % len(cls.palette)], "attributes": []}
+                      for i, name in enumerate(cls.keypoints)],
+        "svg": _class_svg(class_name),
     }
-    labels = [skeleton]
+
+
+def cvat_labels(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES, review_labels: bool = True) -> list[dict[str, Any]]:
+    """CVAT's Raw label JSON: the vehicle skeleton (for the prototypes of the cuboid vocabulary), a skeleton per class
+    of road users with a keypoint vocabulary of its own, and, with ``review_labels``, the labels of the review
+    export."""
+    kind_of = {keypoint: slot.kind for slot in SLOTS for keypoint in slot.keypoints}
+    flat, own = _by_vocabulary(prototypes)
+    labels = []
+    if flat:
+        labels.append({
+            "name": VEHICLE_LABEL,
+            "type": "skeleton",
+            "color": "#ff6037",
+            "attributes": [{"name": PROTOTYPE_ATTRIBUTE, "mutable": False, "input_type": "select",
+                            "default_value": flat[0], "values": list(flat)}],
+            "sublabels": [{"name": name, "type": "points", "color": _COLORS[kind_of[name]], "attributes": []}
+                          for name in KEYPOINTS],
+            "svg": cvat_skeleton_svg(),
+        })
+    labels += [_class_skeleton(name, ps) for name, ps in own.items()]
     if review_labels:
         status = {"name": "status", "mutable": False, "input_type": "select", "default_value": "ok",
                   "values": ["ok", "failed"]}
@@ -145,6 +226,17 @@ def cvat_labels(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES, review_labels:
 def label_studio_config(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES) -> str:
     """Label Studio's labelling config XML: a box per vehicle labelled with its prototype, and the keypoints."""
     kind_of = {keypoint: slot.kind for slot in SLOTS for keypoint in slot.keypoints}
+    flat, own = _by_vocabulary(prototypes)
+    keypoint_labels = [f'    <Label value="{name}" background="{_COLORS[kind_of[name]]}" '
+                       f'hint={quoteattr(describe(name))}/>' for name in (KEYPOINTS if flat else ())]
+    named = set(KEYPOINTS) if flat else set()
+    for class_name in own:
+        cls = CLASSES[class_name]
+        for name, k in cls.keypoints.items():
+            if name not in named:
+                named.add(name)
+                keypoint_labels.append(f'    <Label value="{name}" background="{cls.palette[0]}" '
+                                       f'hint={quoteattr(f"{class_name}: {k.description}")}/>')
     lines = [
         "<View>",
         '  <Header value="ToosiCubix: draw a box per vehicle (its prototype), then click its parts; nest each '
@@ -154,8 +246,7 @@ def label_studio_config(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES) -> str
         *[f"    <Label value={quoteattr(p)}/>" for p in prototypes],
         "  </RectangleLabels>",
         f'  <KeyPointLabels name="{LS_KEYPOINT}" toName="{LS_IMAGE}" strokeWidth="2">',
-        *[f'    <Label value="{name}" background="{_COLORS[kind_of[name]]}" hint={quoteattr(describe(name))}/>'
-          for name in KEYPOINTS],
+        *keypoint_labels,
         "  </KeyPointLabels>",
         "</View>",
     ]
@@ -166,8 +257,17 @@ def coco_categories(prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES) -> dict[st
     """COCO ``categories``: one per prototype, each with every keypoint name and the skeleton (1-based indices)."""
     index = {name: i + 1 for i, name in enumerate(KEYPOINTS)}
     skeleton = [[index[a], index[b]] for a, b in skeleton_edges()]
-    return {"categories": [{"id": i + 1, "name": p, "supercategory": VEHICLE_LABEL, "keypoints": list(KEYPOINTS),
-                            "skeleton": skeleton} for i, p in enumerate(prototypes)]}
+    categories = []
+    for i, p in enumerate(prototypes):
+        cls = keypoint_class(p)
+        if cls is None:
+            categories.append({"id": i + 1, "name": p, "supercategory": VEHICLE_LABEL, "keypoints": list(KEYPOINTS),
+                               "skeleton": skeleton})
+            continue
+        own = {name: j + 1 for j, name in enumerate(cls.keypoints)}
+        categories.append({"id": i + 1, "name": p, "supercategory": cls.family, "keypoints": list(cls.keypoints),
+                           "skeleton": [[own[a], own[b]] for a, b in cls.edges]})
+    return {"categories": categories}
 
 
 def template_text(tool: str, prototypes: tuple[str, ...] = DEFAULT_PROTOTYPES) -> str:

@@ -230,7 +230,7 @@ class DocumentBuilder:
                 self.summary.left_out[kp.name] += 1
                 continue
             named.append((kp.name, kp.xy))
-        conversion = parts_from_keypoints(named, self.lengths)
+        conversion = parts_from_keypoints(named, self.lengths, vehicle.prototype or self.default_prototype)
         elements = {kp.name: kp.element for kp in vehicle.keypoints}
         for name, message in conversion.problems:
             self.warn(file_name, elements.get(name, vehicle.element), f"keypoint {name!r}: {message}: left out")

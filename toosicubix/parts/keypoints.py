@@ -22,11 +22,13 @@ bundled ``toosicubix`` keypoint mapping (:func:`mapping_document`), which the CO
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from toosicubix import vocabulary
+from toosicubix.parts.road_users import keypoint_class, keypoint_parts
 from toosicubix.vocabulary import DIRECTION_AXES, LENGTH_FEATURES, POINT_PARTS, SYMMETRY_FACES
 
 #: How many symmetric pairs a face may carry (``rear-pair1-left`` .. ``rear-pair3-right``).
@@ -119,13 +121,17 @@ class Conversion:
 
 
 def parts_from_keypoints(keypoints: Mapping[str, tuple[float, float]] | Iterable[tuple[str, tuple[float, float]]],
-                         lengths: Mapping[str, tuple[float, float]] | None = None) -> Conversion:
+                         lengths: Mapping[str, tuple[float, float]] | None = None,
+                         prototype: str | None = None) -> Conversion:
     """Part objects of one vehicle from its named keypoints.
 
     Parameters
     ----------
     keypoints : name -> (x, y) pixels, or (name, (x, y)) pairs; a name given twice is a problem
     lengths : feature -> (metres, sigma) of length features; :data:`DEFAULT_LENGTHS` fills the others
+    prototype : the object's prototype; when its class of road users has a keypoint vocabulary of its own (a
+        Pedestrian's COCO keypoints, :mod:`toosicubix.parts.road_users`), its names become ``keypoint`` annotations
+        at the class's places, before the flat vocabulary's names are read
 
     Returns
     -------
@@ -136,6 +142,13 @@ def parts_from_keypoints(keypoints: Mapping[str, tuple[float, float]] | Iterable
     items = list(keypoints.items()) if isinstance(keypoints, Mapping) else list(keypoints)
     known_lengths = {**DEFAULT_LENGTHS, **(lengths or {})}
     problems: list[tuple[str, str]] = []
+    own = keypoint_class(prototype)
+    class_parts: list[dict[str, Any]] = []
+    if own is not None:  # the class's own names first (a name given twice is left to the loop below to report)
+        counts = Counter(name for name, _ in items)
+        named = [(n, (float(p[0]), float(p[1]), True)) for n, p in items if n in own.keypoints and counts[n] == 1]
+        class_parts = keypoint_parts(own.name, named)[0]
+        items = [(n, p) for n, p in items if n not in own.keypoints or counts[n] > 1]
     xy: dict[str, tuple[float, float]] = {}
     for name, point in items:
         if name not in _SLOT_OF:
@@ -162,7 +175,7 @@ def parts_from_keypoints(keypoints: Mapping[str, tuple[float, float]] | Iterable
         if slot.kind == "length":
             part["metres"], part["sigma"] = known_lengths[slot.name]
         parts.append(part)
-    return Conversion(parts, problems)
+    return Conversion(class_parts + parts, problems)
 
 
 def keypoints_from_parts(parts: Iterable[Mapping[str, Any]]) -> list[tuple[str, tuple[float, float]]]:

@@ -44,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from toosicubix.model import Part
-from toosicubix.vocabulary import KINDS, click, click_labels, entry, faces_of_click
+from toosicubix.vocabulary import KINDS, class_keypoint_faces, click, click_labels, entry, faces_of_click
 
 DX, DY, DZ = 0, 1, 2
 #: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.
@@ -142,13 +142,16 @@ class PartsModel:
     def click_faces(self) -> tuple[tuple[str, ...] | None, ...]:
         """The faces each click can be seen on, for the plausibility check: the vocabulary's, and for a keypoint
         (an open kind's name) the faces its typical position ``at`` sits near: beyond 0.3 of the length or width
-        from the centre, or above 0.85 of the height; None (no check) when near none, and for arrows."""
+        from the centre, or above 0.85 of the height; None (no check) when near none, and for arrows. A keypoint
+        of a road-user class's own vocabulary (a pedestrian's shoulder) has the faces the class gives it: any."""
         out: list[tuple[str, ...] | None] = []
         for i, label in enumerate(self.click_labels):
-            if not KINDS[click(label).kind].open_names:
+            c = click(label)
+            if not KINDS[c.kind].open_names:
                 out.append(faces_of_click(label))
                 continue
-            out.append(keypoint_faces((self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])))
+            named, faces = class_keypoint_faces(c.name)
+            out.append(faces if named else keypoint_faces((self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])))
         return tuple(out)
 
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:

@@ -78,7 +78,8 @@ def kitti_objects(image_result: ImageResult, camera: Camera) -> list[tuple[Vehic
     return [(v, kitti.object_from_pose(
         v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
         truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
-        score=1.0 if v.confidence is None else v.confidence)) for v in image_result.vehicles if v.ok]
+        score=1.0 if v.confidence is None else v.confidence, heading=v.heading or "directed"))
+        for v in image_result.vehicles if v.ok]
 
 
 def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:

@@ -24,12 +24,14 @@ from toosicubix.geometry import box2d_of_points, clip_cuboid_to_near_plane, cubo
 from toosicubix.model import GroundPlane, Vehicle
 from toosicubix.parts.linear import PartsModel, TypicalKeypoint, build_parts_model
 from toosicubix.parts.mirror import mirrored
+from toosicubix.parts.road_users import class_keypoints, class_notes
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, guide, is_box_shaped
 from toosicubix.solver.misfit import ResidualTest
 from toosicubix.solver.track import with_box_cue
 from toosicubix.solver.uncertainty import Uncertainty, confidence
+from toosicubix.vocabulary import heading_of
 
 __all__ = ["Keypoints", "SuggestTask", "UnusableFit", "active_cues", "checked_result", "describe_fit", "failed_result",
            "fit_as_written", "fit_one", "with_next_clicks"]
@@ -184,9 +186,15 @@ def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: Part
         ambiguous=fit.ambiguous,
         alternatives=tuple(fit.alternatives),
         residual_test=fit.residual_test,
-        warnings=tuple(fit.warnings),
+        warnings=(*fit.warnings, *class_notes(vehicle.prototype, _keypoint_names(vehicle), float(prior.mean[2]))),
+        heading=None if heading_of(vehicle.prototype) == "directed" else heading_of(vehicle.prototype),
         **suggestions,
     )
+
+
+def _keypoint_names(vehicle: Vehicle) -> tuple[str, ...]:
+    """The names of a vehicle's keypoint annotations (what :func:`toosicubix.parts.road_users.class_notes` reads)."""
+    return tuple(p.name for p in vehicle.parts if p.kind == "keypoint")
 
 
 def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted, options: SolverOptions,
@@ -194,7 +202,9 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted
                  keypoints: Keypoints | None = None) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
     guidance failed) and what clicking every visible one would reach (``reachable_sigma``); an error here never
-    fails the vehicle."""
+    fails the vehicle. A road user with a keypoint vocabulary of its own (a pedestrian) is offered its class's
+    keypoints, whatever mapping the batch names."""
+    keypoints = class_keypoints(vehicle.prototype) or keypoints
     try:
         guidance = guide(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
                          box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type), keypoints=keypoints)

@@ -246,15 +246,34 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     base_rows = np.arange(2 * n_base_clicks)
     base_cols = 6 + np.asarray(base_params)
     cols0 = np.concatenate([np.arange(6), base_cols])
-    lam = _cue_lambdas(problem)
-    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], lam, sigmas[base_rows], G, t)
+    # The cue rows: the scale and upright rows, then each arrow's rows (:meth:`Problem.arrow_rows`), which see the
+    # pose: a candidate arrow's rows count only with that candidate.
+    tails = np.asarray(problem.parts.arrow_tails, dtype=int)
+    per_arrow = problem.n_arrow_rows // max(len(tails), 1)
+    first_arrow_row = len(J_cue) - problem.n_arrow_rows
+
+    def cue_rows(clicks: np.ndarray) -> np.ndarray:
+        arrows = np.flatnonzero(np.isin(tails, clicks))
+        own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
+        return np.concatenate([np.arange(first_arrow_row), own]).astype(int)
+
+    lam = _cue_lambdas(problem)  # one weight, or one per cue row (the upright rows weighed against the clicks)
+
+    def lam_of(rows: np.ndarray) -> float | np.ndarray:
+        return lam if np.ndim(lam) == 0 else np.asarray(lam)[rows]
+
+    base_cues = cue_rows(np.arange(n_base_clicks))
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], lam_of(base_cues),
+                                     sigmas[base_rows], G, t)
     out = []
     for entry in added:
         clicks = np.arange(*entry) if isinstance(entry, tuple) else np.asarray(entry, dtype=int)
         own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
-        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], lam, sigmas[r], G, t))
+        cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]))
+        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], lam_of(cues), sigmas[r],
+                                              G, t))
     return now, out
 
 

@@ -1,10 +1,13 @@
-"""Auto-naming on the annotate page: which part an unnamed click is.
+"""Naming on the annotate page from a vehicle's fit: which part an unnamed click is.
 
-A click made without a name is named as soon as the vehicle's named clicks fix a cuboid (its fit succeeds): it
-takes the name of the part most probably clicked there (:func:`nearest_parts`) among the candidates
-:func:`naming_candidates` places on the fitted cuboid: the point parts not yet clicked, at their typical positions
-(:func:`toosicubix.solver.guidance.suggest_clicks`), and a mapping's keypoints, each at its typical place, on a
-face turned to the camera.
+With a keypoint mapping (``annotate --mapping``), a click made without a name is named once the vehicle's named
+clicks fit a cuboid: it takes the name of the keypoint most probably clicked there (:func:`nearest_parts`) among the
+candidates :func:`naming_candidates` places on the fitted cuboid (its keypoints not clicked yet, each at its typical
+place, on a face turned to the camera). The vocabulary's point parts are named by the prototype's prior cuboid
+(:mod:`toosicubix.web.placement`), before a fit and after; this module's rule (the nearest part not clicked yet at
+its typical place, :func:`toosicubix.solver.guidance.suggest_clicks`) names them only with
+``NamingSettings(after_fit="fit")``, as the page did before issue 33, and for a track's vehicle placed by its other
+frames alone.
 """
 
 from __future__ import annotations

@@ -14,10 +14,12 @@ the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a seco
 ``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
 (unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
 
-Auto-naming (:mod:`toosicubix.web.naming`): a click made without a name is named as soon as the vehicle's named
-clicks fix a cuboid (its fit succeeds), after the part most probably clicked there among those not yet clicked on
-a face turned to the camera. The response names the choice and the runner-up. The requests' fields are checked by
-:mod:`toosicubix.web.request_fields`.
+Naming (:mod:`toosicubix.web.placement`, :mod:`toosicubix.web.naming`): a click made without a name takes the most
+probable name when the page is sure enough of it, else it waits with the few names that fit there for the person to
+choose from. Before the vehicle's named clicks fit a cuboid, the prototype's prior cuboid placed by its box and
+named clicks ranks the names; after, the same placement with the fit's dimensions (with a keypoint mapping: its
+keypoints at their places on the fit). The response names the choice, its probability and the runner-up. The
+requests' fields are checked by :mod:`toosicubix.web.request_fields`.
 
 Sequences (``annotate --sequence``, or a file's images that are frames): a vehicle of a frame carries a track (a new
 vehicle a new one, :func:`toosicubix.web.sequence.new_track_name`) and is fitted with its track's nearby frames as
@@ -69,16 +71,18 @@ from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
 from toosicubix.jsonfile import read_json
 from toosicubix.model import GroundBlock, GroundOverride, GroundPlane, Image, Part, Vehicle
 from toosicubix.parts.linear import TypicalKeypoint
+from toosicubix.parts.mirror import mirrored
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.tracks import results_of_track
 from toosicubix.pipeline.validation import Thresholds, judge
-from toosicubix.pipeline.vehicle import fit_one, with_next_clicks
+from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.track import TrackOptions
 from toosicubix.web.naming import naming_candidates, nearest_parts
+from toosicubix.web.placement import NAMING_SETTINGS, NamingSettings, propose
 from toosicubix.web.request_fields import (
     ApiError,
     Conflict,
@@ -95,6 +99,11 @@ UNDO_DEPTH = 500
 TARGETS = 5
 #: What an image id may be (the annotation file's pattern): the file stem of each image.
 _IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+#: How many names the page offers for a click it did not name (or instead of the name it gave).
+CHOICES = 5
+#: How far (fractions of the dimensions) a mapping's keypoint may lie from another's mirror place to be its mirror
+#: partner: apollocar3d-66's partners lie within 0.046 of each other's mirror places (median 0.023).
+MIRROR_TOLERANCE = 0.1
 #: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
 NEXT_CLICKS = 1000
 
@@ -119,6 +128,7 @@ class ClickedPart:
     known: tuple[float, float] | None = None
     auto: dict[str, Any] | None = None
     extra: dict[str, Any] | None = None
+    choices: list[dict[str, Any]] | None = None
 
     @property
     def named(self) -> bool:
@@ -203,27 +213,38 @@ class _TrackedOn:
 
 
 def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None = None) -> dict[str, Camera]:
-    """Cameras per image id from a cameras file: the cameras file of the importers
-    (``{"cameras": [{"match": GLOB, "K": ...}]}``, :mod:`toosicubix.formats.cameras`, matched on each image's file
-    name, ``file_names``, by default its id), one camera block as the annotation file has it (``{"K": ...}`` or
-    ``{"P": ...}``, optional ``distortion``) for every image, or ``{"<image id or file name>": block, ...}``.
+    """Cameras per image id from ``--cameras``, in any form the importers take
+    (:func:`toosicubix.formats.cameras.load_cameras`: the cameras JSON file ``{"cameras": [{"match": GLOB, "K": ...}]}``
+    matched on each image's file name, a KITTI calibration file for every image, a folder of them matched by image
+    file stem, an OpenCV or ROS camera YAML for every image), or the page's own JSON forms: one camera block as the
+    annotation file has it (``{"K": ...}`` or ``{"P": ...}``, optional ``distortion``) for every image, or
+    ``{"<image id or file name>": block, ...}``. ``file_names``: each image's file name (by default its id).
 
     Raises
     ------
     InputFileError
-        Naming the file and the JSON path of each problem, or the images without a camera.
+        Naming the file and the JSON path or line of each problem, or the images without a camera.
     """
-    data = read_json(path, at_root=True)
-    if not isinstance(data, dict):
-        raise InputFileError(path, [("$", "expected an object: a camera block or image id -> camera block")])
-    if "cameras" in data:  # the importers' cameras file: one reader for every command's --cameras
+    path = Path(path)
+    names = file_names if file_names is not None else image_ids
+    data: Any = None
+    if path.is_file() and _looks_like_json(path):
+        data = read_json(path, at_root=True)
+        if not isinstance(data, dict):
+            raise InputFileError(path, [("$", "expected an object: a camera block, image id -> camera block, or "
+                                              '{"cameras": [...]}')])
+    if data is None or "cameras" in data:  # the importers' reader: one for every command's --cameras
         try:
             table = load_camera_table(path)
         except FormatError as exc:
-            raise InputFileError(path, [("$", exc.message)]) from None
-        names = file_names if file_names is not None else image_ids
-        blocks = {image_id: ("$.cameras", camera) for image_id, name in zip(image_ids, names, strict=True)
+            where = "$" if exc.line is None else f"line {exc.line}"
+            raise InputFileError(path, [(where, exc.message)]) from None
+        blocks = {image_id: ("$.cameras" if table.by_stem is None else "$", camera)
+                  for image_id, name in zip(image_ids, names, strict=True)
                   if (camera := table.camera_for(name)) is not None}
+        missing = [(i, n) for i, n in zip(image_ids, names, strict=True) if i not in blocks]
+        if missing:
+            raise InputFileError(path, [("$", f"no camera for image {i!r}: {table.why_none(n)}") for i, n in missing])
     elif "K" in data or "P" in data:
         blocks = {image_id: ("$", data) for image_id in image_ids}
     else:
@@ -244,6 +265,13 @@ def load_cameras(path: Path, image_ids: list[str], file_names: list[str] | None 
                                         for p, m in exc.problems]) from None
         cameras[image_id] = camera_from_schema(doc.images[0].camera, None)
     return cameras
+
+
+def _looks_like_json(path: Path) -> bool:
+    """Whether a file starts (after white space) as a JSON object or array does."""
+    with open(path, "rb") as handle:
+        head = handle.read(256).decode("utf-8-sig", errors="replace").lstrip()
+    return head[:1] in ("{", "[")
 
 
 def _image_size(path: Path) -> tuple[int, int]:
@@ -295,6 +323,7 @@ class Session:
         the served images that are frames of a sequence show its tracks: a tracked vehicle is fitted with its
         track's nearby frames, and a track with a vehicle near this frame but none in it is shown as predicted
     track_options : the tracks' motion model and box cue, as ``fit`` takes them (its ``--frame-rate``)
+    naming : how unnamed clicks are named (:class:`toosicubix.web.placement.NamingSettings`)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
@@ -303,8 +332,9 @@ class Session:
                  road_grounds: dict[tuple, GroundOverride] | None = None,
                  estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, GroundOverride] | None]] | None = None,
                  mapping: MappingFile | None = None, sequence: str | None = None,
-                 track_options: TrackOptions | None = None):
+                 track_options: TrackOptions | None = None, naming: NamingSettings = NAMING_SETTINGS):
         self.out = Path(out)
+        self.naming = naming
         self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
         self._ground_block, self._ground = (None, None) if not ground else ground_with(None, ground, "ground")
         self._road_grounds = _road_grounds(road_grounds)
@@ -661,15 +691,44 @@ class Session:
         return out
 
     def _auto_name(self, image: ImageState, j: int, v: VehicleState) -> list[dict[str, Any]]:
-        """Name the vehicle's unnamed clicks, oldest first, while its fit succeeds; what was named."""
+        """Name the vehicle's unnamed clicks, oldest first: each takes the most probable name when the page is sure
+        enough of it (:meth:`_choices`), else it waits with the few names that fit there (``choices``, for the
+        person to choose from). What was named."""
         named = []
         for part in v.parts:
             if part.named:
                 continue
-            result = self._fit(image, j, v)
-            if not result.ok:
-                break
-            keypoints = self._keypoints(v.prototype)
+            choices, sure, how = self._choices(image, j, v, part)
+            part.choices = choices[:CHOICES] or None
+            if not choices or not sure:
+                continue
+            best = choices[0]
+            runner = choices[1] if len(choices) > 1 else None
+            part.kind, part.name = best["kind"], best["name"]
+            part.extra = self._keypoint_extra(v.prototype, best["name"]) if best["kind"] == "keypoint" else None
+            part.choices = choices[1:CHOICES + 1] or None
+            part.auto = {"kind": best["kind"], "name": best["name"], "how": how,
+                         "distance_px": best.get("distance_px"), "probability": best.get("probability"),
+                         "runner_up_kind": None if runner is None else runner["kind"],
+                         "runner_up": None if runner is None else runner["name"],
+                         "runner_up_distance_px": None if runner is None else runner.get("distance_px")}
+            named.append({"vehicle": v.id, "part": v.parts.index(part), **part.auto})
+        return named
+
+    def _choices(self, image: ImageState, j: int, v: VehicleState, part: ClickedPart
+                 ) -> tuple[list[dict[str, Any]], bool, str]:
+        """The names an unnamed click of ``v`` may take, the most probable first (``kind``, ``name``, and its
+        ``probability`` or ``distance_px``), whether the page is sure enough to give it the first, and how they were
+        found: 'prior' (no fit yet: the prototype's prior cuboid placed by the box and the named clicks,
+        :mod:`.placement`) or 'fit' (the vehicle's named clicks fit a cuboid: the same placement with its dimensions,
+        or, by :attr:`~.placement.NamingSettings.after_fit`, the parts not clicked yet at their places on the fit,
+        :mod:`.naming`; always so with a keypoint mapping)."""
+        result = self._fit(image, j, v)
+        keypoints = self._keypoints(v.prototype)
+        named = [(p.kind, p.name, np.asarray(p.uv, dtype=float)) for p in v.parts if p.named]
+        # A track's vehicle fitted from its other frames, with no named click here: its fit places it.
+        placed_by_fit = result.ok and not named
+        if result.ok and (keypoints is not None or self.naming.after_fit == "fit" or placed_by_fit):
             if keypoints is None:
                 candidates = naming_candidates(result, image.camera)
             else:  # the mapping's vocabulary: its keypoints not clicked yet
@@ -677,19 +736,33 @@ class Session:
                 candidates = naming_candidates(result, image.camera, {n: k for n, k in keypoints.items()
                                                                       if n not in clicked}, points=set(),
                                                click_sigma=self.options.click_sigma)
-            choice = nearest_parts(part.uv[0], candidates)
-            if not choice:
-                break
-            best = choice[0]
-            runner = choice[1] if len(choice) > 1 else None
-            part.kind, part.name = best["kind"], best["name"]
-            part.extra = self._keypoint_extra(v.prototype, best["name"]) if best["kind"] == "keypoint" else None
-            part.auto = {"kind": best["kind"], "name": best["name"], "distance_px": best["distance_px"],
-                         "runner_up_kind": None if runner is None else runner["kind"],
-                         "runner_up": None if runner is None else runner["name"],
-                         "runner_up_distance_px": None if runner is None else runner["distance_px"]}
-            named.append({"vehicle": v.id, "part": v.parts.index(part), **part.auto})
-        return named
+            choices = nearest_parts(part.uv[0], candidates)
+            return ([{"kind": c["kind"], "name": c["name"], "distance_px": c["distance_px"]} for c in choices],
+                    True, "fit")
+        if keypoints is not None:
+            return [], False, "prior"
+        fitted = np.round(result.dimensions, 4).tolist() if result.ok else None
+        key = json.dumps(["prior", fitted, image.index, v.prototype, v.box2d,
+                          [[k, n, uv.tolist()] for k, n, uv in named], part.uv[0], self.options.click_sigma,
+                          self.naming.to_json()])
+        cached = self._fits.get(key)
+        if cached is None:
+            prior = self.priors[v.prototype]
+            dims = None
+            if result.ok:  # the fit's dimensions, within their sigmas (at most the prior's)
+                sd = np.sqrt(np.diag(prior.cov))
+                if result.sigma is not None:
+                    sd = np.fmin(np.nan_to_num(np.asarray(result.sigma.dimensions, dtype=float), nan=np.inf), sd)
+                dims = (np.asarray(result.dimensions, dtype=float), np.diag(sd**2))
+            proposal = propose(image.camera, prior, named, np.asarray(part.uv[0], dtype=float),
+                               None if v.box2d is None else np.asarray(v.box2d, dtype=float), self._ground_of(image),
+                               self.options.click_sigma, self.naming, dims)
+            cached = self._cache(key, {"proposal": proposal})
+        proposal = cached["proposal"]
+        choices = [{"kind": kind, "name": name, "probability": round(p, 4)} for kind, name, p in proposal.choices]
+        sure = (proposal.placed and not proposal.outlier and bool(choices)
+                and choices[0]["probability"] >= self.naming.confidence)
+        return choices, sure, "fit" if result.ok else "prior"
 
     # -- views ------------------------------------------------------------------------------------------------
 
@@ -741,8 +814,11 @@ class Session:
         tracked = v.track is not None and image.sequence is not None
         entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
         result = entry["result"] if entry is not None else self._fit(image, j, v)
-        parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None}
-                 for k, p in enumerate(v.parts)]
+        for part in v.parts:  # a click read back unnamed from the extras file: the names it may have
+            if not part.named and part.choices is None:
+                part.choices = self._choices(image, j, v, part)[0][:CHOICES] or None
+        parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None,
+                  "choices": p.choices} for k, p in enumerate(v.parts)]
         fit = self._fit_view(image, result)
         if result.ok and len(result.residuals_px) == sum(len(p.uv) for p in v.parts if p.named):
             # (a track's frame whose clicks it left out has none)
@@ -792,6 +868,9 @@ class Session:
                       "depth_m": _finite(sigma.depth_m)} if sigma is not None else None,
             "confidence": result.confidence, "ambiguous": result.ambiguous,
             "well_determined": not problems, "problems": list(problems),
+            "implausible": result.implausible, "warnings": list(result.warnings),
+            "likely_cause": None if result.implausible is None else (
+                "swapped" if SWAPPED in result.warnings else "names"),
             "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
             "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
             "click_sigma_px": self.options.click_sigma,
@@ -815,7 +894,8 @@ class Session:
         ``set_vehicle`` (``vehicle``; ``prototype``, ``box2d``, ``done``, ``track``), ``delete_vehicle``
         (``vehicle``), ``add_click`` (``vehicle``, ``uv`` [[x, y], ...]; ``kind`` and ``name``, or neither for a
         point to be auto-named), ``move_click`` (``vehicle``, ``part``, ``click``, ``uv`` [x, y]), ``rename``
-        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``),
+        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``), ``swap_sides``
+        (``vehicle``: its left and right swapped in every named click),
         ``confirm_prediction`` (``track``: a vehicle of that track without clicks, its pose interpolated),
         ``dismiss_prediction`` and ``restore_prediction`` (``track``: not shown on this frame, or again), ``undo``.
 
@@ -991,13 +1071,13 @@ class Session:
         v = self._vehicle(image, r)
         part = self._part(v, r)
         if (r.get("kind"), r.get("name")) == (part.kind, part.name):  # the same name: now the user's, not auto
-            part.auto = None
+            part.auto = part.choices = None
             return
         if r.get("kind") == "keypoint" and len(part.uv) == 1:
             extra = self._keypoint_extra(v.prototype, r.get("name"), (part.extra or {}).get("visible"))
             if extra is not None:
                 self._check_not_clicked(v, "keypoint", r["name"], part)
-                part.kind, part.name, part.auto, part.extra = "keypoint", r["name"], None, extra
+                part.kind, part.name, part.auto, part.extra, part.choices = "keypoint", r["name"], None, extra, None
                 return
         if part.extra is not None and r.get("kind") == part.kind:
             other = "" if self.mapping is None else f", or name it a keypoint of {self.mapping.name}"
@@ -1011,11 +1091,55 @@ class Session:
         if vocabulary.KINDS[kind].known and part.known is None:
             raise ApiError(f"kind: a {kind} annotation needs its known size; delete it and add it again")
         self._check_not_clicked(v, kind, name, part)
-        part.kind, part.name, part.auto, part.extra = kind, name, None, None
+        part.kind, part.name, part.auto, part.extra, part.choices = kind, name, None, None, None
 
     def _op_delete_click(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
         v.parts.remove(self._part(v, r))
+
+    def _op_swap_sides(self, image: ImageState, r: dict) -> dict[str, Any]:
+        """Swap the vehicle's left and right in its named clicks (:func:`toosicubix.parts.mirror.mirrored`: the
+        ``-left`` and ``-right`` parts, the two clicks of a pair, ``leftward`` and ``rightward``; a mapping's
+        keypoint becomes the keypoint at its mirror place, :meth:`_mirror_keypoint`), as the person's own names.
+        Unnamed clicks stay, and so does a keypoint with no keypoint of the mapping at its mirror place. How many
+        clicks changed, and those keypoints."""
+        v = self._vehicle(image, r)
+        named = [(k, p) for k, p in enumerate(v.parts) if p.named]
+        if not named:
+            raise ApiError(f"vehicle {v.id} has no named click to swap")
+        model = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"parts[{k}]", p.known,
+                           **p.model_fields()) for k, p in named)
+        changed, unpaired = 0, []
+        for (_, part), swapped in zip(named, mirrored(model), strict=True):
+            name, uv, extra = swapped.name, swapped.uv.tolist(), part.extra
+            if part.kind == "keypoint" and self.mapping is not None:
+                name = self._mirror_keypoint(v.prototype, part.name)
+                if name is None:  # no keypoint of the mapping there: left as it is, and said
+                    unpaired.append(part.name)
+                    name = part.name
+                elif name != part.name:
+                    extra = self._keypoint_extra(v.prototype, name, (part.extra or {}).get("visible"))
+            elif swapped.at is not None:  # a keypoint or plate of the file: its typical place mirrored
+                extra = {**(part.extra or {}), "at": swapped.at.tolist()}
+            changed += (name, uv, extra) != (part.name, part.uv, part.extra)
+            part.name, part.uv, part.extra, part.auto, part.choices = name, uv, extra, None, None
+        names = [(p.kind, p.name) for p in v.parts if p.named]
+        twice = sorted({f"{k} {n}" for k, n in names if names.count((k, n)) > 1})
+        if twice:
+            raise ApiError(f"swapping left and right would name two clicks {', '.join(twice)}; rename them one by "
+                           "one instead")
+        return {"swapped": changed, "unpaired": unpaired}
+
+    def _mirror_keypoint(self, prototype: str, name: str) -> str | None:
+        """The mapping's keypoint at the mirror place of keypoint ``name`` (its typical place with Y negated: the
+        nearest keypoint, within :data:`MIRROR_TOLERANCE`), or None when the mapping has none there."""
+        positions = self.mapping.keypoint_positions(prototype) if self.mapping is not None else {}
+        if name not in positions:
+            return None
+        at = np.asarray(positions[name].at, dtype=float) * np.array([1.0, -1.0, 1.0])
+        distance, nearest = min((float(np.linalg.norm(np.asarray(p.at, dtype=float) - at)), k)
+                                for k, p in positions.items())
+        return nearest if distance <= MIRROR_TOLERANCE else None
 
     def _op_confirm_prediction(self, image: ImageState, r: dict) -> dict[str, Any]:
         track = r.get("track")

@@ -9,9 +9,9 @@ const HOTKEYS = {
   "7": ["point", "edge-rear-left"], "8": ["point", "edge-rear-right"],
   "c": ["point", "front-center"], "v": ["point", "rear-center"], "t": ["point", "top-center"],
   "l": ["symmetry", "front"], "k": ["symmetry", "rear"], "o": ["symmetry", "roof"],
-  "a": ["direction", "forward"], "s": ["direction", "leftward"],
+  "a": ["direction", "forward"], "w": ["direction", "leftward"],
 };
-const CLICK_NAMES = { symmetry: ["left light", "right light"], direction: ["tail", "head"] };
+const CLICK_NAMES = { symmetry: ["left one", "right one"], direction: ["tail", "head"] };
 // Kinds named by one click: a point part, or a keypoint of the mapping the page was started with (--mapping).
 const oneClick = (kind) => kind === "point" || kind === "keypoint";
 const partLabel = (kind, name) => (oneClick(kind) ? name : `${kind} ${name}`);
@@ -21,6 +21,9 @@ const state = {
   session: null, index: 0, view: null, revision: 0, vehicle: null, prediction: null, preferPrediction: false,
   armed: null, pending: [], selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0,
   mode: "click", drag: null, drawn: [],
+  // The click a name chosen now goes to (click first, then choose): its index, or null (a name chosen now arms the
+  // next click instead: choose first, then click).
+  naming: null,
 };
 // A track's colour: its number's (a name "<sequence>-<k>"), else its name's hash. No red (the front face), magenta
 // (residuals), yellow (targets) or orange (unnamed clicks).
@@ -199,6 +202,7 @@ async function newVehicle(box2d, track = null) {
     select(doc.vehicle);
     say(`vehicle ${doc.vehicle} added` + (doc.track ? ` (track ${doc.track})` : ""));
   }
+  return doc;
 }
 
 // After a prediction is confirmed or dismissed: the next one, else the given vehicle.
@@ -246,7 +250,7 @@ async function addClick(uv) {
   if (state.armed && !oneClick(state.armed[0])) {
     state.pending.push(uv);
     if (state.pending.length < 2) {
-      say(`${state.armed[0]} ${state.armed[1]}: now click the ${CLICK_NAMES[state.armed[0]][1]}`);
+      say(`${state.armed[0]} ${state.armed[1]}: now click the ${CLICK_NAMES[state.armed[0]][1]}` + sides(state.armed));
       render();
       return;
     }
@@ -262,22 +266,65 @@ async function addClick(uv) {
   state.pending = [];
   const armed = state.armed;
   state.armed = null;
+  state.naming = null;
   const doc = await edit(change, true);
   buildPalette();
   if (!doc) return;
   state.selectedPart = doc.part;
   const auto = doc.auto_named.filter((a) => a.vehicle === state.vehicle);
-  if (auto.length) {
-    state.lastAuto = auto[auto.length - 1];
+  const mine = currentVehicle().parts[doc.part];
+  if (armed) {
+    say(`${partLabel(armed[0], armed[1])} added (you chose the name first)`);
+  } else if (auto.some((a) => a.part === doc.part)) {
+    state.lastAuto = auto.find((a) => a.part === doc.part);
     const a = state.lastAuto;
-    say(`named ${a.name} (${a.distance_px.toFixed(0)} px from its predicted place)` +
-        (a.runner_up ? `; runner-up ${a.runner_up}: press x to take it` : ""));
-  } else if (!armed) {
-    const v = currentVehicle();
-    say(`unnamed click kept: it is named once the named clicks fix a cuboid (${v.fit.error || "no fit"})`);
+    const from = a.how === "prior" ? "the prior cuboid (no fit yet)" : "the fit";
+    const sure = a.probability !== null && a.probability !== undefined ? `, ${Math.round(100 * a.probability)} % sure`
+      : ` (${a.distance_px.toFixed(0)} px from its place)`;
+    say(`the page named it ${a.name}, from ${from}${sure}` +
+        (a.runner_up ? `; wrong? press x for ${a.runner_up}, or pick another below` : ""));
   } else {
-    say(`${armed[1]} added`);
+    state.naming = doc.part;  // the page did not name it: the next name chosen goes to it
+    say(mine.choices && mine.choices.length && mine.choices[0].probability > 0.3 ?
+      "which part is this? The page is not sure: choose below, or press its key" :
+      "which part is this? Nothing places the vehicle yet (a box or a named click would): choose below, or press " +
+      "its key");
   }
+  render();
+}
+
+// The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming).
+async function renameClick(kind, name) {
+  const part = state.naming;
+  state.naming = null;
+  const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name });
+  if (doc) {
+    state.selectedPart = part;
+    say(`click ${part} named ${partLabel(kind, name)}`);
+    render();
+  }
+}
+
+// r (or a click's rename button): the next name chosen renames the selected click.
+function startRename(part) {
+  const v = currentVehicle();
+  if (!v || part === null || part === undefined || !v.parts[part]) { say("select a click first (click it)", true); return; }
+  state.selectedPart = part;
+  state.naming = part;
+  state.armed = null;
+  say(`rename click ${part}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
+  buildPalette();
+  render();
+}
+
+// s: the vehicle's own left and right swapped in its named clicks (one edit; u undoes it).
+async function swapSides() {
+  const v = currentVehicle();
+  if (!v) { say("no vehicle selected", true); return; }
+  const doc = await edit({ op: "swap_sides", vehicle: v.id });
+  if (doc) say(`left and right swapped in ${doc.swapped} click(s) of vehicle ${v.id} (u undoes)` +
+    (doc.unpaired.length ? `; the mapping has no keypoint at the mirror place of ${doc.unpaired.join(", ")}: ` +
+      "rename those yourself" : ""));
 }
 
 async function takeRunnerUp() {
@@ -326,14 +373,30 @@ function paletteButton(button, kind, name, clicked) {
   return button;
 }
 
+// Where left and right matter (a part of one side, or a pair clicked left first): what they mean.
+function sides([kind, name]) {
+  return /left|right/.test(name) || kind === "symmetry" ?
+    ". Left = the vehicle's left, as its driver sees it (on a car facing you, its left is on your right)" : "";
+}
+
+// How many clicks an annotation of a kind takes (a keypoint: one).
+const clicksOf = (kind) => (kind === "keypoint" ? 1 : state.session.vocabulary[kind].clicks.length);
+
 function arm(choice) {
+  const v = currentVehicle();
+  const target = v && state.naming !== null ? v.parts[state.naming] : null;
+  if (choice && target && clicksOf(choice[0]) === target.uv.length) {  // a name for the click being named
+    renameClick(choice[0], choice[1]);
+    return;
+  }
   state.armed = choice;
   state.pending = [];
   if (choice) {
     const first = oneClick(choice[0]) ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
-    say(`next click: ${choice[0]} ${choice[1]}: click ${first}`);
+    say(`next click: ${partLabel(choice[0], choice[1])} (you chose the name first): click ${first}` + sides(choice));
   } else {
-    say("next click: unnamed (auto-named once the cuboid is fixed)");
+    state.naming = null;
+    say("next click: unnamed (you click first; the page names it, or asks)");
   }
   buildPalette();
   render();
@@ -353,7 +416,8 @@ function panels() {
       (v.fit.pose_from ? ` (${v.fit.pose_from})` : "") : "";
     li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${v.parts.length} clicks` +
       (v.unnamed ? ` (${v.unnamed} unnamed)` : "") + (v.box2d ? ", box" : "") +
-      (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.well_determined ? ", well determined" : ", fitted");
+      (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.implausible ? ", implausible"
+        : v.fit.well_determined ? ", well determined" : ", fitted");
     if (v.id === state.vehicle) li.classList.add("selected");
     if (v.done) li.classList.add("done");
     li.onclick = () => select(v.id);
@@ -380,6 +444,10 @@ function panels() {
     list.appendChild(li);
   }
   const v = currentVehicle();
+  banner(v);
+  nextClick(v);
+  choices(v);
+  diagram(v);
   const fit = $("fit");
   const clicks = $("clicks");
   clicks.textContent = "";
@@ -398,9 +466,15 @@ function panels() {
   $("prototype").value = v.prototype;
   const f = v.fit;
   if (f.status !== "ok") {
-    fit.innerHTML = `<span class="bad">not fitted</span>: ${escapeHtml(f.error || "")}`;
+    const named = v.parts.length - v.unnamed;
+    const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
+    fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
+      "ones: " : "") + escapeHtml(f.error || "") : (waiting || "no click yet") + ". A fit needs about five named " +
+      "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
-    const verdict = f.well_determined ? '<span class="ok">well determined</span>'
+    const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
+      (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
+      : f.well_determined ? '<span class="ok">well determined</span>'
       : `<span class="bad">not well determined</span>: ${escapeHtml(f.problems.join("; "))}`;
     const track = v.track ? `<br>track ${escapeHtml(v.track)} (pose: ${f.pose_from}), fitted with frames ` +
       `${f.track_frames[0]} to ${f.track_frames[f.track_frames.length - 1]} (${f.track_frames.length})` : "";
@@ -408,13 +482,93 @@ function panels() {
   }
   v.parts.forEach((p) => {
     const li = document.createElement("li");
-    const name = p.name ? `${p.kind === "point" ? "" : p.kind + " "}${p.name}` : "(unnamed)";
+    const name = p.name ? `${p.kind === "point" ? "" : p.kind + " "}${p.name}` : "(unnamed: choose its name)";
     const res = p.residuals_px ? Math.max(...p.residuals_px.map(([a, b]) => Math.hypot(a, b))).toFixed(1) + " px" : "";
-    li.innerHTML = `${escapeHtml(name)} ${p.auto ? '<span class="auto">auto</span>' : ""} <span class="res">${res}</span>`;
+    const by = p.auto ? `<span class="auto" title="named by the page from ${p.auto.how === "prior" ?
+      "the prior cuboid" : "the fit"}">auto</span>` : "";
+    li.innerHTML = `${escapeHtml(name)} ${by} <span class="res">${res}</span>`;
+    {
+      const rename = document.createElement("button");
+      rename.className = "rename";
+      rename.textContent = "rename";
+      rename.title = "rename this click (r): then press a part's key or choose a name";
+      rename.onclick = (e) => { e.stopPropagation(); startRename(p.index); };
+      li.appendChild(rename);
+    }
     if (p.index === state.selectedPart) li.classList.add("selected");
+    if (p.index === state.naming) li.classList.add("naming");
     li.onclick = () => { state.selectedPart = p.index; render(); };
     clicks.appendChild(li);
   });
+}
+
+// The banner over the image: the selected vehicle's fit is one no person could have clicked, with the likely cause
+// and the fix.
+function banner(v) {
+  const el = $("banner");
+  const f = v && v.fit;
+  if (!f || f.status !== "ok" || !f.implausible) { el.hidden = true; return; }
+  el.hidden = false;
+  if (f.likely_cause === "swapped") {
+    el.innerHTML = "<b>Left and right look swapped.</b> Left = the vehicle's own left, as its driver sees it (seen " +
+      "from the front, its left is on the image's right). Press <kbd>s</kbd> to swap them " +
+      '<button id="swap-now">swap left and right (s)</button>, or rename the clicks.';
+    $("swap-now").onclick = swapSides;
+  } else {
+    el.innerHTML = `<b>No one could have clicked this fit</b> (${escapeHtml(f.implausible)}): check the clicks' ` +
+      "names (front and rear, left and right: the vehicle's own, as its driver sees them) and that they are all " +
+      "on this vehicle; rename a click with r.";
+  }
+}
+
+// What the next click will be: a name chosen first, a click being named, or unnamed (the page names it or asks).
+function nextClick(v) {
+  const el = $("next-click");
+  if (state.naming !== null && v && v.parts[state.naming]) {
+    el.textContent = `Naming click ${state.naming}: press a part's key, or choose below or in the palette. ` +
+      "Esc: leave it as it is.";
+    el.className = "naming";
+  } else if (state.armed) {
+    el.textContent = `Next click: ${partLabel(state.armed[0], state.armed[1])} (you chose the name first). Esc: ` +
+      "click first instead.";
+    el.className = "armed";
+  } else {
+    el.textContent = "Next click: click first, the page names it from where it is (or asks you). Or press a " +
+      "part's key first to name it yourself.";
+    el.className = "";
+  }
+}
+
+// The names the page offers for the click being named, or instead of the name it gave the selected click.
+function choices(v) {
+  const el = $("choices");
+  el.textContent = "";
+  const k = state.naming !== null ? state.naming : state.selectedPart;
+  const part = v && k !== null ? v.parts[k] : null;
+  if (!part || (part.name && !part.auto)) return;
+  // The names worth offering: those the page gives at least 1 % (all when it ranks by distance).
+  const offered = (part.choices || []).filter((c) => c.probability === undefined || c.probability === null ||
+    c.probability >= 0.01);
+  const head = document.createElement("span");
+  head.textContent = part.name ? `Click ${k} is ${part.name} (the page's name)` + (offered.length ? "; or: " : "; r renames it")
+    : `Click ${k} may be: ` + (offered.length ? "" : "any name of the palette");
+  el.appendChild(head);
+  for (const c of offered) {
+    const button = document.createElement("button");
+    const sure = c.probability !== undefined && c.probability !== null ? ` ${Math.round(100 * c.probability)} %` : "";
+    button.textContent = `${c.name}${sure}`;
+    button.dataset.name = c.name;
+    button.onclick = () => { state.naming = k; renameClick(c.kind, c.name); };
+    el.appendChild(button);
+  }
+}
+
+// The parts diagram: the parts the selected vehicle has clicked, marked.
+function diagram(v) {
+  const clicked = new Set(v ? v.parts.filter((p) => p.name).map((p) => p.name) : []);
+  for (const el of document.querySelectorAll("#diagram [data-part]")) {
+    el.classList.toggle("clicked", clicked.has(el.dataset.part));
+  }
 }
 
 function fitTable(f) {
@@ -531,15 +685,7 @@ function drawVehicle(v, selected) {
   }
   if (f.status === "ok" && f.corners_uv) {
     const c = f.corners_uv;
-    ctx.fillStyle = "rgba(255, 80, 80, 0.25)";
-    ctx.beginPath();
-    f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
-    ctx.closePath();
-    ctx.fill();
-    for (const [i, j] of EDGES) {
-      const front = f.front_face.includes(i) && f.front_face.includes(j);
-      line(c[i], c[j], front ? "#ff5050" : trackColour(v.track), front ? 2.5 : 1.5);
-    }
+    drawCuboid(f, "rgba(255, 80, 80, 0.25)", "#ff5050", trackColour(v.track), (front) => (front ? 2.5 : 1.5), []);
     state.drawn.push({ track: v.track, vehicle: v.id, style: "solid" });
     if (v.track) {
       label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), trackColour(v.track), selected);
@@ -584,21 +730,29 @@ function topCorner(c) {
 }
 
 // A track carried to this frame: its predicted cuboid, dashed, in the track's colour (thicker when selected).
-function drawPrediction(p, selected) {
-  const f = p.fit;
-  if (f.status !== "ok" || !f.corners_uv) return;
+// A fit's cuboid: its front face filled with `fill`, its front edges in `frontColour` and the others in `colour`,
+// each as wide as `width(isFront)`, dashed by `dash` ([] for solid).
+function drawCuboid(f, fill, frontColour, colour, width, dash) {
   const c = f.corners_uv;
-  const colour = trackColour(p.track);
-  ctx.globalAlpha = selected ? 1 : 0.75;
-  ctx.fillStyle = selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)";
+  ctx.fillStyle = fill;
   ctx.beginPath();
   f.front_face.forEach((i, k) => (k ? ctx.lineTo(...toScreen(c[i])) : ctx.moveTo(...toScreen(c[i]))));
   ctx.closePath();
   ctx.fill();
   for (const [i, j] of EDGES) {
     const front = f.front_face.includes(i) && f.front_face.includes(j);
-    line(c[i], c[j], front ? "#ff8a80" : colour, selected ? 2.5 : 1.5, [7, 5]);
+    line(c[i], c[j], front ? frontColour : colour, width(front), dash);
   }
+}
+
+function drawPrediction(p, selected) {
+  const f = p.fit;
+  if (f.status !== "ok" || !f.corners_uv) return;
+  const c = f.corners_uv;
+  const colour = trackColour(p.track);
+  ctx.globalAlpha = selected ? 1 : 0.75;
+  drawCuboid(f, selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)", "#ff8a80", colour,
+    () => (selected ? 2.5 : 1.5), [7, 5]);
   label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour, selected);
   ctx.globalAlpha = 1;
   state.drawn.push({ track: p.track, vehicle: null, style: "dashed" });
@@ -662,10 +816,11 @@ canvas.addEventListener("mouseup", async (e) => {
       const track = state.prediction;
       await newVehicle(box, track);
       say(`track ${track}: box drawn on this frame (its pose from the box and the track)`);
-    } else if (currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d) {
-      await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box });
     } else {
-      await newVehicle(box);
+      const doc = currentVehicle() && !currentVehicle().parts.length && !currentVehicle().box2d ?
+        await edit({ op: "set_vehicle", vehicle: state.vehicle, box2d: box }) : await newVehicle(box);
+      if (doc) say(`box drawn for vehicle ${state.vehicle}: the page places its prototype's cuboid in it and ` +
+                   "can name your clicks from the first one");
     }
   } else if (d.kind === "move") {
     state.selectedPart = d.part;
@@ -696,7 +851,9 @@ document.addEventListener("keydown", async (e) => {
   if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   if (HOTKEYS[key]) arm(HOTKEYS[key]);
-  else if (key === "Escape") { state.mode = "click"; arm(null); }
+  else if (key === "Escape") { state.mode = "click"; state.naming = null; arm(null); }
+  else if (key === "s") await swapSides();
+  else if (key === "r") startRename(state.selectedPart);
   else if (key === "u") await edit({ op: "undo" });
   else if (key === "Enter" && state.prediction !== null) await confirmPrediction();
   else if (key === "Tab") { e.preventDefault(); cycleSelection(e.shiftKey ? -1 : 1); }
