@@ -287,7 +287,8 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     return {
         "row": row.label, "half": half, "mapping": mapping.name, "priors": None if priors is None else {
             name: entry for name, entry in json.loads(priors.read_text())["prototypes"].items()
-            if name in OWN_PROTOTYPES.values()}, "options": list(row.options), "ground": ground,
+            if name in OWN_PROTOTYPES.values()}, "options": list(row.options),
+        "ground": None if ground is None else ground.to_json(),
         "cars": n_cars, "fitted": len(objects), "fitted_share": len(objects) / n_cars if n_cars else None,
         "seconds": seconds, "import": summary.lines(), **stats(objects),
         "by_keypoints": by_kp, "by_depth": by_depth,
