@@ -108,11 +108,13 @@ def failure_kind(reason: str) -> str:
     return "solver failure"
 
 
-def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, road_normal: bool = False) -> dict:
+def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, road_normal: bool = False,
+            upright_weight: str = SolverOptions.upright_weight) -> dict:
     selection = SelectionOptions(sequences=SPLITS[split])
     vehicles = select_kitti_tracking(data / "kitti_tracking", selection)
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=row.noise_px, exact_placement=row.exact, seed=seed))
-    options = SolverOptions() if row.lambda_px is None else replace(SolverOptions(), lambda_px=row.lambda_px)
+    options = replace(SolverOptions(), upright_weight=upright_weight)
+    options = options if row.lambda_px is None else replace(options, lambda_px=row.lambda_px)
     folder = work / f"noise{row.noise_px}-{'exact' if row.exact else 'real'}-{row.lambda_px}"
     annotations, gt_dir, out = folder / "annotations.json", folder / "gt", folder / "out"
     folder.mkdir(parents=True)
@@ -214,6 +216,9 @@ def main() -> None:
     parser.add_argument("--road-normal-estimate", action="store_true",
                         help="fit as `toosicubix fit` does without a ground: with each camera's road normal estimated "
                              "from the batch (the optimality-gap column then compares against fits without it)")
+    parser.add_argument("--upright-weight", choices=("lambda", "clicks"), default=SolverOptions.upright_weight,
+                        help="`fit --upright-weight` (rule 23: 'clicks' weighs only keypoint and plate vehicles' "
+                             "upright term differently, so these figures must not move)")
     args = parser.parse_args()
     if not (args.data / "kitti_tracking").is_dir():
         sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
@@ -222,7 +227,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for row in ROWS:
             start = time.perf_counter()
-            rows.append(run_row(row, args.data, args.split, args.jobs, args.seed, Path(tmp), args.road_normal_estimate))
+            rows.append(run_row(row, args.data, args.split, args.jobs, args.seed, Path(tmp), args.road_normal_estimate,
+                                args.upright_weight))
             print(f"{row.label}: done in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     print_tables(rows)
     for r in rows:

@@ -24,9 +24,19 @@ the camera's road normal taken
 from the ground truth (the median up axis of the learning half's cars, or of all for the in-sample half) instead
 of the batch: a ground block without camera height, vehicles upright on a road of that normal within 2 degrees,
 the normal known within 3; and the paper's part vocabulary (``apollocar3d-66-paper``: mirror pairs as symmetry
-pairs), alone and with the wheel centres as hubs, the configuration that failed in issue 14.
+pairs), alone and with the wheel centres as hubs, the configuration that failed in issue 14. Issue 36's rows: the
+upright term weighed against the click noise (``--upright-weight clicks``, rule 23); without it (a diagnostic: the
+batch's normal still places the starts and judges plausibility, vehicles "upright within 180 degrees"); and every
+car of the half fitted, those with fewer than 10 keypoints too, which are reported apart (a diagnostic).
 
-Run from the repository root (about four minutes on 2 cores):
+Issue 36's diagnostics, per row and half: where the rotation error comes from (``rotation_breakdown``: E_R, the yaw
+and up-axis errors and the yaw calibration by keypoints, depth, view and whether the clicks fix pitch and roll);
+what the upright term does to the cars whose clicks fix their own tilt (``upright_cost``, across the rows); the cars
+with fewer than 10 keypoints (``few_keypoints``); and what one keypoint on the far end does for an end-on car
+clicked on its near end only (``far_end``: the default row's cars refitted from their near-end keypoints, then with
+one more).
+
+Run from the repository root (about eight minutes on 2 cores):
 
     python benchmarks/apollocar3d.py [--jobs 2] [--json benchmarks/results/apollocar3d.json]
     python benchmarks/apollocar3d.py --keypoints OTHER/apollocar3d_val_test.json   # another folder, same layout
@@ -42,6 +52,8 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -50,6 +62,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import default_data_dir, machine
 
+import toosicubix.pipeline.road_normal as road_normal_module
 from toosicubix.annotations.mapping import MappingFile, load_mapping
 from toosicubix.annotations.priors_file import load_priors, load_priors_file
 from toosicubix.annotations.schema import SCHEMA_VERSION
@@ -95,6 +108,12 @@ BUNDLED_LEARNED_ON = "de6252f8c68cb029f01f438d7487fec6c0515c6a08f5727645a365e06c
 EXPLAINED_M = 0.25
 KEYPOINT_BINS = ((10, 15), (15, 20), (20, 30), (30, 67))
 DEPTH_BINS = ((0, 20), (20, 40), (40, 60), (60, np.inf))
+#: The view: the angle between a car's ground-truth heading and the line of sight, both in the road plane, folded to
+#: 0-90 degrees (0: seen end-on, front or rear; 90: seen side-on).
+VIEW_BINS = ((0, 30), (30, 60), (60, 90.01))
+#: A car's labelled keypoints are all on one end when every one of them sits this far (a fraction of the length)
+#: from the middle on the same side (a rear view's lamps, plate, boot and rear glass; a door or a wheel is not).
+END_FRACTION = 0.15
 
 
 @dataclass(frozen=True)
@@ -106,10 +125,16 @@ class Row:
     batch_normal: bool = False  # the road normal estimated from the batch's own fits (rule 7)
     misfit_level: float | None = None  # the chi-square test of each fit's residuals (rule 8)
     own_priors: bool = False  # each car type its own prototype, size priors measured on the learning images (rule 16)
+    upright_weight: str = "lambda"  # SolverOptions.upright_weight (rule 23)
+    upright_sigma_deg: float | None = None  # the batch normal's upright sigma instead of road_normal's (a diagnostic)
+    every_car: bool = False  # fit every car of the half, also those with fewer than 10 keypoints (a diagnostic)
 
 
 ROWS = (
     Row("keypoints, default settings", "apollocar3d-66", batch_normal=True),
+    Row("keypoints, --upright-weight clicks", "apollocar3d-66", batch_normal=True, upright_weight="clicks"),
+    Row("keypoints, no upright term", "apollocar3d-66", batch_normal=True, upright_sigma_deg=180.0),
+    Row("keypoints, every car fitted", "apollocar3d-66", batch_normal=True, every_car=True),
     Row("keypoints, car types' own priors", "apollocar3d-66", batch_normal=True, own_priors=True),
     Row("keypoints, --misfit-level 0.99", "apollocar3d-66", batch_normal=True, misfit_level=0.99),
     Row("keypoints, --road-normal none", "apollocar3d-66"),
@@ -177,32 +202,57 @@ def stats(objects: list[dict]) -> dict:
     return out
 
 
+@contextmanager
+def batch_upright_sigma(degrees: float | None) -> Iterator[None]:
+    """Within it, a road normal estimated from the batch stands vehicles upright within ``degrees`` instead of
+    :data:`toosicubix.pipeline.road_normal.UPRIGHT_SIGMA_DEG` (a diagnostic row's setting; None: as it is)."""
+    if degrees is None:
+        yield
+        return
+    kept = road_normal_module.UPRIGHT_SIGMA_DEG
+    road_normal_module.UPRIGHT_SIGMA_DEG = degrees
+    try:
+        yield
+    finally:
+        road_normal_module.UPRIGHT_SIGMA_DEG = kept
+
+
 def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: MappingFile, cameras,
             image_ids: set[str], scored: set[str], counts: dict[str, int], jobs: int, options: SolverOptions,
             estimate_sigma: bool, contradicting: dict[str, str], normal: tuple[float, float, float],
-            priors: Path | None = None, hiding: frozenset[str] = frozenset()) -> dict:
+            priors: Path | None = None, hiding: frozenset[str] = frozenset(),
+            half_cars: set[str] | None = None) -> dict:
+    """One row on one half: fit the half's scored cars (every car of the half, ``half_cars``, for an ``every_car``
+    row), score those with at least :data:`MIN_KEYPOINTS` keypoints, and, for an ``every_car`` row, report the others
+    apart (``few_keypoints``). The returned dict's ``_objects`` (the scored cars, one dict each) and ``_work`` (the
+    row's folder) are for the cross-row diagnostics and are not written."""
     work = folder / f"{half}-{row.label.replace(' ', '_')}"
     work.mkdir(parents=True)
     document, summary = coco_to_annotations(keypoints_path, mapping, cameras, row.options)
+    fitted_cars = (half_cars or scored) if row.every_car else scored
     annotations = work / "annotations.json"
-    annotations.write_text(json.dumps(subset(document, image_ids, scored)))
+    annotations.write_text(json.dumps(subset(document, image_ids, fitted_cars)))
     start = time.perf_counter()
     ground = (GroundOverride(normal=normal, normal_sigma_deg=NORMAL_SIGMA_DEG, upright_sigma_deg=2.0) if row.ground
               else None)
     if row.misfit_level is not None:
         options = replace(options, misfit_level=row.misfit_level)
-    fit_file(annotations, work / "out", BatchSettings(priors=load_priors(priors), options=options, jobs=jobs,
-                                                      estimate_click_sigma=estimate_sigma, ground=ground,
-                                                      estimate_road_normal=row.batch_normal))
+    options = replace(options, upright_weight=row.upright_weight)
+    with batch_upright_sigma(row.upright_sigma_deg):
+        fit_file(annotations, work / "out", BatchSettings(priors=load_priors(priors), options=options, jobs=jobs,
+                                                          estimate_click_sigma=estimate_sigma, ground=ground,
+                                                          estimate_road_normal=row.batch_normal))
     seconds = time.perf_counter() - start
+    n_up = np.asarray(normal, dtype=float)
+    ends = clicked_ends(document, image_ids, fitted_cars)
     result = evaluate(load_predictions(work / "out"), ApolloCar3DGroundTruth(keypoints_path),
                       EvalOptions(classes=("Car",)))
     results = json.loads((work / "out" / "results.json").read_text())
     noise = results.get("click_noise") or {"sigma_px": options.click_sigma, "source": "given"}
     fits = {(im["id"], v["id"]): v for im in results["images"] for v in im["vehicles"]}
-    objects = []
+    objects, few = [], []
     for m in result.matched:
-        if m.pred_id not in scored:
+        if m.pred_id not in fitted_cars:
             continue
         o = {"id": m.pred_id, "depth": m.depth, "keypoints": counts[m.pred_id], "type": m.subtype, **{
             "iou": m.metrics.iou, "siou": m.metrics.siou, "e_r_deg": m.metrics.e_r_deg, "e_t": m.metrics.e_t,
@@ -219,7 +269,12 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
             o["fit_from_twin_deg"] = m.e_r_twin_deg  # evaluate's E_R against the ground truth's twin
         o["downweighted"] = len(fit.get("downweighted", []))
         o["misfit"] = bool((fit.get("residual_test") or {}).get("misfit"))
-        objects.append(o)
+        o["view_deg"], o["facing"] = view_of(m.gt.R_cam_vehicle, m.gt.t_cam_vehicle, n_up)
+        determined = (fit.get("observability") or {}).get("determined_by") or {}
+        o["tilt_by_clicks"] = determined.get("pitch") == "clicks" and determined.get("roll") == "clicks"
+        o["end"] = ends.get(m.pred_id)
+        o["consistent"] = m.pred_id not in contradicting and m.pred_id not in hiding
+        (objects if m.pred_id in scored else few).append(o)
     n_cars = len(scored)
     by_kp = {f"{lo}-{hi - 1}": stats([o for o in objects if lo <= o["keypoints"] < hi]) for lo, hi in KEYPOINT_BINS}
     by_depth = {(f"{lo:g}+ m" if np.isinf(hi) else f"{lo:g}-{hi:g} m"): stats(
@@ -232,7 +287,8 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     return {
         "row": row.label, "half": half, "mapping": mapping.name, "priors": None if priors is None else {
             name: entry for name, entry in json.loads(priors.read_text())["prototypes"].items()
-            if name in OWN_PROTOTYPES.values()}, "options": list(row.options), "ground": ground,
+            if name in OWN_PROTOTYPES.values()}, "options": list(row.options),
+        "ground": None if ground is None else ground.to_json(),
         "cars": n_cars, "fitted": len(objects), "fitted_share": len(objects) / n_cars if n_cars else None,
         "seconds": seconds, "import": summary.lines(), **stats(objects),
         "by_keypoints": by_kp, "by_depth": by_depth,
@@ -260,6 +316,10 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         "click_noise": noise,
         "cars_with_downweighted_clicks": int(sum(o["downweighted"] > 0 for o in objects)),
         "misfits": int(sum(o["misfit"] for o in objects)),
+        "rotation_breakdown": {"neither rule 6 nor 17 flags": rotation_breakdown(consistent),
+                               "all cars": rotation_breakdown(objects)},
+        "few_keypoints": few_keypoints(few) if row.every_car else None,
+        "_objects": objects, "_work": work,
     }
 
 
@@ -271,6 +331,151 @@ def rotation_parts(objects: list[dict]) -> dict:
                         ("tilt_error_deg", [o["tilt_error_deg"] for o in objects])):
         out[key] = {"mean": float(np.mean(values)) if values else None,
                     "median": float(np.median(values)) if values else None}
+    return out
+
+
+def view_of(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, normal: np.ndarray) -> tuple[float, float]:
+    """A car's view (:data:`VIEW_BINS`), degrees, and ``heading . ray`` (> 0: it shows its rear), from its ground-truth
+    pose (3, 3), (3,) and the camera's road ``normal`` (3,)."""
+    ray = t_cam_vehicle / np.linalg.norm(t_cam_vehicle)
+    heading = R_cam_vehicle[:, 0]
+    h, r = heading - (heading @ normal) * normal, ray - (ray @ normal) * normal
+    cos = abs(float(h @ r)) / (np.linalg.norm(h) * np.linalg.norm(r))
+    return float(np.degrees(np.arccos(min(cos, 1.0)))), float(heading @ ray)
+
+
+def clicked_ends(document: dict, image_ids: set[str], cars: set[str]) -> dict[str, str | None]:
+    """Per car, 'front' or 'rear' when all its keypoint clicks sit on that end (their typical positions' length
+    fractions beyond :data:`END_FRACTION` on one side), else None (plates count as keypoints at their centres)."""
+    out = {}
+    for im in document["images"]:
+        if im["id"] not in image_ids:
+            continue
+        for v in im["vehicles"]:
+            if v["id"] not in cars:
+                continue
+            x = [p["at"][0] for p in v["parts"] if p.get("at") is not None]
+            out[v["id"]] = ("front" if x and min(x) > END_FRACTION else "rear" if x and max(x) < -END_FRACTION
+                            else None)
+    return out
+
+
+def _group(objects: list[dict]) -> dict:
+    """E_R (mean, median), its parts' means and the yaw calibration of a group of cars."""
+    within = calibration(objects)
+    return {"n": len(objects),
+            "e_r_deg": {"mean": float(np.mean([o["e_r_deg"] for o in objects])) if objects else None,
+                        "median": float(np.median([o["e_r_deg"] for o in objects])) if objects else None},
+            "abs_yaw_error_deg": float(np.mean([o["yaw_error_deg"] for o in objects])) if objects else None,
+            "tilt_error_deg": float(np.mean([o["tilt_error_deg"] for o in objects])) if objects else None,
+            "yaw_within_1_sigma": within[0], "yaw_within_2_sigma": within[1]}
+
+
+def rotation_breakdown(objects: list[dict]) -> dict[str, dict]:
+    """Where the rotation error of ``objects`` comes from (issue 36, item 1): E_R, its yaw and up-axis parts and the
+    yaw calibration, by labelled keypoints, by ground-truth depth, by view (:data:`VIEW_BINS`), and by whether the
+    fit's clicks fix its pitch and roll themselves (both 'clicks' in its observability) or leave them to the road."""
+    out = {"all": _group(objects)}
+    for lo, hi in KEYPOINT_BINS:
+        out[f"keypoints {lo}-{hi - 1}"] = _group([o for o in objects if lo <= o["keypoints"] < hi])
+    for lo, hi in DEPTH_BINS:
+        out["depth " + (f"{lo:g}+ m" if np.isinf(hi) else f"{lo:g}-{hi:g} m")] = _group(
+            [o for o in objects if lo <= o["depth"] < hi])
+    for lo, hi in VIEW_BINS:
+        out[f"view {lo:g}-{min(hi, 90):g} deg"] = _group([o for o in objects if lo <= o["view_deg"] < hi])
+    out["pitch and roll fixed by the clicks"] = _group([o for o in objects if o["tilt_by_clicks"]])
+    out["pitch or roll left to the road"] = _group([o for o in objects if not o["tilt_by_clicks"]])
+    return out
+
+
+def few_keypoints(objects: list[dict]) -> dict:
+    """The cars with fewer than :data:`MIN_KEYPOINTS` keypoints of an ``every_car`` row (issue 36, item 3): the six
+    metrics, E_R's parts and the yaw calibration, for all and for those neither rule 6 nor rule 17 flags; by keypoint
+    count; and for those whose keypoints all lie on one end (:func:`clicked_ends`) against the others."""
+    consistent = [o for o in objects if o["consistent"]]
+    return {"cars": len(objects), "flagged": len(objects) - len(consistent),
+            "all": {**stats(objects), **_group(objects),
+                    "e_r_over_30_deg": int(sum(o["e_r_deg"] > 30 for o in objects))},
+            "neither rule 6 nor 17 flags": {**stats(consistent), **_group(consistent)},
+            "by_keypoints": {str(k): _group([o for o in objects if o["keypoints"] == k])
+                             for k in sorted({o["keypoints"] for o in objects})},
+            "keypoints on one end": _group([o for o in consistent if o["end"] is not None]),
+            "keypoints along the length": _group([o for o in consistent if o["end"] is None]),
+            "by_view": {f"{lo:g}-{min(hi, 90):g} deg": _group([o for o in consistent if lo <= o["view_deg"] < hi])
+                        for lo, hi in VIEW_BINS}}
+
+
+def upright_cost(rows: list[dict]) -> dict:
+    """What the upright term does to the cars whose clicks fix their own pitch and roll (issue 36, item 1): the cars
+    neither rule 6 nor rule 17 flags whose fit in the default row has both 'clicks' in its observability, and the
+    others, each scored in the default row, the ``--upright-weight clicks`` row and the row without the term."""
+    by_label = {r["row"]: r for r in rows}
+    default = by_label[ROWS[0].label]["_objects"]
+    fixed = {o["id"] for o in default if o["consistent"] and o["tilt_by_clicks"]}
+    rest = {o["id"] for o in default if o["consistent"]} - fixed
+    out = {}
+    for label in (ROWS[0].label, ROWS[1].label, ROWS[2].label):
+        objects = by_label[label]["_objects"]
+        out[label] = {"pitch and roll fixed by the clicks": _group([o for o in objects if o["id"] in fixed]),
+                      "pitch or roll left to the road": _group([o for o in objects if o["id"] in rest])}
+    return out
+
+
+def far_end(row: dict, keypoints_path: Path, jobs: int) -> dict:
+    """What one keypoint on the far end does for a car clicked on one end only (issue 36, item 3): the default row's
+    cars neither rule 6 nor rule 17 flags, seen within 45 degrees of end-on, with at least 4 labelled keypoints on the
+    end they show (length fraction beyond :data:`END_FRACTION` that way) and one on the other half (beyond 5 % of the
+    length past the middle). Each is fitted from the first 8 of its near-end keypoints (file order), then from those
+    and its labelled keypoint farthest toward the far end; with the default row's click noise and road normal (as a
+    ground block: normal within 3 degrees, upright within 2), positions as the row's."""
+    work = row["_work"]
+    objects = {o["id"]: o for o in row["_objects"] if o["consistent"] and o["view_deg"] <= 45.0}
+    document = json.loads((work / "annotations.json").read_text())
+    results = json.loads((work / "out" / "results.json").read_text())
+    (estimated,) = [n for n in results["road_normal"] if n["normal"] is not None]
+    ground = GroundOverride(normal=tuple(estimated["normal"]), normal_sigma_deg=road_normal_module.NORMAL_SIGMA_DEG,
+                            upright_sigma_deg=road_normal_module.UPRIGHT_SIGMA_DEG)
+    options = SolverOptions(click_sigma=results["click_noise"]["sigma_px"])
+    near_doc, far_doc, added = [], [], {}
+    for im in document["images"]:
+        near_cars, far_cars = [], []
+        for v in im["vehicles"]:
+            o = objects.get(v["id"])
+            if o is None:
+                continue
+            sign = -1.0 if o["facing"] > 0 else 1.0  # the end it shows: the rear (x < 0) when it faces away
+            keypoints = [p for p in v["parts"] if p["kind"] == "keypoint"]
+            near = [p for p in keypoints if sign * p["at"][0] > END_FRACTION][:8]
+            far = [p for p in keypoints if sign * p["at"][0] < -0.05]
+            if len(near) < 4 or not far:
+                continue
+            extra = min(far, key=lambda p: sign * p["at"][0])
+            near_cars.append({**v, "parts": near})
+            far_cars.append({**v, "parts": [*near, extra]})
+            added[v["id"]] = extra["name"]
+        if near_cars:
+            near_doc.append({**im, "vehicles": near_cars})
+            far_doc.append({**im, "vehicles": far_cars})
+    out: dict = {"cars": len(added), "keypoint_added": dict(Counter(added.values()).most_common(8))}
+    for label, images in (("near end only", near_doc), ("near end + one on the far end", far_doc)):
+        folder = work.parent / f"{work.name}-far-end-{len(out)}"
+        folder.mkdir()
+        (folder / "annotations.json").write_text(json.dumps({"toosicubix": SCHEMA_VERSION, "images": images}))
+        fit_file(folder / "annotations.json", folder / "out", BatchSettings(options=options, jobs=jobs, ground=ground))
+        result = evaluate(load_predictions(folder / "out"), ApolloCar3DGroundTruth(keypoints_path),
+                          EvalOptions(classes=("Car",)))
+        fits = {(im["id"], v["id"]): v for im in json.loads((folder / "out" / "results.json").read_text())["images"]
+                for v in im["vehicles"]}
+        scored = []
+        for m in result.matched:
+            if m.pred_id in added:
+                fit = fits[(m.image_id, m.pred_id)]
+                up = float(np.degrees(np.arccos(np.clip(m.pred.R_cam_vehicle[:, 2] @ m.gt.R_cam_vehicle[:, 2], -1, 1))))
+                scored.append({"e_r_deg": m.metrics.e_r_deg, "yaw_error_deg": m.metrics.e_yaw_deg, "tilt_error_deg": up,
+                               "yaw_sigma_deg": (fit.get("sigma") or {}).get("yaw_deg")})
+        out[label] = {**_group(scored), "fitted": len(scored),
+                      "e_r_over_10_deg": int(sum(o["e_r_deg"] > 10 for o in scored))}
+    out["all their keypoints (the default row)"] = _group([objects[c] for c in added])
     return out
 
 
@@ -426,6 +631,45 @@ def contradicting_by_depth(images: list, scored: set[str], kinds: dict[str, str]
     return out
 
 
+def _line(name: str, g: dict) -> str:
+    if not g["n"]:
+        return f"{name}: none"
+    return (f"{name}: {g['n']} cars, E_R {g['e_r_deg']['mean']:.2f} / {g['e_r_deg']['median']:.2f} deg, |yaw| "
+            f"{g['abs_yaw_error_deg']:.2f}, up axis {g['tilt_error_deg']:.2f}"
+            + ("" if g["yaw_within_1_sigma"] is None else f", yaw within 1 / 2 sigmas "
+               f"{100 * g['yaw_within_1_sigma']:.1f} / {100 * g['yaw_within_2_sigma']:.1f} %"))
+
+
+def print_breakdown(r: dict) -> None:
+    """The rotation breakdown of a row (its cars that neither rule 6 nor rule 17 flags), and the few-keypoint cars
+    of an ``every_car`` row."""
+    if r["half"] == "design":
+        return
+    for name, g in r["rotation_breakdown"]["neither rule 6 nor 17 flags"].items():
+        if name != "all":
+            print(f"{'':<6}   neither flags, {_line(name, g)}", flush=True)
+    few = r["few_keypoints"]
+    if few:
+        print(f"{'':<6} fewer than {MIN_KEYPOINTS} keypoints: {few['cars']} cars ({few['flagged']} flagged by rule 6 "
+              f"or 17): {_line('all', few['all'])}; means IoU {few['all']['iou']['mean']:.3f}, E_t "
+              f"{few['all']['e_t']['mean']:.4f}", flush=True)
+        for name in ("neither rule 6 nor 17 flags", "keypoints on one end", "keypoints along the length"):
+            print(f"{'':<6}   {_line(name, few[name])}", flush=True)
+
+
+def print_upright_cost(half: str, cost: dict) -> None:
+    for label, groups in cost.items():
+        for name, g in groups.items():
+            print(f"{half:<6} upright term, {label}: {_line(name, g)}", flush=True)
+
+
+def print_far_end(half: str, found: dict) -> None:
+    print(f"{half:<6} one keypoint on the far end: {found['cars']} cars seen end-on, clicked on their near end",
+          flush=True)
+    for name in ("near end only", "near end + one on the far end", "all their keypoints (the default row)"):
+        print(f"{'':<6}   {_line(name, found[name])}", flush=True)
+
+
 def format_row(r: dict) -> str:
     def cell(m: str, k: str) -> str:
         v = r[m][k]
@@ -572,7 +816,9 @@ def main() -> int:
     for half, bins in depth_of.items():
         told = "; ".join(f"{b} {v['contradicting']} of {v['cars']}" for b, v in bins.items())
         print(f"{half:<6} cars whose ground truth contradicts their clicks, by ground-truth depth: {told}", flush=True)
-    rows = []
+    rows: list[dict] = []
+    upright_of: dict[str, dict] = {}
+    far_end_of: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for half in halves:
             learned = None if half.bundled else learned_on(half.learn, cameras, f"{half.name} learning images")
@@ -586,13 +832,14 @@ def main() -> int:
                 else:
                     mapping = load_mapping(row.mapping)[0]
                 ids = {im.id for im in half.score}
-                cars = {str(c.id) for im in half.score for c in im.cars} & scored
-                result = run_row(row, half.name, keypoints_path, Path(tmp), mapping, cameras, ids, cars, counts,
-                                 args.jobs, options, args.click_sigma is None, contradicting_of[half.name],
+                every = {str(c.id) for im in half.score for c in im.cars}
+                result = run_row(row, half.name, keypoints_path, Path(tmp), mapping, cameras, ids, every & scored,
+                                 counts, args.jobs, options, args.click_sigma is None, contradicting_of[half.name],
                                  normal_of[half.name], own_priors_path if row.own_priors else None,
-                                 frozenset(hiding_of[half.name]))
+                                 frozenset(hiding_of[half.name]), every)
                 rows.append(result)
                 print(format_row(result), flush=True)
+                print_breakdown(result)
                 if result["yaw_within_1_sigma"] is not None:
                     print(f"{'':<6} yaw within 1 / 2 predicted sigmas: {100 * result['yaw_within_1_sigma']:.1f} % / "
                           f"{100 * result['yaw_within_2_sigma']:.1f} %; E_R > 30 deg: {result['e_r_over_30_deg']}; "
@@ -633,6 +880,14 @@ def main() -> int:
                 misses = "; ".join(f"{k} {n}" for k, n in sorted(result["e_r_over_30_deg_by_ground_truth"].items()))
                 print(f"{'':<6} the other {agree['contradicting']} fit: {kinds}. E_R > 30 deg by ground truth: "
                       f"{misses}", flush=True)
+            if not args.design:  # issue 36's diagnostics, from this half's rows
+                of_half = [r for r in rows if r["half"] == half.name]
+                upright_of[half.name] = upright_cost(of_half)
+                far_end_of[half.name] = far_end(of_half[0], keypoints_path, args.jobs)
+                print_upright_cost(half.name, upright_of[half.name])
+                print_far_end(half.name, far_end_of[half.name])
+        for r in rows:
+            del r["_objects"], r["_work"]
     print(f"{'paper':<6} {'KITTI, human clicks (paper)':<36} {'':>16} | "
           + " ".join(f"{PAPER_KITTI[m]:>7}" for m in METRICS))
     doc = {"generator": "benchmarks/apollocar3d.py", "machine": machine(), "min_keypoints": MIN_KEYPOINTS,
@@ -643,7 +898,7 @@ def main() -> int:
            "hiding_cars": {half: {car: {**counts, "scored": car in scored, "rule_6": contradicting_of[half].get(car)}
                                   for car, counts in sorted(found.items(), key=lambda item: _car_order(item[0]))}
                            for half, found in hiding_of.items()},
-           "rows": rows}
+           "upright_cost": upright_of, "far_end": far_end_of, "rows": rows}
     if args.json is not None:
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
     return 0

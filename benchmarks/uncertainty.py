@@ -135,16 +135,16 @@ def part_sigma_landscape(data: Path, grid: list[float], options: SolverOptions =
 
 
 def _next_click_task(task) -> dict | None:
-    sv, ground_block, seed = task
+    sv, ground_block, seed, options = task
     prior = load_priors()[sv.source.label.type]
     camera = sv.source.camera
     ground = ground_with(None, ground_block)[1] if ground_block else None
     base = tuple(sv.parts)
-    fit = fit_vehicle(build_parts_model(base), camera, prior, OPTIONS, ground)
+    fit = fit_vehicle(build_parts_model(base), camera, prior, options, ground)
     if not fit.ok or not sv.spare:
         return None
     clickable = {(p.kind, p.name): p for p in sv.spare}
-    ranked = suggest_clicks(base, camera, prior, fit, OPTIONS, ground,
+    ranked = suggest_clicks(base, camera, prior, fit, options, ground,
                             box_shaped=is_box_shaped(sv.source.label.type))
     guided = next((clickable[(s.kind, s.name)] for s in ranked if (s.kind, s.name) in clickable), None)
     if guided is None:
@@ -155,7 +155,7 @@ def _next_click_task(task) -> dict | None:
            "guided_name": guided.name, "random_name": random_part.name, "spares": len(sv.spare)}
     errors = {}  # |yaw error| after adding each part of the pool
     for part in sv.spare:
-        refit = fit_vehicle(build_parts_model((*base, part)), camera, prior, OPTIONS, ground)
+        refit = fit_vehicle(build_parts_model((*base, part)), camera, prior, options, ground)
         error = abs(yaw_error_deg(refit.R_cam_vehicle, sv.R_cam_vehicle)) if refit.ok else float("nan")
         errors[(part.kind, part.name)] = (error, refit.uncertainty.yaw_deg if refit.ok else float("nan"))
     for key, part in (("guided", guided), ("random", random_part)):
@@ -164,9 +164,10 @@ def _next_click_task(task) -> dict | None:
     return out
 
 
-def next_click(vehicles, budget: int, ground: GroundOverride | None, seed: int = 0) -> dict:
+def next_click(vehicles, budget: int, ground: GroundOverride | None, seed: int = 0,
+               options: SolverOptions = OPTIONS) -> dict:
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0, max_clicks=budget))
-    tasks = [(sv, ground, seed) for sv in simulated]
+    tasks = [(sv, ground, seed, options) for sv in simulated]
     with ProcessPoolExecutor(max_workers=2) as pool:
         rows = [r for r in pool.map(_next_click_task, tasks, chunksize=16) if r is not None]
     table = {k: np.array([r[k] for r in rows]) for k in ("before", "guided", "random", "random_expected",
@@ -200,9 +201,14 @@ def main() -> None:
     parser.add_argument("--misfit-level", type=float, default=None,
                         help="The calibration rows with the chi-square test of each fit's residuals at this level "
                              "(`fit --misfit-level`; rule 8 of benchmarks/decisions.md measured 0.99).")
+    parser.add_argument("--upright-weight", choices=("lambda", "clicks"), default=SolverOptions.upright_weight,
+                        help="`fit --upright-weight` (rule 23: 'clicks' weighs only keypoint and plate vehicles' "
+                             "upright term differently, so these cuboid-part figures must not move)")
     args = parser.parse_args()
-    base = replace(OPTIONS, misfit_level=args.misfit_level)
+    base = replace(OPTIONS, misfit_level=args.misfit_level, upright_weight=args.upright_weight)
     report: dict = {"machine": machine(), "misfit_level": args.misfit_level, "calibration": [], "next_click": []}
+    if args.upright_weight != SolverOptions.upright_weight:
+        report["upright_weight"] = args.upright_weight
     print(f"machine: {report['machine']}", flush=True)
     if args.tune_part_sigma:
         best, rows = part_sigma_landscape(args.data, [float(v) for v in args.tune_part_sigma.split(",")], base)
@@ -237,7 +243,7 @@ def main() -> None:
                   + (f"; misfits {row['misfits']}" if args.misfit_level is not None else ""), flush=True)
     for budget in (int(b) for b in args.budgets.split(",")):
         for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND)):
-            row = {"ground": label, **next_click(vehicles, budget, ground)}
+            row = {"ground": label, **next_click(vehicles, budget, ground, options=base)}
             report["next_click"].append(row)
             print(f"next click | budget {budget} | {label}: {row['vehicles']} vehicles; median |yaw error| "
                   f"{row['before']['median_deg']:.2f} deg -> guided {row['guided']['median_deg']:.2f}, random "

@@ -174,6 +174,14 @@ def test_lambda_options_are_validated_and_recorded(tmp_path):
     assert (settings["lambda_3d"], settings["lambda_px"]) == (0.5, 0.25)
 
 
+def test_upright_weight_is_validated_and_recorded(tmp_path):
+    assert run("fit", str(SAMPLE), "-o", str(tmp_path / "o"), "--upright-weight", "prior").exit_code == 2
+    assert run("fit", str(SAMPLE), "-o", str(tmp_path / "o")).exit_code == 0
+    assert "upright_weight" not in json.loads((tmp_path / "o" / "results.json").read_text())["settings"]  # default
+    assert run("fit", str(SAMPLE), "-o", str(tmp_path / "o"), "--upright-weight", "clicks").exit_code == 0
+    assert json.loads((tmp_path / "o" / "results.json").read_text())["settings"]["upright_weight"] == "clicks"
+
+
 def test_foreign_label_files_are_never_overwritten(tmp_path):
     label_dir = tmp_path / "kitti" / "label_2"
     label_dir.mkdir(parents=True)

@@ -112,3 +112,33 @@ def test_validate_names_keypoints_to_click_next(keypoint_file, tmp_path):
     assert listed and all(line.endswith("; people click it on 50 % of the cars that show it") for line in listed)
     bad = CliRunner().invoke(main, ["validate", str(keypoint_file), "--mapping", "apollocar3d-66-paper"])
     assert bad.exit_code == 2 and "has no keypoint parts" in bad.output
+
+
+def test_validate_tells_a_car_clicked_on_its_rear_to_click_toward_the_front(tmp_path):
+    """Issue 36, item 3: cars clicked on their rear only (seen from behind and the left) are told, in validate's report
+    and by their first next click (the page's first target), to click one keypoint toward the front along the left."""
+    images = _pitched_batch(3, np.random.default_rng(11))
+    doc = document_json(images)
+    for im in doc["images"]:
+        vehicle = im["vehicles"][0]
+        vehicle["parts"] = [p for p in vehicle["parts"] if p["at"][0] < -0.15]  # lamps, rear glass, bumper, sill
+        assert len(vehicle["parts"]) == 9
+    path = tmp_path / "rear.json"
+    path.write_text(json.dumps(doc))
+    mapping = _mapping().model_dump(mode="json", exclude_none=True)
+    mapping["parts"].append({"kind": "keypoint", "keypoint": "wheel-front-left",
+                             "position": {"at": [0.3, 0.49, 0.2], "spread": [0.01, 0.01, 0.01]}})
+    mapping_file = tmp_path / "mapping.json"
+    mapping_file.write_text(json.dumps(mapping))
+    report = validate_file(path, BatchSettings(next_clicks=3, keypoints=MappingFile.model_validate(mapping)))
+    for check in report.vehicles:
+        first = check.result.next_clicks[0]
+        assert first["far_end"] and first["visible"] and first["inside_image"]
+        assert first["name"] in {"wheel-front-left", "sill-front", "mirror", "door-bottom", "lamp-front-left"}
+    result = CliRunner().invoke(main, ["validate", str(path), "--mapping", str(mapping_file), "--all", "-q"])
+    assert result.exit_code in (0, 1), result.output
+    told = ("  every keypoint is on its rear end, so its yaw and length rest on the size prior: click one more toward "
+            "the far end, the front, along its left side (its left front wheel centre, or a corner of a front door)")
+    assert result.output.count(told) == 3
+    firsts = [line for line in result.output.splitlines() if line.startswith("    1. ")]
+    assert len(firsts) == 3 and all(line.endswith("[toward the far end: fixes yaw and length]") for line in firsts)

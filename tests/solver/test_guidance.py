@@ -233,3 +233,43 @@ def test_no_suggestion_where_the_person_clicked_already():
     clicked = np.concatenate([p.uv for p in (*parts, near)])
     for s in after:
         assert np.min(np.linalg.norm(s.uv[:, None] - clicked[None], axis=2)) >= ALREADY_CLICKED_SIGMAS * 1.5
+
+
+def test_a_car_clicked_on_one_end_is_told_to_click_toward_the_far_end_first():
+    """Issue 36, item 3: every keypoint on the rear (lamps, rear glass, bumper), the car seen from behind and its left:
+    the clicks leave its yaw and length to the size prior. The observability says so in one sentence naming the far
+    end and the side the camera sees, and the keypoints toward the front along that side come first among the next
+    clicks, whatever their linearised gain."""
+    from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
+    from tests.parts.test_real_click_kinds import scene as keypoint_scene
+    from toosicubix.solver.uncertainty import one_end
+
+    d, R, t = keypoint_scene(np.random.default_rng(5))
+    rear = {n: at for n, at in REAR_LEFT.items() if at[0] < -0.15}
+    clicked = tuple(keypoint_parts(d, R, t, rear))
+    prior = exact_prior(d)
+    fit = fit_vehicle(build_parts_model(clicked), CAMERA, prior, OPTIONS)
+    assert fit.ok
+    assert one_end(build_parts_model(clicked), fit.p, fit.R_cam_vehicle, fit.t_cam_vehicle) == ("rear", "left")
+    sentences = fit.observability.sentences
+    assert any(s.startswith("every keypoint is on its rear end, so its yaw and length rest on the size prior: click "
+                            "one more toward the far end, the front, along its left side") for s in sentences)
+    assert not any(s.startswith(("yaw ", "length ")) for s in sentences)  # the one sentence says it for both
+    more = {"wheel-front-left": (0.3, 0.49, 0.2), "lamp-front-right": (0.46, -0.36, 0.55),
+            "handle-rear": REAR_LEFT["handle-rear"], "bumper-right": (-0.48, -0.35, 0.25)}
+    keypoints = {n: TypicalKeypoint(np.array(a), np.full(3, 0.02)) for n, a in {**REAR_LEFT, **more}.items()}
+    suggestions = suggest_clicks(clicked, CAMERA, prior, fit, OPTIONS, keypoints=keypoints)
+    first = suggestions[0]
+    assert first.far_end and first.visible and keypoints[first.name].at[0] > 0.05
+    assert first.to_json()["far_end"] is True
+    far = [s.name for s in suggestions if s.far_end]
+    # past the middle by more than 5 % of the length (the front door handle, at 5 %, is not)
+    assert set(far) == {"door-bottom", "mirror", "wheel-front-left", "lamp-front-right"}
+    visible_far = [s for s in suggestions if s.far_end and s.visible and s.inside]
+    assert suggestions[:len(visible_far)] == visible_far  # every visible one toward the front before the rest
+    # Clicks along the length (a front door handle besides the rear): no such sentence, no far end.
+    along = (*clicked, *keypoint_parts(d, R, t, {"handle-front": REAR_LEFT["handle-front"]}))
+    fit_along = fit_vehicle(build_parts_model(along), CAMERA, prior, OPTIONS)
+    assert one_end(build_parts_model(along), fit_along.p) is None
+    assert not any(s.startswith("every keypoint") for s in fit_along.observability.sentences)
+    assert not any(s.far_end for s in suggest_clicks(along, CAMERA, prior, fit_along, OPTIONS, keypoints=keypoints))

@@ -189,7 +189,8 @@ def test_the_sandwich_is_positive_semidefinite_even_when_badly_conditioned():
 def test_a_vehicle_clicked_in_keypoints_is_advised_in_keypoints():
     """A car seen from behind, clicked on its rear lamps, glass and bumper only (keypoints at typical
     positions, as ApolloCar3D's people click): its length is left to the prior, and the advice names
-    keypoints (a front and a rear one), never the cuboid vocabulary's arrows or ground contacts."""
+    keypoints (one toward the front, the far end: issue 36, item 3), never the cuboid vocabulary's arrows or
+    ground contacts."""
     from tests.parts.test_real_click_kinds import REAR_LEFT, exact_prior, keypoint_parts
 
     rear = {name: at for name, at in REAR_LEFT.items() if name.split("-")[0] in ("lamp", "glass", "bumper")}
@@ -200,7 +201,9 @@ def test_a_vehicle_clicked_in_keypoints_is_advised_in_keypoints():
     fit = fit_vehicle(parts, CAMERA, exact_prior(d))
     assert fit.ok
     sentences = " ".join(fit.observability.sentences)
-    assert "length mostly set by the prior: click a keypoint at the front and one at the rear" in sentences
+    assert ("every keypoint is on its rear end, so its yaw and length rest on the size prior: click one more toward "
+            "the far end, the front, along its ") in sentences
+    assert "length mostly set by the prior" not in sentences  # the one sentence says it
     assert "arrow" not in sentences and "ground" not in sentences.split("scale set by")[0]
     # The same view clicked in the cuboid vocabulary keeps the cuboid advice.
     _, _, cuboid = _fit("rear", 0)
@@ -227,5 +230,6 @@ def test_on_a_road_pitch_and_roll_are_the_roads_not_advice():
     assert f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)" in sentences
     assert not any(s.startswith(("pitch mostly", "roll mostly", "pitch set by the prior", "roll set by the prior"))
                    for s in sentences)
-    assert any(s.startswith("length mostly set by the prior") for s in sentences)
+    assert any(s.startswith("every keypoint is on its rear end, so its yaw and length rest on the size prior")
+               for s in sentences)  # the other quantities keep theirs: the one-end sentence for yaw and length
     assert not any("set by the road" in s for s in free.sentences)  # off the road the clicks set them

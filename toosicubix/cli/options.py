@@ -281,6 +281,12 @@ _FITTING_OPTIONS = [
                  show_default=True,
                  help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
                       " auto: for vehicles with keypoint or plate clicks only (real clicks), the others as with none."),
+    click.option("--upright-weight", type=click.Choice(["lambda", "clicks"]), default=SolverOptions.upright_weight,
+                 show_default=True,
+                 help="How a vehicle with keypoint or plate clicks weighs being upright on the road: lambda, like the "
+                      "size prior (--lambda-p); clicks, as a prior of the stated lean against the click noise (the "
+                      "upright sigma about an estimated road normal). Vehicles of cuboid parts: lambda either way "
+                      "(benchmarks/decisions.md, rule 23)."),
     click.option("--misfit-level", type=click.FloatRange(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
                  help="Test each fit's residuals against the click noise (chi-square at this level, e.g. 0.99): a "
                       "fit that fails is warned about ('misfit: ...', `residual_test` in results.json) and its sigmas "
@@ -315,7 +321,7 @@ _FITTING_OPTIONS = [
     jobs_option,
 ]
 _FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
-                  "misfit_level", "kitti_ground",
+                  "upright_weight", "misfit_level", "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
                   "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "tracks", "frame_rate", "box_cue", "jobs")
 
@@ -372,7 +378,7 @@ def _settings(values: dict[str, Any]) -> Any:
     options = replace(solver_options(values["config_path"], **explicit),
                       click_sigma=SolverOptions.click_sigma if given_sigma is None else given_sigma,
                       part_sigma=values["part_sigma"], robust_loss=values["robust_loss"],
-                      misfit_level=values["misfit_level"])
+                      upright_weight=values["upright_weight"], misfit_level=values["misfit_level"])
     road, normal = road_normal_choice(values["road_normal"])
     given = {k: values[k] for k in ("camera_height", "camera_height_sigma", "camera_pitch_deg", "camera_roll_deg",
                                     "normal_sigma_deg", "upright_sigma_deg")}

@@ -238,6 +238,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
         "settings": {"lambda_3d": options.lambda_3d, "lambda_px": options.lambda_px, "click_sigma": options.click_sigma,
                      "part_sigma": options.part_sigma,
                      **({"misfit_level": options.misfit_level} if options.misfit_level is not None else {}),
+                     **({"upright_weight": options.upright_weight} if options.upright_weight != "lambda" else {}),
                      **({"ground": ground.to_json()} if ground else {}),
                      **({"joint_ground": True} if settings.joint_ground else {})},
         **pilot.header(),

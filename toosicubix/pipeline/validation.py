@@ -268,7 +268,8 @@ def describe(check: VehicleCheck) -> str:
                      "  click next (ranked by each one's shrink of the sigmas times how often people click it):")
     for k, s in enumerate(suggestions, 1):
         where = ", ".join(f"({u:.0f}, {v:.0f})" for u, v in s["uv"])
-        caveat = "" if s["visible"] and s["inside_image"] else (
+        caveat = (" [toward the far end: fixes yaw and length]" if s.get("far_end") else "") + (
+            "" if s["visible"] and s["inside_image"] else
             " [on a face turned away]" if not s["visible"] else " [outside the image]")
         yaw_now = None if sigma is None else sigma.yaw_deg
         depth_now = None if sigma is None else sigma.depth_rel

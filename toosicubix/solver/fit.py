@@ -102,6 +102,10 @@ class SolverOptions:
         'auto': on ApolloCar3D's comparison half it lowered the mean E_comb and E_R and took yaw within two sigmas
         from 87.2 to 89.8 % (rule 18 of benchmarks/decisions.md); vehicles of cuboid parts are fitted as without it
     robust_rounds : how many reweighting rounds the robust loss takes at most
+    upright_weight : how the upright term (a ground's) of a vehicle with keypoint or plate clicks is weighed: 'lambda'
+        (by ``lambda_px``, as every cue) or 'clicks' (against the click noise its soft-weighted pixel rows have: the
+        prior of the sigma the ground states, :meth:`.problem.Problem.upright_against_clicks`; rule 23 of
+        benchmarks/decisions.md); vehicles of cuboid parts are fitted as with 'lambda' either way
     misfit_level : the level of the chi-square test of a fit's residuals (:mod:`.misfit`), e.g. 0.99; a fit that
         fails it is warned about and its sigmas widen by the root of its chi-square per degree of freedom. Default
         None (no test): on the simulated KITTI test split it took the yaw share within one sigma with a ground
@@ -127,6 +131,7 @@ class SolverOptions:
     ambiguity_sigmas: float = 4.0
     robust_loss: str = "auto"
     robust_rounds: int = 5
+    upright_weight: str = "lambda"
     misfit_level: float | None = None
 
 
@@ -324,6 +329,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     # Keypoints' and plates' soft term: their spread as per-click weights, seen from the best start's distance.
     soft = soft_weights(problem, float(np.linalg.norm(ordered[0].t)), options.click_sigma)
     problem = with_weights(problem, soft)
+    if soft is not None and options.upright_weight == "clicks":  # the upright term as the prior it states
+        problem = problem.upright_against_clicks(options.click_sigma)
     k = options.refine_starts
     converged, refine_iterations = _refine_batch(problem, ordered[:k], options, max_tilt, parts.click_labels,
                                                  click_faces)

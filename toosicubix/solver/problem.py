@@ -16,6 +16,12 @@ with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`
 road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
 does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
 
+The upright term of a vehicle whose clicks carry their own noise (keypoints and plates: the soft term of
+:mod:`.robust` weighs each pixel row to the click noise ``sigma_c``) may instead be weighed as the prior it states,
+``sigma_c^2 |R e_z - n|^2 / sigma_up^2`` (:meth:`Problem.upright_against_clicks`, ``SolverOptions.upright_weight``
+'clicks'; rule 23 of benchmarks/decisions.md): weighed by ``lambda_px`` (10 px^2) against ApolloCar3D's 0.95 px
+clicks it stands vehicles upright within about 1 degree where the ground block says 3.6.
+
 Arrow rows: a direction arrow's two points are a gauge (the paper moves them along their rays until the segment is
 as long as the dimension it runs along), so only the rays say where the arrow was drawn. The arrow is drawn on the
 vehicle or on the ground beside it, so the midpoint's ray, taken at the distance of the vehicle's centre, passes
@@ -30,6 +36,7 @@ whenever an arrow is drawn shorter or longer than the vehicle (rule 22 of benchm
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -74,6 +81,9 @@ class Problem:
     row_cues : (m,) what each row is
     ground : the road plane, or None
     upright_sigma : radians, the spread of the vehicle's up axis about the normal (None without ground)
+    upright_noise_px : the pixel noise the upright rows are weighed against, each row
+        ``upright_noise_px (R e_z - n)_k / upright_sigma``; None: ``sqrt(lambda_px)``, like every other cue
+        (:meth:`upright_against_clicks`)
     A_rows : (3N, P) ``A`` stacked; A_mean : (3, P) the clicked points' centroid is ``A_mean @ p``
     arrow_mid, arrow_low, arrow_high : (3 n_arrows, P) each arrow's midpoint coordinates and the zone's
         bounds on them, linear in ``p`` (empty without arrows)
@@ -99,6 +109,7 @@ class Problem:
     arrow_low: np.ndarray
     arrow_high: np.ndarray
     click_weights: np.ndarray | None = None
+    upright_noise_px: float | None = None
 
     @classmethod
     def build(cls, parts: PartsModel, camera: Camera, prior: SizePrior, lambda_3d: float,
@@ -144,6 +155,41 @@ class Problem:
         A_mean = A.mean(axis=0) if len(A) else np.zeros((3, P))  # no clicks (a track's frame with a box only)
         return cls(parts, u, uv, camera.K, prior, lambda_3d, lambda_px, np.array(rows), np.array(targets),
                    tuple(cues), ground, upright_sigma, A.reshape(-1, P), A_mean, *_arrow_zone(parts))
+
+    @property
+    def upright_weight(self) -> float:
+        """The factor of the upright rows ``(R e_z - n)`` in the pixel cost: ``upright_noise_px / upright_sigma``
+        (``sqrt(lambda_px)`` for the noise when None). Only for a problem with a ground."""
+        assert self.upright_sigma is not None
+        noise = math.sqrt(self.lambda_px) if self.upright_noise_px is None else self.upright_noise_px
+        return noise / self.upright_sigma
+
+    @property
+    def cue_row_lambdas(self) -> np.ndarray:
+        """(m,) the weight, px^2, of each cue row's squared standardized residual in the pixel cost, in the order
+        of :func:`.refine.residuals_batch`'s cue rows (scale rows, upright rows, arrow rows): ``lambda_px``, but
+        ``upright_noise_px^2`` for the upright rows when set."""
+        n_up = 0 if self.upright_sigma is None else 3
+        out = np.full(len(self.b) + n_up + self.n_arrow_rows, float(self.lambda_px))
+        if n_up and self.upright_noise_px is not None:
+            out[len(self.b):len(self.b) + n_up] = self.upright_noise_px**2
+        return out
+
+    def upright_against_clicks(self, click_sigma: float) -> Problem:
+        """The problem with its upright term weighed against the click noise ``click_sigma`` (px), as the prior it
+        states: for a vehicle whose pixel rows are weighed to that noise (keypoints, plates:
+        :func:`.robust.soft_weights`).
+
+        The spread is the ground's ``upright_sigma`` about a normal the batch estimated (rule 7 measured its 2 degrees
+        about the median of ground-truth up axes, the estimator of :mod:`toosicubix.pipeline.road_normal`: the
+        estimate's own error is in it; it is 0.16 degrees, the standard error of the median of 231 vehicles, on
+        ApolloCar3D's comparison half), else ``hypot(upright_sigma, normal_sigma)`` as for every vehicle. Without a
+        ground, the problem as it is."""
+        if self.ground is None:
+            return self
+        sigma = (self.ground.upright_sigma if self.ground.from_batch
+                 else float(np.hypot(self.ground.upright_sigma, self.ground.normal_sigma)))
+        return replace(self, upright_sigma=float(sigma), upright_noise_px=float(click_sigma))
 
     @property
     def n_arrow_rows(self) -> int:
@@ -283,17 +329,21 @@ class Problem:
         return Y[:, :2] / Y[:, 2:3] @ self.K[:2, :2].T + self.K[:2, 2] - self.uv
 
     def cost_px(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
-        """The pixel-domain cost: px^2 plus lambda_px times the cues' squared standardized residuals."""
+        """The pixel-domain cost: px^2 plus lambda_px times the cues' squared standardized residuals (the upright
+        term's weight :attr:`upright_weight` squared)."""
         e = self.pixel_residuals(R_cam_vehicle, t_cam_vehicle, p)
         if self.click_weights is not None:
             e = e * self.click_weights[:, None]
         a, b = self.scale_terms(t_cam_vehicle, p)
         cues = float(np.sum((a - b) ** 2))
-        if self.upright_sigma is not None:
+        upright = 0.0
+        if self.upright_sigma is not None and self.upright_noise_px is None:
             cues += float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2)) / self.upright_sigma**2
+        elif self.upright_sigma is not None:
+            upright = self.upright_weight**2 * float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2))
         if self.n_arrow_rows:
             cues += float(np.sum(self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None])[0] ** 2))
-        return float(np.sum(e * e) + self.lambda_px * cues)
+        return float(np.sum(e * e) + self.lambda_px * cues + upright)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
         """Smallest depth (camera z) of the clicked points and the cuboid's bottom centre, metres."""

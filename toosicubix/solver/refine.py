@@ -57,7 +57,8 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     """Residuals (B, M) and Jacobians (B, M, 6 + P) of B poses: ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P),
     ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
     problem has a ground plane, then 3 arrow rows per arrow (:meth:`Problem.arrow_rows`); the cue rows are
-    multiplied by ``sqrt(lambda_px)``."""
+    multiplied by ``sqrt(lambda_px)`` (the upright rows by :attr:`.problem.Problem.upright_weight` times
+    ``sigma_up``)."""
     K_ = problem.K
     N, _, P = problem.A.shape
     B = len(R)
@@ -83,7 +84,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     else:
         r[:, 2 * N:2 * N + m] = w * (a - b)
     if n_up:
-        w_up = w / problem.upright_sigma
+        w_up = problem.upright_weight  # sqrt(lambda_px) / sigma_up, or the clicks' noise over it (keypoints)
         r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
     if n_arrow:
         arrow_r, arrow_gradient = problem.arrow_rows(R, t, p, pivot)

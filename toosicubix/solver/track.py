@@ -703,6 +703,8 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
             weights = fit.click_weights if fit is not None else soft_weights(problem, float(np.linalg.norm(t0[f])),
                                                                              options.click_sigma)
             problem = with_weights(problem, weights)
+            if frame.parts.click_spread is not None and options.upright_weight == "clicks":  # as a frame alone
+                problem = problem.upright_against_clicks(options.click_sigma)
         problems.append(problem)
         own.append(values)
     boxes, sides = [], []

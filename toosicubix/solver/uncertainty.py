@@ -1,14 +1,16 @@
 """How well a fitted cuboid is determined: covariance, standard deviations, what the clicks fix, confidence.
 
-The fit minimizes ``F = |r_px|^2 + lambda_px |r_cue|^2`` (pixel residuals; size prior, known sizes, ground
-cues as standardized residuals). Linearized at the optimum, with clicks off by independent Gaussian noise of
-``click_sigma`` pixels per coordinate and the vehicle off its prior (and the road off its stated plane) by
-one standard deviation per standardized residual, the estimate's error has covariance
+The fit minimizes ``F = |r_px|^2 + sum_k lambda_k r_cue,k^2`` (pixel residuals; size prior, known sizes, ground
+cues as standardized residuals, each weighed by ``lambda_px``, or the upright rows of a vehicle of keypoints by the
+click noise squared: :attr:`.problem.Problem.cue_row_lambdas`, ``Lambda`` below). Linearized at the optimum, with
+clicks off by independent Gaussian noise of ``click_sigma`` pixels per coordinate and the vehicle off its prior (and
+the road off its stated plane) by one standard deviation per standardized residual, the estimate's error has
+covariance
 
-    Cov = H^-1 (click_sigma^2 J_px^T J_px + lambda_px^2 J_cue^T J_cue) H^-1,  H = J_px^T J_px + lambda_px J_cue^T J_cue
+    Cov = H^-1 (click_sigma^2 J_px^T J_px + J_cue^T Lambda^2 J_cue) H^-1,  H = J_px^T J_px + J_cue^T Lambda J_cue
 
 over ``theta = (delta, t, p)`` with ``R = R_hat exp([delta]x)``: the estimator's own spread, right whatever
-``lambda_px`` is (when ``lambda_px = click_sigma^2`` it is the Laplace posterior ``click_sigma^2 H^-1``).
+``Lambda`` is (when every ``lambda_k = click_sigma^2`` it is the Laplace posterior ``click_sigma^2 H^-1``).
 Reported quantities are functions of ``theta`` whose standard deviations follow by the chain rule.
 
 What the clicks determine: for each quantity, its posterior variance from the clicks' information alone
@@ -27,9 +29,13 @@ import numpy as np
 
 from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
+from toosicubix.parts.linear import PartsModel
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 
+#: A vehicle's clicks are all on one end when each sits at least this fraction of its length from the middle, all on
+#: one side (:func:`one_end`): a rear view's lamps, plate, boot and rear glass; a door or a wheel is not.
+END_FRACTION = 0.15
 #: A quantity is "mostly set by the cues" when switching them off multiplies its variance by more than this
 #: (its standard deviation by 2).
 PRIOR_SET_RATIO = 4.0
@@ -137,12 +143,15 @@ def finite_or_none(value: float) -> float | None:
 
 def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
               J: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot); ``J``
-    is that Jacobian when the caller has it already (:func:`.refine.residuals_and_jacobian` at the pose)."""
+    """The pixel rows and the standardized cue rows of the Jacobian w.r.t. ``(delta, t, p)`` (no pivot), each cue
+    row divided by the root of its weight (:attr:`.problem.Problem.cue_row_lambdas`); ``J`` is that Jacobian when
+    the caller has it already (:func:`.refine.residuals_and_jacobian` at the pose)."""
     if J is None:
         _, J = residuals_and_jacobian(problem, R, t, p)
     n_px = 2 * problem.parts.n_clicks
-    return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
+    if problem.upright_noise_px is None:  # every cue row weighed by lambda_px
+        return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
+    return J[:n_px], J[n_px:] / np.sqrt(problem.cue_row_lambdas)[:, None]
 
 
 def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
@@ -162,17 +171,24 @@ def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, cl
     return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
 
 
-def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float, sigmas: np.ndarray) -> np.ndarray:
-    """``H^-1 (J_px^T S^2 J_px + lam^2 J_cue^T J_cue) H^-1`` with ``H = J_px^T J_px + lam J_cue^T J_cue`` and
-    ``S`` the rows' noise (:func:`row_sigmas`).
+def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float | np.ndarray, sigmas: np.ndarray) -> np.ndarray:
+    """``H^-1 (J_px^T S^2 J_px + J_cue^T Lambda^2 J_cue) H^-1`` with ``H = J_px^T J_px + J_cue^T Lambda J_cue``,
+    ``S`` the rows' noise (:func:`row_sigmas`) and ``Lambda`` the cue rows' weights: ``lam`` for every row, or
+    per row (m,) (:attr:`.problem.Problem.cue_row_lambdas`).
 
     Computed as ``X X^T`` with ``X = H^-1 [J_px^T S, lam J_cue^T]``, ``H`` scaled to a unit diagonal first, so
     that no variance comes out negative however badly the fit is conditioned; a direction ``H`` does not
     determine at all gets infinite variance (never zero)."""
-    H = J_px.T @ J_px + lam * (J_cue.T @ J_cue)
+    if np.ndim(lam) == 0:
+        H = J_px.T @ J_px + lam * (J_cue.T @ J_cue)
+        weighted_cue_T = lam * J_cue.T
+    else:
+        weighted_cue = np.asarray(lam)[:, None] * J_cue
+        H = J_px.T @ J_px + J_cue.T @ weighted_cue
+        weighted_cue_T = weighted_cue.T
     scale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
     H_scaled = H * scale[:, None] * scale[None, :]
-    L = np.hstack([(J_px * sigmas[:, None]).T, lam * J_cue.T]) * scale[:, None]
+    L = np.hstack([(J_px * sigmas[:, None]).T, weighted_cue_T]) * scale[:, None]
     try:
         X = np.linalg.solve(H_scaled, L) * scale[:, None]
     except np.linalg.LinAlgError:
@@ -195,11 +211,12 @@ def ypr_gradient(R: np.ndarray) -> np.ndarray:
     return np.linalg.inv(np.column_stack([R.T @ e_y, rot_x(roll).T @ e_y, e_x]))
 
 
-def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float, sigmas: np.ndarray,
+def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: float | np.ndarray, sigmas: np.ndarray,
                                G: np.ndarray, t: np.ndarray) -> Uncertainty:
     """Standard deviations of a fit from the rows :func:`jacobians` gives (any subset of clicks and of
-    parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`)
-    and ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
+    parameters, the rotation, translation and dimensions first), their noise ``sigmas`` (:func:`row_sigmas`),
+    the cue rows' weights ``lambda_px`` (one, or per row: :attr:`.problem.Problem.cue_row_lambdas`) and
+    ``G = ypr_gradient(R)``: what :func:`analyse` reports when the rows are all of them."""
     return uncertainty_from_covariance(_sandwich(J_px, J_cue, lambda_px, sigmas), G, t)
 
 
@@ -240,8 +257,13 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
         own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
         return np.concatenate([np.arange(first_arrow_row), own]).astype(int)
 
+    lam = _cue_lambdas(problem)  # one weight, or one per cue row (the upright rows weighed against the clicks)
+
+    def lam_of(rows: np.ndarray) -> float | np.ndarray:
+        return lam if np.ndim(lam) == 0 else np.asarray(lam)[rows]
+
     base_cues = cue_rows(np.arange(n_base_clicks))
-    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], problem.lambda_px,
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], lam_of(base_cues),
                                      sigmas[base_rows], G, t)
     out = []
     for entry in added:
@@ -250,9 +272,14 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
         cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]))
-        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], problem.lambda_px, sigmas[r],
+        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], lam_of(cues), sigmas[r],
                                               G, t))
     return now, out
+
+
+def _cue_lambdas(problem: Problem) -> float | np.ndarray:
+    """The cue rows' weights for :func:`_sandwich`: ``lambda_px`` when every row has it, else per row."""
+    return problem.lambda_px if problem.upright_noise_px is None else problem.cue_row_lambdas
 
 
 def uncertainty_from_covariance(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
@@ -286,10 +313,11 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     C = J_c.T @ J_c
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
-    u = uncertainty_from_covariance(_sandwich(J_px, J_c, problem.lambda_px, sigmas), G, t)
+    u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
     return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
-                             problem.upright_sigma is not None, tuple(problem.row_cues))
+                             problem.upright_sigma is not None, tuple(problem.row_cues),
+                             one_end(problem.parts, p, R, t))
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -370,21 +398,49 @@ class Observability:
                    tuple(d["sentences"]))
 
 
+def one_end(parts: PartsModel, p: np.ndarray, R: np.ndarray | None = None, t: np.ndarray | None = None
+            ) -> tuple[str, str | None] | None:
+    """The end every click of a vehicle clicked in keypoints only sits on, 'front' or 'rear' (each click's typical
+    position at least :data:`END_FRACTION` of the length from the middle, on that side), and with a pose ``R``
+    (3, 3), ``t`` (3,) the side the camera sees, 'left' or 'right' (None without); None when the clicks span the
+    length or are not all keypoints. ``p`` (P,): the vehicle's unknowns, its dimensions first.
+
+    ApolloCar3D's end-on cars clicked on one end only (a rear view's lamps, plate, boot and rear glass) leave their
+    length and yaw to the size prior: on the comparison half, 268 end-on cars fitted from their near end's keypoints
+    had a mean E_R of 7.52 degrees, and one keypoint toward the far end took it to 3.38 (benchmarks/apollocar3d.py's
+    far-end diagnostic; benchmarks/decisions.md, rule 23's section)."""
+    if not parts.keypoints_only:
+        return None
+    x = (parts.A @ p)[:, 0] / p[0]  # (N,) each click's position along the length, fractions from the middle
+    end = "front" if x.min() > END_FRACTION else "rear" if x.max() < -END_FRACTION else None
+    if end is None:
+        return None
+    side = None if R is None or t is None else ("left" if (R.T @ -np.asarray(t))[1] >= 0.0 else "right")
+    return end, side
+
+
 def observability_sentences(status: dict[str, str], scale_from: str | None, keypoints_only: bool = False,
-                            upright: bool = False, scale_cues: tuple[str, ...] = ()) -> tuple[str, ...]:
+                            upright: bool = False, scale_cues: tuple[str, ...] = (),
+                            end: tuple[str, str | None] | None = None) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
     ground block): pitch and roll left to the cues are one sentence saying the road sets them, with no advice,
     since that is its job. ``scale_cues``: the cues that share the scale (:attr:`~toosicubix.solver.fit.FitResult.
-    scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks."""
+    scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks.
+    ``end``: the end every keypoint sits on and the side the camera sees (:func:`one_end`): when the clicks leave the
+    yaw or the length to the prior, one sentence says so and which click fixes both, in place of their hints."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
     on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
     if on_road:
         out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
+    on_one_end = ()
+    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
+        on_one_end = ("yaw", "length")
+        out.append(_far_end_sentence(*end))
     for name in QUANTITIES:
-        if name in on_road:
+        if name in on_road or name in on_one_end:
             continue
         if status[name] == "cues only":
             out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
@@ -394,6 +450,15 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
         out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
     return tuple(out)
+
+
+def _far_end_sentence(end: str, side: str | None) -> str:
+    """What to click on a vehicle whose keypoints all sit on its ``end``, seen from ``side`` (or None)."""
+    far = "front" if end == "rear" else "rear"
+    along = f"along its {side} side" if side else "along a side it shows"
+    example = f"its {side} {far} wheel centre" if side else f"a {far} wheel centre"
+    return (f"every keypoint is on its {end} end, so its yaw and length rest on the size prior: click one more "
+            f"toward the far end, the {far}, {along} ({example}, or a corner of a {far} door)")
 
 
 def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
@@ -412,7 +477,8 @@ def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
 
 
 def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
-                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = ()) -> Observability:
+                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = (),
+                   end: tuple[str, str | None] | None = None) -> Observability:
     ratios, status = {}, {}
     for name, v_full in full.items():
         v_clicks = clicks_only[name]
@@ -421,7 +487,7 @@ def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_
         status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
                         "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
     return Observability(ratios, status,
-                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues))
+                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues, end))
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
