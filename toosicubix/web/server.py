@@ -186,6 +186,7 @@ class Handler(BaseHTTPRequestHandler):
         elif path == "/api/save":
             self._json(HTTPStatus.OK, session.save(self._body()))
         elif path == "/api/reload":
+            self._body()  # read (and checked as every POST's): the next request on the connection starts after it
             self._json(HTTPStatus.OK, session.reload())
         else:
             raise ApiError(f"no such API: POST {path[:200]}", HTTPStatus.NOT_FOUND)

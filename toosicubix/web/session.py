@@ -5,14 +5,15 @@ Concurrency (two pages on one file): **refuse, never merge.** Every change carri
 last saw; a change made on an older revision is refused (:class:`Conflict`, HTTP 409) and the page gets the
 current state, re-applies a click it was adding and tells the person. A change is also refused when the file
 on disk was changed by another program since this session read or wrote it (a second ``toosicubix annotate``
-on the same file, an editor): its content hash is checked under a lock file beside it before each write, and
-the person is told to reload. So no click is ever silently overwritten: the one that would be lost is refused
-and said so.
+on the same file, an editor): the content hashes of both files it writes (the annotation file and its extras file,
+below) are checked under a lock file beside them before each write, and the person is told to reload. So no click
+is ever silently overwritten: the one that would be lost is refused and said so.
 
 What the file cannot hold: the annotation file v1 names every part, so a click not named yet (waiting for
 the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a second file beside it,
 ``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
-(unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
+(unnamed clicks come back after their vehicle's named ones; the entries of images not served are kept as read); it
+is removed when there is nothing in it.
 
 Naming (:mod:`toosicubix.web.placement`, :mod:`toosicubix.web.naming`): a click made without a name takes the most
 probable name when the page is sure enough of it, else it waits with the few names that fit there for the person to
@@ -35,6 +36,7 @@ are its keypoints.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import fcntl
 import hashlib
@@ -45,8 +47,9 @@ import re
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from http import HTTPStatus
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +67,7 @@ from toosicubix.annotations.mapping import MappingFile
 from toosicubix.annotations.schema import MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
-from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
+from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
@@ -375,22 +378,20 @@ class Session:
     # -- loading and saving ------------------------------------------------------------------------------------
 
     def _load(self) -> None:
-        """(Re)read the annotation file, if any, and build the state of every given image."""
-        data = _read_bytes(self.out)
-        self._disk_digest = _digest(data)
-        loaded: list[Image] = load_images(self.out) if data is not None else []
+        """(Re)read the annotation file and its extras file, if any, and build the state of every given image.
+
+        Both files are read under the lock file's shared lock (a second session writes them under its exclusive
+        lock), so the pair read is one that session wrote together. Nothing of this session's state changes until
+        everything is read: a file that cannot be read (an error naming it) leaves the session as it was."""
+        with self._file_lock(exclusive=False):
+            data, extras = _read_bytes(self.out), _read_bytes(self.extras_path)
+            loaded: list[Image] = load_images(self.out) if data is not None else []
+            extras_doc = read_json(self.extras_path, at_root=True) if extras is not None else None
         check_prototypes(loaded, self.priors, self.out)
         by_id = {im.id: im for im in loaded}
         served_ids = {p.stem for p in self._paths}
-        self._others = [image_json(im) for im in loaded if im.id not in served_ids]
-        # The file's frames that are not served: their tracked vehicles are fitted with the served frames' (never
-        # changed here, so kept as read).
-        self._other_frames = [im for im in loaded if im.id not in served_ids and im.sequence is not None]
-        self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
         taken = {(im.sequence, im.frame): im.id for im in loaded if im.sequence is not None}
-        #: The served images the file did not have when it was read.
-        self.new_ids = {p.stem for p in self._paths} - set(by_id)
-        self.images: list[ImageState] = []
+        images: list[ImageState] = []
         for index, path in enumerate(self._paths):
             image_id = path.stem
             size = _image_size(path)
@@ -413,9 +414,20 @@ class Session:
                     raise ApiError(f"--sequence {sequence}: {path.name} would be frame {frame}, which is image "
                                    f"{taken[(sequence, frame)]!r}'s in {self.out} already (the file's images keep "
                                    "their frames): give the sequence another name, or files numbered as the file's")
-            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles,
-                                          sequence=sequence, frame=frame))
-        self._restore_extras()
+            images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles,
+                                     sequence=sequence, frame=frame))
+        other_extras = self._restore_extras(images, extras_doc)
+        # Read: now the session's state.
+        self._disk_digest, self._extras_digest = _digest(data), _digest(extras)
+        self._others = [image_json(im) for im in loaded if im.id not in served_ids]
+        # The file's frames that are not served: their tracked vehicles are fitted with the served frames' (never
+        # changed here, so kept as read).
+        self._other_frames = [im for im in loaded if im.id not in served_ids and im.sequence is not None]
+        self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
+        #: The served images the file did not have when it was read.
+        self.new_ids = served_ids - set(by_id)
+        self.images = images
+        self._other_extras = other_extras
 
     @property
     def order(self) -> list[int]:
@@ -522,23 +534,45 @@ class Session:
                 images.append(others[image_id])
         return {"toosicubix": 1, "images": images}
 
-    def _save(self) -> None:
-        """Write the file atomically, unless someone else changed it since we read or wrote it (Conflict)."""
-        text = json.dumps(self.document(), indent=1, allow_nan=False) + "\n"
+    @contextlib.contextmanager
+    def _file_lock(self, exclusive: bool = True) -> Iterator[None]:
+        """The lock file beside the annotation file (``.<name>.lock``), held exclusively to write the annotation
+        file and its extras file, shared to read them (every session on the file takes it)."""
         lock_path = self.out.with_name(f".{self.out.name}.lock")
         with open(lock_path, "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+            fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
             try:
-                now = _digest(_read_bytes(self.out))
-                if now != self._disk_digest:
-                    raise Conflict(f"{self.out} was changed on disk by another program since this session read "
-                                   "or wrote it; the change was not saved. Reload (POST /api/reload) to continue "
-                                   "from the file as it is now.")
-                atomic_write_text(self.out, text)
-                self._disk_digest = _digest(text.encode("utf-8"))
-                self._save_extras()
+                yield
             finally:
                 fcntl.flock(lock, fcntl.LOCK_UN)
+
+    def _save(self) -> None:
+        """Write the annotation file and its extras file atomically, unless someone else changed either since this
+        session read or wrote them (Conflict: nothing is written).
+
+        Both are checked by content hash under the lock file (:meth:`_file_lock`) before either is written: a
+        second ``annotate`` on the file writes them under the same lock, so what it wrote is never overwritten."""
+        text = json.dumps(self.document(), indent=1, allow_nan=False) + "\n"
+        extras = self._extras_document()
+        extras_text = None if extras is None else json.dumps(extras, indent=1, allow_nan=False) + "\n"
+        try:
+            with self._file_lock():
+                for path, digest in ((self.out, self._disk_digest), (self.extras_path, self._extras_digest)):
+                    if _digest(_read_bytes(path)) != digest:
+                        raise Conflict(f"{path} was changed on disk by another program (a second annotate page on "
+                                       "this file, an editor) since this session read or wrote it; the change was "
+                                       "not saved. Reload (the page's reload button, or POST /api/reload) to "
+                                       "continue from the files as they are now.")
+                atomic_write_text(self.out, text)
+                self._disk_digest = _digest(text.encode("utf-8"))
+                if extras_text is not None:
+                    atomic_write_text(self.extras_path, extras_text)
+                else:
+                    self.extras_path.unlink(missing_ok=True)
+                self._extras_digest = None if extras_text is None else _digest(extras_text.encode("utf-8"))
+        except OSError as exc:
+            raise ApiError(f"cannot write {exc.filename or self.out}: {exc.strerror or exc}; the change was not "
+                           "saved", HTTPStatus.SERVICE_UNAVAILABLE) from None
 
     @property
     def extras_path(self) -> Path:
@@ -546,45 +580,57 @@ class Session:
         tracks whose prediction was dismissed on a frame."""
         return self.out.with_name(f"{self.out.name}.annotate.json")
 
-    def _save_extras(self) -> None:
-        images = {}
+    def _extras_document(self) -> dict[str, Any] | None:
+        """The extras file of the current state (the served images', and the other images' entries as read), or
+        None when there is nothing in it."""
+        images = dict(self._other_extras["images"])
         for im in self.images:
             vehicles = {v.id: {"done": v.done, "unnamed": [p.uv[0] for p in v.parts if not p.named]}
                         for v in im.vehicles if v.done or any(not p.named for p in v.parts)}
             if vehicles:
                 images[im.id] = vehicles
-        dismissed = {im.id: list(im.dismissed) for im in self.images if im.dismissed}
-        if images or dismissed:
-            extras: dict[str, Any] = {"toosicubix_annotate": 1, "images": images}
-            if dismissed:
-                extras["dismissed"] = dismissed
-            atomic_write_json(self.extras_path, extras)
-        else:
-            self.extras_path.unlink(missing_ok=True)
+        dismissed = {**self._other_extras["dismissed"],
+                     **{im.id: list(im.dismissed) for im in self.images if im.dismissed}}
+        if not images and not dismissed:
+            return None
+        extras: dict[str, Any] = {"toosicubix_annotate": 1, "images": images}
+        if dismissed:
+            extras["dismissed"] = dismissed
+        return extras
 
-    def _restore_extras(self) -> None:
-        """Unnamed clicks (appended to their vehicle) and done marks of vehicles that still exist."""
-        if not self.extras_path.exists():
-            return
-        data = read_json(self.extras_path, at_root=True)
+    def _restore_extras(self, images: list[ImageState], data: Any) -> dict[str, dict[str, Any]]:
+        """Put the extras file's unnamed clicks (appended to their vehicle) and done marks of vehicles that still
+        exist, and its dismissed tracks, on ``images``. The entries of images not served, kept as read (written
+        back with the served ones')."""
+        others: dict[str, dict[str, Any]] = {"images": {}, "dismissed": {}}
+        if data is None:
+            return others
         if not isinstance(data, dict) or data.get("toosicubix_annotate") != 1:
             raise InputFileError(self.extras_path, [("$.toosicubix_annotate", "expected 1 (an annotate session file)")])
         try:
-            by_id = {im.id: im for im in self.images}
+            by_id = {im.id: im for im in images}
             for image_id, vehicles in data["images"].items():
+                # Checked as an edit's clicks are (the entries of images not served are written back as read).
+                entries = {vehicle_id: {"done": bool(extra["done"]),
+                                        "unnamed": [checked_pixels([uv], 1, "uv")[0] for uv in extra["unnamed"]]}
+                           for vehicle_id, extra in vehicles.items()}
+                if image_id not in by_id:
+                    others["images"][image_id] = entries
                 for v in by_id[image_id].vehicles if image_id in by_id else []:
-                    extra = vehicles.get(v.id)
+                    extra = entries.get(v.id)
                     if extra is not None:
-                        v.done = bool(extra["done"])
-                        v.parts.extend(ClickedPart(None, None, checked_pixels([uv], 1, "uv"))
-                                       for uv in extra["unnamed"])
+                        v.done = extra["done"]
+                        v.parts.extend(ClickedPart(None, None, [uv]) for uv in extra["unnamed"])
             for image_id, tracks in data.get("dismissed", {}).items():
+                if not isinstance(tracks, list) or not all(isinstance(t, str) for t in tracks):
+                    raise TypeError("dismissed tracks that are not a list of strings")
                 if image_id in by_id:
-                    if not all(isinstance(t, str) for t in tracks):
-                        raise TypeError("a dismissed track that is not a string")
                     by_id[image_id].dismissed = list(tracks)
+                else:
+                    others["dismissed"][image_id] = tracks
         except (KeyError, TypeError, AttributeError, ApiError) as exc:
             raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
+        return others
 
     # -- the model and the fit --------------------------------------------------------------------------------
 

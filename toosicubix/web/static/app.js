@@ -168,6 +168,8 @@ async function edit(change, retryable = false) {
     }
     if (status === 409) await loadView();
     say(doc.error, true);
+    // Another program (a second page's server) changed the files: this page continues only from them, on request.
+    if (status === 409 && doc.error.includes("changed on disk")) $("reload").hidden = false;
     return null;
   }
   say("the annotations keep changing under this page; the click was not added", true);
@@ -880,6 +882,19 @@ async function toggleDone() {
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
 }
 
+// Read the annotation file and its extras file again (after another program changed them); this page's undo
+// history is dropped.
+async function reloadFiles() {
+  const { status, doc } = await api("POST", "/api/reload", {});
+  if (status !== 200) { say(doc.error, true); return; }
+  $("reload").hidden = true;
+  state.session = doc;
+  state.revision = doc.revision;
+  await loadView();
+  say("reloaded from the files as they are now");
+}
+
+$("reload").onclick = reloadFiles;
 $("prev").onclick = () => step(-1);
 $("next").onclick = () => step(1);
 $("confirm").onclick = confirmPrediction;
