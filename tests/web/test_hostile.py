@@ -6,9 +6,17 @@ connections, ids and images that used to crash the page, and the time bound on r
 from __future__ import annotations
 
 import json
+from pathlib import Path
+
+import pytest
 
 from tests.web.conftest import make_session, serving
-from tests.web.synthetic import NAMED, UNNAMED, clicks
+from tests.web.synthetic import NAMED, UNNAMED, clicks, write_sequence
+from toosicubix.annotations.priors_file import load_priors
+from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE
+from toosicubix.web import session as session_module
+from toosicubix.web.request_fields import ApiError
+from toosicubix.web.session import Session, load_cameras
 
 # -- two servers on one file: every file the page writes is checked before it is written ---------------------------
 
@@ -80,3 +88,117 @@ def test_a_reload_that_fails_leaves_the_session_as_it_was(served, tmp_path):
     status, doc = client.edit({"op": "set_vehicle", "vehicle": "1", "done": True})
     assert status == 409 and "changed on disk" in doc["error"]
     assert (tmp_path / "annotations.json").read_text() == '{"toosicubix": 1, "images": ['
+
+
+# -- the page never saves what fit would refuse -----------------------------------------------------------------------
+
+@pytest.mark.parametrize(("change", "field", "expected"), [
+    ({"op": "set_vehicle", "vehicle": "1", "box2d": [0, 0, 1e308, 1e308]}, "box2d[2]", "pixel coordinate within"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[5e6, 5e6]]}, "uv[0][0]", "pixel coordinate within"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[-1e300, 1]]}, "uv[0][0]", "pixel coordinate within"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[10**400, 1]]}, "uv[0][0]", "an integer of 401 digits"),
+    ({"op": "add_click", "vehicle": "1", "kind": "length", "name": "plate-rear", "uv": [[10.0, 10.0], [20.0, 10.0]],
+      "known": [1e308, 1e-300]}, "known[0]", "size in metres"),
+    ({"op": "add_click", "vehicle": "1", "kind": "length", "name": "plate-rear", "uv": [[10.0, 10.0], [20.0, 10.0]],
+      "known": [0.5, 1e-300]}, "known[1]", "sigma in metres"),
+    # The synthetic image is 1240 x 375 px: 10 % around it is x in [-124, 1364], y in [-37.5, 412.5].
+    ({"op": "add_click", "vehicle": "1", "uv": [[600, 413]]}, "uv[0]",
+     "outside the 1240 x 375 image by more than 10 %"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[-125, 100]]}, "uv[0]", "expected x within [-124, 1364]"),
+    ({"op": "add_click", "vehicle": "1", "kind": "symmetry", "name": "rear", "uv": [[600, 200], [1400, 200]]},
+     "uv[1]", "outside the 1240 x 375 image"),
+    ({"op": "set_vehicle", "vehicle": "1", "box2d": [100, 100, 1500, 300]}, "box2d[2:4]", "outside the 1240 x 375"),
+    ({"op": "move_click", "vehicle": "1", "part": 0, "uv": [600, 5000]}, "uv[0]", "outside the 1240 x 375 image"),
+    ({"op": "add_click", "vehicle": "1", "uv": [[float("nan"), 1]]}, "uv[0][0]", "expected a finite number"),
+])
+def test_edits_fit_would_refuse_get_400_naming_the_field(served, tmp_path, change, field, expected):
+    """Issue 34: each of these was saved (200) and then `validate`, `fit` and `annotate` refused the file. Now 400
+    naming the field, and the file stays as it was."""
+    client, _ = served
+    assert client.edit({"op": "add_vehicle"})[0] == 200
+    assert client.edit({"op": "add_click", "vehicle": "1", "uv": [[600, 200]]})[0] == 200
+    before = (tmp_path / "annotations.json").read_bytes(), session_extras(tmp_path)
+    status, doc = client.edit(change)
+    assert status == 400 and doc["error"].startswith(f"{field}: ") and expected in doc["error"], doc
+    assert ((tmp_path / "annotations.json").read_bytes(), session_extras(tmp_path)) == before
+
+
+def session_extras(folder: Path) -> bytes | None:
+    path = folder / "annotations.json.annotate.json"
+    return path.read_bytes() if path.exists() else None
+
+
+def test_clicks_within_the_margin_are_kept_and_the_file_reads_back(served, tmp_path):
+    """A wheel cut off by the image's edge is clicked a little outside it: within 10 % of the image's size it is
+    kept, and what the page saved is a file `validate` reads."""
+    client, _ = served
+    assert client.edit({"op": "add_vehicle", "box2d": [-100, 10, 1300, 400]})[0] == 200
+    status, doc = client.edit({"op": "add_click", "vehicle": "1", "kind": "point", "name": "wheel-front-left",
+                               "uv": [[-120.0, 410.0]]})
+    assert status == 200, doc
+    assert validate_main(["validate", str(tmp_path / "annotations.json")]) in (0, 1)
+
+
+def validate_main(args: list[str]) -> int:
+    from click.testing import CliRunner
+
+    from toosicubix.cli import main
+
+    result = CliRunner().invoke(main, args)
+    assert result.exception is None or isinstance(result.exception, SystemExit), result.output
+    return result.exit_code
+
+
+def test_a_vehicle_has_at_most_the_clicks_a_file_may_hold(scene, tmp_path):
+    """A vehicle with MAX_CLICKS_PER_VEHICLE clicked points (here unnamed ones, read back from the extras file) takes
+    no more: a file with one more is one `fit` refuses."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    extras = {"toosicubix_annotate": 1, "images": {"car": {"1": {
+        "done": False, "unnamed": [[100.0 + k, 200.0] for k in range(MAX_CLICKS_PER_VEHICLE)]}}}}
+    session.extras_path.write_text(json.dumps(extras))
+    resumed = make_session(scene, out)
+    with pytest.raises(ApiError, match=f"has {MAX_CLICKS_PER_VEHICLE} clicked points") as refused:
+        resumed.edit(0, {"revision": resumed.revision, "op": "add_click", "vehicle": "1", "uv": [[50.0, 60.0]]})
+    assert refused.value.status == 400
+
+
+def test_an_image_takes_at_most_max_vehicles(scene, tmp_path, monkeypatch):
+    monkeypatch.setattr(session_module, "MAX_VEHICLES_PER_IMAGE", 3)
+    session = make_session(scene, tmp_path / "annotations.json")
+    for _ in range(3):
+        session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
+    with pytest.raises(ApiError, match="has 3 vehicles, as many as the page adds"):
+        session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
+
+
+@pytest.mark.parametrize("odd_id", ["²", "٣", "007", "9" * 30])
+def test_vehicle_ids_validate_accepts_do_not_break_add_vehicle(scene, tmp_path, odd_id):
+    """Issue 34: a vehicle id '²' (which `validate` accepts; str.isdigit passes it, int refuses it) made every
+    add_vehicle on its image a 500. Ids of other digits, or too many of them, are left alone."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    document = json.loads(out.read_text())
+    document["images"][0]["vehicles"][0]["id"] = odd_id
+    out.write_text(json.dumps(document))
+    resumed = make_session(scene, out)
+    view = resumed.edit(0, {"revision": resumed.revision, "op": "add_vehicle"})
+    assert [v["id"] for v in view["vehicles"]] == [odd_id, "1" if odd_id != "007" else "8"]
+
+
+def test_track_names_of_other_digits_do_not_break_the_view(tmp_path):
+    """A track named '²' (or of 40 digits) on a frame: the page orders tracks by their ASCII digits only."""
+    paths, cameras = write_sequence(tmp_path, frames=2)
+    out = tmp_path / "annotations.json"
+    session = Session(paths, out, load_cameras(cameras, [p.stem for p in paths]), load_priors(), sequence="0003")
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    session.edit(0, {"revision": session.revision, "op": "add_vehicle"})
+    document = json.loads(out.read_text())
+    document["images"][0]["vehicles"][0]["track"] = "²"
+    document["images"][0]["vehicles"][1]["track"] = "1" * 40
+    out.write_text(json.dumps(document))
+    resumed = Session(paths, out, load_cameras(cameras, [p.stem for p in paths]), load_priors(), sequence="0003")
+    view = resumed.image_view(1)
+    assert {p["track"] for p in view["predictions"]} == {"²", "1" * 40}

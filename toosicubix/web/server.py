@@ -103,7 +103,7 @@ class Handler(BaseHTTPRequestHandler):
         if kind != "application/json":
             # A web page of another site can send a form or text/plain POST here without asking; it cannot send
             # application/json without a CORS preflight, which this server never grants.
-            raise ApiError(f"expected Content-Type application/json, got {kind or 'none'!r}",
+            raise ApiError(f"expected Content-Type application/json, got {kind or 'none'!r:.60}",
                            HTTPStatus.UNSUPPORTED_MEDIA_TYPE)
         length = self.headers.get("Content-Length")
         if length is None or not length.isdigit():
@@ -124,7 +124,8 @@ class Handler(BaseHTTPRequestHandler):
             return
         host = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]").lower()
         if host not in ("127.0.0.1", "localhost", "::1"):
-            raise ApiError(f"requests must be addressed to 127.0.0.1 or localhost, not {host!r}", HTTPStatus.FORBIDDEN)
+            raise ApiError(f"requests must be addressed to 127.0.0.1 or localhost, not {host!r:.60}",
+                           HTTPStatus.FORBIDDEN)
 
     def _handle(self, route) -> None:
         try:

@@ -64,7 +64,7 @@ from toosicubix.annotations.convert import (
     part_from_schema,
 )
 from toosicubix.annotations.mapping import MappingFile
-from toosicubix.annotations.schema import MAX_ID_LENGTH, parse_annotations
+from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE, MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.atomic import atomic_write_text
@@ -89,6 +89,7 @@ from toosicubix.web.placement import NAMING_SETTINGS, NamingSettings, propose
 from toosicubix.web.request_fields import (
     ApiError,
     Conflict,
+    check_on_image,
     checked_box2d,
     checked_kind_name,
     checked_known,
@@ -107,6 +108,10 @@ CHOICES = 5
 #: How far (fractions of the dimensions) a mapping's keypoint may lie from another's mirror place to be its mirror
 #: partner: apollocar3d-66's partners lie within 0.046 of each other's mirror places (median 0.023).
 MIRROR_TOLERANCE = 0.1
+#: The most vehicles the page adds to one image (a file may have more; the page's answers and undo grow with them).
+MAX_VEHICLES_PER_IMAGE = 500
+#: A vehicle id the page numbers from: ASCII digits, few enough for any integer conversion.
+_VEHICLE_NUMBER = re.compile(r"^[0-9]{1,18}$")
 #: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
 NEXT_CLICKS = 1000
 
@@ -958,14 +963,14 @@ class Session:
             image = self.image(index)
             revision = request.get("revision")
             if not isinstance(revision, int) or isinstance(revision, bool):
-                raise ApiError(f"revision: expected the integer revision the page last saw, got {revision!r}")
+                raise ApiError(f"revision: expected the integer revision the page last saw, got {revision!r:.60}")
             if revision != self.revision:
                 raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision} "
                                "(another page changed them); nothing was changed, reload and apply it again")
             op = request.get("op")
             handler = _OPS.get(op) if isinstance(op, str) else None
             if handler is None:
-                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r}")
+                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r:.60}")
             before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
@@ -999,7 +1004,7 @@ class Session:
             raise ApiError('expected {"image": index, "vehicle": {...a vehicle of the annotation file v1...}}')
         index = body["image"]
         if not isinstance(index, int) or isinstance(index, bool):
-            raise ApiError(f"image: expected an index, got {index!r}")
+            raise ApiError(f"image: expected an index, got {index!r:.60}")
         doc = {"toosicubix": 1, "images": [{"id": "request", "camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
                                             "vehicles": [body["vehicle"]]}]}
         try:
@@ -1009,10 +1014,17 @@ class Session:
             raise ApiError("; ".join(f"{'vehicle' + p.removeprefix(prefix)}: {m}" for p, m in exc.problems)) from None
         self._check_prototype(v.prototype)
         parts = [part_from_schema(p, "") for p in v.parts]
+        image = self.image(index)
+        size = image.camera.image_size
+        for k, part in enumerate(parts):  # on the image, as an edit's clicks
+            for name, xy in zip(vocabulary.KINDS[part.kind].clicks, part.uv, strict=True):
+                check_on_image((float(xy[0]), float(xy[1])), size, f"vehicle.parts[{k}].{name}")
+        if v.box2d is not None:
+            checked_box2d(list(v.box2d), size)
         state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
                              parts=[ClickedPart.of(p) for p in parts])
         with self._lock:
-            return {"revision": self.revision, **self._vehicle_view(self.image(index), 0, state)}
+            return {"revision": self.revision, **self._vehicle_view(image, 0, state)}
 
     def reload(self) -> dict[str, Any]:
         """Read the file again (after another program changed it); undo history is dropped."""
@@ -1037,7 +1049,7 @@ class Session:
             self._check_prototype(prototype)
             if image.sequence is not None:
                 track = new_track_name(image.sequence, self._all_tracks())
-        box = checked_box2d(r.get("box2d"))
+        box = checked_box2d(r.get("box2d"), image.camera.image_size)
         vehicle_id = self._new_vehicle_id(image)
         image.vehicles.append(VehicleState(vehicle_id, prototype, box, track=track))
         if track in image.dismissed:
@@ -1046,8 +1058,22 @@ class Session:
 
     @staticmethod
     def _new_vehicle_id(image: ImageState) -> str:
-        used = {int(v.id) for v in image.vehicles if v.id.isdigit()}
-        return str(max(used, default=0) + 1)
+        """One more than the largest id of ASCII digits on the image (ids of other characters, e.g. '²', which
+        ``int`` refuses though ``str.isdigit`` passes them, or '007', are left alone), never one it has.
+
+        Raises
+        ------
+        ApiError
+            The image has :data:`MAX_VEHICLES_PER_IMAGE` vehicles already.
+        """
+        if len(image.vehicles) >= MAX_VEHICLES_PER_IMAGE:
+            raise ApiError(f"image {image.id} has {len(image.vehicles)} vehicles, as many as the page adds to one "
+                           f"image (MAX_VEHICLES_PER_IMAGE)")
+        taken = {v.id for v in image.vehicles}
+        k = max((int(v.id) for v in image.vehicles if _VEHICLE_NUMBER.match(v.id)), default=0) + 1
+        while str(k) in taken:
+            k += 1
+        return str(k)
 
     def _op_set_vehicle(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1068,10 +1094,10 @@ class Session:
                                    "the track has no other frame, or delete those")
             self._set_prototype(v, r["prototype"])
         if "box2d" in r:
-            v.box2d = checked_box2d(r["box2d"])
+            v.box2d = checked_box2d(r["box2d"], image.camera.image_size)
         if "done" in r:
             if not isinstance(r["done"], bool):
-                raise ApiError(f"done: expected true or false, got {r['done']!r}")
+                raise ApiError(f"done: expected true or false, got {r['done']!r:.60}")
             v.done = r["done"]
 
     def _set_prototype(self, v: VehicleState, prototype: str) -> None:
@@ -1087,17 +1113,21 @@ class Session:
     def _op_add_click(self, image: ImageState, r: dict) -> dict[str, Any]:
         v = self._vehicle(image, r)
         kind, name = r.get("kind"), r.get("name")
+        size = image.camera.image_size
         if kind is None and name is None:
-            uv = checked_pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv", size)
+            self._check_room(v, 1)
             v.parts.append(ClickedPart(None, None, uv))
         elif kind == "keypoint" and (extra := self._keypoint_extra(v.prototype, name)) is not None:
-            uv = checked_pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv", size)
+            self._check_room(v, 1)
             self._check_not_clicked(v, kind, name)
             v.parts.append(ClickedPart(kind, name, uv, extra=extra))
         else:
             self._check_page_made(kind, name)
             kind, name = checked_kind_name(kind, name)
-            uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
+            uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv", size)
+            self._check_room(v, len(uv))
             self._check_not_clicked(v, kind, name)
             known = None
             if vocabulary.KINDS[kind].known:
@@ -1110,8 +1140,8 @@ class Session:
         part = self._part(v, r)
         click = r.get("click", 0)
         if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
-            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r}")
-        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv")[0]
+            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r:.60}")
+        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv", image.camera.image_size)[0]
 
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1246,14 +1276,14 @@ class Session:
         for v in image.vehicles:
             if v.id == vehicle_id:
                 return v
-        raise ApiError(f"vehicle: no vehicle {vehicle_id!r} on image {image.id} "
+        raise ApiError(f"vehicle: no vehicle {vehicle_id!r:.60} on image {image.id} "
                        f"(it has {', '.join(v.id for v in image.vehicles) or 'none'})")
 
     @staticmethod
     def _part(v: VehicleState, r: dict) -> ClickedPart:
         k = r.get("part")
         if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < len(v.parts):
-            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r}")
+            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r:.60}")
         return v.parts[k]
 
     def _check_page_made(self, kind: Any, name: Any) -> None:
@@ -1267,8 +1297,18 @@ class Session:
         if self.mapping is None:
             raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
                            "keypoint mapping: start the page with --mapping (e.g. apollocar3d-66) to click keypoints")
-        raise ApiError(f"name: {kind} {name!r} is not a keypoint of the mapping {self.mapping.name} (its keypoints "
+        raise ApiError(f"name: {kind} {name!r:.60} is not a keypoint of the mapping {self.mapping.name} (its keypoints "
                        f"are in the palette; plates are not made on the page)")
+
+    @staticmethod
+    def _check_room(v: VehicleState, clicks: int) -> None:
+        """Room on ``v`` for ``clicks`` more clicked points, named or not: a file with more than the schema's
+        :data:`MAX_CLICKS_PER_VEHICLE` on a vehicle is one ``fit`` refuses (ApiError otherwise)."""
+        have = sum(len(p.uv) for p in v.parts)
+        if have + clicks > MAX_CLICKS_PER_VEHICLE:
+            raise ApiError(f"uv: vehicle {v.id} has {have} clicked points; a file may hold at most "
+                           f"{MAX_CLICKS_PER_VEHICLE} on one vehicle (MAX_CLICKS_PER_VEHICLE), so this click would "
+                           "make one that fit refuses")
 
     @staticmethod
     def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None) -> None:

@@ -601,6 +601,16 @@ function fitToView() {
 
 const toScreen = ([u, v]) => [u * state.zoom + state.panX, v * state.zoom + state.panY];
 const toImage = (x, y) => [(x - state.panX) / state.zoom, (y - state.panY) / state.zoom];
+// Whether an image pixel lies on the image shown (not on the grey around it): only such clicks are sent.
+function onImage([u, v]) {
+  const [w, h] = state.session.images[state.index].size;
+  return u >= 0 && v >= 0 && u <= w && v <= h;
+}
+const clampToImage = ([u, v]) => {
+  const [w, h] = state.session.images[state.index].size;
+  return [Math.min(Math.max(u, 0), w), Math.min(Math.max(v, 0), h)];
+};
+const OFF_IMAGE = "that is outside the image: click on the image itself (zoom out with the wheel or 0 to see all of it)";
 
 function line(a, b, colour, width = 1.5, dash = []) {
   ctx.strokeStyle = colour;
@@ -811,7 +821,7 @@ canvas.addEventListener("mouseup", async (e) => {
   if (!d) return;
   if (d.kind === "box") {
     state.mode = "click";
-    const [u0, v0] = d.from, [u1, v1] = toImage(e.offsetX, e.offsetY);
+    const [u0, v0] = clampToImage(d.from), [u1, v1] = clampToImage(toImage(e.offsetX, e.offsetY));
     const box = [Math.min(u0, u1), Math.min(v0, v1), Math.max(u0, u1), Math.max(v0, v1)];
     if (box[2] - box[0] < 2 || box[3] - box[1] < 2) { say("box too small", true); render(); return; }
     if (state.prediction !== null) {  // the prediction's box: its track gets a vehicle with that box only
@@ -826,14 +836,19 @@ canvas.addEventListener("mouseup", async (e) => {
     }
   } else if (d.kind === "move") {
     state.selectedPart = d.part;
-    if (d.moved) {
-      await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click,
-        uv: toImage(e.offsetX, e.offsetY) });
+    const uv = toImage(e.offsetX, e.offsetY);
+    if (d.moved && !onImage(uv)) {
+      await loadView();  // the click back where it was
+      say(OFF_IMAGE, true);
+    } else if (d.moved) {
+      await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click, uv });
     } else {
       render();
     }
   } else if (d.kind === "click") {
-    await addClick(toImage(e.offsetX, e.offsetY));
+    const uv = toImage(e.offsetX, e.offsetY);
+    if (onImage(uv)) await addClick(uv);
+    else say(OFF_IMAGE, true);
   }
 });
 canvas.addEventListener("wheel", (e) => {
