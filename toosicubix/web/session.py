@@ -84,6 +84,7 @@ from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.track import TrackOptions
+from toosicubix.web.images import image_size
 from toosicubix.web.naming import naming_candidates, nearest_parts
 from toosicubix.web.placement import NAMING_SETTINGS, NamingSettings, propose
 from toosicubix.web.request_fields import (
@@ -282,15 +283,6 @@ def _looks_like_json(path: Path) -> bool:
     return head[:1] in ("{", "[")
 
 
-def _image_size(path: Path) -> tuple[int, int]:
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise InputFileError(path, [("$", "cannot read the image (missing or not a format OpenCV reads)")])
-    return int(image.shape[1]), int(image.shape[0])
-
-
 def _digest(data: bytes | None) -> str | None:
     return None if data is None else hashlib.sha256(data).hexdigest()
 
@@ -399,7 +391,7 @@ class Session:
         images: list[ImageState] = []
         for index, path in enumerate(self._paths):
             image_id = path.stem
-            size = _image_size(path)
+            size = image_size(path)
             known = by_id.get(image_id)
             if known is not None:
                 camera = Camera(K=known.camera.K, distortion=known.camera.distortion,
