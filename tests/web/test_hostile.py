@@ -5,7 +5,10 @@ connections, ids and images that used to crash the page, and the time bound on r
 
 from __future__ import annotations
 
+import http.client
 import json
+import socket
+import time
 from pathlib import Path
 
 import pytest
@@ -15,7 +18,9 @@ from tests.web.synthetic import NAMED, UNNAMED, clicks, write_sequence
 from toosicubix.annotations.priors_file import load_priors
 from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE
 from toosicubix.web import session as session_module
+from toosicubix.web.client import Client
 from toosicubix.web.request_fields import ApiError
+from toosicubix.web.server import serve_in_thread
 from toosicubix.web.session import Session, load_cameras
 
 # -- two servers on one file: every file the page writes is checked before it is written ---------------------------
@@ -202,3 +207,132 @@ def test_track_names_of_other_digits_do_not_break_the_view(tmp_path):
     resumed = Session(paths, out, load_cameras(cameras, [p.stem for p in paths]), load_priors(), sequence="0003")
     view = resumed.image_view(1)
     assert {p["track"] for p in view["predictions"]} == {"²", "1" * 40}
+
+
+# -- JSON-only, same-origin POSTs ----------------------------------------------------------------------------------
+
+def _raw(client, method: str, path: str, body: bytes = b"", headers: dict | None = None) -> tuple[int, dict]:
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    try:
+        connection.request(method, path, body=body, headers=headers or {})
+        response = connection.getresponse()
+        return response.status, json.loads(response.read())
+    finally:
+        connection.close()
+
+
+def test_a_form_post_cannot_reload(served):
+    """Issue 34: any web page could make the browser send a plain form post to /api/reload (it bumped the revision
+    and dropped the undo history). Every POST now needs a JSON body."""
+    client, session = served
+    for kind in ("application/x-www-form-urlencoded", "text/plain", "multipart/form-data; boundary=x"):
+        status, doc = _raw(client, "POST", "/api/reload", b"a=1", {"Content-Type": kind})
+        assert status == 415 and "expected Content-Type application/json" in doc["error"]
+    status, doc = _raw(client, "POST", "/api/reload", b"", {})
+    assert status == 415
+    assert session.revision == 0
+
+
+@pytest.mark.parametrize(("headers", "expected"), [
+    ({"Origin": "http://evil.example"}, "a request from 'http://evil.example'"),
+    ({"Origin": "null"}, "a request from 'null'"),
+    ({"Origin": "http://localhost:1"}, "may not change the annotations"),
+    ({"Sec-Fetch-Site": "cross-site"}, "a cross-site request may not change"),
+    ({"Sec-Fetch-Site": "same-site"}, "a same-site request may not change"),
+])
+def test_posts_from_another_origin_are_refused(served, headers, expected):
+    client, session = served
+    for path in ("/api/reload", "/api/save", "/api/images/0/edit", "/api/fit"):
+        status, doc = _raw(client, "POST", path, b'{"revision": 0, "op": "add_vehicle"}',
+                           {"Content-Type": "application/json", **headers})
+        assert status == 403 and expected in doc["error"], (path, doc)
+    assert session.revision == 0 and not session.out.exists()
+
+
+def test_posts_from_the_page_itself_pass(served):
+    client, _ = served
+    origin = f"http://{client.host}:{client.port}"
+    status, doc = _raw(client, "POST", "/api/images/0/edit", b'{"revision": 0, "op": "add_vehicle"}',
+                       {"Content-Type": "application/json", "Origin": origin, "Sec-Fetch-Site": "same-origin"})
+    assert status == 200 and doc["vehicle"] == "1"
+
+
+@pytest.mark.parametrize(("path", "body", "headers", "status", "expected"), [
+    ("/api/reload", b"[" * 5000, {}, 400, "nests arrays and objects 5000 deep"),
+    ("/api/images/0/edit", b'{"revision": ' + b"9" * 5000 + b"}", {}, 400, "not JSON this server reads"),
+    ("/api/images/0/edit", b'{"revision": 0', {}, 400, "not JSON at line 1 column 15"),
+    ("/api/images/0/edit", b"\xff\xfe", {}, 400, "not UTF-8 JSON"),
+    ("/api/images/0/edit", b"{}", {"Content-Length": "\u00b2"}, 411, "Content-Length"),
+    ("/api/images/0/edit", b"{}", {"Content-Length": "1" * 20}, 411, "Content-Length"),
+    ("http://[", b"{}", {}, 400, "a request target this server cannot read: Invalid IPv6 URL"),
+])
+def test_malformed_requests_get_4xx_not_500(served, path, body, headers, status, expected):
+    client, _ = served
+    connection = http.client.HTTPConnection(client.host, client.port, timeout=30)
+    try:
+        connection.putrequest("POST", path, skip_host=True, skip_accept_encoding=True)
+        connection.putheader("Host", f"127.0.0.1:{client.port}")
+        connection.putheader("Content-Type", "application/json")
+        connection.putheader("Content-Length", headers.get("Content-Length", str(len(body))))
+        connection.endheaders(body)
+        response = connection.getresponse()
+        got, doc = response.status, json.loads(response.read())
+    finally:
+        connection.close()
+    assert got == status and expected in doc["error"], doc
+
+
+# -- stalled connections ---------------------------------------------------------------------------------------------
+
+def _stall(address, count: int, partial: bytes) -> list[socket.socket]:
+    out = []
+    for _ in range(count):
+        s = socket.create_connection(address, timeout=30)
+        s.sendall(partial)
+        out.append(s)
+    return out
+
+
+def test_stalled_connections_do_not_lock_the_page_out(scene, tmp_path):
+    """Issue 34: a few hundred connections that send half a request and wait. At most max_connections are served
+    at once; each new one closes the one that has waited longest for its client, so the page's requests are
+    answered at once all along."""
+    session = make_session(scene, tmp_path / "a.json")
+    server = serve_in_thread(session, max_connections=16)
+    address = server.server_address[:2]
+    client = Client(*address, timeout=30)
+    stalled = []
+    try:
+        for partial in (b"GET /api/session HTTP/1.1\r\nHost: 127.0.0.1\r\n",  # headers never finished
+                        b"POST /api/images/0/edit HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                        b"Content-Length: 100\r\n\r\n{\"revision\": 0"):  # a body never finished
+            stalled += _stall(address, 150, partial)
+            started = time.monotonic()
+            status, doc = client.request("GET", "/api/session")
+            assert status == 200 and doc["images"][0]["id"] == "car"
+            assert client.edit({"op": "add_vehicle"})[0] == 200
+            assert time.monotonic() - started < 5.0  # generous: a hang would be READ_TIMEOUT or more
+            assert server.connections <= 16
+    finally:
+        for s in stalled:
+            s.close()
+        server.shutdown()
+        server.server_close()
+
+
+def test_a_stalled_body_times_out_with_408(scene, tmp_path):
+    session = make_session(scene, tmp_path / "a.json")
+    server = serve_in_thread(session, read_timeout=0.5)
+    try:
+        (s,) = _stall(server.server_address[:2], 1, b"POST /api/images/0/edit HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                      b"Content-Type: application/json\r\nContent-Length: 100\r\n\r\n{")
+        s.settimeout(30)
+        answer = s.recv(4096)
+        assert answer.startswith(b"HTTP/1.1 408") and b"did not arrive within 0.5 s" in answer
+        assert s.recv(4096) == b""  # and closed
+        s.close()
+        assert Client(*server.server_address[:2]).request("GET", "/api/session")[0] == 200
+        assert session.revision == 0
+    finally:
+        server.shutdown()
+        server.server_close()
