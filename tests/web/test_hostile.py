@@ -338,3 +338,48 @@ def test_a_stalled_body_times_out_with_408(scene, tmp_path):
         server.shutdown()
         server.server_close()
 
+
+# -- the time bound on refits (issue 34, item 4) -------------------------------------------------------------------
+
+
+def test_a_refit_over_the_bound_answers_422_within_it_and_leaves_the_files_as_they_were(scene, tmp_path):
+    """The fits run in a process of their own, ended when late. With the bound lowered to 2 ms, a change whose refit
+    takes longer (a fresh fit of five named parts: tens of milliseconds) is refused with 422 well within a second,
+    nothing is written and the revision stays; the view shows the vehicle as not fitted in time; with the bound as
+    shipped, the same change is saved."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session, bound_fits=True)
+    try:
+        client = Client(*server.server_address[:2])
+        assert client.edit({"op": "add_vehicle"})[0] == 200
+        named = clicks(NAMED)
+        for c in named[:-1]:
+            change = {"op": "add_click", "vehicle": "1", "kind": c.kind, "name": c.name, "uv": c.uv}
+            assert client.edit(change)[0] == 200
+        files = out.read_bytes(), session.extras_path.exists()
+        revision = session.revision
+        session.fit_seconds = 0.002
+        last = {"op": "add_click", "vehicle": "1", "kind": named[-1].kind, "name": named[-1].name, "uv": named[-1].uv}
+        started = time.monotonic()
+        status, doc = client.edit(last, revision=revision)
+        answered = time.monotonic() - started
+        assert status == 422, doc
+        assert "did not finish within 0.002 s" in doc["error"] and "nothing was changed" in doc["error"]
+        assert answered < 1.0, answered
+        assert (out.read_bytes(), session.extras_path.exists()) == files
+        assert session.revision == revision and len(session.images[0].vehicles[0].parts) == len(named) - 1
+        assert server.fitter.killed >= 1  # ended, not waited for
+        session.fit_seconds = session_module.FIT_SECONDS
+        status, doc = client.edit(last)
+        assert status == 200 and doc["vehicles"][0]["fit"]["status"] == "ok", doc
+        assert len(json.loads(out.read_text())["images"][0]["vehicles"][0]["parts"]) == len(named)
+        assert client.request("POST", "/api/reload", {})[0] == 200  # the fits made before are forgotten
+        session.fit_seconds = 0.002
+        status, view = client.request("GET", "/api/images/0")  # a view answers, the fit it could not make said so
+        assert status == 200 and view["vehicles"][0]["fit"]["error"] == "out_of_time", view["vehicles"][0]["fit"]
+        assert "did not finish within 0.002 s" in view["vehicles"][0]["fit"]["error_detail"]
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert server.fitter is None  # its processes ended with the server

@@ -23,6 +23,10 @@ application/json``, else 415: a web page of another site cannot send that withou
 never grants), addressed to a loopback name when the server listens on one (else 403: DNS rebinding), and, when the
 browser says where it comes from (``Origin``, ``Sec-Fetch-Site``), from this server's own origin (else 403).
 
+Each request's fits are bounded too (:attr:`AnnotateServer.fitter`, :meth:`.Session.use_fitter`): computed in a process
+of their own, ended when they are not done within the session's bound (an edit or a preview then gets 422 and nothing
+changes).
+
 Connections are bounded: each read or write waits at most :data:`READ_TIMEOUT` seconds for the client, and at most
 :data:`MAX_CONNECTIONS` connections are served at once (one thread each); a new connection beyond them closes the
 one that has waited longest for its client's bytes (a stalled or idle connection: never one the server is answering),
@@ -49,7 +53,8 @@ from urllib.parse import urlsplit
 from toosicubix.errors import InputFileError
 from toosicubix.jsonfile import MAX_JSON_DEPTH, json_nesting
 from toosicubix.web.request_fields import ApiError
-from toosicubix.web.session import Session
+from toosicubix.web.session import FIT_MODULES, Session
+from toosicubix.web.worker import DeadlineWorker
 
 #: Largest request body, bytes.
 MAX_BODY = 1 << 20
@@ -79,8 +84,11 @@ class AnnotateServer(ThreadingHTTPServer):
     request_queue_size = 128
 
     def __init__(self, address: tuple[str, int], session: Session, read_timeout: float = READ_TIMEOUT,
-                 max_connections: int = MAX_CONNECTIONS):
+                 max_connections: int = MAX_CONNECTIONS, bound_fits: bool = True):
         self.session = session
+        #: The process the session's fits are computed in, each request's within the session's bound (started here
+        #: when ``bound_fits``, ended by :meth:`server_close`).
+        self.fitter: DeadlineWorker | None = None
         self.static = static_files()
         self.loopback = address[0] in ("127.0.0.1", "localhost", "::1")
         self.read_timeout, self.max_connections = read_timeout, max_connections
@@ -88,6 +96,16 @@ class AnnotateServer(ThreadingHTTPServer):
         self._waiting: dict[socket.socket, float | None] = {}
         self._places = threading.Condition()
         super().__init__(address, Handler)
+        if bound_fits:
+            self.fitter = DeadlineWorker(FIT_MODULES).start()
+            session.use_fitter(self.fitter)
+
+    def server_close(self) -> None:
+        super().server_close()
+        if self.fitter is not None:
+            self.session.use_fitter(None)
+            self.fitter.close()
+            self.fitter = None
 
     @property
     def url(self) -> str:
@@ -349,12 +367,16 @@ class Handler(BaseHTTPRequestHandler):
 
 def serve(session: Session, host: str = "127.0.0.1", port: int = 0, **bounds: Any) -> AnnotateServer:
     """A server bound to ``host:port`` (0: any free port), not yet serving: call ``serve_forever``. ``bounds``:
-    ``read_timeout``, ``max_connections`` (:class:`AnnotateServer`)."""
+    ``read_timeout``, ``max_connections``, ``bound_fits`` (default True: the fits in a process of their own, each
+    request's within the session's bound; :class:`AnnotateServer`)."""
     return AnnotateServer((host, port), session, **bounds)
 
 
-def serve_in_thread(session: Session, host: str = "127.0.0.1", port: int = 0, **bounds: Any) -> AnnotateServer:
-    """A server answering from a daemon thread (tests, benchmarks); ``shutdown()`` and ``server_close()`` end it."""
-    server = serve(session, host, port, **bounds)
+def serve_in_thread(session: Session, host: str = "127.0.0.1", port: int = 0, bound_fits: bool = False,
+                    **bounds: Any) -> AnnotateServer:
+    """A server answering from a daemon thread (tests, benchmarks); ``shutdown()`` and ``server_close()`` end it.
+    Its fits are computed in the serving process, unbounded, unless ``bound_fits`` (starting the fitting processes takes
+    a second or two)."""
+    server = serve(session, host, port, bound_fits=bound_fits, **bounds)
     threading.Thread(target=server.serve_forever, name="toosicubix-annotate", daemon=True).start()
     return server

@@ -81,7 +81,7 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.tracks import results_of_track
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
-from toosicubix.size_priors import Priors
+from toosicubix.size_priors import Priors, SizePrior
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.track import TrackOptions
 from toosicubix.web.images import image_size
@@ -97,6 +97,7 @@ from toosicubix.web.request_fields import (
     checked_pixels,
 )
 from toosicubix.web.sequence import TRACK_WINDOW, frame_numbers, frames_to_fit, new_track_name, track_sort_key
+from toosicubix.web.worker import DeadlineWorker, OutOfTime, WorkerDied
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -115,6 +116,19 @@ MAX_VEHICLES_PER_IMAGE = 500
 _VEHICLE_NUMBER = re.compile(r"^[0-9]{1,18}$")
 #: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
 NEXT_CLICKS = 1000
+#: Seconds the fits of one request may take in all, from the moment the session takes the request (issue 34: an
+#: answer or an error within a second; the rest of the second is for reading the request, writing the files and the
+#: answer). A fit already on the page (cached) takes none of it.
+FIT_SECONDS = 0.75
+#: What the fitting process imports before its first fit (so that the first one does not pay for it).
+FIT_MODULES = ("toosicubix.web.session",)
+
+
+class OutOfFitTime(ApiError):
+    """A request whose fits did not finish within the session's bound (:data:`FIT_SECONDS`): 422, nothing changed."""
+
+    def __init__(self, message: str):
+        super().__init__(message, HTTPStatus.UNPROCESSABLE_ENTITY)
 
 
 @dataclass
@@ -324,6 +338,10 @@ class Session:
         track's nearby frames, and a track with a vehicle near this frame but none in it is shown as predicted
     track_options : the tracks' motion model and box cue, as ``fit`` takes them (its ``--frame-rate``)
     naming : how unnamed clicks are named (:class:`toosicubix.web.placement.NamingSettings`)
+    fitter : the process the fits are computed in, each request's within ``fit_seconds`` (``annotate`` gives one):
+        an edit or a preview whose fits would take longer is refused (:class:`OutOfFitTime`, 422) and nothing
+        changes; an image's view shows a vehicle not fitted in time as such. None: fits are computed in this
+        process, unbounded (a thread cannot be stopped)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
@@ -332,8 +350,14 @@ class Session:
                  road_grounds: dict[tuple, GroundOverride] | None = None,
                  estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, GroundOverride] | None]] | None = None,
                  mapping: MappingFile | None = None, sequence: str | None = None,
-                 track_options: TrackOptions | None = None, naming: NamingSettings = NAMING_SETTINGS):
+                 track_options: TrackOptions | None = None, naming: NamingSettings = NAMING_SETTINGS,
+                 fitter: DeadlineWorker | None = None, fit_seconds: float = FIT_SECONDS):
         self.out = Path(out)
+        self._fitter, self.fit_seconds = fitter, fit_seconds
+        #: When the fits of the request being answered must be done (:meth:`_bounded`); None between requests.
+        self._deadline: float | None = None
+        #: Whether a fit not done in time refuses the request being answered (an edit, a preview) or shows as such.
+        self._strict = False
         self.naming = naming
         self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
         self._ground_block, self._ground = (None, None) if not ground else ground_with(None, ground, "ground")
@@ -631,6 +655,46 @@ class Session:
 
     # -- the model and the fit --------------------------------------------------------------------------------
 
+    def use_fitter(self, fitter: DeadlineWorker | None) -> None:
+        """Compute the fits in ``fitter`` from now on, each request's within :attr:`fit_seconds` (None: here)."""
+        with self._lock:
+            self._fitter = fitter
+
+    @contextlib.contextmanager
+    def _bounded(self, started: float) -> Iterator[None]:
+        """The fits computed in the block (:meth:`_compute`) must be done :attr:`fit_seconds` after ``started`` (a
+        :func:`time.monotonic`; the request's, taken before waiting for the lock). Called under the lock; a block
+        within another's keeps the outer deadline."""
+        outer = self._deadline
+        if outer is None:
+            self._deadline = started + self.fit_seconds
+        try:
+            yield
+        finally:
+            self._deadline = outer
+
+    def _compute(self, function: Callable[..., Any], *args: Any) -> Any:
+        """``function(*args)``: in the fitting process within the request's deadline (:meth:`_bounded`) when the
+        session has one, else here.
+
+        Raises
+        ------
+        OutOfFitTime
+            Not done by the deadline (the fitting process computing it was ended), or that process died.
+        """
+        if self._fitter is None:
+            return function(*args)
+        deadline = self._deadline if self._deadline is not None else time.monotonic() + self.fit_seconds
+        try:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise OutOfTime("no time left for it")
+            return self._fitter.call(function, args, remaining)
+        except (OutOfTime, WorkerDied) as exc:
+            raise OutOfFitTime(f"the fits of this request did not finish within {self.fit_seconds:g} s ({exc}); "
+                               "nothing was changed. A vehicle with fewer clicks, or on a frame with fewer tracked "
+                               "frames near it, fits faster") from None
+
     def _model_vehicle(self, image: ImageState, j: int, v: VehicleState) -> Vehicle:
         """The vehicle with its named clicks, as :mod:`toosicubix.model` has it."""
         parts = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"{image.id}.vehicles[{j}].parts[{k}]",
@@ -648,10 +712,10 @@ class Session:
                           sorted(v.known_dimensions.items())])
         cached = self._fits.get(key)
         if cached is None:
-            cached = self._cache(key, {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                         self.options, self._ground_of(image),
-                                                         next_clicks=NEXT_CLICKS,
-                                                         keypoints=self._keypoints(v.prototype))})
+            cached = self._cache(key, {"result": self._compute(_fit_one, vehicle, image.camera,
+                                                               self.priors[v.prototype], self.options,
+                                                               self._ground_of(image),
+                                                               self._keypoints(v.prototype))})
         return cached["result"]
 
     def _cache(self, key: str, entry: dict[str, Any]) -> dict[str, Any]:
@@ -709,11 +773,10 @@ class Session:
         key = json.dumps(["track", track, image.index, [[im.id, im.frame, _vehicle_key(v)] for im, v in pairs]])
         cached = self._fits.get(key)
         if cached is None:
-            prior = self.priors[vehicle.prototype]
             started = time.perf_counter()
-            result = results_of_track(track, pairs, prior, self.options, self.track_options)[-1]
-            result = with_next_clicks(vehicle, image.camera, prior, result, self.options, self._ground_of(image),
-                                      NEXT_CLICKS, self._keypoints(vehicle.prototype))
+            result = self._compute(_track_result, track, pairs, self.priors[vehicle.prototype], self.options,
+                                   self.track_options, image.camera, self._ground_of(image),
+                                   self._keypoints(vehicle.prototype))
             cached = self._cache(key, {"result": result, "frames": sorted(im.frame for im, _ in pairs),
                                        "seconds": time.perf_counter() - started})
         return cached
@@ -797,7 +860,7 @@ class Session:
                 if result.sigma is not None:
                     sd = np.fmin(np.nan_to_num(np.asarray(result.sigma.dimensions, dtype=float), nan=np.inf), sd)
                 dims = (np.asarray(result.dimensions, dtype=float), np.diag(sd**2))
-            proposal = propose(image.camera, prior, named, np.asarray(part.uv[0], dtype=float),
+            proposal = self._compute(propose, image.camera, prior, named, np.asarray(part.uv[0], dtype=float),
                                None if v.box2d is None else np.asarray(v.box2d, dtype=float), self._ground_of(image),
                                self.options.click_sigma, self.naming, dims)
             cached = self._cache(key, {"proposal": proposal})
@@ -828,10 +891,16 @@ class Session:
                 "thresholds": self.thresholds.to_json(),
             }
 
-    def image_view(self, index: int) -> dict[str, Any]:
+    def image_view(self, index: int, strict: bool = False) -> dict[str, Any]:
         """One image: its vehicles, each with its clicks, fit, cuboid, sigmas and targets; on a frame of a sequence
-        also the predictions of the tracks carried to it and how each track's pose here is determined."""
-        with self._lock:
+        also the predictions of the tracks carried to it and how each track's pose here is determined.
+
+        The fits it computes are bounded (:meth:`_bounded`): one not done in time shows as not fitted (status
+        'failed', error 'out_of_time') and is tried again on the next view; ``strict``: raises
+        :class:`OutOfFitTime` instead (an edit's view)."""
+        started = time.monotonic()
+        with self._lock, self._bounded(started):
+            self._strict = strict
             image = self.image(index)
             view: dict[str, Any] = {"revision": self.revision, "index": index, "id": image.id,
                                     "size": list(image.camera.image_size), "sequence": image.sequence,
@@ -852,16 +921,28 @@ class Session:
             view["tracks"] = sorted(states, key=lambda s: track_sort_key(s["track"]))
             return view
 
+    def _out_of_time(self, exc: OutOfFitTime) -> dict[str, Any]:
+        """A fit not done in time, as the view shows it; raised again in an edit's view."""
+        if self._strict:
+            raise exc
+        return {"status": "failed", "error": "out_of_time", "error_detail": str(exc)}
+
     def _vehicle_view(self, image: ImageState, j: int, v: VehicleState,
                       tracks: dict[str, dict[int, _TrackedOn]] | None = None) -> dict[str, Any]:
         tracked = v.track is not None and image.sequence is not None
-        entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
-        result = entry["result"] if entry is not None else self._fit(image, j, v)
-        for part in v.parts:  # a click read back unnamed from the extras file: the names it may have
-            if not part.named and part.choices is None:
-                part.choices = self._choices(image, j, v, part)[0][:CHOICES] or None
         parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None,
                   "choices": p.choices} for k, p in enumerate(v.parts)]
+        base = {"id": v.id, "prototype": v.prototype, "track": v.track, "box2d": v.box2d, "done": v.done,
+                "parts": parts, "unnamed": sum(not p.named for p in v.parts), "targets": []}
+        try:
+            entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
+            result = entry["result"] if entry is not None else self._fit(image, j, v)
+            for view_part, part in zip(parts, v.parts, strict=True):
+                if not part.named and part.choices is None:  # a click read back unnamed from the extras file
+                    part.choices = self._choices(image, j, v, part)[0][:CHOICES] or None
+                    view_part["choices"] = part.choices
+        except OutOfFitTime as exc:
+            return {**base, "fit": self._out_of_time(exc)}
         fit = self._fit_view(image, result)
         if result.ok and len(result.residuals_px) == sum(len(p.uv) for p in v.parts if p.named):
             # (a track's frame whose clicks it left out has none)
@@ -874,22 +955,25 @@ class Session:
         if entry is not None:
             fit.update({"pose_from": result.pose_from, "track_frames": entry["frames"]})
         targets = [s for s in (result.next_clicks or []) if s["visible"] and s["inside_image"]][:TARGETS]
-        return {"id": v.id, "prototype": v.prototype, "track": v.track, "box2d": v.box2d, "done": v.done,
-                "parts": parts, "unnamed": sum(not p.named for p in v.parts), "fit": fit, "targets": targets}
+        return {**base, "fit": fit, "targets": targets}
 
     def _prediction_view(self, image: ImageState, track: str, tracks: dict[str, dict[int, _TrackedOn]]
                          ) -> dict[str, Any]:
         """A track carried to ``image``: its pose here from its other frames (interpolated between them, or held
         beyond its ends), the cuboid and sigmas, and the frames it comes from."""
-        entry = self._track_fit(image, track, None, tracks)
-        result = entry["result"]
         own = [f for f in tracks[track] if f != image.frame]
         before = max((f for f in own if f < image.frame), default=None)
         after = min((f for f in own if f > image.frame), default=None)
-        return {"track": track, "prototype": result.prototype,
+        view = {"track": track, "prototype": next(iter(tracks[track].values())).vehicle.prototype,
                 "source": "interpolated" if before is not None and after is not None else "held",
-                "from_frames": [before, after], "fit": {**self._fit_view(image, result), "pose_from": "predicted",
-                                                        "track_frames": entry["frames"]}}
+                "from_frames": [before, after]}
+        try:
+            entry = self._track_fit(image, track, None, tracks)
+        except OutOfFitTime as exc:
+            return {**view, "fit": {**self._out_of_time(exc), "pose_from": "predicted"}}
+        result = entry["result"]
+        return {**view, "prototype": result.prototype,
+                "fit": {**self._fit_view(image, result), "pose_from": "predicted", "track_frames": entry["frames"]}}
 
     def _fit_view(self, image: ImageState, result: VehicleResult) -> dict[str, Any]:
         """A fit as the page draws it: the cuboid's corners in pixels, the pose, size and sigmas, the verdict."""
@@ -949,9 +1033,10 @@ class Session:
         Conflict
             ``revision`` is not the current one, or the file changed on disk (409); nothing changed.
         """
+        started = time.monotonic()
         if not isinstance(request, dict):
             raise ApiError("expected a JSON object {\"revision\": ..., \"op\": ...}")
-        with self._lock:
+        with self._lock, self._bounded(started):
             image = self.image(index)
             revision = request.get("revision")
             if not isinstance(revision, int) or isinstance(revision, bool):
@@ -967,6 +1052,8 @@ class Session:
             try:
                 outcome = handler(self, image, request) or {}
                 auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
+                # Every fit the answer shows, before anything is written: one not done in time refuses the change.
+                view = self.image_view(index, strict=True)
                 self._save()
             except BaseException:
                 image.restore(before)
@@ -978,7 +1065,7 @@ class Session:
                 del image.undo[:-UNDO_DEPTH]
             self.revision += 1
             self.estimate_again_if_grown()
-            return {**self.image_view(index), "op": op, **outcome, "auto_named": auto}
+            return {**view, "revision": self.revision, "op": op, **outcome, "auto_named": auto}
 
     def save(self, request: Any) -> dict[str, Any]:
         """Write the file now (it is written after every change anyway)."""
@@ -992,6 +1079,7 @@ class Session:
     def preview(self, body: Any) -> dict[str, Any]:
         """``POST /api/fit``: the view of a vehicle given in the request, ``{"image": index, "vehicle": {...}}``
         (a vehicle of the annotation file v1), fitted on that image's camera; nothing is stored."""
+        started = time.monotonic()
         if not isinstance(body, dict) or set(body) != {"image", "vehicle"}:
             raise ApiError('expected {"image": index, "vehicle": {...a vehicle of the annotation file v1...}}')
         index = body["image"]
@@ -1015,7 +1103,8 @@ class Session:
             checked_box2d(list(v.box2d), size)
         state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
                              parts=[ClickedPart.of(p) for p in parts])
-        with self._lock:
+        with self._lock, self._bounded(started):
+            self._strict = True
             return {"revision": self.revision, **self._vehicle_view(image, 0, state)}
 
     def reload(self) -> dict[str, Any]:
@@ -1337,3 +1426,18 @@ def _vehicle_key(v: Vehicle) -> list[Any]:
             [[p.kind, p.name, p.uv.tolist(), p.known, None if p.at is None else p.at.tolist(),
               None if p.spread is None else p.spread.tolist(), p.visible] for p in v.parts],
             sorted(v.known_dimensions.items())]
+
+
+def _fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions, ground: GroundPlane | None,
+             keypoints: dict[str, TypicalKeypoint] | None) -> VehicleResult:
+    """One vehicle fitted as ``fit`` fits it, with the page's suggestions (computed in the fitting process)."""
+    return fit_one(vehicle, camera, prior, options, ground, next_clicks=NEXT_CLICKS, keypoints=keypoints)
+
+
+def _track_result(track: str, pairs: list[tuple[Image, Vehicle]], prior: SizePrior, options: SolverOptions,
+                  track_options: TrackOptions, camera: Camera, ground: GroundPlane | None,
+                  keypoints: dict[str, TypicalKeypoint] | None) -> VehicleResult:
+    """The last of ``pairs`` (a frame and the track's vehicle there) fitted with the others as ``fit`` fits a track,
+    with the page's suggestions (computed in the fitting process)."""
+    result = results_of_track(track, pairs, prior, options, track_options)[-1]
+    return with_next_clicks(pairs[-1][1], camera, prior, result, options, ground, NEXT_CLICKS, keypoints)

@@ -471,7 +471,7 @@ function panels() {
     const named = v.parts.length - v.unnamed;
     const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml(f.error || "") : (waiting || "no click yet") + ". A fit needs about five named " +
+      "ones: " : "") + escapeHtml((f.error === "out_of_time" ? f.error_detail : f.error) || "") : (waiting || "no click yet") + ". A fit needs about five named " +
       "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
