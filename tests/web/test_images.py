@@ -81,6 +81,10 @@ def test_a_png_declaring_60000_squared_is_refused_naming_its_size(tmp_path: Path
     (b"\xff\xd8\xff\xda\0\x10", "a JPEG without a frame header"),
     (b"\xff\xd8" + b"\xff\xfe\0\x02" * 2000, "without a frame header in its first 1000 segments"),
     (png_header(0, 10), "declares 0 x 10 pixels"),
+    # Found by the test below: a WebP cut short inside its first chunk's header (an IndexError; for VP8X a size of
+    # 1 x 1 read from nothing).
+    (b"RIFF\0\0\0\0WEBPVP8L", "a WebP header cut short"),
+    (b"RIFF\0\0\0\0WEBPVP8X" + bytes(10), "a WebP header cut short"),
 ])
 def test_files_that_are_no_image_are_refused_naming_why(tmp_path: Path, data: bytes, message: str):
     path = tmp_path / "x.png"

@@ -70,6 +70,8 @@ def _header_size(handle: BinaryIO) -> tuple[int, int] | None:
         width, height = struct.unpack("<ii", head[18:26])
         return width, abs(height)  # a negative height: rows stored top-down
     if head.startswith(b"RIFF") and head[8:12] == b"WEBP":
+        if len(head) < 30:
+            raise ValueError(f"a WebP header cut short ({len(head)} bytes; its size is in the first 30)")
         chunk = head[12:16]
         if chunk == b"VP8X":  # extended: the canvas size, 24 bits each, minus one
             return int.from_bytes(head[24:27], "little") + 1, int.from_bytes(head[27:30], "little") + 1
