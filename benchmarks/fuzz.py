@@ -21,6 +21,18 @@ Each finding's input is kept under ``--keep`` for reproduction. Run from the rep
 
 Then ``--kill-trials N`` (default 20) kill -9 runs of ``fit`` in its write phase (:mod:`fuzz_kill`), counting folders
 left mixed or refused by the next run (the second half of item 7).
+
+The surfaces after issue 13 (issue 34, item 2) are targets (:mod:`fuzz_targets`): ``import coco``, ``import cvat``,
+``import label-studio``, ``learn-parts`` and mapping files, ``eval --apollocar3d``, ``export openlabel`` and ``export
+cvat``, ``render``. ``--targets`` picks them (``all``: every one; ``fit``: the trials above) and ``--cases N`` shares
+N cases among the chosen ones. Each case's command runs in a forked child (:func:`run_isolated`), which gives its peak
+memory (the child's maximum resident set, the worker's pages it touches included) and a hang bound that needs no
+signal in the command's own process; the child may not map more than ``--address-limit`` GB (a runaway allocation
+ends as a MemoryError, counted as a traceback, not as the machine's OOM killer). It counts, per target: tracebacks,
+exit codes other than 0, 1, 2, exit 2 without an ``Error:`` message, anything written after an exit 2, a NaN or an
+infinity in a file written, hangs, children killed by a signal, and cases whose peak memory passed 1 GB.
+
+    python benchmarks/fuzz.py --targets all --cases 10000 --workers 2 --kill-trials 0 --json FILE
 """
 
 from __future__ import annotations
@@ -30,7 +42,11 @@ import copy
 import json
 import math
 import multiprocessing
+import os
 import random
+import re
+import resource
+import select
 import shutil
 import signal
 import sys
@@ -43,6 +59,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
 
 from click.testing import CliRunner  # noqa: E402
 
@@ -264,6 +281,9 @@ def non_finite_in(path: Path) -> str | None:
             return str(exc)[:100] if "non-finite" in str(exc) else None
         return None
     text = data.decode("utf-8", "replace")
+    if path.suffix == ".xml":  # points="x,y;x,y" and numbers in attributes: any nan or inf spelled out
+        found = re.search(r'[",; ](-?(?:nan|inf|infinity))[",; ]', text, flags=re.IGNORECASE)
+        return None if found is None else f"line {text.count(chr(10), 0, found.start()) + 1}: {found.group(1)}"
     for number, line in enumerate(text.splitlines(), 1):
         for token in line.replace(",", " ").split():
             try:
@@ -370,6 +390,184 @@ def run_chunk(job: tuple[list[int], int, float, str]) -> dict[str, Any]:
     return summary
 
 
+# --- targets beyond fit (issue 34): each case's commands in a forked child -------------------------------------------
+
+#: Peak memory a case may reach (the child's maximum resident set), bytes.
+MEMORY_TARGET = 1 << 30
+
+
+def _written_files(writes: Path | None) -> list[Path]:
+    if writes is None or not writes.exists():
+        return []
+    return [writes] if writes.is_file() else sorted(p for p in writes.rglob("*") if p.is_file())
+
+
+def _child(command, address_limit: float, out) -> None:
+    """In the forked child: run the command in-process, check what it wrote, send the record, exit."""
+    try:
+        limit = int(address_limit * (1 << 30))
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+        start = time.perf_counter()
+        result = CliRunner().invoke(main, command.args, catch_exceptions=True)
+        text = result.output
+        record: dict[str, Any] = {"exit": result.exit_code,
+                                  "output": text if len(text) <= 2000 else f"{text[:1000]} [...] {text[-1000:]}",
+                                  "seconds": time.perf_counter() - start}
+        exc = result.exc_info[1] if result.exc_info else None
+        if exc is not None and not isinstance(exc, SystemExit):
+            frame = traceback.extract_tb(exc.__traceback__)[-1]
+            record["traceback"] = (f"{type(exc).__name__} at {Path(frame.filename).name}:{frame.lineno}: "
+                                   f"{str(exc)[:200]}")
+        written = _written_files(command.writes)
+        if result.exit_code == 2 and written and command.label != "render":
+            record["written_on_error"] = [str(p) for p in written[:3]]
+        for path in written:
+            if path.suffix in (".json", ".xml", ".csv", ".txt"):
+                bad = non_finite_in(path)
+                if bad is not None:
+                    record["non_finite"] = f"{path.name}: {bad}"
+                    break
+        os.write(out, json.dumps(record, default=str).encode())
+    except BaseException as exc:
+        os.write(out, json.dumps({"harness_error": f"{type(exc).__name__}: {exc}"[:300]}).encode())
+    finally:
+        os._exit(0)
+
+
+def run_isolated(command, timeout: float, folder: Path, address_limit: float = 4.0) -> dict[str, Any]:
+    """Run one command (:class:`fuzz_targets.Command`) in a forked child: its record (exit code, output, traceback,
+    what it wrote), its peak memory (``max_rss_mb``, the child's maximum resident set) and whether it hung (killed
+    after ``timeout`` seconds) or died of a signal."""
+    read, write = os.pipe()
+    start = time.perf_counter()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read)
+        _child(command, address_limit, write)
+    os.close(write)
+    chunks, hang = [], False
+    deadline = start + timeout
+    while True:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            hang = True
+            os.kill(pid, signal.SIGKILL)
+            break
+        ready, _, _ = select.select([read], [], [], left)
+        if ready:
+            chunk = os.read(read, 1 << 16)
+            if not chunk:
+                break
+            chunks.append(chunk)
+    os.close(read)
+    _, status, usage = os.wait4(pid, 0)
+    record: dict[str, Any] = {"command": command.label, "hang": hang, "max_rss_mb": usage.ru_maxrss / 1024,
+                              "seconds": time.perf_counter() - start}
+    if not hang:
+        if os.WIFSIGNALED(status):
+            record["signal"] = os.WTERMSIG(status)
+        else:
+            try:
+                record.update(json.loads(b"".join(chunks) or b"{}"))
+            except ValueError:
+                record["harness_error"] = "the child's record was not JSON"
+    return record
+
+
+def run_target_chunk(job: tuple[str, list[int], int, float, str, float]) -> dict[str, Any]:
+    """A worker's share of one target's cases; the figures to merge (see :func:`merge`)."""
+    from fuzz_targets import TARGETS
+
+    name, indices, seed, timeout, keep, address_limit = job
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    # What the commands import, imported once here: each forked case then starts with it (and its memory counts).
+    import toosicubix.evaluation.evaluate
+    import toosicubix.formats.coco
+    import toosicubix.formats.cvat
+    import toosicubix.formats.labelstudio
+    import toosicubix.formats.openlabel
+    import toosicubix.pipeline.batch
+    import toosicubix.render.folder  # noqa: F401
+    summary: dict[str, Any] = {"cases": Counter(), "exits": Counter(), "kinds": Counter(), "tracebacks": Counter(),
+                               "non_finite": [], "written_on_error": [], "hangs": [], "signals": [], "unclear": [],
+                               "bad_exit": [], "harness": [], "over_memory": [], "max_seconds": Counter(),
+                               "max_rss_mb": Counter(), "seconds": 0.0}
+    with tempfile.TemporaryDirectory(prefix=f"toosicubix-fuzz-{name}-") as tmp:
+        work = Path(tmp)
+        target = TARGETS[name]()
+        (work / "base").mkdir()
+        target.prepare(work / "base")
+        for n, index in enumerate(indices):
+            folder = work / f"c{index}"
+            folder.mkdir()
+            start = time.perf_counter()
+            try:
+                records = target.run_case(index, seed, folder, timeout,
+                                          lambda c, t, f: run_isolated(c, t, f, address_limit))
+            except Exception as exc:  # the case could not be made: the harness's fault, counted, the run goes on
+                records = [{"command": "(making the case)", "kind": "harness", "hang": False, "max_rss_mb": 0.0,
+                            "seconds": 0.0, "harness_error": f"{type(exc).__name__}: {str(exc)[:200]}"}]
+            summary["seconds"] += time.perf_counter() - start
+            summary["cases"][name] += 1
+            for r in records:
+                c = f"{name}: {r['command']}"
+                summary["exits"][f"{c} {'hang' if r.get('hang') else r.get('exit', 'signal')}"] += 1
+                summary["kinds"][f"{name}: {r['kind'].split(':')[0]}"] += 1
+                summary["max_seconds"][c] = max(summary["max_seconds"][c], r["seconds"])
+                summary["max_rss_mb"][c] = max(summary["max_rss_mb"][c], r["max_rss_mb"])
+                where = f"{c} case {index} ({r['kind']})"
+                finding = False
+                if r.get("traceback"):
+                    summary["tracebacks"][f"{c}: {r['traceback']}"] += 1
+                    finding = True
+                for key, target_key in (("non_finite", "non_finite"), ("written_on_error", "written_on_error"),
+                                        ("hang", "hangs"), ("signal", "signals"), ("harness_error", "harness")):
+                    if r.get(key):
+                        summary[target_key].append(f"{where}: {r[key]}")
+                        finding = True
+                if r["max_rss_mb"] * (1 << 20) > MEMORY_TARGET:
+                    summary["over_memory"].append(f"{where}: {r['max_rss_mb']:.0f} MB")
+                    finding = True
+                if not r.get("hang") and "exit" in r:
+                    if r["exit"] not in (0, 1, 2):
+                        summary["bad_exit"].append(f"{where}: exit {r['exit']}")
+                        finding = True
+                    elif r["exit"] == 2 and "Error" not in r.get("output", ""):
+                        summary["unclear"].append(f"{where}: {r.get('output', '')[:100]!r}")
+                        finding = True
+                if finding:
+                    dest = Path(keep) / f"{name}-case{index}"
+                    if not dest.exists():
+                        shutil.copytree(folder, dest, symlinks=True)
+                        (dest / "finding.json").write_text(json.dumps(r, indent=1, default=str))
+            shutil.rmtree(folder, ignore_errors=True)
+            if (n + 1) % 250 == 0:
+                print(f"[{name}] {n + 1} of {len(indices)} cases, {sum(summary['tracebacks'].values())} tracebacks, "
+                      f"max {max(summary['max_rss_mb'].values(), default=0):.0f} MB", file=sys.stderr, flush=True)
+    return summary
+
+
+def target_figures(total: dict[str, Any], names: list[str]) -> dict[str, Any]:
+    """Per target: cases, exit codes, tracebacks, non-finite values written, hangs, peak memory."""
+    out = {}
+    for name in names:
+        mine = [k for k in total["exits"] if k.startswith(f"{name}: ")]
+        out[name] = {
+            "cases": total["cases"][name],
+            "exit_codes": {k[len(name) + 2:]: total["exits"][k] for k in sorted(mine)},
+            "mutations": {k[len(name) + 2:]: v for k, v in sorted(total["kinds"].items()) if k.startswith(f"{name}: ")},
+            "tracebacks": sum(v for k, v in total["tracebacks"].items() if k.startswith(f"{name}: ")),
+            **{key: sum(1 for x in total[key] if x.startswith(f"{name}: "))
+               for key in ("non_finite", "written_on_error", "hangs", "signals", "bad_exit", "unclear", "harness",
+                           "over_memory")},
+            "peak_memory_mb": {k[len(name) + 2:]: round(v) for k, v in total["max_rss_mb"].items()
+                               if k.startswith(f"{name}: ")},
+            "max_seconds": {k[len(name) + 2:]: round(v, 2) for k, v in total["max_seconds"].items()
+                            if k.startswith(f"{name}: ")},
+        }
+    return out
+
+
 def kill_trials(args: argparse.Namespace) -> dict[str, Any]:
     """kill -9 in the write phase of ``fit``, then check the folder is the previous complete output or one the
     next run takes as its own ("folders left mixed": ``mixed``, target 0); :mod:`fuzz_kill` runs them."""
@@ -384,7 +582,7 @@ def merge(parts: list[dict[str, Any]]) -> dict[str, Any]:
     total: dict[str, Any] = {}
     for part in parts:
         for key, value in part.items():
-            if key == "max_seconds":
+            if key in ("max_seconds", "max_rss_mb"):
                 total.setdefault(key, Counter())
                 for k, v in value.items():
                     total[key][k] = max(total[key][k], v)
@@ -398,49 +596,98 @@ def merge(parts: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main_(argv: list[str] | None = None) -> int:
+    from fuzz_targets import TARGETS
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--files", type=int, default=10_000, help="mutated annotation files (default 10000)")
+    parser.add_argument("--targets", default="fit",
+                        help=f"comma-separated: fit (issue 13's trials), {', '.join(TARGETS)}, or all [default: fit]")
+    parser.add_argument("--files", type=int, default=10_000, help="fit: mutated annotation files (default 10000)")
+    parser.add_argument("--cases", type=int, default=10_000,
+                        help="the other targets: cases in all, shared evenly among them (default 10000)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--start", type=int, default=0, help="index of the first trial (to rerun a finding)")
+    parser.add_argument("--start", type=int, default=0, help="index of the first trial or case (to rerun a finding)")
     parser.add_argument("--workers", type=int, default=1, help="processes (each runs its share of the trials)")
     parser.add_argument("--timeout", type=float, default=20.0, help="seconds per command before it counts as a hang")
+    parser.add_argument("--address-limit", type=float, default=4.0,
+                        help="GB of address space a case's process may map (a runaway allocation fails there)")
     parser.add_argument("--keep", type=Path, default=Path(tempfile.gettempdir()) / "toosicubix-fuzz-findings",
                         help="where the inputs of findings are kept")
     parser.add_argument("--kill-trials", type=int, default=20, help="kill -9 trials in fit's write phase (0: none)")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args(argv)
+    names = [*TARGETS, "fit"] if args.targets == "all" else [t.strip() for t in args.targets.split(",")]
+    unknown = set(names) - set(TARGETS) - {"fit"}
+    if unknown:
+        parser.error(f"unknown targets {', '.join(sorted(unknown))}; expected fit, {', '.join(TARGETS)} or all")
     args.keep.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    end = args.start + args.files
-    chunks = [(list(range(args.start + w, end, args.workers)), args.seed, args.timeout, str(args.keep))
-              for w in range(args.workers)]
-    if args.workers > 1:
-        with multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            parts = pool.map(run_chunk, chunks)
-    else:
-        parts = [run_chunk(chunks[0])]
-    total = merge(parts)
-    kills = kill_trials(args)
-    wall = time.perf_counter() - start
-    figures = {
-        "files": total["trials"], "mutation_families": dict(total["kinds"]),
-        "gt_files_mutated": args.files // 2, "seed": args.seed, "timeout_s": args.timeout,
-        "exit_codes": dict(sorted(total["exits"].items())),
-        "tracebacks": sum(total["tracebacks"].values()), "traceback_kinds": dict(total["tracebacks"].most_common(20)),
-        "non_finite_written": len(total["non_finite"]), "files_outside_output": len(total["outside"]),
-        "hangs_over_timeout": len(total["hangs"]), "bad_exit_codes": len(total["bad_exit"]),
-        "exit_2_without_message": len(total["unclear"]),
-        "max_seconds_per_command": {k: round(v, 2) for k, v in total["max_seconds"].items()},
-        "examples": {k: total[k][:5] for k in ("non_finite", "outside", "hangs", "bad_exit", "unclear")},
-        "kill_trials": kills, "wall_s": round(wall, 1), "findings_kept_in": str(args.keep),
-    }
+    figures: dict[str, Any] = {"command": "python benchmarks/fuzz.py " + " ".join(argv if argv is not None
+                                                                               else sys.argv[1:]),
+                               "seed": args.seed, "timeout_s": args.timeout}
+    bad = 0
+    if "fit" in names:
+        end = args.start + args.files
+        chunks = [(list(range(args.start + w, end, args.workers)), args.seed, args.timeout, str(args.keep))
+                  for w in range(args.workers)]
+        if args.workers > 1:
+            with multiprocessing.get_context("fork").Pool(args.workers) as pool:
+                parts = pool.map(run_chunk, chunks)
+        else:
+            parts = [run_chunk(chunks[0])]
+        total = merge(parts)
+        kills = kill_trials(args)
+        figures.update({
+            "files": total["trials"], "mutation_families": dict(total["kinds"]),
+            "gt_files_mutated": args.files // 2,
+            "exit_codes": dict(sorted(total["exits"].items())),
+            "tracebacks": sum(total["tracebacks"].values()),
+            "traceback_kinds": dict(total["tracebacks"].most_common(20)),
+            "non_finite_written": len(total["non_finite"]), "files_outside_output": len(total["outside"]),
+            "hangs_over_timeout": len(total["hangs"]), "bad_exit_codes": len(total["bad_exit"]),
+            "exit_2_without_message": len(total["unclear"]),
+            "max_seconds_per_command": {k: round(v, 2) for k, v in total["max_seconds"].items()},
+            "examples": {k: total[k][:5] for k in ("non_finite", "outside", "hangs", "bad_exit", "unclear")},
+            "kill_trials": kills,
+        })
+        bad += (figures["tracebacks"] + figures["non_finite_written"] + figures["files_outside_output"]
+                + figures["hangs_over_timeout"] + figures["bad_exit_codes"] + figures["exit_2_without_message"]
+                + kills.get("mixed", 0) + kills.get("rerun_failed", 0))
+    others = [n for n in names if n != "fit"]
+    if others:
+        share = [args.cases // len(others) + (k < args.cases % len(others)) for k in range(len(others))]
+        jobs = [(name, list(range(args.start + w, args.start + n, args.workers)), args.seed, args.timeout,
+                 str(args.keep), args.address_limit)
+                for name, n in zip(others, share, strict=True) for w in range(args.workers)]
+        if args.workers > 1:
+            with multiprocessing.get_context("fork").Pool(args.workers) as pool:
+                parts = pool.map(run_target_chunk, jobs, chunksize=1)
+        else:
+            parts = [run_target_chunk(job) for job in jobs]
+        total = merge(parts)
+        per_target = target_figures(total, others)
+        findings = ("tracebacks", "non_finite", "written_on_error", "hangs", "signals", "bad_exit", "unclear",
+                    "harness", "over_memory")
+        figures["targets"] = {
+            "cases": sum(total["cases"].values()), "address_limit_gb": args.address_limit,
+            "memory_target_mb": MEMORY_TARGET >> 20,
+            **{f"{key}_total": sum(t[key] for t in per_target.values()) for key in findings},
+            "peak_memory_mb": round(max(total["max_rss_mb"].values(), default=0)),
+            "traceback_kinds": dict(total["tracebacks"].most_common(20)),
+            "examples": {k: total[k][:5] for k in findings[1:]},
+            "per_target": per_target,
+        }
+        bad += sum(figures["targets"][f"{key}_total"] for key in findings)
+    figures.update(wall_s=round(time.perf_counter() - start, 1), findings_kept_in=str(args.keep))
+    try:
+        from common import machine
+
+        figures["machine"] = machine()
+    except Exception as exc:
+        figures["machine"] = f"unknown ({exc})"
     print(json.dumps(figures, indent=1))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=1) + "\n")
-    bad = (figures["tracebacks"] + figures["non_finite_written"] + figures["files_outside_output"]
-           + figures["hangs_over_timeout"] + figures["bad_exit_codes"] + figures["exit_2_without_message"]
-           + kills.get("mixed", 0) + kills.get("rerun_failed", 0))
     return 1 if bad else 0
 
 

@@ -15,7 +15,7 @@ from tests.conftest import REPO
 #: Lowest floor first. Data flows up: annotations (schema, model) -> parts -> solver -> formats / evaluation /
 #: render -> cli and web.
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("__init__", "errors", "geometry", "jsonfile", "vocabulary"),
+    ("__init__", "errors", "fields", "geometry", "jsonfile", "vocabulary"),
     ("camera", "model", "size_priors"),
     ("parts",),
     ("annotations", "solver"),

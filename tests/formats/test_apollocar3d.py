@@ -9,6 +9,8 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.conftest import shared_data_dir
 from tests.eval_scenes import K_KITTI, Pose, write_results
@@ -298,3 +300,137 @@ def test_eval_and_learn_parts_on_the_real_folder(tmp_path):
                                   str(tmp_path / "render")])
     assert result.exit_code == 0, result.output
     assert list((tmp_path / "render").glob("*.png"))
+
+
+# --- keys that collide, hostile values, cameras in every form (issue 34) -----------------------------------------
+
+def _models_text(tmp_path, text: str):
+    path = tmp_path / "car_models.json"
+    path.write_text(text)
+    return path
+
+
+MODEL = '{"type": "3x", "length": 4.8, "width_body": 1.8, "height": 1.5}'
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    (f'{{"35": {MODEL}, "035": {MODEL}}}', "$.035: car model keys '35' (at $.35) and '035' both mean car model 35"),
+    (f'{{"35": {MODEL}, "\u0663\u0665": {MODEL}}}', "$.\u0663\u0665: car model keys '35' (at $.35) and "
+                                                    "'\u0663\u0665' both mean car model 35"),
+    (f'{{"35": {MODEL}, "35": {MODEL}}}', "$: the key '35' is given twice in one object"),
+    (f'{{"\u00b2": {MODEL}}}', "$.\u00b2: expected a car model id: an integer from 0, or 1 to 18 decimal digits, "
+                               "got '\u00b2'"),
+    (f'{{"{"9" * 5000}": {MODEL}}}', "$['99999999"),
+    ('{"35": {"length": 1e-300, "width_body": 1.8, "height": 1.5}}',
+     "$.35.length: expected a size in metres greater than 0.1 and at most 100, got 1e-300"),
+    ('{"35": {"length": ' + "9" * 400 + ', "width_body": 1.8, "height": 1.5}}',
+     "$.35.length: expected a size in metres greater than 0.1 and at most 100, got an integer of 400 digits"),
+    ('{"35": {"length": 4.8, "width_body": 1.8, "height": 1.5, "name": ' + "9" * 400 + '}}',
+     "$.35.name: expected a string of at most 128 characters (no control characters), got an integer of 400 "
+     "digits"),
+    ('{"35": {"length": 4.8, "width_body": 1.8, "height": 1.5, "type": "\\ud800"}}',  # not text: eval's CSV failed
+     "$.35.type: expected a string of at most 128 characters (no control characters), got '\\ud800'"),
+])
+def test_car_model_keys_and_extents_are_checked(tmp_path, text, message):
+    path = _models_text(tmp_path, text)
+    with pytest.raises(InputFileError) as info:
+        read_car_models(path)
+    assert str(info.value).startswith(f"{path}: {message}")
+
+
+def test_a_category_id_written_as_text_means_its_model(tmp_path):
+    path = write_dataset(tmp_path)
+    doc = json.loads(path.read_text())
+    doc["annotations"][0]["category_id"] = "000"
+    path.write_text(json.dumps(doc))
+    (image,) = read_apollocar3d(path, read_car_models(tmp_path / "car_models.json"))
+    assert image.cars[0].model.id == 0
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda d: d["annotations"][0].__setitem__("image_id", [1]), "$.annotations[0].image_id: expected an image id"),
+    (lambda d: d["annotations"][0].__setitem__("category_id", {"a": 0}), "$.annotations[0].category_id: expected a "
+                                                                         "car model id"),
+    (lambda d: d["annotations"][0].__setitem__("category_id", "\u00b2"), "$.annotations[0].category_id: expected"),
+    (lambda d: d["annotations"][0]["pose"].__setitem__(3, 10**400), "$.annotations[0].pose: expected 6 numbers, got "
+                                                                    "[3.14159"),
+    (lambda d: d["annotations"][0]["pose"].__setitem__(5, 1e300), "$.annotations[0].pose: expected roll, pitch, yaw "
+                                                                  "within +-100 rad and x, y, z within +-10000 m"),
+    (lambda d: d["annotations"][0].__setitem__("id", 10**400), "$.annotations[0].id: expected an annotation id"),
+    (lambda d: d["images"].append({"id": 1, "file_name": "y.jpg"}), "$.images[1].id: image id 1 given twice"),
+    (lambda d: d["images"].append({"id": 2, "file_name": "b/x_Camera_5.jpg"}),
+     "$.images[1].file_name: this image and the one at $.images[0] both get the image id 'x_Camera_5'"),
+    (lambda d: d["annotations"][0]["keypoints"].__setitem__(2, 7), "$.annotations[0]: expected bbox [x, y, w, h]"),
+])
+def test_keypoint_file_values_are_checked(tmp_path, change, message):
+    path = write_dataset(tmp_path)
+    doc = json.loads(path.read_text())
+    change(doc)
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputFileError) as info:
+        read_apollocar3d(path, read_car_models(tmp_path / "car_models.json"))
+    assert str(info.value).startswith(f"{path}: {message}")
+    fit = write_results(tmp_path / "fit", {"x_Camera_5": []}, K_APOLLO, np.zeros(3), (3384, 2710))
+    result = CliRunner().invoke(main, ["eval", str(fit), "--apollocar3d", str(path)])
+    assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_learn_parts_and_eval_take_the_cameras_in_every_form(tmp_path):
+    """A KITTI calib file, a folder of them and an OpenCV YAML instead of our JSON (learn-parts took camera['K'] only
+    and crashed with KeyError: 'P')."""
+    labelled = (0, 1, 2, 3, 54, 55, 56, 57)
+    pose = (np.pi, 0.0, 0.0, 2.0, 2.0, 15.0)
+    path = write_dataset(tmp_path, pose)
+    doc = json.loads(path.read_text())
+    doc["annotations"][0]["keypoints"] = _labelled_at(pose, labelled)[0].ravel().tolist()
+    path.write_text(json.dumps(doc))
+    K = K_APOLLO
+    P2 = " ".join(f"{v:.6f}" for v in np.hstack([K, np.zeros((3, 1))]).ravel())
+    (tmp_path / "calib.txt").write_text(f"P0: {P2}\nP2: {P2}\n")
+    (tmp_path / "calib").mkdir()
+    (tmp_path / "calib" / "x_Camera_5.txt").write_text(f"P2: {P2}\n")
+    (tmp_path / "camera.yaml").write_text("%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n"
+                                          f"  data: [{', '.join(str(v) for v in K.ravel())}]\n")
+    learned = {}
+    for cameras in ("calib.txt", "calib", "camera.yaml"):
+        out = tmp_path / f"mapping-{cameras}.json"
+        result = CliRunner().invoke(main, ["learn-parts", str(path), "--car-models", str(tmp_path / "car_models.json"),
+                                           "--cameras", str(tmp_path / cameras), "--min-samples", "3", "-o", str(out)])
+        assert result.exit_code == 0, result.output
+        learned[cameras] = json.loads(out.read_text())["parts"]
+        source = ApolloCar3DGroundTruth(path, cameras=tmp_path / cameras)
+        (obj,) = source.load("x_Camera_5").objects
+        assert obj.keypoints_off_rays_m == pytest.approx(0.0, abs=1e-3)
+    assert learned["calib.txt"] == learned["calib"] == learned["camera.yaml"]
+
+
+MODEL_VALUES = st.one_of(st.none(), st.booleans(), st.floats(), st.integers(min_value=-(10**500), max_value=10**500),
+                         st.text(max_size=8), st.lists(st.integers(), max_size=2))
+
+
+@settings(max_examples=100, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.one_of(st.text(min_size=1, max_size=6), st.integers(min_value=0, max_value=10**30).map(str)),
+       field=st.sampled_from(["length", "width_body", "height", "name", "type", "category_id", "image_id", "bbox",
+                              "pose", "keypoints", "id"]),
+       value=MODEL_VALUES)
+def test_any_key_or_value_reads_or_is_named(tmp_path, key, field, value):
+    """A car model key and one value of the car models or keypoint file replaced: read, or an InputFileError naming
+    the file and a JSON path; never another exception (and never a car model with an extent under 0.1 m)."""
+    path = write_dataset(tmp_path)
+    models = {**MODELS, key: dict(MODELS["0"])}
+    doc = json.loads(path.read_text())
+    if field in ("length", "width_body", "height", "name", "type"):
+        models[key][field] = value
+    else:
+        doc["annotations"][0][field] = value
+    (tmp_path / "car_models.json").write_text(json.dumps(models))
+    path.write_text(json.dumps(doc))
+    try:
+        read = read_car_models(tmp_path / "car_models.json")
+        images = read_apollocar3d(path, read)
+    except InputFileError as exc:
+        assert str(exc).startswith(str(tmp_path)) and ": $" in str(exc)
+        return
+    assert all(min(m.length, m.width_body, m.height) > 0.1 for m in read.values())
+    assert all(np.isfinite(car.t_cam_vehicle).all() for im in images for car in im.cars)

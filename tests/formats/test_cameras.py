@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.conftest import shared_data_dir
 from toosicubix.errors import FormatError
@@ -317,3 +319,66 @@ def test_the_shared_kitti_calib_folder():
     P = np.array(table.camera_for(f"image_2/{stem}.png")["P"])
     offset = np.linalg.solve(P[:, :3], P[:, 3])  # camera 2 sits some 6 cm from camera 0
     assert 0.03 < np.linalg.norm(offset) < 0.1
+
+
+# --- hostile values (issue 34) ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("K", [[[10**400, 0, 600], [0, 700, 180], [0, 0, 1]], [10**400] * 9,
+                               [[700, 0, 600], [0, 700, 180], [0, 0, "1"]]])
+def test_a_huge_or_odd_K_entry_is_named(tmp_path, K):
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps({"cameras": [{"match": "*", "K": K}]}))
+    with pytest.raises(FormatError, match=r"cameras.json: \$.cameras\[0\].K: expected a 3x3 matrix"):
+        load_cameras(path)
+
+
+@pytest.mark.parametrize("value", ["4_01.2", "nan", "\u0664\u0660\u0661"])
+def test_kitti_and_yaml_numbers_are_read_strictly(tmp_path, value):
+    calib = tmp_path / "calib.txt"
+    calib.write_text(f"P2: {value} 0 600 0 0 700 180 0 0 0 1 0\n")
+    with pytest.raises(FormatError, match=r"calib.txt:1: P2: expected 12 numbers"):
+        load_cameras(calib)
+    yaml = tmp_path / "camera.yaml"
+    yaml.write_text(f"camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{value}, 0, 600, 0, 700, 180, 0, 0, 1]\n")
+    with pytest.raises(FormatError, match=r"camera_matrix.data: expected a list of finite numbers"):
+        load_cameras(yaml)
+
+
+def test_intrinsics_of_a_K_or_a_P_camera():
+    from toosicubix.formats.cameras import intrinsics
+
+    K = [[700.0, 0.0, 600.0], [0.0, 700.0, 180.0], [0.0, 0.0, 1.0]]
+    np.testing.assert_array_equal(intrinsics({"K": K}), K)
+    np.testing.assert_array_equal(intrinsics({"P": [[*K[0], 44.9], [*K[1], 0.2], [*K[2], 0.003]]}), K)
+
+
+CAMERA_FILES = {
+    "cameras.json": json.dumps({"cameras": [{"match": "*", "K": [[700, 0, 600], [0, 700, 180], [0, 0, 1]],
+                                             "distortion": [0.1, 0.01, 0, 0]}]}),
+    "calib.txt": "P0: 700 0 600 0 0 700 180 0 0 0 1 0\nP2: 700 0 600 44.9 0 700 180 0.2 0 0 1 0.003\n",
+    "camera.yaml": "%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [700, 0, 600, 0, "
+                   "700, 180, 0, 0, 1]\ndistortion_coefficients: !!opencv-matrix\n  rows: 1\n  cols: 5\n  dt: d\n"
+                   "  data: [0.1, 0.01, 0, 0, 0]\n",
+}
+
+
+@settings(max_examples=150, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=st.sampled_from(sorted(CAMERA_FILES)), at=st.integers(0, 400), cut=st.integers(0, 12),
+       noise=st.one_of(st.binary(max_size=6), st.sampled_from([b"9" * 5000, b"4_01.2", b"nan", b"\xc2\xb2", b"1e999",
+                                                               b"[", b"{", b"-", b"\t"])))
+def test_any_camera_file_reads_as_a_camera_or_a_format_error(tmp_path, name, at, cut, noise):
+    from toosicubix.annotations.schema import CameraModel
+    from toosicubix.formats.cameras import intrinsics
+
+    data = CAMERA_FILES[name].encode()
+    path = tmp_path / name
+    path.write_bytes(data[:at] + noise + data[at + cut:])
+    try:
+        table = load_cameras(path)
+    except FormatError as exc:
+        assert str(exc).startswith(str(path))
+        return
+    camera = table.camera_for("a.png")
+    CameraModel.model_validate(camera)  # what the annotation file takes
+    assert np.isfinite(intrinsics(camera)).all()

@@ -3,19 +3,23 @@ naming file and JSON path."""
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from toosicubix.annotations.mapping import load_mapping, mapping_json_schema
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.cli import main
 from toosicubix.errors import InputFileError
+from toosicubix.fields import shown
 from toosicubix.formats.cameras import load_cameras as read_cameras
-from toosicubix.formats.coco import coco_to_annotations
+from toosicubix.formats.coco import CocoImport, coco_to_annotations
 
 REPO = Path(__file__).resolve().parents[2]
 K = [[1000.0, 0.0, 640.0], [0.0, 1000.0, 360.0], [0.0, 0.0, 1.0]]
@@ -277,3 +281,137 @@ def test_video_bad_input_exits_2_naming_the_json_path(files, change, message):
     assert result.exit_code == 2
     assert result.output == f"Error: {message.format(coco=path)}\n"
     assert not out.exists()
+
+
+# --- hostile values (issue 34): the field rules name the file and the JSON path, exit 2, nothing written ---------
+
+HUGE = 10**400
+
+
+def _set_path(doc: dict, path: tuple, value) -> dict:
+    target = doc
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    return doc
+
+
+@pytest.mark.parametrize(("path", "value", "message"), [
+    (("annotations", 0, "bbox", 0), HUGE, "$.annotations[0].bbox[0]: expected a pixel coordinate from -1000000 to "
+                                          "1000000, got an integer of 401 digits"),
+    (("annotations", 0, "bbox", 2), HUGE, "$.annotations[0].bbox[2]: expected a box side from 0 to 2000000, got an "
+                                          "integer of 401 digits"),
+    (("annotations", 0, "keypoints", 3), HUGE, "$.annotations[0].keypoints[3:6]: keypoint 1 (lamp-r): expected x, y "
+                                               "pixel coordinates within +-1000000 and v in 0, 1, 2, got [an integer "
+                                               "of 401 digits, 201, 2]"),
+    (("images", 0, "width"), HUGE, "$.images[0].width: expected an image side in pixels from 1 to 1000000, got an "
+                                   "integer of 401 digits"),
+    (("images", 0, "height"), "720", "$.images[0].height: expected an image side in pixels from 1 to 1000000, got "
+                                     "'720'"),
+    (("categories", 0, "id"), [7], "$.categories[0].id: expected a category id: a string of 1 to 128 characters (no "
+                                   "control characters) or an integer of at most 18 digits, got [7]"),
+    (("annotations", 0, "category_id"), {"id": 7}, "$.annotations[0].category_id: expected a category id: a string "
+                                                   "of 1 to 128 characters (no control characters) or an integer of "
+                                                   "at most 18 digits, got {'id': 7}"),
+    (("annotations", 0, "image_id"), [5], "$.annotations[0].image_id: expected an image id"),
+    (("images", 0, "id"), 10**4000, "$.images[0].id: expected an image id: a string of 1 to 128 characters (no "
+                                    "control characters) or an integer of at most 18 digits, got an integer of 4001 "
+                                    "digits"),
+    (("annotations", 0, "id"), "a\x00", "$.annotations[0].id: expected an annotation id"),
+    (("images", 0, "K"), [[HUGE, 0, 1], [0, 1, 1], [0, 0, 1]], "$.images[0].K[0][0]: expected a finite number, got "
+                                                               "an integer of 401 digits"),
+], ids=lambda value: shown(value, 30))
+def test_hostile_values_exit_2_naming_file_and_path(files, path, value, message):
+    tmp_path, mapping_path, cameras_path = files
+    coco = write(tmp_path, "coco.json", _set_path(coco_doc(), path, value))
+    out = tmp_path / "ann.json"
+    result = CliRunner().invoke(main, ["import", "coco", str(coco), "--mapping", str(mapping_path), "--cameras",
+                                       str(cameras_path), "-o", str(out)])
+    assert result.exit_code == 2
+    assert result.output.startswith(f"Error: {coco}: {message}")
+    assert not out.exists()
+
+
+def test_an_integer_python_cannot_read_is_named_by_its_line(files):
+    tmp_path, mapping_path, cameras_path = files
+    coco = tmp_path / "coco.json"
+    coco.write_text(json.dumps(coco_doc(), indent=1).replace('"width": 1280', '"width": ' + "9" * 5000))
+    result = CliRunner().invoke(main, ["import", "coco", str(coco), "--mapping", str(mapping_path), "--cameras",
+                                       str(cameras_path), "-o", str(tmp_path / "ann.json")])
+    assert result.exit_code == 2
+    assert result.output == f"Error: {coco}: $: not valid JSON: a number of 5000 digits at line 6 (expected at most " \
+                            "4300)\n"
+
+
+def test_two_images_with_one_id_are_named_both(files):
+    tmp_path, mapping_path, cameras_path = files
+    coco = coco_doc()
+    coco["images"].append({**coco["images"][0], "id": 6, "file_name": "other/FRAME_Camera_5.jpg"})
+    mapping, _ = load_mapping(mapping_path)
+    with pytest.raises(InputFileError, match=r"coco.json: \$.images\[1\]: this image and the one at \$.images\[0\] "
+                                             r"both get the image id 'FRAME_Camera_5'"):
+        coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, read_cameras(cameras_path))
+
+
+def test_written_image_by_image_as_the_whole_document_would_be(files):
+    tmp_path, mapping_path, _ = files
+    cameras = read_cameras(write(tmp_path, "cams.json", {"cameras": [{"match": "*", "K": K}]}))
+    mapping, _ = load_mapping(mapping_path)
+    coco = write(tmp_path, "video.json", video_doc())
+    imported = CocoImport(coco, mapping, cameras)
+    assert imported.write(tmp_path / "ann.json") == 3
+    document, summary = coco_to_annotations(coco, mapping, cameras)
+    assert (tmp_path / "ann.json").read_text() == json.dumps(document, indent=1) + "\n"
+    assert imported.summary == summary
+    # Only the annotations' places in the text are kept between the passes, not the decoded annotations.
+    assert all(isinstance(start, int) and isinstance(i, int) for spans in imported._spans.values()
+               for start, i in spans)
+
+
+def test_an_annotation_file_problem_found_while_writing_leaves_nothing(files):
+    tmp_path, mapping_path, _ = files
+    cameras = read_cameras(write(tmp_path, "cams.json", {"cameras": [{"match": "*", "K": K}]}))
+    mapping, _ = load_mapping(mapping_path)
+    coco = video_doc()
+    coco["annotations"][1]["category_id"] = 8  # a second prototype on the track: found once every frame is read
+    out = tmp_path / "ann.json"
+    with pytest.raises(InputFileError, match="one prototype"):
+        CocoImport(write(tmp_path, "video.json", coco), mapping, cameras).write(out)
+    assert not out.exists() and list(tmp_path.glob(".ann.json*")) == []
+
+
+COCO_VALUES = st.one_of(
+    st.none(), st.booleans(), st.floats(), st.integers(min_value=-(10**500), max_value=10**500),
+    st.text(max_size=20), st.lists(st.integers(min_value=-3, max_value=3), max_size=3),
+    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2))
+
+
+def _coco_paths(doc, path=()):
+    out = [path]
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            out += _coco_paths(v, (*path, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            out += _coco_paths(v, (*path, i))
+    return out
+
+
+@settings(max_examples=150, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_value_anywhere_imports_or_is_named(files, data):
+    """One value of a video COCO file replaced by any JSON value: an annotation file v1, or an InputFileError
+    naming the file and a JSON path; never another exception."""
+    tmp_path, mapping_path, _ = files
+    cameras = read_cameras(write(tmp_path, "cams.json", {"cameras": [{"match": "*", "K": K}]}))
+    mapping, _ = load_mapping(mapping_path)
+    doc = copy.deepcopy(video_doc())  # its keypoint lists are one shared list
+    path = data.draw(st.sampled_from(_coco_paths(doc)[1:]))
+    coco = write(tmp_path, "fuzz.json", _set_path(doc, path, data.draw(COCO_VALUES)))
+    try:
+        document, _ = coco_to_annotations(coco, mapping, cameras)
+    except InputFileError as exc:
+        assert str(exc).startswith(f"{coco}") and ": $" in str(exc)
+        return
+    parse_annotations(document)

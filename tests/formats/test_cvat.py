@@ -2,11 +2,14 @@
 export."""
 
 import json
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.conftest import REPO
 from tests.formats.tool_fixtures import (
@@ -24,7 +27,7 @@ from toosicubix.annotations.convert import document_json, images_from_schema
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.cli import main
-from toosicubix.errors import FormatError
+from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.cvat import read_cvat
 from toosicubix.formats.cvat_export import EDGE_WALK, review_xml
@@ -276,15 +279,16 @@ def test_video_cli_names_the_sequence_and_reports_the_tracks(tmp_path):
 @pytest.mark.parametrize(("old", "new", "message"), [
     ('<box frame="2" keyframe="0" outside="0" occluded="0" xtl="696.00"',
      '<box frame="1.5" keyframe="0" outside="0" occluded="0" xtl="696.00"',
-     "{xml}: <track id='2' label='Truck'> box 3: expected an integer frame number from 0 to 1000000, got '1.5'"),
+     "{xml}:162: <track id='2' label='Truck'> box 3 frame: expected a frame number written in digits from 0 to "
+     "1000000, got '1.5'"),
     ('<box frame="2" keyframe="0" outside="0" occluded="0" xtl="696.00"',
      '<box frame="1" keyframe="0" outside="0" occluded="0" xtl="696.00"',
-     "{xml}: <track id='2' label='Truck'> box 3 (frame 1): frame 1 is given twice in one track"),
+     "{xml}:162: <track id='2' label='Truck'> box 3 (frame 1): frame 1 is given twice in one track"),
     ('<skeleton frame="2" keyframe="0" z_order="0">\n      <points label="wheel-front-left" keyframe="0" outside="0"',
      '<skeleton frame="2" keyframe="no" z_order="0">\n      <points label="wheel-front-left" keyframe="0" outside="0"',
-     "{xml}: <track id='0' label='vehicle'> skeleton 3 (frame 2): expected keyframe=\"0\" or \"1\", got 'no'"),
+     "{xml}:115: <track id='0' label='vehicle'> skeleton 3 (frame 2): expected keyframe=\"0\" or \"1\", got 'no'"),
     ('<track id="2" label="Truck" source="manual">', '<track id="2" label="Truck" source="manual" group_id="1">',
-     "{xml}: <track id='2' label='Truck'> box 1 (frame 0): group_id 1 (tracks 0, 1, 2) has a second box on frame 0 "
+     "{xml}:158: <track id='2' label='Truck'> box 1 (frame 0): group_id 1 (tracks 0, 1, 2) has a second box on frame 0 "
      "(also <track id='1' label='Car'> box 1 (frame 0)): one box per vehicle"),
     # The prototype attribute changes along track 0 (Van, then Car on frame 3): one prototype per track.
     ('keyframe="0" outside="0" occluded="1" points="310.00,193.00">\n      </points>\n      '
@@ -438,8 +442,120 @@ def test_a_damaged_zip_or_a_doctype_inside_it_is_refused(tmp_path):
     with pytest.raises(FormatError, match=r"cut.zip: a damaged zip archive"):
         read_cvat(tmp_path / "cut.zip", None)
     doctype = _zip(tmp_path / "doctype.zip", {"annotations.xml": '<!DOCTYPE a [<!ENTITY x "y">]><annotations/>'})
-    with pytest.raises(FormatError, match=r"doctype.zip/annotations.xml: a DOCTYPE is not allowed"):
+    with pytest.raises(FormatError, match=r"doctype.zip/annotations.xml:1: a DOCTYPE is not allowed"):
         read_cvat(doctype, None)
     broken = _zip(tmp_path / "broken.zip", {"annotations.xml": "<annotations><image></annotations>"})
     with pytest.raises(FormatError, match=r"broken.zip/annotations.xml:1: not valid XML"):
         read_cvat(broken, None)
+
+
+# --- hostile XML (issue 34): declarations refused by the parser, numbers and ids by the field rules ---------------
+
+SKELETON = """  <image id="0" name="frames/a.png" width="1000" height="500">
+    <skeleton label="vehicle" source="manual" z_order="0">
+      <points label="wheel-front-left" source="manual" outside="0" occluded="0" points="401.20,202.00">
+      </points>
+      <points label="wheel-rear-left" source="manual" outside="0" occluded="0" points="301.20,212.00">
+      </points>
+    </skeleton>
+    <points label="top-center" source="manual" occluded="0" points="350.00,150.00" z_order="0" group_id="3"/>
+    <box label="Car" source="manual" occluded="0" xtl="280" ytl="120" xbr="420" ybr="230" z_order="0" group_id="3"/>
+  </image>"""
+LAUGHS = ('<!DOCTYPE annotations [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">'
+          '<!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;">]>\n')
+
+
+def _hostile(text: str, encoding: str = "utf-8") -> bytes:
+    return text.encode(encoding)
+
+
+@pytest.mark.parametrize(("data", "message"), [
+    # A DOCTYPE after a comment longer than any look-ahead, in UTF-8 and in UTF-16 (both with entity expansion).
+    (_hostile(f'<?xml version="1.0" encoding="utf-8"?>\n<!--{"x" * 5000}-->\n{LAUGHS}<annotations><version>&c;'
+              "</version></annotations>"), ":3: a DOCTYPE is not allowed"),
+    (_hostile(f'<?xml version="1.0" encoding="utf-16"?>\n{LAUGHS}<annotations><version>&c;</version></annotations>',
+              "utf-16"), ":2: a DOCTYPE is not allowed"),
+    (_hostile('<!DOCTYPE a [<!ENTITY e SYSTEM "file:///etc/passwd">]>\n<annotations>&e;</annotations>'),
+     ":1: a DOCTYPE is not allowed"),
+    (_hostile('<!DOCTYPE a SYSTEM "http://127.0.0.1:9/a.dtd">\n<annotations/>'), ":1: a DOCTYPE is not allowed"),
+    (_hostile("<annotations><version>&c;</version></annotations>"), ":1: not valid XML: undefined entity"),
+    (_hostile(SKELETON.replace("401.20,202.00", "4_01.2,202.00")),
+     ":6: <image id='0' name='frames/a.png'> skeleton 1 (label 'vehicle'), points 'wheel-front-left' points: expected "
+     "a pixel coordinate written in decimals (e.g. 401.25) from -1000000 to 1000000, got '4_01.2'"),
+    (_hostile(SKELETON.replace("401.20,202.00", "nan,202.00")), "got 'nan'"),
+    (_hostile(SKELETON.replace('points="350.00,150.00"', 'points="1e999,150.00"')), "got '1e999'"),
+    (_hostile(SKELETON.replace('group_id="3"/>\n    <box', f'group_id="{"9" * 5000}"/>\n    <box')),
+     ":11: <image id='0' name='frames/a.png'> points 2 (label 'top-center') group_id: expected a group id (CVAT "
+     "numbers groups) written in at most 18 digits, got '99999"),
+    (_hostile(SKELETON.replace('group_id="3"/>\n    <box', 'group_id="\u00b2"/>\n    <box')), "got '\u00b2'"),
+    (_hostile(SKELETON.replace('width="1000"', 'width="\u00b2"')),
+     ":4: <image id='0' name='frames/a.png'> width: expected an image side in pixels written in digits from 1 to "
+     "1000000, got '\u00b2'"),
+    (_hostile(SKELETON.replace('width="1000"', 'width="4_000"')), "got '4_000'"),
+    (_hostile(SKELETON.replace('xtl="280"', 'xtl="2.8e2.1"')), "box 3 (label 'Car', group_id 3) xtl: expected"),
+])
+def test_hostile_xml_is_refused_naming_the_file_and_line(tmp_path, data, message):
+    if data.lstrip().startswith(b"<image"):  # a fragment: one image
+        data = (b'<?xml version="1.0" encoding="utf-8"?>\n<annotations>\n  <version>1.1</version>\n' + data
+                + b"\n</annotations>\n")
+    path = tmp_path / "hostile.xml"
+    path.write_bytes(data)
+    with pytest.raises((FormatError, InputFileError)) as info:
+        read_cvat(path, _any_camera(tmp_path))
+    assert str(info.value).startswith(str(path)) and message in str(info.value)
+    out = tmp_path / "out.json"
+    result = CliRunner().invoke(main, ["import", "cvat", str(path), "-o", str(out)])
+    assert result.exit_code == 2 and result.output.startswith(f"Error: {path}") and not out.exists()
+
+
+def test_the_unmodified_skeleton_imports(tmp_path):
+    doc, _ = read_cvat(_xml(tmp_path, SKELETON), _any_camera(tmp_path))
+    assert [len(v["parts"]) for v in doc["images"][0]["vehicles"]] == [2, 1]
+    assert doc["images"][0]["vehicles"][1]["box2d"] == [280.0, 120.0, 420.0, 230.0]
+
+
+def test_images_are_read_one_at_a_time(tmp_path):
+    from toosicubix.formats import cvat
+
+    seen = []
+
+    def take(element, root, source):
+        seen.append((element.tag, element.line, len(root)))
+        return element.tag == "image"
+
+    body = "\n".join(SKELETON.replace('id="0" name="frames/a.png"', f'id="{i}" name="frames/{i}.png"')
+                     for i in range(3))
+    root, _ = cvat._parse(_xml(tmp_path, body), take)
+    assert [tag for tag, _, _ in seen] == ["version", "image", "image", "image"]
+    assert [children for tag, _, children in seen if tag == "image"] == [2, 2, 2]  # version and the one image
+    assert [child.tag for child in root] == ["version"]
+    assert [line for tag, line, _ in seen if tag == "image"] == [4, 14, 24]
+
+
+XML_TEXT = st.text(alphabet=st.characters(codec="utf-8"), max_size=12)
+
+
+@settings(max_examples=150, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_mutation_imports_or_is_named(tmp_path, data):
+    """A CVAT XML with an attribute value replaced by any text, or bytes cut, inserted or replaced: a valid
+    annotation document, or a FormatError (InputFileError) naming the file; never another exception."""
+    text = _xml(tmp_path, SKELETON).read_bytes()
+    if data.draw(st.booleans()):
+        values = [m for m in re.finditer(rb'="([^"]*)"', text)]
+        found = data.draw(st.sampled_from(values))
+        new = data.draw(XML_TEXT).replace("&", "&amp;").replace("<", "&lt;").replace('"', "&quot;")
+        text = text[:found.start(1)] + new.encode() + text[found.end(1):]
+    else:
+        at = data.draw(st.integers(min_value=0, max_value=len(text)))
+        cut = data.draw(st.integers(min_value=0, max_value=16))
+        text = text[:at] + data.draw(st.binary(max_size=8)) + text[at + cut:]
+    path = tmp_path / "fuzz.xml"
+    path.write_bytes(text)
+    try:
+        doc, _ = read_cvat(path, _any_camera(tmp_path))
+    except (FormatError, InputFileError) as exc:
+        assert str(exc).startswith(str(path))
+        return
+    parse_annotations(doc)

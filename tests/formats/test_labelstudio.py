@@ -1,10 +1,14 @@
 """Label Studio JSON export import (fixtures as Label Studio exports them)."""
 
 import json
+import math
 from pathlib import Path
 from urllib.parse import quote
 
 import pytest
+from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.formats.tool_fixtures import (
     cameras_doc,
@@ -16,7 +20,9 @@ from tests.formats.tool_fixtures import (
     sample_fit,
     write_json,
 )
-from toosicubix.errors import FormatError
+from toosicubix.annotations.schema import parse_annotations
+from toosicubix.cli import main
+from toosicubix.errors import FormatError, InputFileError
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.labelstudio import read_label_studio
 
@@ -122,7 +128,7 @@ def test_cancelled_and_repeated_annotations(tmp_path):
 
 def test_errors_name_the_file_and_json_path(tmp_path):
     bad = _task([_kp("k", "top-center", "left", 20)])
-    with pytest.raises(FormatError, match=r"\$\[0\].annotations\[0\].result\[0\].value.x: expected a number"):
+    with pytest.raises(FormatError, match=r"\$\[0\].annotations\[0\].result\[0\].value.x: expected a percentage"):
         read_label_studio(write_json(tmp_path / "e.json", [bad]), _any_camera(tmp_path))
     good = _task([_kp("k", "top-center", 20, 20)])
     with pytest.raises(FormatError, match=r"image 'a.png': no camera"):
@@ -218,3 +224,101 @@ def test_a_local_files_path_that_climbs_is_refused(tmp_path, d):
     with pytest.raises(FormatError, match=r"\$\[0\]\.data\.image \(task 7\): the local-files path .* has a '\.\.' "
                                           r"component: refused"):
         read_label_studio(write_json(tmp_path / "e.json", [task]), _any_camera(tmp_path))
+
+
+# --- hostile values (issue 34) ---------------------------------------------------------------------------------
+
+def _with(task_change=None, region_change=None):
+    task = _task([_box("b", "Car", 10, 10, 50, 50), _kp("k", "wheel-front-left", 20, 30, parent="b"),
+                  _kp("l", "wheel-rear-left", 40, 30, parent="b")])
+    if task_change:
+        task_change(task)
+    if region_change:
+        region_change(task["annotations"][0]["result"])
+    return task
+
+
+def _image(url):
+    return lambda task: task["data"].__setitem__("image", url)
+
+
+def _width(value):
+    return lambda result: [region.__setitem__("original_width", value) for region in result]
+
+
+@pytest.mark.parametrize(("task", "message"), [
+    (_with(_image("http://[abc/x.png")), "$[0].data.image (task 7): expected an image URL or file name, got "
+                                         "'http://[abc/x.png': Invalid IPv6 URL"),
+    (_with(_image("/data/local-files/?d=..%2F..%2F000001.png")),
+     "$[0].data.image (task 7): the local-files path '../../000001.png' has a '..' component: refused"),
+    (_with(_image("http://host/img/..%2F..%2Fetc%2Fx.png")),
+     "$[0].data.image (task 7): the file name '/img/../../etc/x.png' (from 'http://host/img/..%2F..%2Fetc%2Fx.png') "
+     "has a '..' component: refused"),
+    (_with(_image("../../x.png")), "the file name '../../x.png' (from '../../x.png') has a '..' component"),
+    (_with(region_change=_width(math.inf)), "$[0].annotations[0].result[0].original_width: expected an image side in "
+                                            "pixels from 1 to 1000000, got inf"),
+    (_with(region_change=_width(math.nan)), "original_width: expected an image side in pixels from 1 to 1000000, "
+                                            "got nan"),
+    (_with(region_change=_width(10**400)), "original_width: expected an image side in pixels from 1 to 1000000, got "
+                                           "an integer of 401 digits"),
+    (_with(region_change=lambda r: r[1]["value"].__setitem__("x", 1e300)),
+     "$[0].annotations[0].result[1].value.x: expected a percentage of the image's size from -10000 to 10000, got "
+     "1e+300"),
+    (_with(region_change=lambda r: r[0].__setitem__("id", [1])), "$[0].annotations[0].result[0].id: expected a "
+                                                                 "region id"),
+    (_with(region_change=lambda r: r[1].__setitem__("parentID", {"b": 1})), "result[1].parentID: expected a region id"),
+])
+def test_hostile_values_exit_2_naming_file_and_path(tmp_path, task, message):
+    path = write_json(tmp_path / "export.json", [task])
+    out = tmp_path / "ann.json"
+    result = CliRunner().invoke(main, ["import", "label-studio", str(path), "--cameras",
+                                       str(write_json(tmp_path / "c.json", {"cameras": [{"match": "*", "K": [
+                                           [800, 0, 500], [0, 800, 250], [0, 0, 1]]}]})), "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith(f"Error: {path}: ") and message in result.output
+    assert not out.exists()
+
+
+def test_huge_task_and_relation_ids_are_named_not_spelled(tmp_path):
+    task = _with()
+    task["id"] = 10**400
+    task["annotations"].append(task["annotations"][0])  # two annotations: a warning names the task
+    task["annotations"][0]["result"].append({"type": "relation", "from_id": 10**400, "to_id": [1]})
+    _, summary = read_label_studio(write_json(tmp_path / "e.json", [task]), _any_camera(tmp_path))
+    assert summary.warnings == [f"{tmp_path / 'e.json'}: image 'a.png', task an integer of 401 digits: 2 annotations: "
+                                "the last one (annotations[1]) is used"]
+
+
+LS_VALUES = st.one_of(
+    st.none(), st.booleans(), st.floats(), st.integers(min_value=-(10**500), max_value=10**500), st.text(max_size=30),
+    st.sampled_from(["http://[::1/x.png", "/data/local-files/?d=a%2F..%2Fb.png", "s3://b/..", "%zz", "\x00"]),
+    st.lists(st.integers(min_value=-3, max_value=3), max_size=2), st.dictionaries(st.text(max_size=2), st.none()))
+
+
+def _ls_paths(doc, path=()):
+    out = [path]
+    items = doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) else ()
+    for key, value in items:
+        out += _ls_paths(value, (*path, key))
+    return out
+
+
+@settings(max_examples=150, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_value_anywhere_imports_or_is_named(tmp_path, data):
+    """One value of an export replaced by any JSON value: an annotation file v1, or an error naming the file and
+    a JSON path; never another exception."""
+    doc = [_with()]
+    path = data.draw(st.sampled_from(_ls_paths(doc)[1:]))
+    target = doc
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = data.draw(LS_VALUES)
+    export = write_json(tmp_path / "fuzz.json", doc)
+    try:
+        imported, _ = read_label_studio(export, _any_camera(tmp_path))
+    except (FormatError, InputFileError) as exc:
+        assert str(exc).startswith(f"{export}: $") or "(as imported)" in str(exc), str(exc)
+        return
+    parse_annotations(imported)

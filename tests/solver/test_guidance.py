@@ -8,7 +8,7 @@ from toosicubix.annotations.priors_file import load_priors
 from toosicubix.model import Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.solver.fit import SolverOptions, fit_vehicle
-from toosicubix.solver.guidance import ALREADY_CLICKED_PX, guide, suggest_clicks
+from toosicubix.solver.guidance import ALREADY_CLICKED_SIGMAS, guide, suggest_clicks
 
 CAR = load_priors()["Car"]
 OPTIONS = SolverOptions()
@@ -214,8 +214,8 @@ def test_clicking_every_visible_suggestion_gives_the_reachable_uncertainty(view,
 
 
 def test_no_suggestion_where_the_person_clicked_already():
-    """A wheel's hub clicked counts as that wheel clicked, and no part is suggested within ALREADY_CLICKED_PX of
-    a click: a person sees a click there already."""
+    """A wheel's hub clicked counts as that wheel clicked, and no part is suggested within ALREADY_CLICKED_SIGMAS
+    click sigmas of a click (3 px here): no click could tell it from the one already there."""
     scene = random_scene(np.random.default_rng(3), "oblique-front-left")
     parts = tuple(scene.parts[:5])
     fit = _fit(parts)
@@ -225,11 +225,11 @@ def test_no_suggestion_where_the_person_clicked_already():
     refit = _fit((*parts, hub))
     assert refit.ok
     assert wheel.name not in {s.name for s in guide((*parts, hub), CAMERA, CAR, refit, OPTIONS).suggestions}
-    # A corner (no unknowns of its own: the same fit) clicked 5 px from where a suggestion would go hides it.
+    # A corner (no unknowns of its own: the same fit) clicked 2.5 px from where a suggestion would go hides it.
     target = next(s for s in before if s.kind == "point" and s.name != wheel.name)
-    near = Part("point", "corner-top-front-right", target.uv + np.array([[3.0, 4.0]]), "$")
+    near = Part("point", "corner-top-front-right", target.uv + np.array([[1.5, 2.0]]), "$")
     after = guide((*parts, near), CAMERA, CAR, fit, OPTIONS).suggestions
     assert target.name not in {s.name for s in after}
     clicked = np.concatenate([p.uv for p in (*parts, near)])
     for s in after:
-        assert np.min(np.linalg.norm(s.uv[:, None] - clicked[None], axis=2)) >= ALREADY_CLICKED_PX
+        assert np.min(np.linalg.norm(s.uv[:, None] - clicked[None], axis=2)) >= ALREADY_CLICKED_SIGMAS * 1.5

@@ -81,6 +81,8 @@ def _moved_arrow(scene, metres_ahead: float) -> tuple[np.ndarray, int]:
 
 @pytest.mark.parametrize("view", ["front", "rear"])
 def test_arrow_zone_rows_are_zero_near_the_vehicle_and_grow_outside(rng, view):
+    """The zone judges the arrow midpoint's ray at the vehicle centre's distance (rule 22): zero for an arrow drawn
+    beside the vehicle, and for one moved 30 m ahead, the distance of that ray's point outside the zone."""
     scene = random_scene(rng, view)
     lam = 4.0
     problem = Problem.build(scene.model, CAMERA, CAR, 1.0, lam)
@@ -90,10 +92,38 @@ def test_arrow_zone_rows_are_zero_near_the_vehicle_and_grow_outside(rng, view):
     np.testing.assert_array_equal(r[-3:], 0.0)  # drawn beside the vehicle: inside the zone, no pull at all
     p, i = _moved_arrow(scene, 30.0)
     r, _ = residuals_and_jacobian(problem, R, t, p)
-    mid_x = 0.5 * (scene.model.A[i, 0] + scene.model.A[i + 1, 0]) @ p
-    expected = np.sqrt(lam) * (mid_x - 1.5 * p[0]) / ARROW_ZONE_SIGMA
-    np.testing.assert_allclose(r[-3:], [expected, 0.0, 0.0], rtol=1e-12)
-    assert expected > 0.0
+    mid = 0.5 * (scene.model.A[i] + scene.model.A[i + 1]) @ p  # (3,) vehicle frame
+    centre = np.array([0.0, 0.0, 0.5 * p[2]])
+    camera_centre = -R.T @ t
+    on_ray = camera_centre + (mid - camera_centre) * np.linalg.norm(R @ centre + t) / np.linalg.norm(R @ mid + t)
+    low, high = np.array([-1.5, -1.5, -0.5]) * p[:3], np.array([1.5, 1.5, 1.5]) * p[:3]
+    outside = np.where(on_ray > high, on_ray - high, np.where(on_ray < low, on_ray - low, 0.0))
+    assert np.any(outside != 0.0)
+    np.testing.assert_allclose(r[-3:], np.sqrt(lam) * outside / ARROW_ZONE_SIGMA, rtol=1e-12, atol=1e-12)
+
+
+def test_the_arrow_zone_ignores_where_along_its_rays_the_arrow_is_drawn(rng):
+    """An arrow drawn shorter or longer than the vehicle is the model's arrow moved along its rays (the paper's
+    gauge): the zone sees the midpoint's ray only, so a midpoint anywhere on that ray gives the same rows (issue 36:
+    judging the gauge point pulled the yaw of every vehicle whose arrow was not exactly as long as it)."""
+    scene = random_scene(rng, "rear")
+    problem = Problem.build(scene.model, CAMERA, CAR, 1.0, 1.0)
+    R, t = scene.R_cam_vehicle, scene.t_cam_vehicle
+    p, i = _moved_arrow(scene, 30.0)
+    model = scene.model
+    camera_centre = -R.T @ t
+    own = np.flatnonzero(np.any(model.A[i, :, 3:] != 0, axis=1)) + 3  # the tail's X, Y, Z unknowns
+    mid = 0.5 * (model.A[i] + model.A[i + 1]) @ p
+    half_step = mid - model.A[i] @ p  # the tail-to-midpoint vector: half the dimension along the arrow's axis
+    r_before, _ = residuals_and_jacobian(problem, R, t, p)
+    assert np.any(r_before[-3:] != 0.0)  # outside the zone: the rows are not trivially zero
+    for factor in (0.4, 2.5):
+        moved = p.copy()
+        moved[own] = camera_centre + factor * (mid - camera_centre) - half_step
+        assert np.allclose(np.cross(0.5 * (model.A[i] + model.A[i + 1]) @ moved - camera_centre,
+                                    mid - camera_centre), 0.0, atol=1e-9)  # the same ray
+        r_after, _ = residuals_and_jacobian(problem, R, t, moved)
+        np.testing.assert_allclose(r_after[-3:], r_before[-3:], rtol=1e-9, atol=1e-12)
 
 
 def test_jacobian_matches_central_differences_with_an_arrow_outside_its_zone(rng):

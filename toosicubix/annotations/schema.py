@@ -7,6 +7,7 @@ numpy dataclasses of :mod:`toosicubix.model`; nothing past that boundary imports
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar, Union
 
@@ -24,36 +25,24 @@ from pydantic import (
 
 from toosicubix import vocabulary
 from toosicubix.errors import InputFileError
+from toosicubix.fields import MAX_FRAME, MAX_ID_LENGTH, MAX_METRES, MAX_PIXEL, MIN_SIGMA_METRES
 from toosicubix.jsonfile import read_json
 from toosicubix.vocabulary import DIMENSION_AXES
 
 SCHEMA_VERSION = 1
+
+# MAX_PIXEL, MAX_METRES, MIN_SIGMA_METRES, MAX_ID_LENGTH and MAX_FRAME are the bounds every reader applies
+# (toosicubix.fields, imported above): what a file may hold is what a reader may pass on.
 
 #: The most clicked points one vehicle may have (a point part is one, a pair or an arrow two). The flat keypoint
 #: vocabulary of the labelling tools has 65 and ApolloCar3D's 66; the solver's work grows with the square of
 #: the clicks and more, so a vehicle past this is refused rather than left to run for minutes.
 MAX_CLICKS_PER_VEHICLE = 128
 
-#: The largest pixel coordinate (and image side) a file may hold. The largest camera images are some 10^5
-#: pixels across; a click a million pixels off is a typo, and the solver's squared pixel costs of larger
-#: numbers lose every digit a click carries (and overflow float64 near 1e154).
-MAX_PIXEL = 1e6
-#: The largest size in metres a ``length`` feature, known dimension or camera height may have: no road
-#: vehicle or camera mount is 100 m.
-MAX_METRES = 100.0
-#: The smallest sigma in metres: no vehicle's size is known to a tenth of a millimetre, and a smaller sigma
-#: makes the prior's weight (1 / sigma^2) swamp every click.
-MIN_SIGMA_METRES = 1e-4
-#: Image ids name files (``label_2/<id>.txt``, and a temporary file beside it with 14 more characters):
-#: most file systems allow 255 bytes per name; this leaves room for both. Vehicle ids and prototypes have
-#: the same bound so that messages and results stay readable.
-MAX_ID_LENGTH = 128
 #: Focal lengths in pixels: below 1 px the clicks cannot be pixels; above 10^6 px no lens gives it.
 FOCAL_RANGE_PX = (1.0, 1e6)
 #: The largest camera offset ``|K^-1 P[:, 3]|`` (metres) a ``P`` may hold (KITTI's: 0.06 m).
 MAX_CAMERA_OFFSET = 100.0
-#: The largest frame number of a sequence (KITTI's longest sequence has 1,106 frames; 10^6 is a day at 10 Hz).
-MAX_FRAME = 1_000_000
 #: What names a file: image ids and sequence names (``label_2/<image id>.txt``, ``label_02/<sequence>.txt``).
 FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$"
 
@@ -438,8 +427,13 @@ def _json_path(loc: tuple[int | str, ...]) -> str:
     return path
 
 
+#: A quoted value in a validator's message longer than this is cut (pydantic quotes the input: a 5,000-character
+#: ``kind`` made a 5,000-character message).
+_QUOTED = re.compile(r"'([^']{57})[^']{4,}'")
+
+
 def _describe(error: dict[str, Any]) -> str:
-    message = error["msg"].removeprefix("Value error, ")
+    message = _QUOTED.sub(r"'\1...'", error["msg"].removeprefix("Value error, "))
     if error["loc"] and error["loc"][-1] == "[key]":
         message = f"bad key: {message}"
     if error["type"] == "missing":

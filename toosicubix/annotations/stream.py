@@ -20,7 +20,7 @@ from pydantic import ValidationError
 
 from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, TrackBook, _describe, _json_path
 from toosicubix.errors import FormatError, InputFileError
-from toosicubix.jsonfile import read_json_text
+from toosicubix.jsonfile import long_integer_error, read_json_text
 
 _WHITESPACE = re.compile(r"[ \t\n\r]*")
 #: At most this many problems are listed for one file.
@@ -76,6 +76,8 @@ class _Scanner:
             value, self.pos = self.decoder.raw_decode(self.text, self.pos)
         except json.JSONDecodeError as exc:
             raise self.fail(exc.msg, exc.pos) from None
+        except ValueError:  # an integer of more than 4,300 digits, which Python does not read
+            raise InputFileError(self.path, [("$", long_integer_error(self.text, self.path, start).message)]) from None
         except RecursionError:
             raise InputFileError(self.path, [("$", "JSON nested too deeply")]) from None
         return value, start, self.pos

@@ -75,9 +75,14 @@ def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, out
       toosicubix export openlabel toosicubix-out -o labels.json
     """
     from toosicubix.formats.openlabel import openlabel_document
+    from toosicubix.formats.results import RESULTS_FILENAME, non_finite_path
 
     images, annotations = _load(out, annotations_path)
     doc, warnings = openlabel_document(images, name=annotations.name)
+    bad = non_finite_path(doc)
+    if bad is not None:  # results.json's numbers are checked when read: this is the last guard, not the first
+        raise BadInput(f"{out / RESULTS_FILENAME}: its fits give a NaN or an infinity at {bad} of the OpenLABEL "
+                       "document: refusing to write it")
     _write(output, json.dumps(doc, indent=1, allow_nan=False) + "\n", warnings, quiet)
 
 

@@ -215,7 +215,7 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
     """
     from toosicubix.annotations.mapping import load_mapping
     from toosicubix.formats.cameras import load_cameras
-    from toosicubix.formats.coco import coco_to_annotations
+    from toosicubix.formats.coco import CocoImport
 
     try:
         mapping, _ = load_mapping(mapping_name)
@@ -224,10 +224,16 @@ def coco_command(keypoints: Path, mapping_name: str, cameras_path: Path | None, 
             raise click.BadParameter(f"the mapping {mapping.name!r} has no parts with option "
                                      f"{', '.join(sorted(unknown))}", param_hint="--option")
         cameras = load_cameras(cameras_path) if cameras_path is not None else None
-        document, summary = coco_to_annotations(keypoints, mapping, cameras, options)
+        imported = CocoImport(keypoints, mapping, cameras, options)
+        imported.write(out_path)  # image by image, atomically: a problem found on the way leaves nothing written
     except InputError as exc:
         raise BadInput(str(exc)) from None
-    _write(document, summary, out_path, quiet)
+    except OSError as exc:
+        raise BadInput(f"cannot write {out_path}: {exc.strerror or exc}") from None
+    if not quiet:
+        for line in imported.summary.lines():
+            click.echo(line, err=True)
+        click.echo(f"wrote {out_path}", err=True)
 
 
 #: The commands of the ``import`` group this module contributes.

@@ -6,10 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from toosicubix.cli.options import BadInput
 from toosicubix.errors import InputError
+from toosicubix.fields import shown
 from toosicubix.parts.learned import CONTRADICTION_M
 
 
@@ -17,8 +17,9 @@ from toosicubix.parts.learned import CONTRADICTION_M
 @click.argument("keypoints", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--car-models", "car_models_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="ApolloCar3D car_models.json: each car model's extents and type.")
-@click.option("--cameras", "cameras_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="Cameras file (see `toosicubix import coco --help`).")
+@click.option("--cameras", "cameras_path", type=click.Path(path_type=Path), required=True,
+              help="The cameras of the images, in any form `toosicubix import` takes: a cameras JSON file, a KITTI "
+                   "calib file or a folder of them, or an OpenCV or ROS camera YAML.")
 @click.option("--mapping", "mapping_name", default="apollocar3d-66", show_default=True,
               help="The mapping whose keypoint parts get the learned positions (names by index, other parts kept).")
 @click.option("--images", "which", type=click.Choice(["all", "even", "odd"]), default="all", show_default=True,
@@ -49,7 +50,7 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
     from toosicubix.annotations.mapping import load_mapping
     from toosicubix.formats.apollocar3d import keypoint_samples, read_apollocar3d, read_car_models
     from toosicubix.formats.atomic import atomic_write_json
-    from toosicubix.formats.cameras import load_cameras
+    from toosicubix.formats.cameras import intrinsics, load_cameras
     from toosicubix.parts.learned import learned_mapping
 
     try:
@@ -65,8 +66,9 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
     for im in images:
         camera = cameras.camera_for(im.file_name)
         if camera is None:
-            raise BadInput(f"{cameras_path}: no camera matches image {im.file_name!r}")
-        K_of[im.id] = np.array(camera["K"], dtype=float)
+            raise BadInput(f"{cameras_path}: no camera for image {shown(im.file_name)} "
+                           f"({cameras.why_none(im.file_name)})")
+        K_of[im.id] = intrinsics(camera)  # a K, or a KITTI calib's P[:, :3]
     try:
         samples = keypoint_samples(images, mapping.keypoints, K_of)
     except InputError as exc:

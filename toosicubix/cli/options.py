@@ -165,19 +165,20 @@ def apollocar3d_cameras_option(command: Callable) -> Callable:
     :func:`ground_truth_options`. The command receives ``cameras_path``, refused with another ground truth."""
     return _apollocar3d_file_option(
         command, "--cameras", "cameras_path",
-        "With --apollocar3d: the cameras file of its images (see `toosicubix import coco --help`), for how far each "
-        "car's labelled keypoints lie from their rays at its ground-truth pose [default: cameras.json beside the "
-        "keypoint file, if there is one].")
+        "With --apollocar3d: the cameras of its images, in any form `toosicubix import` takes (our JSON, a KITTI calib "
+        "file or folder, an OpenCV or ROS YAML), for how far each car's labelled keypoints lie from their rays at its "
+        "ground-truth pose [default: cameras.json beside the keypoint file, if there is one].", dir_okay=True)
 
 
-def _apollocar3d_file_option(command: Callable, flag: str, parameter: str, help_text: str) -> Callable:
+def _apollocar3d_file_option(command: Callable, flag: str, parameter: str, help_text: str,
+                             dir_okay: bool = False) -> Callable:
     @functools.wraps(command)
     def wrapper(*args: Any, ground_truth: GroundTruth | None, **kwargs: Any) -> Any:
         if kwargs[parameter] is not None and (ground_truth is None or ground_truth.kind != "apollocar3d"):
             raise click.UsageError(f"{flag} goes with --apollocar3d only")
         return command(*args, ground_truth=ground_truth, **kwargs)
 
-    return click.option(flag, parameter, type=click.Path(dir_okay=False, path_type=Path), default=None,
+    return click.option(flag, parameter, type=click.Path(dir_okay=dir_okay, path_type=Path), default=None,
                         help=help_text)(wrapper)
 
 

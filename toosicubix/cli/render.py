@@ -50,8 +50,11 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
     bird's-eye view draws each of the frame's tracks over all the sequence's frames: its positions relative to
     the camera, a dot per frame, clicked frames ringed, this frame's a larger dot.
 
-    Images come from each image's `file` relative to the annotation file, or from --images; a missing image
-    gets a warning and a blank canvas. Files are written atomically; rendering twice gives identical files.
+    Images come from each image's `file` relative to the annotation file, or from --images; a missing image, or
+    one that cannot be decoded, gets a warning naming it and a blank canvas. Sizes are bounded: an image file whose
+    header declares more than 16,384 px a side or 50 Mpx is not decoded, and a canvas beyond them is drawn scaled
+    down with a warning (left out when a side would be under a pixel). Files are written atomically; rendering
+    twice gives identical files.
 
     Exit code 0 on success, 2 for a missing or malformed input.
 
@@ -80,5 +83,6 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
         if len(summary.warnings) > 20:
             click.echo(f"  ... and {len(summary.warnings) - 20} more warnings", err=True)
         blank = f", {len(summary.blank)} on a blank canvas" if summary.blank else ""
+        blank += f", {len(summary.refused)} left out (too large to draw even scaled)" if summary.refused else ""
         skipped = f" ({summary.skipped} left out by --only {only})" if only else ""
         click.echo(f"rendered {len(summary.written)} images{blank} -> {summary.out_dir}{skipped}", err=True)

@@ -13,12 +13,15 @@ vehicle frame (X forward, Y left, Z up, origin at the bottom-face centre)::
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from toosicubix import fields
 from toosicubix.errors import InputFileError
+from toosicubix.fields import DistinctKeys, shown
 from toosicubix.geometry import rot_x, rot_y, rot_z
 from toosicubix.jsonfile import read_json
 
@@ -40,29 +43,59 @@ class CarModel:
         return np.array([self.length, self.width_body, self.height])
 
 
+#: The smallest extent (length, width, height) of a car model, metres: no car is 10 cm long, wide or high, and the
+#: learned keypoint positions are fractions of the extents (a length of 1e-300 made them infinite).
+MIN_EXTENT_M = 0.1
+
+
+def _key_path(key: str) -> str:
+    """The JSON path of a top-level key: ``$.35``, or ``$['...']`` for a key that is not short and plain."""
+    return f"$.{key}" if len(key) <= 40 and re.fullmatch(r"\w+", key) else f"$[{shown(key, 40)}]"
+
+
+def _is_identifier(value: str) -> bool:
+    try:
+        fields.identifier(value, None, None)
+    except fields.FieldError:
+        return False
+    return True
+
+
 def read_car_models(path: str | Path) -> dict[int, CarModel]:
     """The car models of ``car_models.json`` by id.
+
+    Keys are car model numbers by the field rules (:func:`toosicubix.fields.numeric_key`): ``"35"``, ``"035"`` and
+    ``"٣٥"`` all mean model 35, and two keys that mean one model are an error naming both (one silently won).
 
     Raises
     ------
     InputFileError
-        Naming the file and the JSON path of a missing or non-positive field.
+        Naming the file and the JSON path: a key that is no model number, two keys for one model (or one key given
+        twice), an extent that is no size in metres from :data:`MIN_EXTENT_M`, a name or type that is no string.
     """
-    data = read_json(path, at_root=True)
+    data = read_json(path, at_root=True, unique_keys=True)
     if not isinstance(data, dict) or not data:
         raise InputFileError(path, [("$", "expected an object of car models by id")])
     out = {}
+    keys = DistinctKeys(path, "car model")
     for key, entry in data.items():
-        where = f"$.{key}"
-        if not key.isdigit() or not isinstance(entry, dict):
-            raise InputFileError(path, [(where, "expected a car model id (digits) with an object")])
-        values = {}
-        for name in ("length", "width_body", "height"):
-            v = entry.get(name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v <= 0:
-                raise InputFileError(path, [(f"{where}.{name}", f"expected a positive number, got {v!r:.40}")])
-            values[name] = float(v)
-        out[int(key)] = CarModel(int(key), str(entry.get("name", key)), str(entry.get("type", "")), **values)
+        where = _key_path(key)
+        model_id = fields.numeric_key(key, path, where, what="a car model id")
+        keys.add(model_id, key, where)
+        if not isinstance(entry, dict):
+            raise InputFileError(path, [(where, f"expected an object with length, width_body and height, got "
+                                                f"{shown(entry)}")])
+        values = {name: fields.metres(entry.get(name), path, f"{where}.{name}", low=MIN_EXTENT_M)
+                  for name in ("length", "width_body", "height")}
+        text = {}
+        for name, default in (("name", key), ("type", "")):
+            value = entry.get(name, default)
+            if value != "" and (not isinstance(value, str) or not _is_identifier(value)):
+                raise InputFileError(path, [(f"{where}.{name}", f"expected a string of at most {fields.MAX_ID_LENGTH} "
+                                                                f"characters (no control characters), got "
+                                                                f"{shown(value)}")])
+            text[name] = value
+        out[model_id] = CarModel(model_id, text["name"], text["type"], **values)
     return out
 
 
@@ -108,40 +141,71 @@ class ApolloImage:
     cars: tuple[ApolloCar, ...]
 
 
+#: The largest pose translation, metres (ApolloCar3D's cars stand within 100 m or so of the camera).
+MAX_DISTANCE_M = 10_000.0
+#: The largest pose angle, radians (any angle is one within +-pi; a number far beyond is no angle).
+MAX_ANGLE = 100.0
+
+
 def read_apollocar3d(path: str | Path, car_models: dict[int, CarModel]) -> list[ApolloImage]:
     """Every image of an ApolloCar3D keypoint file with its cars' ground truth, in file order.
+
+    Every field goes through the field rules (:mod:`toosicubix.fields`): ids strings or integers of sane length,
+    ``category_id`` a car model number (``"35"`` or 35), pixels within the annotation file's bounds, the pose's
+    angles within :data:`MAX_ANGLE` radians and its translation within :data:`MAX_DISTANCE_M`.
 
     Raises
     ------
     InputFileError
-        Naming the file and the JSON path: a missing or malformed pose, bbox or keypoints, an unknown car model.
+        Naming the file and the JSON path: a missing or malformed pose, bbox or keypoints, an unknown car model, an
+        image id given twice or two images whose file names give one image id.
     """
     data = read_json(path, at_root=True)
     if not isinstance(data, dict) or not isinstance(data.get("images"), list) \
             or not isinstance(data.get("annotations"), list):
         raise InputFileError(path, [("$", "expected a COCO object with 'images' and 'annotations' lists")])
     names: dict[object, str] = {}
+    stems: dict[str, str] = {}  # image id (the file name's stem) -> where
     for i, im in enumerate(data["images"]):
+        where = f"$.images[{i}]"
         if not isinstance(im, dict) or "id" not in im or not isinstance(im.get("file_name"), str):
-            raise InputFileError(path, [(f"$.images[{i}]", "expected an object with 'id' and 'file_name'")])
-        names[im["id"]] = im["file_name"]
+            raise InputFileError(path, [(where, "expected an object with 'id' and 'file_name'")])
+        image_id = fields.identifier(im["id"], path, f"{where}.id", what="an image id")
+        if image_id in names:
+            raise InputFileError(path, [(f"{where}.id", f"image id {shown(image_id)} given twice")])
+        stem = Path(im["file_name"]).stem
+        if stem in stems:
+            raise InputFileError(path, [(f"{where}.file_name", f"this image and the one at {stems[stem]} both get the "
+                                                               f"image id {shown(stem)} (the file name's stem)")])
+        names[image_id], stems[stem] = im["file_name"], where
     cars: dict[object, list[ApolloCar]] = {k: [] for k in names}
     for i, ann in enumerate(data["annotations"]):
         where = f"$.annotations[{i}]"
         if not isinstance(ann, dict):
             raise InputFileError(path, [(where, "expected an object")])
-        if ann.get("image_id") not in names:
-            raise InputFileError(path, [(f"{where}.image_id", f"no image has id {ann.get('image_id')!r:.40}")])
-        model = car_models.get(ann.get("category_id"))  # type: ignore[arg-type]
+        image_id = fields.identifier(ann.get("image_id"), path, f"{where}.image_id", what="an image id")
+        if image_id not in names:
+            raise InputFileError(path, [(f"{where}.image_id", f"no image has id {shown(image_id, 40)}")])
+        category = fields.numeric_key(ann.get("category_id"), path, f"{where}.category_id", what="a car model id")
+        model = car_models.get(category)
         if model is None:
             raise InputFileError(path, [(f"{where}.category_id",
-                                         f"car model {ann.get('category_id')!r:.20} is not in the car models file")])
+                                         f"car model {shown(ann.get('category_id'), 20)} is not in the car models "
+                                         "file")])
+        car_id = fields.identifier(ann.get("id"), path, f"{where}.id", what="an annotation id")
         pose = _numbers(ann, "pose", (6,), path, where)
+        if np.abs(pose[:3]).max() > MAX_ANGLE or np.abs(pose[3:]).max() > MAX_DISTANCE_M:
+            expected = f"roll, pitch, yaw within +-{MAX_ANGLE:g} rad and x, y, z within +-{MAX_DISTANCE_M:g} m"
+            raise InputFileError(path, [(f"{where}.pose", f"expected {expected}, got {pose.tolist()}")])
         box = _numbers(ann, "bbox", (4,), path, where)
         keypoints = _numbers(ann, "keypoints", (-1,), path, where).reshape(-1, 3)
+        if not (np.isin(keypoints[:, 2], (0, 1, 2)).all() and np.abs(keypoints[:, :2]).max() <= fields.MAX_PIXEL
+                and np.abs(box).max() <= fields.MAX_PIXEL and box[2] > 0 and box[3] > 0):
+            raise InputFileError(path, [(where, f"expected bbox [x, y, w, h] (w, h > 0) and keypoints x, y, v (v in 0, "
+                                                f"1, 2) within +-{fields.MAX_PIXEL:.0f} pixels")])
         R, t = pose_to_vehicle(pose, model.dimensions)
-        cars[ann["image_id"]].append(ApolloCar(
-            id=str(ann.get("id")), model=model, R_cam_vehicle=R, t_cam_vehicle=t,
+        cars[image_id].append(ApolloCar(
+            id=str(car_id), model=model, R_cam_vehicle=R, t_cam_vehicle=t,
             box2d=np.array([box[0], box[1], box[0] + box[2], box[1] + box[3]]), keypoints=keypoints,
             source=f"{path} {where}"))
     return [ApolloImage(Path(names[k]).stem, names[k], tuple(cars[k])) for k in names]
@@ -151,14 +215,14 @@ def _numbers(obj: dict, key: str, shape: tuple[int, ...], path: str | Path, wher
     value = obj.get(key)
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond float's range
         arr = np.zeros(0)
     ok = arr.ndim == 1 and arr.size > 0 and np.all(np.isfinite(arr)) and (shape[0] < 0 or arr.shape == shape)
     if shape[0] < 0:
         ok = ok and arr.size % 3 == 0
     if not ok:
         expected = f"{shape[0]} numbers" if shape[0] > 0 else "x, y, v triplets"
-        raise InputFileError(path, [(f"{where}.{key}", f"expected {expected}, got {value!r:.60}")])
+        raise InputFileError(path, [(f"{where}.{key}", f"expected {expected}, got {shown(value)}")])
     return arr
 
 

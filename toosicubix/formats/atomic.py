@@ -13,7 +13,7 @@ import json
 import os
 import re
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO, Any
 
@@ -113,3 +113,31 @@ def atomic_write_json(path: str | Path, doc: Any) -> None:
         handle.write("\n")
 
     atomic_write(path, write)
+
+
+def atomic_write_json_items(path: str | Path, head: dict[str, Any], key: str, items: Iterable[Any]) -> int:
+    """Write ``{**head, key: [*items]}`` byte for byte as :func:`atomic_write_json` would, taking ``items`` one at a
+    time from an iterator (a large imported annotation file is never held whole); return how many were written.
+
+    ``head`` comes first, ``key`` last. An exception from ``items`` (a problem found while they are made) leaves
+    ``path`` untouched, as any error does.
+
+    Raises
+    ------
+    ValueError
+        A NaN or an infinity (not JSON); ``path`` is then untouched.
+    """
+    count = 0
+
+    def write(handle: IO[str]) -> None:
+        nonlocal count
+        opening = json.dumps({**head, key: []}, indent=1, allow_nan=False)  # '{\n ...,\n "key": []\n}'
+        handle.write(opening[: -len("[]\n}")])
+        for item in items:
+            text = json.dumps(item, indent=1, allow_nan=False)  # JSON strings hold no raw newline
+            handle.write(("[\n  " if count == 0 else ",\n  ") + text.replace("\n", "\n  "))
+            count += 1
+        handle.write("\n ]\n}\n" if count else "[]\n}\n")
+
+    atomic_write(path, write)
+    return count

@@ -28,7 +28,6 @@ the forms is refused naming all four (:data:`ACCEPTED`).
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -36,10 +35,13 @@ from fnmatch import fnmatchcase
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+import numpy as np
 from pydantic import ValidationError
 
+from toosicubix import fields
 from toosicubix.annotations.schema import CameraModel
 from toosicubix.errors import FormatError
+from toosicubix.fields import shown
 from toosicubix.formats.kitti import read_text
 from toosicubix.jsonfile import json_field, read_json
 
@@ -104,6 +106,14 @@ class CameraTable:
         if self.by_stem is not None:
             return f"no KITTI calib file {Path(self.source) / (_stem(file_name) + '.txt')}"
         return f"no entry of {self.source} matches it"
+
+
+def intrinsics(camera: Mapping[str, Any]) -> np.ndarray:
+    """The (3, 3) ``K`` of an annotation file ``camera`` object: its ``K``, or ``P[:, :3]`` of a KITTI ``P`` (the
+    camera's rays; its offset ``K^-1 P[:, 3]`` from the reference camera, some 6 cm for KITTI, is not in K)."""
+    if "K" in camera:
+        return np.array(camera["K"], dtype=float).reshape(3, 3)
+    return np.array(camera["P"], dtype=float).reshape(3, 4)[:, :3]
 
 
 def _stem(file_name: str) -> str:
@@ -175,7 +185,12 @@ def _checked(camera: dict[str, Any], path: Path, where: str | None, line: int | 
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """Whether ``value`` is a finite number by the field rules (an integer of 400 digits is none)."""
+    try:
+        fields.number(value, None, None)
+    except fields.FieldError:
+        return False
+    return True
 
 
 def _json_K(K: Any, path: Path, where: str) -> list:
@@ -185,12 +200,12 @@ def _json_K(K: Any, path: Path, where: str) -> list:
     if isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r)
                                                    for r in K):
         return K
-    raise FormatError(path, f"{where}.K: expected {_K_SHAPE}, got {K!r:.80}")
+    raise FormatError(path, f"{where}.K: expected {_K_SHAPE}, got {shown(K, 80)}")
 
 
 def _json_distortion(d: Any, path: Path, where: str) -> list:
     if not (isinstance(d, list) and all(_is_number(v) for v in d) and len(d) in DISTORTION_COUNTS):
-        raise FormatError(path, f"{where}.distortion: expected {_DISTORTION_SHAPE}, got {d!r:.80}")
+        raise FormatError(path, f"{where}.distortion: expected {_DISTORTION_SHAPE}, got {shown(d, 80)}")
     if any(abs(v) > MAX_DISTORTION for v in d):
         raise FormatError(path, f"{where}.distortion: expected coefficients within +-{MAX_DISTORTION:g}, got {d}")
     return d
@@ -232,11 +247,11 @@ def kitti_P2_camera(path: Path) -> dict[str, Any]:
         key, sep, rest = line.partition(":")
         if not sep or key.strip() not in ("P2", "P_rect_02"):
             continue
-        try:
-            values = [float(v) for v in rest.split()]
-        except ValueError:
+        try:  # decimal notation only (fields.text_number): '4_01.2' and 'nan' are refused
+            values = [fields.text_number(v, path, number) for v in rest.split()]
+        except fields.FieldError:
             values = []
-        if len(values) != 12 or not all(math.isfinite(v) for v in values):
+        if len(values) != 12:
             raise FormatError(path, f"{key.strip()}: expected 12 numbers (the 3x4 projection matrix of camera 2, row "
                                     f"by row), got {rest.strip()[:80]!r}", number)
         P = [values[0:4], values[4:8], values[8:12]]
@@ -366,12 +381,12 @@ def _yaml_document(text: str, path: Path) -> dict[str, _Node]:
 
 def _yaml_numbers(node: _Node, path: Path, name: str) -> list[float]:
     items = node.value if isinstance(node.value, list) else None
-    try:
-        values = [float(v) for v in items] if items is not None else None
-    except ValueError:
+    try:  # decimal notation only (fields.text_number): '4_01.2', '.nan' and other scripts' digits are refused
+        values = [fields.text_number(v, path, node.line) for v in items] if items is not None else None
+    except fields.FieldError:
         values = None
-    if values is None or not all(math.isfinite(v) for v in values):
-        raise _yaml_error(path, node.line, f"{name}: expected a list of finite numbers, got {node.value!r:.60}")
+    if values is None:
+        raise _yaml_error(path, node.line, f"{name}: expected a list of finite numbers, got {shown(node.value)}")
     return values
 
 
@@ -380,18 +395,20 @@ def _yaml_matrix(doc: dict[str, _Node], key: str, path: Path) -> tuple[list[floa
     node = doc[key]
     if not isinstance(node.value, dict):
         raise _yaml_error(path, node.line, f"{key}: expected rows, cols and data one level down")
-    fields = node.value
+    members = node.value
     for name in ("rows", "cols", "data"):
-        if name not in fields:
+        if name not in members:
             raise _yaml_error(path, node.line, f"{key}.{name}: missing")
     try:
-        rows, cols = int(fields["rows"].value), int(fields["cols"].value)
-    except (TypeError, ValueError):
+        rows, cols = (fields.text_integer(members[name].value if isinstance(members[name].value, str) else None,
+                                          path, node.line, low=0, high=1000) for name in ("rows", "cols"))
+    except fields.FieldError:
         raise _yaml_error(path, node.line, f"{key}: expected integer rows and cols, got "
-                                           f"{fields['rows'].value!r:.20} and {fields['cols'].value!r:.20}") from None
-    data = _yaml_numbers(fields["data"], path, f"{key}.data")
+                                           f"{shown(members['rows'].value, 20)} and {shown(members['cols'].value, 20)}"
+                          ) from None
+    data = _yaml_numbers(members["data"], path, f"{key}.data")
     if len(data) != rows * cols:
-        raise _yaml_error(path, fields["data"].line, f"{key}.data: expected {rows * cols} numbers (rows {rows} x "
+        raise _yaml_error(path, members["data"].line, f"{key}.data: expected {rows * cols} numbers (rows {rows} x "
                                                      f"cols {cols}), got {len(data)}")
     return data, rows, cols, node.line
 

@@ -42,12 +42,17 @@ the JSON path. Files without these fields import as before.
 
 from __future__ import annotations
 
-import math
+import json
+import re
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
+from toosicubix import fields
 from toosicubix.annotations import schema as schemas
 from toosicubix.annotations.mapping import (
     MappingDirection,
@@ -59,10 +64,13 @@ from toosicubix.annotations.mapping import (
     MappingSymmetry,
     keypoints_of,
 )
-from toosicubix.errors import InputFileError
+from toosicubix.annotations.schema import ImageAnnotation, TrackBook, _describe, _json_path
+from toosicubix.errors import FormatError, InputFileError
+from toosicubix.fields import shown
+from toosicubix.formats.atomic import atomic_write_json_items
 from toosicubix.formats.cameras import CameraTable
-from toosicubix.formats.tool_import import check_imported, frame_image_id, sequence_id_for
-from toosicubix.jsonfile import read_json
+from toosicubix.formats.tool_import import frame_image_id, sequence_id_for
+from toosicubix.jsonfile import read_json, read_json_text, scan_object
 from toosicubix.parts.road_users import import_notes
 from toosicubix.vocabulary import KINDS
 
@@ -112,17 +120,30 @@ def _field(obj: Any, key: str, kinds: type | tuple[type, ...], path: str | Path,
         raise _fail(path, f"{where}.{key}", "missing required field")
     value = obj[key]
     if not isinstance(value, kinds) or isinstance(value, bool):
-        raise _fail(path, f"{where}.{key}", f"expected {getattr(kinds, '__name__', kinds)}, got {value!r:.60}")
+        names = kinds.__name__ if isinstance(kinds, type) else " or ".join(k.__name__ for k in kinds)
+        raise _fail(path, f"{where}.{key}", f"expected {_KIND_NAMES.get(names, names)}, got {shown(value)}")
     return value
 
 
-def _number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+#: How a message names a JSON type.
+_KIND_NAMES = {"list": "a list", "dict": "an object", "str": "a string"}
 
 
-def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: CameraTable | None = None,
-                        options: tuple[str, ...] = ()) -> tuple[dict[str, Any], ImportSummary]:
-    """Turn a COCO keypoint file into an annotation file v1 (a JSON document, already validated).
+def _id(obj: dict[str, Any], key: str, path: str | Path, where: str, what: str) -> str | int:
+    """``obj[key]``, an id by the field rules (a string or an integer of sane length)."""
+    if key not in obj:
+        raise _fail(path, f"{where}.{key}", "missing required field")
+    return fields.identifier(obj[key], path, f"{where}.{key}", what=what)
+
+
+class CocoImport:
+    """A COCO keypoint file read for import into an annotation file v1, image by image.
+
+    Reading it (the constructor) checks every field of every entry, in file order, and counts what the import
+    makes (:attr:`summary`); :meth:`images` then makes and validates each image's document in turn, so that a large
+    file is never held whole: the ``annotations`` array (nearly all of a keypoint file) stays text, each annotation
+    decoded when it is checked and again when its image is made. A 101 MB ApolloCar3D-like file (103,400 cars)
+    peaked at 4.2 GB held whole; read so, it stays near three times its text (benchmarks/RESULTS.md).
 
     Parameters
     ----------
@@ -131,6 +152,219 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
     cameras : from :func:`toosicubix.formats.cameras.load_cameras`; None: every image must carry its own ``K``
     options : the mapping's optional parts to use (e.g. ``("plates",)``)
 
+    Raises
+    ------
+    InputFileError
+        Naming the file and the JSON path: a malformed entry (by the field rules of :mod:`toosicubix.fields`), an
+        image without a camera, a keypoint the mapping does not know, a bad triplet.
+    """
+
+    def __init__(self, coco_path: str | Path, mapping: MappingFile, cameras: CameraTable | None = None,
+                 options: tuple[str, ...] = ()):
+        self.path = coco_path
+        self.mapping = mapping
+        self.summary = ImportSummary()
+        self._enabled = [p for p in mapping.parts if p.option is None or p.option in options]
+        try:
+            self._text = read_json_text(coco_path)
+        except FormatError as exc:
+            raise _fail(coco_path, "$", exc.message) from None
+        scanned = scan_object(self._text, coco_path, spans_of=("annotations",), at_root=True)
+        if scanned is None:
+            read_json(coco_path, at_root=True)  # names the line of invalid JSON
+            raise _fail(coco_path, "$", "expected a COCO object with images, annotations and categories")
+        data, spans = scanned
+        self._categories = self._read_categories(data)
+        self._read_images(data, cameras)
+        self.summary.images = len(self._images)
+        if "annotations" in spans:
+            annotation_spans = spans["annotations"]
+        else:
+            annotation_spans = []
+            _field(data, "annotations", list, coco_path, "$")  # missing, or not a list
+        self._spans: dict[Any, list[tuple[int, int]]] = {key: [] for key in self._images}
+        decoder = json.JSONDecoder()
+        for i, (start, _) in enumerate(annotation_spans):
+            ann, _ = decoder.raw_decode(self._text, start)
+            image_key, vehicle = self._vehicle(ann, i, self.summary)
+            if vehicle is not None:
+                self._spans[image_key].append((start, i))
+
+    def _read_categories(self, data: dict[str, Any]) -> dict[Any, tuple[str, list[str] | None]]:
+        path, known = self.path, self.mapping.known_keypoints()
+        categories: dict[Any, tuple[str, list[str] | None]] = {}
+        for i, cat in enumerate(_field(data, "categories", list, path, "$")):
+            where = f"$.categories[{i}]"
+            if not isinstance(cat, dict):
+                raise _fail(path, where, f"expected an object with id, name and keypoints, got {shown(cat)}")
+            cat_id = _id(cat, "id", path, where, "a category id")
+            names = cat.get("keypoints")
+            if isinstance(names, list) and all(n == "" for n in names):
+                names = None  # unnamed (ApolloCar3D's file): the mapping's names by index apply
+            if names is not None:
+                if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                    raise _fail(path, f"{where}.keypoints", "expected a list of keypoint names")
+                for j, name in enumerate(names):
+                    if name not in known:
+                        raise _fail(path, f"{where}.keypoints[{j}]",
+                                    f"keypoint {shown(name)} is not known to the mapping {self.mapping.name!r}")
+            name = cat.get("name", cat_id)
+            if not isinstance(name, str | int) or isinstance(name, bool):
+                raise _fail(path, f"{where}.name", f"expected a category name (a string), got {shown(name)}")
+            categories[cat_id] = (str(fields.identifier(name, path, f"{where}.name", what="a category name")),
+                                  names)
+        return categories
+
+    def _read_images(self, data: dict[str, Any], cameras: CameraTable | None) -> None:
+        path = self.path
+        self._images: dict[Any, dict[str, Any]] = {}
+        ids: dict[str, str] = {}  # the imported image id, folded to lower case -> where
+        videos = _video_names(data, path)
+        sequences: dict[str, tuple[Any, str]] = {}  # sequence -> (the video it names, where first)
+        for i, im in enumerate(_field(data, "images", list, path, "$")):
+            where = f"$.images[{i}]"
+            if not isinstance(im, dict):
+                raise _fail(path, where, f"expected an object with id and file_name, got {shown(im)}")
+            image_id = _id(im, "id", path, where, "an image id")
+            file_name = _field(im, "file_name", str, path, where)
+            camera = _camera_of(im, file_name, cameras, path, where)
+            doc: dict[str, Any] = {"id": Path(file_name).stem, "file": file_name}
+            frame_of = _video_frame(im, videos, path, where)
+            if frame_of is not None:
+                video, sequence, frame = frame_of
+                first = sequences.setdefault(sequence, (video, where))
+                if first[0] != video:
+                    raise _fail(path, where, f"videos {shown(first[0][1])} (at {first[1]}) and {shown(video[1])} both "
+                                             f"become sequence {sequence!r}: rename one")
+                doc.update(id=frame_image_id(sequence, frame), sequence=sequence, frame=frame)
+            doc.update(camera=camera, vehicles=[])
+            if im.get("width") is not None or im.get("height") is not None:
+                doc["size"] = [fields.image_side(im.get("width"), path, f"{where}.width"),
+                               fields.image_side(im.get("height"), path, f"{where}.height")]
+            if image_id in self._images:
+                raise _fail(path, f"{where}.id", f"image id {shown(image_id)} appears twice")
+            folded = str(doc["id"]).lower()  # image ids name files, and some file systems ignore case
+            if folded in ids:
+                raise _fail(path, where, f"this image and the one at {ids[folded]} both get the image id "
+                                         f"{shown(doc['id'])} (from file_name{', video and frame' if frame_of else ''}"
+                                         f"; ids name files, compared ignoring case): rename one")
+            ids[folded] = where
+            self._images[image_id] = doc
+
+    def _vehicle(self, ann: Any, i: int, summary: ImportSummary | None) -> tuple[Any, dict[str, Any] | None]:
+        """The image key and the vehicle of annotation ``i`` (None: a crowd annotation, skipped); counted in
+        ``summary`` when given."""
+        path, mapping = self.path, self.mapping
+        where = f"$.annotations[{i}]"
+        if not isinstance(ann, dict):
+            raise _fail(path, where, f"expected an object with id, image_id and keypoints, got {shown(ann)}")
+        ann_id = _id(ann, "id", path, where, "an annotation id")
+        image_id = _id(ann, "image_id", path, where, "an image id")
+        if image_id not in self._images:
+            raise _fail(path, f"{where}.image_id", f"no image has id {shown(image_id)}")
+        image = self._images[image_id]
+        if ann.get("iscrowd") in (1, True):
+            if summary is not None:
+                summary.crowd_skipped += 1
+            return image_id, None
+        category = ann.get("category_id")
+        if category is not None:
+            category = fields.identifier(category, path, f"{where}.category_id", what="a category id")
+        cat_name, names = self._categories.get(category, (str(category), None))
+        track = _track_of(ann, image, path, where)
+        if names is None:
+            names = mapping.keypoints
+        labelled: dict[str, tuple[float, float, bool]] = {}
+        if track is None or "keypoints" in ann:  # a tracked box without keypoints is a frame with a box only
+            if names is None:
+                raise _fail(path, f"{where}.category_id", f"category {shown(category)} does not name its keypoints, "
+                                                          f"nor does the mapping {mapping.name!r}")
+            labelled = _triplets(ann, names, path, where, summary)
+        prototype = mapping.prototypes.get(str(category), mapping.prototypes.get(cat_name, mapping.prototype))
+        parts, taken = _make_parts(self._enabled, labelled, prototype)
+        vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype}
+        if track is not None:
+            vehicle["track"] = track
+        vehicle["parts"] = parts
+        if "bbox" in ann:
+            vehicle["box2d"] = _box(ann["bbox"], path, f"{where}.bbox")
+        if summary is not None:
+            summary.unused.update(name for name in labelled if name not in taken)
+            if track is not None:
+                summary.tracks.add(track)
+                summary.tracked_without_parts += not parts
+            summary.vehicles += 1
+            summary.vehicles_without_parts += not parts and track is None
+            for note in import_notes(prototype, labelled):
+                summary.notes[note] += 1
+            for part in parts:
+                summary.parts[part["kind"]] += 1
+                summary.clicks += len(KINDS[part["kind"]].clicks)
+        return image_id, vehicle
+
+    def images(self) -> Iterator[dict[str, Any]]:
+        """Each image of the annotation file, in the COCO file's order, validated as the annotation file's
+        ``$.images[i]``; then the rules across frames (one prototype per track, ...).
+
+        Raises
+        ------
+        InputFileError
+            Naming the file ("as imported") and the JSON path of the first image that breaks a rule of the
+            annotation file (with its image id), or of every rule across frames broken.
+        """
+        decoder = json.JSONDecoder()
+        source = f"{self.path} (as imported)"
+        book = TrackBook()
+        for index, (image_id, header) in enumerate(self._images.items()):
+            image = {**header, "vehicles": [self._vehicle(decoder.raw_decode(self._text, start)[0], i, None)[1]
+                                            for start, i in self._spans[image_id]]}
+            try:
+                book.add(index, ImageAnnotation.model_validate(image))
+            except ValidationError as exc:
+                raise InputFileError(source, [(_json_path(("images", index, *err["loc"])) + f" (image "
+                                               f"{image['id']!r})", _describe(err)) for err in exc.errors()]) from None
+            yield image
+        if book.problems:
+            ids = [image["id"] for image in self._images.values()]
+            raise InputFileError(source, [(f"{where} (image {ids[_image_index(where)]!r})", message)
+                                          for where, message in book.problems])
+
+    def document(self) -> dict[str, Any]:
+        """The whole annotation file v1 document (what :meth:`images` gives, in one list)."""
+        return {"toosicubix": schemas.SCHEMA_VERSION, "images": list(self.images())}
+
+    def write(self, out_path: str | Path) -> int:
+        """Write the annotation file atomically, one image at a time; the number of images.
+
+        Raises
+        ------
+        InputFileError
+            As :meth:`images`; nothing is written then.
+        OSError
+            The file cannot be written.
+        """
+        return atomic_write_json_items(out_path, {"toosicubix": schemas.SCHEMA_VERSION}, "images", self.images())
+
+
+def _pixel(value: Any) -> bool:
+    """Whether ``value`` is a pixel coordinate by the field rules."""
+    try:
+        fields.pixel(value, None, None)
+    except fields.FieldError:
+        return False
+    return True
+
+
+def _image_index(where: str) -> int:
+    """The index of the image a JSON path ``$.images[i]...`` is in."""
+    return int(re.match(r"\$\.images\[(\d+)\]", where).group(1))  # type: ignore[union-attr]
+
+
+def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: CameraTable | None = None,
+                        options: tuple[str, ...] = ()) -> tuple[dict[str, Any], ImportSummary]:
+    """Turn a COCO keypoint file into an annotation file v1 (a JSON document, already validated): the whole
+    document of :class:`CocoImport` (which writes a large one image by image instead).
+
     Returns
     -------
     (document, summary)
@@ -138,108 +372,22 @@ def coco_to_annotations(coco_path: str | Path, mapping: MappingFile, cameras: Ca
     Raises
     ------
     InputFileError
-        Naming the file and the JSON path: a malformed entry, an image without a camera, a keypoint the
-        mapping does not know, a bad triplet.
+        As :class:`CocoImport` and :meth:`CocoImport.images`.
     """
-    data = read_json(coco_path, at_root=True)
-    if not isinstance(data, dict):
-        raise _fail(coco_path, "$", "expected a COCO object with images, annotations and categories")
-    known = mapping.known_keypoints()
-    categories: dict[Any, tuple[str, list[str] | None]] = {}
-    for i, cat in enumerate(_field(data, "categories", list, coco_path, "$")):
-        where = f"$.categories[{i}]"
-        cat_id = _field(cat, "id", (int, str), coco_path, where)
-        names = cat.get("keypoints") if isinstance(cat, dict) else None
-        if isinstance(names, list) and all(n == "" for n in names):
-            names = None  # unnamed (ApolloCar3D's file): the mapping's names by index apply
-        if names is not None:
-            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-                raise _fail(coco_path, f"{where}.keypoints", "expected a list of keypoint names")
-            for j, name in enumerate(names):
-                if name not in known:
-                    raise _fail(coco_path, f"{where}.keypoints[{j}]",
-                                f"keypoint {name!r} is not known to the mapping {mapping.name!r}")
-        categories[cat_id] = (str(cat.get("name", cat_id)), names)
+    imported = CocoImport(coco_path, mapping, cameras, options)
+    return imported.document(), imported.summary
 
-    images: dict[Any, dict[str, Any]] = {}
-    order: list[Any] = []
-    videos = _video_names(data, coco_path)
-    sequences: dict[str, tuple[Any, str]] = {}  # sequence -> (the video it names, where first)
-    for i, im in enumerate(_field(data, "images", list, coco_path, "$")):
-        where = f"$.images[{i}]"
-        image_id = _field(im, "id", (int, str), coco_path, where)
-        file_name = _field(im, "file_name", str, coco_path, where)
-        camera = _camera_of(im, file_name, cameras, coco_path, where)
-        doc: dict[str, Any] = {"id": Path(file_name).stem, "file": file_name}
-        frame_of = _video_frame(im, videos, coco_path, where)
-        if frame_of is not None:
-            video, sequence, frame = frame_of
-            first = sequences.setdefault(sequence, (video, where))
-            if first[0] != video:
-                raise _fail(coco_path, where, f"videos {first[0][1]!r} (at {first[1]}) and {video[1]!r} both become "
-                                              f"sequence {sequence!r}: rename one")
-            doc.update(id=frame_image_id(sequence, frame), sequence=sequence, frame=frame)
-        doc.update(camera=camera, vehicles=[])
-        if _number(im.get("width")) and _number(im.get("height")):
-            doc["size"] = [int(im["width"]), int(im["height"])]
-        if image_id in images:
-            raise _fail(coco_path, f"{where}.id", f"image id {image_id!r} appears twice")
-        images[image_id] = doc
-        order.append(image_id)
 
-    summary = ImportSummary(images=len(images))
-    enabled = [p for p in mapping.parts if p.option is None or p.option in options]
-    for i, ann in enumerate(_field(data, "annotations", list, coco_path, "$")):
-        where = f"$.annotations[{i}]"
-        ann_id = _field(ann, "id", (int, str), coco_path, where)
-        image_id = _field(ann, "image_id", (int, str), coco_path, where)
-        if image_id not in images:
-            raise _fail(coco_path, f"{where}.image_id", f"no image has id {image_id!r}")
-        if ann.get("iscrowd") in (1, True):
-            summary.crowd_skipped += 1
-            continue
-        category = ann.get("category_id")
-        cat_name, names = categories.get(category, (str(category), None))
-        track = _track_of(ann, images[image_id], coco_path, where)
-        if names is None:
-            names = mapping.keypoints
-        labelled: dict[str, tuple[float, float, bool]] = {}
-        if track is None or "keypoints" in ann:  # a tracked box without keypoints is a frame with a box only
-            if names is None:
-                raise _fail(coco_path, f"{where}.category_id", f"category {category!r} does not name its keypoints, "
-                                                               f"nor does the mapping {mapping.name!r}")
-            labelled = _triplets(ann, names, coco_path, where, summary)
-        prototype = mapping.prototypes.get(str(category), mapping.prototypes.get(cat_name, mapping.prototype))
-        parts, taken = _make_parts(enabled, labelled, prototype)
-        for name in labelled:
-            if name not in taken:
-                summary.unused[name] += 1
-        vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype}
-        if track is not None:
-            vehicle["track"] = track
-            summary.tracks.add(track)
-            summary.tracked_without_parts += not parts
-        vehicle["parts"] = parts
-        if "bbox" in ann:
-            box = ann["bbox"]
-            if not (isinstance(box, list) and len(box) == 4 and all(_number(v) for v in box)) or box[2] <= 0 \
-                    or box[3] <= 0:
-                raise _fail(coco_path, f"{where}.bbox", f"expected [x, y, w, h] with w, h > 0, got {box!r:.60}")
-            vehicle["box2d"] = [box[0], box[1], box[0] + box[2], box[1] + box[3]]
-        images[image_id]["vehicles"].append(vehicle)
-        summary.vehicles += 1
-        summary.vehicles_without_parts += not parts and track is None
-        for note in import_notes(prototype, labelled):
-            summary.notes[note] += 1
-        for part in parts:
-            summary.parts[part["kind"]] += 1
-            summary.clicks += len(KINDS[part["kind"]].clicks)
-    document = {"toosicubix": schemas.SCHEMA_VERSION, "images": [images[k] for k in order]}
-    if sequences:
-        check_imported(document, f"{coco_path} (as imported)")  # the rules across frames name the image too
-    else:
-        schemas.parse_annotations(document, f"{coco_path} (as imported)")
-    return document, summary
+def _box(box: Any, path: str | Path, where: str) -> list[float]:
+    """A COCO ``bbox`` ``[x, y, w, h]`` as the annotation file's ``box2d`` ``[x1, y1, x2, y2]``."""
+    if not (isinstance(box, list) and len(box) == 4):
+        raise _fail(path, where, f"expected [x, y, w, h] with w, h > 0, got {shown(box)}")
+    x, y = (fields.pixel(v, path, f"{where}[{k}]") for k, v in enumerate(box[:2]))
+    w, h = (fields.number(v, path, f"{where}[{k + 2}]", low=0.0, high=2 * fields.MAX_PIXEL, what="a box side")
+            for k, v in enumerate(box[2:]))
+    if w <= 0 or h <= 0:
+        raise _fail(path, where, f"expected [x, y, w, h] with w, h > 0, got {shown(box)}")
+    return [x, y, x + w, y + h]
 
 
 #: The spellings of a frame's video (identity first, then names), its frame number and an annotation's track.
@@ -254,7 +402,9 @@ def _video_names(data: dict[str, Any], path: str | Path) -> dict[Any, str]:
         return {}
     names: dict[Any, str] = {}
     for i, video in enumerate(_field(data, "videos", list, path, "$")):
-        video_id = _field(video, "id", (int, str), path, f"$.videos[{i}]")
+        if not isinstance(video, dict):
+            raise _fail(path, f"$.videos[{i}]", f"expected an object with id and name, got {shown(video)}")
+        video_id = _id(video, "id", path, f"$.videos[{i}]", "a video id")
         name = video.get("name")
         if name is not None:
             names[video_id] = str(_field(video, "name", str, path, f"$.videos[{i}]"))
@@ -275,13 +425,17 @@ def _video_frame(im: dict[str, Any], videos: dict[Any, str], path: str | Path,
     frame = im[frame_key]
     if not isinstance(frame, int) or isinstance(frame, bool) or not 0 <= frame <= schemas.MAX_FRAME:
         raise _fail(path, f"{where}.{frame_key}", f"expected an integer frame number from 0 to {schemas.MAX_FRAME}, "
-                                                  f"got {frame!r:.40}")
-    value = _field(im, video_key, (int, str) if video_key == "video_id" else str, path, where)
+                                                  f"got {shown(frame, 40)}")
+    if video_key == "video_id":
+        value = _id(im, video_key, path, where, "a video id")
+    else:
+        value = _field(im, video_key, str, path, where)
     name = videos.get(value) if video_key == "video_id" else None
     name = name or next((im[k] for k in VIDEO_KEYS[1:] if isinstance(im.get(k), str)), None) or str(value)
     sequence = sequence_id_for(name)
     if not sequence:
-        raise _fail(path, f"{where}.{video_key}", f"video {name!r} makes no sequence name (letters or digits needed)")
+        raise _fail(path, f"{where}.{video_key}", f"video {shown(name)} makes no sequence name (letters or digits "
+                                                  "needed)")
     return (video_key, value), sequence, frame
 
 
@@ -290,7 +444,7 @@ def _track_of(ann: dict[str, Any], image: dict[str, Any], path: str | Path, wher
     key = next((k for k in TRACK_KEYS if ann.get(k) is not None), None)
     if key is None:
         return None
-    value = _field(ann, key, (int, str), path, where)
+    value = _id(ann, key, path, where, "a track id")
     if "sequence" not in image:
         raise _fail(path, f"{where}.{key}", f"a track needs a frame of a video, but image {image['file']!r} has no "
                                             f"{' or '.join(VIDEO_KEYS)} with {' or '.join(FRAME_KEYS)}")
@@ -301,20 +455,20 @@ def _camera_of(im: dict[str, Any], file_name: str, cameras: CameraTable | None, 
                where: str) -> dict[str, Any]:
     if "K" in im:
         K = im["K"]
-        if not (isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3
-                                                             and all(_number(v) for v in r) for r in K)):
-            raise _fail(path, f"{where}.K", f"expected a 3x3 matrix of numbers, got {K!r:.60}")
-        return {"K": K}
+        if not (isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3 for r in K)):
+            raise _fail(path, f"{where}.K", f"expected a 3x3 matrix of numbers, got {shown(K)}")
+        return {"K": [[fields.number(v, path, f"{where}.K[{r}][{c}]") for c, v in enumerate(row)]
+                      for r, row in enumerate(K)]}
     camera = None if cameras is None else cameras.camera_for(file_name)
     if camera is not None:
         return dict(camera)
     how = "no camera in the cameras file matches it" if cameras else "give --cameras CAMERAS.json"
-    raise _fail(path, where, f"image {file_name!r} has no camera: no 'K' in the image and {how}")
+    raise _fail(path, where, f"image {shown(file_name)} has no camera: no 'K' in the image and {how}")
 
 
 def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: str,
-              summary: ImportSummary) -> dict[str, tuple[float, float, bool]]:
-    """The labelled keypoints of an annotation: name -> (x, y, visible)."""
+              summary: ImportSummary | None) -> dict[str, tuple[float, float, bool]]:
+    """The labelled keypoints of an annotation: name -> (x, y, visible); counted in ``summary`` when given."""
     kp = _field(ann, "keypoints", list, path, where)
     if len(kp) != 3 * len(names):
         raise _fail(path, f"{where}.keypoints",
@@ -322,13 +476,16 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
     out = {}
     for j, name in enumerate(names):
         x, y, v = kp[3 * j: 3 * j + 3]
-        if not (_number(x) and _number(y) and v in (0, 1, 2)) or isinstance(v, bool):
+        if not (_pixel(x) and _pixel(y) and v in (0, 1, 2)) or isinstance(v, bool):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
-                        f"keypoint {j} ({name}): expected x, y finite and v in 0, 1, 2, got {[x, y, v]!r:.60}")
+                        f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
+                        f"v in 0, 1, 2, got {shown([x, y, v])}")
         if v == 0:
-            summary.unlabelled += 1
+            if summary is not None:
+                summary.unlabelled += 1
             continue
-        summary.hidden_kept += v == 1
+        if summary is not None:
+            summary.hidden_kept += v == 1
         out[name] = (float(x), float(y), v == 2)
     return out
 

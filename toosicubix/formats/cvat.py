@@ -69,7 +69,15 @@ Project exports of video tasks are refused (export each task: one sequence each)
 
 Either format is read from the XML or from the zip CVAT downloads (``annotations.xml`` at its root, the images
 under ``images/``): a zip needs exactly one ``annotations.xml``; the XML may have at most :data:`MAX_XML_BYTES`
-(a zip member's uncompressed size is checked before it is read). A DOCTYPE is refused (no entities expanded).
+(a zip member's uncompressed size is checked before it is read). The parser refuses a DOCTYPE and any entity
+declaration wherever it stands and in any encoding (no entity is expanded or fetched). CVAT for images is read one
+``<image>`` at a time (a 100 MB export: 0.2 GB); a video's tracks are held whole (some 10 times the XML's size).
+
+Every number is read by the field rules (:func:`toosicubix.fields.text_number`, :func:`~toosicubix.fields.
+text_integer`): decimal notation in ASCII digits, so ``4_01.2`` (Python's ``float`` reads 401.2), ``nan``, ``1e999``
+or ``'²'`` are refused; coordinates within the annotation file's pixel bound, image sides and frame numbers within
+theirs, group and track ids of at most :data:`~toosicubix.fields.MAX_ID_DIGITS` digits. A refusal names the file,
+the line and the element.
 """
 
 from __future__ import annotations
@@ -79,14 +87,15 @@ import re
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import IO, Any
+from xml.parsers import expat
 
-import numpy as np
-
-from toosicubix.annotations.schema import MAX_FRAME
+from toosicubix import fields
 from toosicubix.errors import FormatError
+from toosicubix.fields import MAX_FRAME, MAX_ID_LENGTH, MAX_PIXEL, shown
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.templates import PROTOTYPE_ATTRIBUTE
 from toosicubix.formats.tool_import import (
@@ -105,36 +114,104 @@ FRAME_FILE = "images/frame_{frame:06d}.PNG"
 
 #: The largest CVAT XML read, in bytes: a file, or the ``annotations.xml`` of an export zip (its uncompressed size,
 #: checked before it is read and while it is read, so a zip bomb is refused rather than unpacked). CVAT writes some
-#: 150 bytes per keypoint: this holds over 3 million; the parsed tree needs several times the text's size in memory.
+#: 150 bytes per keypoint: this holds over 3 million. Images are read one at a time; a video's tree needs some 10
+#: times the text's size in memory.
 MAX_XML_BYTES = 512 * 1024 * 1024
 #: What CVAT names the XML inside the zip it downloads for "CVAT for images 1.1" and "CVAT for video 1.1"
 #: (``_export_task`` / ``_export_project`` in cvat/apps/dataset_manager/formats/cvat.py: ``annotations.xml`` at the
 #: root, the frames under ``images/``).
 ZIP_ANNOTATIONS = "annotations.xml"
 _CHUNK = 1 << 16
+#: The longest track id: a vehicle's track ``<sequence>-<track id>`` stays within the annotation file's
+#: ``MAX_ID_LENGTH`` with a sequence name of half of it.
+MAX_TRACK_ID = MAX_ID_LENGTH // 2
 
 
-def _parse_stream(handle: IO[bytes], source: Path) -> ET.Element:
-    """Parse CVAT XML from an open binary stream, refusing a DOCTYPE and more than :data:`MAX_XML_BYTES`."""
-    head = handle.read(4096)
-    if "<!DOCTYPE" in head.decode("utf-8", errors="replace").upper():
-        raise FormatError(source, "a DOCTYPE is not allowed in CVAT XML (entities are not expanded)")
-    parser = ET.XMLParser()
-    read = len(head)
+class _Element(ET.Element):
+    """An element of the parsed XML with the line it starts on (1-based), for messages."""
+
+    line = 0
+
+
+class _Refused(Exception):
+    """A declaration the reader does not take (a DOCTYPE, an entity), at a line."""
+
+    def __init__(self, what: str, line: int):
+        super().__init__(what)
+        self.what, self.line = what, line
+
+
+#: Called with each element right under the root once it is complete, the root and the name messages give the file;
+#: returns True when it took the element (which is then dropped from the tree).
+Taker = Callable[[ET.Element, ET.Element, Path], bool]
+
+
+def _parse_stream(handle: IO[bytes], source: Path, take: Taker | None = None) -> _Element:
+    """Parse CVAT XML from an open binary stream into elements that know their line; refuse any DOCTYPE, entity or
+    notation declaration and any external entity, and more than :data:`MAX_XML_BYTES`.
+
+    ``take`` sees each element right under the root as soon as it ends; an element it takes is dropped from the
+    tree, so that a file of many ``<image>`` elements is read one image at a time (the tree of a 100 MB export held
+    whole needs some 1 GB).
+
+    The refusals are the XML parser's own (expat's declaration handlers, parameter entities never parsed), so they
+    hold wherever the declaration stands (after a long comment too) and in any encoding the parser reads (UTF-16
+    by its byte order mark, or as the XML declaration names it): no entity is ever expanded or fetched. CVAT writes
+    no DOCTYPE. The standard library's parser is enough for this; defusedxml, which sets the same handlers, would
+    add a dependency for no further refusal.
+    """
+    builder = ET.TreeBuilder(element_factory=_Element)
+    parser = expat.ParserCreate()
+    parser.buffer_text = True
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+
+    def refuse(what: str) -> Any:
+        def handler(*_: Any) -> None:
+            raise _Refused(what, parser.CurrentLineNumber)
+        return handler
+
+    path: list[ET.Element] = []  # the open elements, the root first
+
+    def start(tag: str, attributes: dict[str, str]) -> None:
+        element = builder.start(tag, attributes)
+        element.line = parser.CurrentLineNumber  # type: ignore[attr-defined]
+        path.append(element)
+
+    def end(tag: str) -> None:
+        element = builder.end(tag)
+        path.pop()
+        if take is not None and len(path) == 1 and take(element, path[0], source):
+            path[0].remove(element)  # the last child: found at once
+
+    parser.StartDoctypeDeclHandler = refuse("a DOCTYPE")
+    parser.EntityDeclHandler = refuse("an entity declaration")
+    parser.UnparsedEntityDeclHandler = refuse("an entity declaration")
+    parser.NotationDeclHandler = refuse("a notation declaration")
+    parser.ExternalEntityRefHandler = refuse("an external entity")
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = builder.data
+    read = 0
     try:
-        parser.feed(head)
         while chunk := handle.read(_CHUNK):
             read += len(chunk)
             if read > MAX_XML_BYTES:
                 raise FormatError(source, f"more than {MAX_XML_BYTES} bytes of XML: larger than a CVAT export this "
                                           "reader takes")
-            parser.feed(chunk)
-        return parser.close()
-    except ET.ParseError as exc:
-        raise FormatError(source, f"not valid XML: {exc}", exc.position[0]) from None
+            parser.Parse(chunk, False)
+        parser.Parse(b"", True)
+        return builder.close()  # type: ignore[return-value]
+    except _Refused as exc:
+        raise FormatError(source, f"{exc.what} is not allowed in CVAT XML (CVAT writes none; entities are never "
+                                  "expanded or fetched)", exc.line) from None
+    except expat.ExpatError as exc:
+        raise FormatError(source, f"not valid XML: {expat.ErrorString(exc.code)} at line {exc.lineno} column "
+                                  f"{exc.offset + 1}", exc.lineno) from None
+    except (AssertionError, ET.ParseError) as exc:  # the builder's: a document without a root element
+        raise FormatError(source, f"not valid XML: {exc or 'no root element'}") from None
 
 
-def _parse_zip(path: Path) -> tuple[ET.Element, Path]:
+def _parse_zip(path: Path, take: Taker | None) -> tuple[ET.Element, Path]:
     """The root of the one ``annotations.xml`` in a CVAT export zip, and its name for messages (``zip/member``)."""
     expected = (f"expected the zip CVAT downloads for CVAT for images 1.1 or CVAT for video 1.1, with one "
                 f"{ZIP_ANNOTATIONS}")
@@ -156,37 +233,59 @@ def _parse_zip(path: Path) -> tuple[ET.Element, Path]:
                 raise FormatError(source, f"{info.file_size} bytes uncompressed: larger than the {MAX_XML_BYTES} "
                                           "bytes of XML this reader takes")
             with archive.open(info) as handle:
-                return _parse_stream(handle, source), source
+                return _parse_stream(handle, source, take), source
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
         raise FormatError(path, f"a damaged zip archive ({exc}): {expected}") from None
     except (RuntimeError, NotImplementedError) as exc:  # encrypted, or a compression zipfile cannot read
         raise FormatError(path, f"cannot unpack: {exc}") from None
 
 
-def _parse(path: Path) -> tuple[ET.Element, Path]:
-    """The root element of a CVAT XML file or of the ``annotations.xml`` in a CVAT export zip, and the name
-    messages give it (the file, or ``zip/annotations.xml``)."""
+def _parse(path: Path, take: Taker | None = None) -> tuple[ET.Element, Path]:
+    """The root element of a CVAT XML file or of the ``annotations.xml`` in a CVAT export zip (without the elements
+    ``take`` took, see :func:`_parse_stream`), and the name messages give it (the file, or ``zip/annotations.xml``)."""
     try:
         with open(path, "rb") as handle:
             if handle.read(4) in (b"PK\x03\x04", b"PK\x05\x06"):  # a zip (or an empty one)
-                return _parse_zip(path)
+                return _parse_zip(path, take)
             handle.seek(0)
             size = os.fstat(handle.fileno()).st_size
             if size > MAX_XML_BYTES:
                 raise FormatError(path, f"{size} bytes: larger than the {MAX_XML_BYTES} bytes of XML this reader takes")
-            return _parse_stream(handle, path), path
+            return _parse_stream(handle, path, take), path
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
 
 
-def _xy_list(text: str | None, path: Path, where: str) -> list[tuple[float, float]]:
-    try:
-        pairs = [tuple(float(v) for v in item.split(",")) for item in (text or "").split(";") if item.strip()]
-    except ValueError:
-        pairs = [()]
-    if not pairs or any(len(p) != 2 or not all(np.isfinite(p)) for p in pairs):
-        raise FormatError(path, f"{where}: expected points=\"x,y[;x,y...]\", got {text!r:.60}")
-    return [(p[0], p[1]) for p in pairs]
+def _line(element: ET.Element) -> int | None:
+    """The line an element starts on, for messages."""
+    return getattr(element, "line", None) or None
+
+
+def _coordinate(text: str, path: Path, element: ET.Element, where: str) -> float:
+    """A pixel coordinate written in an attribute (surrounding spaces allowed), by the field rules."""
+    return fields.text_number(text.strip(), path, _line(element), low=-MAX_PIXEL, high=MAX_PIXEL,
+                              what="a pixel coordinate", label=where)
+
+
+def _xy_list(element: ET.Element, path: Path, where: str) -> list[tuple[float, float]]:
+    """The ``points="x,y[;x,y...]"`` of an element, each number by the field rules."""
+    text = element.get("points")
+    items = [item.split(",") for item in (text or "").split(";") if item.strip()]
+    if not items or any(len(item) != 2 for item in items):
+        raise FormatError(path, f"{where}: expected points=\"x,y[;x,y...]\", got {shown(text)}", _line(element))
+    return [(_coordinate(x, path, element, f"{where} points"), _coordinate(y, path, element, f"{where} points"))
+            for x, y in items]
+
+
+def _box_of(element: ET.Element, path: Path, where: str) -> tuple[float, float, float, float]:
+    """The ``xtl ytl xbr ybr`` of a box element, by the field rules."""
+    return tuple(_coordinate(element.get(k, ""), path, element, f"{where} {k}")  # type: ignore[return-value]
+                 for k in ("xtl", "ytl", "xbr", "ybr"))
+
+
+def _group_key(group: str) -> int:
+    """A ``group_id`` as the number it is (checked by :func:`_group`)."""
+    return int(group)
 
 
 def _attributes(element: ET.Element) -> dict[str, str]:
@@ -223,32 +322,59 @@ def read_cvat(path: str | Path, cameras: CameraTable | None, default_prototype: 
         A video whose imported document breaks the annotation file's rules (e.g. a prototype that changes
         along a track), naming the file ("as imported") and the JSON path.
     """
-    root, path = _parse(Path(path))
+    images = _ImageReader(cameras, default_prototype, lengths, sequence)
+    root, path = _parse(Path(path), images.take)
     if root.tag != "annotations":
-        raise FormatError(path, f"expected <annotations> (CVAT for images 1.1), found <{root.tag}>")
+        raise FormatError(path, f"expected <annotations> (CVAT for images 1.1), found <{shown(root.tag)}>")
     version = (root.findtext("version") or "").strip()
     if version and version != "1.1":
-        raise FormatError(path, f"<version>: expected 1.1, found {version}")
-    builder = DocumentBuilder(str(path), cameras, default_prototype, lengths)
+        raise FormatError(path, f"<version>: expected 1.1, found {shown(version)}")
+    builder = images.builder or DocumentBuilder(str(path), cameras, default_prototype, lengths)
     if root.find("track") is not None:
+        if images.read:
+            raise FormatError(path, "both <image> and <track> elements: expected CVAT for images 1.1 or CVAT for "
+                                    "video 1.1, not both")
         return _read_video(root, path, builder, sequence)
     if sequence is not None:
         raise FormatError(path, f"a sequence name ({sequence!r}) is for CVAT for video exports; this file has no "
                                 "<track> (CVAT for images 1.1)")
-    for image in root.findall("image"):
+    return builder.document(), builder.summary
+
+
+class _ImageReader:
+    """Reads each ``<image>`` of CVAT for images 1.1 as soon as the parser has it (:data:`Taker`), so that the
+    export's tree is never held whole."""
+
+    def __init__(self, cameras: CameraTable | None, default_prototype: str,
+                 lengths: dict[str, tuple[float, float]] | None, sequence: str | None):
+        self.cameras, self.default_prototype, self.lengths = cameras, default_prototype, lengths
+        self.sequence = sequence
+        self.builder: DocumentBuilder | None = None
+        self.read = 0
+
+    def take(self, image: ET.Element, root: ET.Element, path: Path) -> bool:
+        if image.tag != "image" or root.tag != "annotations":
+            return False
+        if root.find("track") is not None:
+            raise FormatError(path, "both <image> and <track> elements: expected CVAT for images 1.1 or CVAT for "
+                                    "video 1.1, not both", _line(image))
+        if self.sequence is not None:
+            raise FormatError(path, f"a sequence name ({self.sequence!r}) is for CVAT for video exports; this file has "
+                                    "no <track> (CVAT for images 1.1)", _line(image))
+        if self.builder is None:
+            self.builder = DocumentBuilder(str(path), self.cameras, self.default_prototype, self.lengths)
+        self.read += 1
         name = image.get("name")
         if not name:
-            raise FormatError(path, f"<image id={image.get('id')!r}>: missing name")
-        where = f"<image id={image.get('id')!r} name={name!r}>"
-        try:
-            size = (int(image.get("width", "")), int(image.get("height", "")))
-        except ValueError:
-            raise FormatError(path, f"{where}: expected integer width and height") from None
-        vehicles = _image_vehicles(image, path, where, builder, name)
-        if not vehicles and image.find("*") is None:
-            continue  # an image nobody labelled
-        builder.add_image(name, size, vehicles)
-    return builder.document(), builder.summary
+            raise FormatError(path, f"<image id={shown(image.get('id'))}>: missing name", _line(image))
+        where = f"<image id={shown(image.get('id'))} name={shown(name)}>"
+        size = tuple(fields.text_integer(image.get(side), path, _line(image), low=1, high=int(MAX_PIXEL),
+                                         what="an image side in pixels", label=f"{where} {side}")
+                     for side in ("width", "height"))
+        vehicles = _image_vehicles(image, path, where, self.builder, name)
+        if vehicles or image.find("*") is not None:  # else an image nobody labelled
+            self.builder.add_image(name, size, vehicles)  # type: ignore[arg-type]
+        return True
 
 
 def _image_vehicles(image: ET.Element, path: Path, where: str, builder: DocumentBuilder,
@@ -263,7 +389,7 @@ def _image_vehicles(image: ET.Element, path: Path, where: str, builder: Document
             pwhere = f"{where} {element}, points {label!r}"
             if point.get("outside", "0") == "1":
                 continue
-            xy = _xy_list(point.get("points"), path, pwhere)
+            xy = _xy_list(point, path, pwhere)
             if len(xy) != 1:
                 builder.warn(name, f"{element}, points {label!r}", f"{len(xy)} points in one element: left out")
                 builder.summary.left_out[label] += 1
@@ -276,21 +402,17 @@ def _image_vehicles(image: ET.Element, path: Path, where: str, builder: Document
         if shape.tag not in ("points", "box"):
             continue
         label = shape.get("label", "")
-        group = shape.get("group_id")
+        group = _group(shape, path, f"{where} {shape.tag} {index + 1} (label {label!r})")
         element = f"{shape.tag} {index + 1} (label {label!r}{f', group_id {group}' if group else ''})"
         if group and group != "0" and group not in groups:
             groups[group] = ToolVehicle(id="", element=f"group_id {group}")
         if shape.tag == "box":
             if not group or group == "0":
                 continue  # a box on its own is not ours
-            try:
-                box = tuple(float(shape.get(k, "")) for k in ("xtl", "ytl", "xbr", "ybr"))
-            except ValueError:
-                raise FormatError(path, f"{where} {element}: expected numbers xtl, ytl, xbr, ybr") from None
-            groups[group].box2d = box  # type: ignore[assignment]
+            groups[group].box2d = _box_of(shape, path, f"{where} {element}")
             groups[group].prototype = _attributes(shape).get(PROTOTYPE_ATTRIBUTE) or label
             continue
-        xy = _xy_list(shape.get("points"), path, f"{where} {element}")
+        xy = _xy_list(shape, path, f"{where} {element}")
         if len(xy) != 1:
             builder.warn(name, element, f"{len(xy)} points in one shape: left out")
             builder.summary.left_out[label] += 1
@@ -303,7 +425,7 @@ def _image_vehicles(image: ET.Element, path: Path, where: str, builder: Document
                 groups[group].prototype = prototype
         else:
             loose.append(keypoint)
-    for group in sorted(groups, key=lambda g: int(g) if g.isdigit() else 0):
+    for group in sorted(groups, key=_group_key):
         groups[group].id = str(len(vehicles) + 1)
         vehicles.append(groups[group])
     if loose and not vehicles:
@@ -352,7 +474,20 @@ class _Vehicle:
 
 
 def _number_key(text: str) -> tuple[int, int | str]:
-    return (0, int(text)) if text.isdigit() else (1, text)
+    """Track ids in CVAT's order: numbers (at most :data:`~toosicubix.fields.MAX_ID_DIGITS` ASCII digits, as
+    :func:`_tracks` checks) by value, before any other id."""
+    return (0, int(text)) if text.isascii() and text.isdigit() else (1, text)
+
+
+def _group(element: ET.Element, path: Path, where: str) -> str | None:
+    """An element's ``group_id``: None for none or ``0``, else the number CVAT wrote (field rules: ASCII digits, at
+    most :data:`~toosicubix.fields.MAX_ID_DIGITS`), as text without leading zeros."""
+    text = element.get("group_id")
+    if text is None:
+        return None
+    group = fields.text_integer(text.strip(), path, _line(element), low=0, high=10 ** fields.MAX_ID_DIGITS - 1,
+                                what="a group id (CVAT numbers groups)", label=f"{where} group_id")
+    return str(group) if group else None
 
 
 def _flag(element: ET.Element, name: str, where: str, path: Path, default: bool | None) -> bool:
@@ -360,7 +495,7 @@ def _flag(element: ET.Element, name: str, where: str, path: Path, default: bool 
     if value is None and default is not None:
         return default
     if value not in ("0", "1"):
-        raise FormatError(path, f'{where}: expected {name}="0" or "1", got {value!r}')
+        raise FormatError(path, f'{where}: expected {name}="0" or "1", got {shown(value)}', _line(element))
     return value == "1"
 
 
@@ -385,13 +520,11 @@ def _video_meta(root: ET.Element, path: Path) -> tuple[str | None, tuple[int, in
         size_element = meta.find("original_size")  # where a job export puts it
     if size_element is None:
         return name, None
-    try:
-        size = (int(size_element.findtext("width", "")), int(size_element.findtext("height", "")))
-    except ValueError:
-        size = (0, 0)
-    if min(size) <= 0:
-        raise FormatError(path, "<original_size>: expected positive integer <width> and <height>")
-    return name, size
+    size = tuple(fields.text_integer((size_element.findtext(side) or "").strip(), path, _line(size_element), low=1,
+                                     high=int(MAX_PIXEL), what="an image side in pixels",
+                                     label=f"<original_size> <{side}>")
+                 for side in ("width", "height"))
+    return name, size  # type: ignore[return-value]
 
 
 def _tracks(root: ET.Element, path: Path) -> list[_Track]:
@@ -399,32 +532,31 @@ def _tracks(root: ET.Element, path: Path) -> list[_Track]:
     ids: set[str] = set()
     for t, element in enumerate(root.findall("track")):
         track_id, label = (element.get("id") or "").strip(), element.get("label", "")
-        where = f"<track id={track_id!r} label={label!r}>"
-        if not re.fullmatch(r"[A-Za-z0-9_.\-]+", track_id):
-            raise FormatError(path, f"<track> {t + 1} (label {label!r}): expected an id of digits (CVAT's track "
-                                    f"number), got {track_id!r}")
+        where = f"<track id={shown(track_id)} label={shown(label)}>"
+        if not re.fullmatch(r"[A-Za-z0-9_.\-]+", track_id) or len(track_id) > MAX_TRACK_ID \
+                or (track_id.isdigit() and len(track_id) > fields.MAX_ID_DIGITS):
+            raise FormatError(path, f"<track> {t + 1} (label {shown(label)}): expected an id of digits (CVAT's track "
+                                    f"number, at most {fields.MAX_ID_DIGITS}), got {shown(track_id)}", _line(element))
         if track_id in ids:
-            raise FormatError(path, f"{where}: a second track with id {track_id!r}")
+            raise FormatError(path, f"{where}: a second track with id {track_id!r}", _line(element))
         ids.add(track_id)
-        group = element.get("group_id")
+        group = _group(element, path, where)
         kinds = {child.tag for child in element if child.tag != "attribute"}
         if not kinds & set(_SHAPES):
             continue  # an empty track, or polygons, cuboids, ...: not ours
         if len(kinds) > 1:
-            raise FormatError(path, f"{where}: expected one kind of shape per track, got {', '.join(sorted(kinds))}")
-        track = _Track(track_id, label, kinds.pop(), group if group and group != "0" else None)
+            raise FormatError(path, f"{where}: expected one kind of shape per track, got {', '.join(sorted(kinds))}",
+                              _line(element))
+        track = _Track(track_id, label, kinds.pop(), group)
         for index, shape in enumerate(element):
             if shape.tag != track.kind:
                 continue
-            text = shape.get("frame")
             swhere = f"{where} {shape.tag} {index + 1}"
-            if text is None or not re.fullmatch(r"[0-9]+", text) or int(text) > MAX_FRAME:
-                raise FormatError(path, f"{swhere}: expected an integer frame number from 0 to {MAX_FRAME}, "
-                                        f"got {text!r:.40}")
-            frame = int(text)
+            frame = fields.text_integer(shape.get("frame"), path, _line(shape), low=0, high=MAX_FRAME,
+                                        what="a frame number", label=f"{swhere} frame")
             swhere = f"{swhere} (frame {frame})"
             if frame in track.shapes:
-                raise FormatError(path, f"{swhere}: frame {frame} is given twice in one track")
+                raise FormatError(path, f"{swhere}: frame {frame} is given twice in one track", _line(shape))
             track.shapes[frame] = _Shape(frame, _flag(shape, "keyframe", swhere, path, None),
                                          _flag(shape, "outside", swhere, path, False), shape, swhere,
                                          f"track {track_id} (label {label!r}), {shape.tag} (frame {frame})")
@@ -462,13 +594,10 @@ def _vehicles(tracks: list[_Track], builder: DocumentBuilder) -> list[_Vehicle]:
 
 
 def _box(shape: _Shape, path: Path) -> tuple[float, float, float, float]:
-    try:
-        box = tuple(float(shape.element.get(k, "")) for k in ("xtl", "ytl", "xbr", "ybr"))
-    except ValueError:
-        box = (np.nan,) * 4
-    if not (np.all(np.isfinite(box)) and box[0] < box[2] and box[1] < box[3]):
-        raise FormatError(path, f"{shape.where}: expected numbers xtl < xbr and ytl < ybr")
-    return box  # type: ignore[return-value]
+    box = _box_of(shape.element, path, shape.where)
+    if not (box[0] < box[2] and box[1] < box[3]):
+        raise FormatError(path, f"{shape.where}: expected numbers xtl < xbr and ytl < ybr", _line(shape.element))
+    return box
 
 
 def _vehicle_frame(vehicle: _Vehicle, frame: int, path: Path, builder: DocumentBuilder,
@@ -487,14 +616,14 @@ def _vehicle_frame(vehicle: _Vehicle, frame: int, path: Path, builder: DocumentB
         if track.kind == "box":
             if box_owner is not None:
                 raise FormatError(path, f"{shape.where}: {vehicle.element} has a second box on frame {frame} "
-                                        f"(also {box_owner.where}): one box per vehicle")
+                                        f"(also {box_owner.where}): one box per vehicle", _line(shape.element))
             present, box_owner, out.box2d = True, shape, _box(shape, path)
             box_named += [prototype] if prototype else []
             continue
         if track.kind == "points":
             present = True
             if shape.keyframe:
-                xy = _xy_list(shape.element.get("points"), path, shape.where)
+                xy = _xy_list(shape.element, path, shape.where)
                 if len(xy) != 1:
                     builder.warn(file_name, shape.name, f"{len(xy)} points in one shape: left out")
                     builder.summary.left_out[track.label] += 1
@@ -511,7 +640,7 @@ def _vehicle_frame(vehicle: _Vehicle, frame: int, path: Path, builder: DocumentB
                 pwhere = f"{shape.where}, points {label!r}"
                 if not (shape.keyframe and _flag(point, "keyframe", pwhere, path, shape.keyframe)):
                     continue  # CVAT's interpolation, not a click
-                xy = _xy_list(point.get("points"), path, pwhere)
+                xy = _xy_list(point, path, pwhere)
                 element = f"{shape.name}, points {label!r}"
                 if len(xy) != 1:
                     builder.warn(file_name, element, f"{len(xy)} points in one element: left out")

@@ -16,6 +16,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from toosicubix.fields import MAX_PIXEL
 from toosicubix.formats.fitted import FittedImage
 from toosicubix.formats.templates import CUBOID_LABEL, FRONT_LABEL
 from toosicubix.geometry import FRONT_FACE, Z_NEAR, cuboid_corners_cam
@@ -37,8 +38,14 @@ def _path_cam(corners_cam: np.ndarray, walk: tuple[int, ...], samples: int, clos
     return np.vstack(out)
 
 
+#: The largest pixel coordinate written (the annotation file's bound): a cuboid projecting beyond is left out with a
+#: warning, like one behind the camera; nothing non-finite or absurd is written.
+MAX_WRITTEN_PIXEL = MAX_PIXEL
+
+
 def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[list[dict], list[str]]:
-    """Per fitted vehicle its polyline (N, 2) and front polygon (M, 2), pixels; and warnings for the left out.
+    """Per fitted vehicle its polyline (N, 2) and front polygon (M, 2), pixels; and warnings for the left out
+    (a cuboid reaching behind the camera, or projecting beyond +-:data:`MAX_WRITTEN_PIXEL` or to no finite pixel).
 
     Returns
     -------
@@ -51,11 +58,17 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
         if not v.ok:
             continue
         corners_cam = cuboid_corners_cam(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions)  # (8, 3)
-        if corners_cam[:, 2].min() < Z_NEAR:
+        if not corners_cam[:, 2].min() >= Z_NEAR:
             warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid reaches behind the camera: left out")
             continue
-        polyline = image.camera.project(_path_cam(corners_cam, EDGE_WALK, samples, closed=False))
-        front = image.camera.project(_path_cam(corners_cam, FRONT_FACE, samples, closed=True))
+        with np.errstate(all="ignore"):  # a far or extreme pose may overflow: checked below
+            polyline = image.camera.project(_path_cam(corners_cam, EDGE_WALK, samples, closed=False))
+            front = image.camera.project(_path_cam(corners_cam, FRONT_FACE, samples, closed=True))
+        if not all(np.all(np.abs(uv) <= MAX_WRITTEN_PIXEL) for uv in (polyline, front)):  # NaN fails too
+            warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid projects beyond "
+                            f"+-{MAX_WRITTEN_PIXEL:.0f} pixels (t_cam_vehicle {np.round(v.t_cam_vehicle, 3).tolist()}):"
+                            " left out")
+            continue
         shapes.append({"id": v.id, "status": v.status, "polyline": polyline, "front": front})
     return shapes, warnings
 

@@ -373,7 +373,7 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         beside = self.root.parent / "cameras.json"
         found = beside if beside.is_file() and keypoint_checks else None
         self.cameras = Path(cameras) if cameras is not None else found
-        if self.cameras is not None and not self.cameras.is_file():
+        if self.cameras is not None and not self.cameras.exists():
             raise EvaluationInputError(f"{self.cameras}: cameras file not found")
         try:
             images = read_apollocar3d(self.root, read_car_models(self.car_models))
@@ -401,8 +401,10 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
         return self._candidates[prototype]
 
     def _K(self, file_name: str) -> np.ndarray | None:
+        from toosicubix.formats.cameras import intrinsics
+
         camera = None if self._camera_table is None else self._camera_table.camera_for(file_name)
-        return None if camera is None else np.array(camera["K"], dtype=float)
+        return None if camera is None else intrinsics(camera)  # a K, or a KITTI calib's P[:, :3]
 
     def image_ids(self) -> list[str]:
         return sorted(self._images)
@@ -421,7 +423,8 @@ class ApolloCar3DGroundTruth(GroundTruthSource):
             objects.append(GtObject(
                 index=k, cls="Car", cuboid_rect=Cuboid(car.R_cam_vehicle, car.t_cam_vehicle, car.model.dimensions),
                 box2d=car.box2d, truncation=None, occlusion=None, occlusion_fraction=None,
-                track_id=int(car.id) if car.id.isdigit() else None, source=car.source, subtype=car.model.type,
+                track_id=int(car.id) if car.id.isascii() and car.id.isdigit() else None, source=car.source,
+                subtype=car.model.type,
                 keypoints=int(np.count_nonzero(car.keypoints[:, 2] > 0)),
                 keypoints_hidden=None if seen_from is None else keypoints_hidden(car, seen_from),
                 keypoints_off_rays_m=None if K is None or typical is None else keypoints_off_rays(

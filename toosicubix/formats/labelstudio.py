@@ -34,7 +34,9 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 from urllib.parse import unquote, urlparse
 
+from toosicubix import fields
 from toosicubix.errors import FormatError
+from toosicubix.fields import shown
 from toosicubix.formats.cameras import CameraTable
 from toosicubix.formats.tool_import import DocumentBuilder, ImportSummary, ToolKeypoint, ToolVehicle
 from toosicubix.jsonfile import read_json
@@ -43,10 +45,19 @@ from toosicubix.jsonfile import read_json
 CONTAINMENT_MARGIN = 0.1
 
 
-def _number(value: Any, path: Path, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise FormatError(path, f"{where}: expected a number, got {value!r:.40}")
-    return float(value)
+#: How far outside its image a region may reach, in percent of the image (``value.x``, ``y``, ``width``,
+#: ``height``): 100 times the image's size; a point beyond is a typo, not a click.
+MAX_PERCENT = 1e4
+
+
+def _percent(value: Any, path: Path, where: str) -> float:
+    return fields.number(value, path, where, low=-MAX_PERCENT, high=MAX_PERCENT,
+                         what="a percentage of the image's size")
+
+
+def _region_id(value: Any, path: Path, where: str) -> str:
+    """A region's ``id`` (or a ``parentID``, ``from_id``, ``to_id``) as the text that ties regions together."""
+    return str(fields.identifier(value, path, where, what="a region id"))
 
 
 #: An uploaded file as Label Studio names it: ``/data/upload/<project id>/<8 lowercase hex digits>-<name>``
@@ -71,8 +82,23 @@ def original_file_name(value: str, path: Path, where: str) -> str:
     Raises
     ------
     FormatError
-        A local-files path with a ``..`` component.
+        A value Python's URL parser refuses (``http://[abc/x.png``), or a file name with a ``..`` component (a local
+        files path, an http path or a plain value: the annotation file's ``file`` is relative to it, and a ``..``
+        would reach out of that folder).
     """
+    try:
+        name = _file_name_of(value, path, where)
+    except FormatError:
+        raise
+    except ValueError as exc:  # urlparse: 'Invalid IPv6 URL', a port out of range, ...
+        raise FormatError(path, f"{where}: expected an image URL or file name, got {shown(value)}: {exc}") from None
+    if ".." in re.split(r"[/\\]", name):
+        raise FormatError(path, f"{where}: the file name {shown(name)} (from {shown(value)}) has a '..' component: "
+                                "refused (expected a path inside the folder the images are in)")
+    return name
+
+
+def _file_name_of(value: str, path: Path, where: str) -> str:
     parsed = urlparse(value)
     if parsed.scheme in STORAGE_SCHEMES:  # the object key as Label Studio keeps it, not percent-decoded
         return PurePosixPath(urlparse(value, allow_fragments=False).path).name or value
@@ -80,8 +106,8 @@ def original_file_name(value: str, path: Path, where: str) -> str:
     if local:  # local files: /data/local-files/?d=folder/image.png
         name = unquote(local[0])
         if ".." in re.split(r"[/\\]", name):
-            raise FormatError(path, f"{where}: the local-files path {name!r} has a '..' component: refused (expected "
-                                    "a path inside Label Studio's LOCAL_FILES_DOCUMENT_ROOT)")
+            raise FormatError(path, f"{where}: the local-files path {shown(name)} has a '..' component: refused "
+                                    "(expected a path inside Label Studio's LOCAL_FILES_DOCUMENT_ROOT)")
         return name
     if parsed.scheme in ("http", "https"):
         value = unquote(parsed.path)
@@ -98,7 +124,7 @@ def _file_name(data: dict[str, Any], image_key: str | None, path: Path, where: s
         key, value = next(((k, v) for k, v in data.items() if isinstance(v, str)), (key, None))
     if not isinstance(value, str):
         return None
-    return original_file_name(value, path, f"{where}.data.{key} (task {task_id})")
+    return original_file_name(value, path, f"{where}.data.{key} (task {shown(task_id)})")
 
 
 def _pick_annotation(task: dict[str, Any], where: str, builder: DocumentBuilder, name: str,
@@ -111,8 +137,8 @@ def _pick_annotation(task: dict[str, Any], where: str, builder: DocumentBuilder,
     if not usable:
         return None, key
     if len(usable) > 1:
-        builder.warn(name, f"task {task.get('id')}", f"{len(usable)} annotations: the last one "
-                                                      f"({key}[{usable[-1][0]}]) is used")
+        builder.warn(name, f"task {shown(task.get('id'))}", f"{len(usable)} annotations: the last one "
+                                                             f"({key}[{usable[-1][0]}]) is used")
     index, annotation = usable[-1]
     return annotation, f"{where}.{key}[{index}]"
 
@@ -133,29 +159,39 @@ def _regions(result: list[Any], path: Path, where: str) -> tuple[list[dict], lis
         value = region.get("value")
         if not isinstance(value, dict):
             raise FormatError(path, f"{rw}.value: missing")
-        width = _number(region.get("original_width"), path, f"{rw}.original_width")
-        height = _number(region.get("original_height"), path, f"{rw}.original_height")
+        width = fields.image_side(region.get("original_width"), path, f"{rw}.original_width")
+        height = fields.image_side(region.get("original_height"), path, f"{rw}.original_height")
         if size is None:
-            size = (round(width), round(height))
+            size = (width, height)
         if region.get("image_rotation", 0) not in (0, 0.0, None):
             raise FormatError(path, f"{rw}.image_rotation: rotated images are not supported "
-                                    f"(got {region['image_rotation']})")
+                                    f"(got {shown(region['image_rotation'])})")
         labels = value.get(kind)
         if not isinstance(labels, list) or len(labels) != 1 or not isinstance(labels[0], str):
-            raise FormatError(path, f"{rw}.value.{kind}: expected one label, got {labels!r:.60}")
-        x = _number(value.get("x"), path, f"{rw}.value.x") / 100.0 * width
-        y = _number(value.get("y"), path, f"{rw}.value.y") / 100.0 * height
-        entry = {"id": str(region.get("id", j)), "label": labels[0], "where": rw, "x": x, "y": y,
-                 "parent": region.get("parentID")}
+            raise FormatError(path, f"{rw}.value.{kind}: expected one label, got {shown(labels)}")
+        x = _percent(value.get("x"), path, f"{rw}.value.x") / 100.0 * width
+        y = _percent(value.get("y"), path, f"{rw}.value.y") / 100.0 * height
+        parent = region.get("parentID")
+        entry = {"id": _region_id(region.get("id", j), path, f"{rw}.id"), "label": labels[0], "where": rw, "x": x,
+                 "y": y, "parent": None if parent is None else _region_id(parent, path, f"{rw}.parentID")}
         if kind == "rectanglelabels":
-            w = _number(value.get("width"), path, f"{rw}.value.width") / 100.0 * width
-            h = _number(value.get("height"), path, f"{rw}.value.height") / 100.0 * height
+            w = _percent(value.get("width"), path, f"{rw}.value.width") / 100.0 * width
+            h = _percent(value.get("height"), path, f"{rw}.value.height") / 100.0 * height
             entry["box"] = (x, y, x + w, y + h)
             entry["rotated"] = bool(value.get("rotation", 0))
             boxes.append(entry)
         else:
             points.append(entry)
     return boxes, points, relations, size
+
+
+def _tie(value: Any) -> str | None:
+    """A relation's ``from_id`` or ``to_id`` as a region id (:func:`_region_id`), or None when it is none (a
+    relation that ties nothing is left unused, as one naming no region of the annotation)."""
+    try:
+        return _region_id(value, None, None)  # type: ignore[arg-type]
+    except fields.FieldError:
+        return None
 
 
 def _inside(box: tuple[float, float, float, float], x: float, y: float) -> bool:
@@ -185,6 +221,9 @@ def read_label_studio(path: str | Path, cameras: CameraTable | None, default_pro
     ------
     FormatError
         Not JSON, not a list of tasks, malformed regions, an image without camera: naming the file and JSON path.
+    toosicubix.fields.FieldError
+        A value the field rules refuse (an image size of inf, nan or 400 digits, a percentage beyond
+        :data:`MAX_PERCENT`, a region id that is a list): naming the file and JSON path.
     """
     path = Path(path)
     tasks = read_json(path)
@@ -202,7 +241,7 @@ def read_label_studio(path: str | Path, cameras: CameraTable | None, default_pro
             raise FormatError(path, f"{where}.data: no image ({image_key or 'image'})")
         annotation, awhere = _pick_annotation(task, where, builder, name, path)
         if annotation is None:
-            builder.warn(name, f"task {task.get('id')}", "no annotation that is not cancelled: image left out")
+            builder.warn(name, f"task {shown(task.get('id'))}", "no annotation that is not cancelled: image left out")
             continue
         result = annotation.get("result")
         if not isinstance(result, list):
@@ -217,7 +256,7 @@ def _vehicles(boxes: list[dict], points: list[dict], relations: list[dict], buil
     vehicles = []
     by_id: dict[str, ToolVehicle] = {}
     for i, box in enumerate(boxes):
-        vehicle = ToolVehicle(id=str(i + 1), element=f"task {task_id}, box {box['id']} ({box['where']})",
+        vehicle = ToolVehicle(id=str(i + 1), element=f"task {shown(task_id)}, box {box['id']} ({box['where']})",
                               prototype=box["label"], box2d=None if box["rotated"] else box["box"])
         if box["rotated"]:
             builder.warn(name, vehicle.element, "rotated box: not used as box2d")
@@ -225,21 +264,23 @@ def _vehicles(boxes: list[dict], points: list[dict], relations: list[dict], buil
         by_id[box["id"]] = vehicle
     related: dict[str, str] = {}
     for rel in relations:
-        a, b = str(rel.get("from_id")), str(rel.get("to_id"))
+        a, b = (_tie(rel.get(key)) for key in ("from_id", "to_id"))
+        if a is None or b is None:
+            continue
         if a in by_id and b not in by_id:
             related[b] = a
         elif b in by_id and a not in by_id:
             related[a] = b
     loose: list[ToolKeypoint] = []
     for point in points:
-        element = f"task {task_id}, keypoint {point['id']} {point['label']!r} ({point['where']})"
+        element = f"task {shown(task_id)}, keypoint {point['id']} {shown(point['label'])} ({point['where']})"
         keypoint = ToolKeypoint(point["label"], (point["x"], point["y"]), element)
         parent = point["parent"]
-        if parent is not None and str(parent) in by_id:
-            by_id[str(parent)].keypoints.append(keypoint)
+        if parent is not None and parent in by_id:
+            by_id[parent].keypoints.append(keypoint)
             continue
         if parent is not None:
-            builder.warn(name, element, f"parentID {parent!r} is not a vehicle box of this annotation")
+            builder.warn(name, element, f"parentID {shown(parent)} is not a vehicle box of this annotation")
         if point["id"] in related:
             by_id[related[point["id"]]].keypoints.append(keypoint)
             continue
@@ -254,5 +295,6 @@ def _vehicles(boxes: list[dict], points: list[dict], relations: list[dict], buil
                                         "left out")
             builder.summary.left_out[keypoint.name] += 1
     if loose:
-        vehicles.append(ToolVehicle(id="1", element=f"task {task_id}, keypoints without a box", keypoints=loose))
+        vehicles.append(ToolVehicle(id="1", element=f"task {shown(task_id)}, keypoints without a box",
+                                    keypoints=loose))
     return vehicles

@@ -22,7 +22,10 @@ from typing import IO, Any
 
 import numpy as np
 
+from toosicubix import fields as field_rules
+from toosicubix.annotations.schema import MAX_CAMERA_OFFSET, check_intrinsics
 from toosicubix.errors import FormatError
+from toosicubix.fields import shown
 from toosicubix.jsonfile import json_field, json_numbers, read_json
 from toosicubix.solver.fit import Alternative
 from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
@@ -249,6 +252,7 @@ class VehicleResult:
         """
         status = json_field(v, "status", str, path, where)
         posed = status == "ok"
+        _check_fields(v, path, where)
 
         def get(key: str, convert: Any = None) -> Any:
             value = v.get(key)
@@ -288,13 +292,136 @@ class VehicleResult:
                 next_clicks=get("next_clicks", list), next_clicks_error=v.get("next_clicks_error"),
                 extra={k: val for k, val in v.items() if k not in _KNOWN_KEYS},
             )
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
             if isinstance(exc, FormatError):
                 raise
-            raise FormatError(path, f"{where}: malformed vehicle result ({type(exc).__name__}: {exc})") from None
+            raise FormatError(path, f"{where}: malformed vehicle result ({type(exc).__name__}: "
+                                    f"{shown(str(exc), 120)})") from None
 
 
 _KNOWN_KEYS = {f.name for f in fields(VehicleResult)} - {"extra"}
+
+#: The largest distance of a fitted vehicle from the camera, metres: 1,000 km, far beyond any fit of clicks (a
+#: vehicle 30 px long at a focal length of 10^6 px is 100 km away), short of what turns a projection infinite.
+MAX_RESULT_DISTANCE_M = 1e6
+#: The largest fitted dimension, metres (the size priors' vehicles are under 30 m).
+MAX_RESULT_SIZE_M = 1e3
+#: How far a fitted rotation may be from orthonormal (``|R^T R - I|``, largest entry): fit writes them to 1e-12.
+ROTATION_TOLERANCE = 1e-6
+
+#: The optional keys of a vehicle result read by type (what readers of results.json use): strings, numbers (finite),
+#: integers, lists of strings, and sigma blocks (results.json's ``sigma``: numbers >= 0, null for infinite).
+_TEXT_KEYS = ("error", "error_detail", "prototype", "kitti_type", "box2d_source", "scale_from", "next_clicks_error",
+              "track", "pose_from", "implausible")
+_NUMBER_KEYS = ("confidence", "rms_px", "truncated", "cost", "prior_mahalanobis2")
+_INTEGER_KEYS = ("constraints", "clicks", "aux_unknowns")
+_TEXT_LIST_KEYS = ("click_labels", "downweighted", "warnings")
+_SIGMA_KEYS = ("sigma", "reachable_sigma")
+
+
+def _check_fields(v: dict[str, Any], path: str | Path, where: str) -> None:
+    """The types and ranges of a vehicle result's keys, before any is used (:mod:`toosicubix.fields`): a results file
+    that fit did not write (or that was edited) is refused naming the JSON path, not met by a traceback or written on
+    as a NaN.
+
+    Raises
+    ------
+    FormatError
+        Naming the JSON path and what was expected.
+    """
+    for key in ("id", "status"):  # written into files and XML: the id rule (no control characters, no surrogates)
+        field_rules.identifier(v.get(key), path, f"{where}.{key}", what=f"a vehicle {key}")
+        if not isinstance(v[key], str):
+            raise FormatError(path, f"{where}.{key}: expected a string, got {shown(v[key])}")
+    for key in _TEXT_KEYS:
+        if v.get(key) is not None and not (isinstance(v[key], str) and _encodable(v[key])):
+            raise FormatError(path, f"{where}.{key}: expected a string (of text UTF-8 can write) or null, got "
+                                    f"{shown(v[key])}")
+    for key in _NUMBER_KEYS:
+        if v.get(key) is not None:
+            field_rules.number(v[key], path, f"{where}.{key}", what="a finite number or null")
+    for key in _INTEGER_KEYS:
+        if v.get(key) is not None:
+            field_rules.integer(v[key], path, f"{where}.{key}", low=0, high=10**9, integral_floats=False,
+                                what="a count or null")
+    for key in _TEXT_LIST_KEYS:
+        items = v.get(key)
+        if items is not None and not (isinstance(items, list) and all(isinstance(item, str) for item in items)):
+            raise FormatError(path, f"{where}.{key}: expected a list of strings, got {shown(items)}")
+    for key in _SIGMA_KEYS:
+        if v.get(key) is not None:
+            _check_sigma(v[key], path, f"{where}.{key}")
+    for key, shape in (("residuals_px", (-1, 2)), ("click_weights", (-1,)), ("yaw_pitch_roll_deg", (3,))):
+        if v.get(key) is not None:
+            _check_numbers(v[key], shape, path, f"{where}.{key}")
+    for key in ("parameters", "scale_shares"):
+        value = v.get(key)
+        if value is not None and not (isinstance(value, dict) and all(_is_finite(x) for x in value.values())):
+            raise FormatError(path, f"{where}.{key}: expected an object of finite numbers, got {shown(value)}")
+    if v.get("status") == "ok":
+        _check_pose(v, path, where)
+
+
+def _encodable(text: str) -> bool:
+    """Whether UTF-8 can write ``text`` (JSON's escapes let a file hold unpaired surrogates, which it cannot)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _is_finite(value: Any) -> bool:
+    try:
+        field_rules.number(value, None, None)
+    except field_rules.FieldError:
+        return False
+    return True
+
+
+def _check_numbers(value: Any, shape: tuple[int, ...], path: str | Path, where: str) -> np.ndarray:
+    """``value`` as finite numbers of ``shape`` (-1: any length)."""
+    flat = value if isinstance(value, list) else None
+    if flat is not None and len(shape) == 2:
+        flat = [x for row in value for x in row] if all(isinstance(row, list) and len(row) == shape[1]
+                                                       for row in value) else None
+    if flat is None or not all(_is_finite(x) for x in flat) or (shape[0] >= 0 and len(value) != shape[0]):
+        what = "finite numbers" + (f" of shape {shape}" if shape[0] >= 0 else f", {shape[-1]} per row"
+                                   if len(shape) == 2 else "")
+        raise FormatError(path, f"{where}: expected {what}, got {shown(value)}")
+    return np.array(flat, dtype=float)
+
+
+def _check_sigma(value: Any, path: str | Path, where: str) -> None:
+    """A sigma block: its scalars and vectors numbers >= 0 or null (infinite)."""
+    if not isinstance(value, dict):
+        raise FormatError(path, f"{where}: expected an object of sigmas, got {shown(value)}")
+    for key, item in value.items():
+        for k, x in enumerate(item if isinstance(item, list) else [item]):
+            if x is None:
+                continue
+            place = f"{where}.{key}" + (f"[{k}]" if isinstance(item, list) else "")
+            field_rules.number(x, path, place, low=0.0, what="a sigma (or null for infinite): a number")
+
+
+def _check_pose(v: dict[str, Any], path: str | Path, where: str) -> None:
+    """A fitted pose: ``R_cam_vehicle`` a rotation (orthonormal, determinant +1), ``t_cam_vehicle`` within
+    :data:`MAX_RESULT_DISTANCE_M`, ``dimensions`` positive and within :data:`MAX_RESULT_SIZE_M`."""
+    R = json_numbers(v.get("R_cam_vehicle"), (3, 3), path, f"{where}.R_cam_vehicle")
+    R_bounded = np.clip(R, -2.0, 2.0)  # a rotation's entries are within +-1: larger ones fail, without overflow
+    error = float(np.abs(R_bounded.T @ R_bounded - np.eye(3)).max())
+    if not (error <= ROTATION_TOLERANCE and np.abs(R).max() <= 1.0 + ROTATION_TOLERANCE and np.linalg.det(R) > 0):
+        raise FormatError(path, f"{where}.R_cam_vehicle: expected a rotation matrix (orthonormal to "
+                                f"{ROTATION_TOLERANCE:g}, determinant +1), got determinant "
+                                f"{np.linalg.det(R_bounded):.3g} and |R^T R - I| = {error:.3g}")
+    t = json_numbers(v.get("t_cam_vehicle"), (3,), path, f"{where}.t_cam_vehicle")
+    if np.abs(t).max() > MAX_RESULT_DISTANCE_M:
+        raise FormatError(path, f"{where}.t_cam_vehicle: expected a position within {MAX_RESULT_DISTANCE_M:g} m of the "
+                                f"camera, got {t.tolist()}")
+    d = json_numbers(v.get("dimensions"), (3,), path, f"{where}.dimensions")
+    if not (d.min() > 0 and d.max() <= MAX_RESULT_SIZE_M):
+        raise FormatError(path, f"{where}.dimensions: expected three sizes greater than 0 and at most "
+                                f"{MAX_RESULT_SIZE_M:g} m, got {d.tolist()}")
 
 
 @dataclass(frozen=True)
@@ -521,12 +648,27 @@ def read_results(path: str | Path) -> list[ImageResult]:
         where = f"$.images[{i}]"
         camera = json_field(im, "camera", dict, path, where)
         K = json_numbers(camera.get("K"), (3, 3), path, f"{where}.camera.K")
+        try:
+            check_intrinsics(K)
+        except ValueError as exc:
+            raise FormatError(path, f"{where}.camera.K: {exc}") from None
         t_cam_rect = json_numbers(camera.get("t_cam_rect", [0.0, 0.0, 0.0]), (3,), path, f"{where}.camera.t_cam_rect")
+        if np.abs(t_cam_rect).max() > MAX_CAMERA_OFFSET:
+            raise FormatError(path, f"{where}.camera.t_cam_rect: expected an offset within {MAX_CAMERA_OFFSET:g} m, "
+                                    f"got {t_cam_rect.tolist()}")
         size = camera.get("image_size")
+        if size is not None:
+            if not (isinstance(size, list) and len(size) == 2):
+                raise FormatError(path, f"{where}.camera.image_size: expected [width, height] or null, got "
+                                        f"{shown(size)}")
+            size = [field_rules.image_side(side, path, f"{where}.camera.image_size[{k}]")
+                    for k, side in enumerate(size)]
         vehicles = [VehicleResult.from_json(v, path, f"{where}.vehicles[{j}]")
                     for j, v in enumerate(json_field(im, "vehicles", list, path, where))]
+        image_id = json_field(im, "id", str, path, where)
+        field_rules.identifier(image_id, path, f"{where}.id", what="an image id")
         images.append(ImageResult(
-            id=str(json_field(im, "id", str, path, where)), K=K, t_cam_rect=t_cam_rect,
+            id=image_id, K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=_road_plane(im.get("ground")),
             sequence=im["sequence"] if isinstance(im.get("sequence"), str) else None,

@@ -15,10 +15,12 @@ Every PNG is written atomically (temporary file, then rename); the same inputs g
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import math
 import re
+import struct
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -59,6 +61,16 @@ ONLY_CHOICES = ("failed", "ambiguous", "uncertain", "misfit")
 DEFAULT_RENDER_SUFFIX = "-render"
 #: PNG compression: 1 is fast and still about half the raw size; the README picture uses 9.
 PNG_COMPRESSION = 1
+#: The largest image render draws, per side and in all (pixels): a larger image (its annotated size, or a blank
+#: canvas of it) is drawn scaled down to fit both, with a warning; an image file beyond them is not decoded (its
+#: header says its size). 16,384 px is what a PNG encoder and OpenCV's drawing handle without trouble on any
+#: machine; 50 Mpx (an 8,192 x 6,144 photo) keeps a picture's memory (canvas, its fill layer, the bird's-eye panel,
+#: the PNG) near 0.6 GB. The annotation file allows sides of 10^6 px: such a canvas, unbounded, needed 4-4.5 GB at
+#: 40,000 x 40,000 or 1 x 1,000,000, and 2.7 TiB at 10^6 x 10^6.
+MAX_CANVAS_SIDE = 16_384
+MAX_CANVAS_PIXELS = 50_000_000
+#: The largest image file read (bytes): a 50 Mpx photo as a PNG of noise is 150 MB.
+MAX_IMAGE_FILE_BYTES = 256 * 1024 * 1024
 
 
 class RenderInputError(InputError):
@@ -92,6 +104,7 @@ class RenderSummary:
     ----------
     written : the PNG files, in results order
     blank : ids of images drawn on a blank canvas
+    refused : ids of images not drawn: too large a canvas even scaled (:func:`canvas_scale`)
     skipped : images left out by ``only``
     warnings : one line each (missing image files, images without ground truth, a changed annotation file)
     out_dir : where the PNGs went
@@ -99,6 +112,7 @@ class RenderSummary:
 
     written: list[Path] = field(default_factory=list)
     blank: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
     skipped: int = 0
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
@@ -341,8 +355,18 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
     options = options or OverlayOptions()
     camera = image.camera if image is not None else Camera(K=result.K, image_size=result.image_size)
     size = image_size_of(result, image)
-    canvas = background.copy() if background is not None else blank_canvas(size)
     vehicles = drawn_vehicles(image, result, camera, tracks.colours if tracks is not None else None)
+    if background is not None:
+        canvas = background.copy()
+    else:
+        scale = canvas_scale(size)
+        if scale is None:
+            raise ValueError(f"image {result.id}: a canvas of {size[0]}x{size[1]} pixels cannot be drawn even scaled "
+                             f"(at most {MAX_CANVAS_SIDE} px a side and {MAX_CANVAS_PIXELS} pixels, at least 1 px)")
+        if scale < 1.0:  # drawn scaled: the camera, and every pixel the vehicles carry
+            camera, vehicles = scaled_camera(camera, scale), [scaled_vehicle(v, scale) for v in vehicles]
+            size = scaled_size(size, scale)
+        canvas = blank_canvas(size)
     gt = ground_truth or []
     draw_overlay(canvas, camera, vehicles, gt, options)
     if note:
@@ -353,6 +377,37 @@ def render_image(result: ImageResult, image: Image | None, background: np.ndarra
                            height=canvas.shape[0], tracks=drawn_tracks(result, tracks) if tracks is not None else ()) \
         if options.birds_eye else None
     return compose(canvas, panel)
+
+
+def canvas_scale(size: tuple[int, int]) -> float | None:
+    """The factor an image of ``size = (width, height)`` is drawn at: 1 within :data:`MAX_CANVAS_SIDE` and
+    :data:`MAX_CANVAS_PIXELS`, else the largest that brings it within both; None when a side would then be under
+    one pixel (an image of 1 x 1,000,000 pixels)."""
+    width, height = size
+    scale = min(1.0, MAX_CANVAS_SIDE / max(width, height), math.sqrt(MAX_CANVAS_PIXELS / (width * height)))
+    return scale if min(width, height) * scale >= 1.0 else None
+
+
+def scaled_size(size: tuple[int, int], scale: float) -> tuple[int, int]:
+    """``size`` drawn at ``scale``, rounded down (within the bounds) and at least one pixel."""
+    return max(1, int(size[0] * scale)), max(1, int(size[1] * scale))
+
+
+def scaled_camera(camera: Camera, scale: float) -> Camera:
+    """The camera of an image drawn at ``scale``: ``K`` scaled in x and y (the lens distortion acts on normalized
+    coordinates, so it stays), the image size scaled."""
+    K = np.diag([scale, scale, 1.0]) @ camera.K
+    size = None if camera.image_size is None else scaled_size(camera.image_size, scale)
+    return dataclasses.replace(camera, K=K, image_size=size)
+
+
+def scaled_vehicle(v: DrawnVehicle, scale: float) -> DrawnVehicle:
+    """A vehicle's pixels (clicks, where the fit puts them, box, next clicks) in an image drawn at ``scale``."""
+    def times(uv: Any) -> Any:
+        return None if uv is None else np.asarray(uv, dtype=float) * scale
+
+    return dataclasses.replace(v, clicks_uv=times(v.clicks_uv), fitted_uv=times(v.fitted_uv), box2d=times(v.box2d),
+                               next_clicks=tuple((label, times(uv)) for label, uv in v.next_clicks))
 
 
 def image_size_of(result: ImageResult, image: Image | None) -> tuple[int, int]:
@@ -402,11 +457,119 @@ def find_image_file(image: Image | None, image_id: str, annotations_path: Path |
     return None, f"image {image_id}: no image file in {images_dir} (looked for {names}); drawn on a blank canvas"
 
 
-def read_image(path: Path) -> np.ndarray | None:
-    """The file as (H, W, 3) uint8 BGR, or None when OpenCV cannot decode it."""
-    data = np.fromfile(str(path), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-    return image
+def read_image(path: Path) -> tuple[np.ndarray | None, str | None]:
+    """The file as (H, W, 3) uint8 BGR, or None and why not: the file is larger than :data:`MAX_IMAGE_FILE_BYTES`,
+    its header (:func:`header_size`) says it is beyond :data:`MAX_CANVAS_SIDE` or :data:`MAX_CANVAS_PIXELS` or does
+    not say its size (a format not read here), or OpenCV cannot decode it. Nothing is decoded before its size is
+    known: a 437 KB PNG that declares 60,000 x 60,000 pixels would need 10 GB."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_IMAGE_FILE_BYTES:
+            return None, f"{size} bytes: larger than the {MAX_IMAGE_FILE_BYTES} bytes of an image render reads"
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError as exc:
+        return None, f"cannot be read ({exc.strerror or exc})"
+    if not data.size:
+        return None, "an empty file"
+    declared = header_size(data[:1 << 16].tobytes(), path)
+    if declared is None:
+        return None, f"no header of an image render reads ({', '.join(IMAGE_FORMATS)}) gives its size"
+    width, height = declared
+    if not (0 < width <= MAX_CANVAS_SIDE and 0 < height <= MAX_CANVAS_SIDE and width * height <= MAX_CANVAS_PIXELS):
+        return None, (f"its header declares {width}x{height} pixels: beyond the {MAX_CANVAS_SIDE} px a side and "
+                      f"{MAX_CANVAS_PIXELS} pixels render decodes")
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    except cv2.error as exc:  # a damaged file OpenCV's decoder asserts on
+        return None, f"cannot be decoded ({str(exc).strip().splitlines()[-1][:120]})"
+    if image is None or image.ndim != 3 or image.shape[2] != 3:
+        return None, "cannot be decoded as an image"
+    return image, None
+
+
+#: The formats whose size :func:`header_size` reads from their header.
+IMAGE_FORMATS = ("PNG", "JPEG", "BMP", "GIF", "WebP", "TIFF", "PNM")
+_JPEG_FRAMES = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def header_size(head: bytes, path: Path | None = None) -> tuple[int, int] | None:
+    """``(width, height)`` an image file declares in its header (``head``: its first bytes, 64 KB suffice for all
+    but a JPEG with long metadata, whose segments are then followed in the file at ``path``), or None when it is
+    none of :data:`IMAGE_FORMATS` or its header is cut short."""
+    try:
+        return _header_size(head, path)
+    except (struct.error, IndexError, ValueError, OSError):
+        return None
+
+
+def _header_size(head: bytes, path: Path | None) -> tuple[int, int] | None:
+    if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR":
+        return struct.unpack(">II", head[16:24])  # type: ignore[return-value]
+    if head.startswith(b"\xff\xd8"):
+        return _jpeg_size(head, path)
+    if head.startswith(b"BM"):
+        if struct.unpack("<I", head[14:18])[0] == 12:  # OS/2 BITMAPCOREHEADER
+            return struct.unpack("<HH", head[18:22])  # type: ignore[return-value]
+        width, height = struct.unpack("<ii", head[18:26])
+        return abs(width), abs(height)
+    if head[:6] in (b"GIF87a", b"GIF89a"):
+        return struct.unpack("<HH", head[6:10])  # type: ignore[return-value]
+    if head.startswith(b"RIFF") and head[8:12] == b"WEBP":
+        chunk = head[12:16]
+        if chunk == b"VP8 ":
+            width, height = struct.unpack("<HH", head[26:30])
+            return width & 0x3FFF, height & 0x3FFF
+        if chunk == b"VP8L":
+            bits = struct.unpack("<I", head[21:25])[0]
+            return 1 + (bits & 0x3FFF), 1 + ((bits >> 14) & 0x3FFF)
+        if chunk == b"VP8X":
+            return 1 + int.from_bytes(head[24:27], "little"), 1 + int.from_bytes(head[27:30], "little")
+        return None
+    if head[:4] in (b"II*\x00", b"MM\x00*"):
+        return _tiff_size(head)
+    if len(head) > 2 and head[:1] == b"P" and head[1:2] in b"123456" and head[2:3].isspace():
+        tokens = re.sub(rb"#[^\n]*", b" ", head[2:256]).split()
+        return int(tokens[0]), int(tokens[1])
+    return None
+
+
+def _jpeg_size(head: bytes, path: Path | None) -> tuple[int, int] | None:
+    """The size in a JPEG's first frame header (SOFn), following the segments from the file when they run past
+    ``head``."""
+    data, i = head, 2
+    for _ in range(10_000):  # segments before the frame: a handful in any file
+        if i + 4 > len(data) and path is not None and len(data) == len(head):
+            data = path.read_bytes()[: 16 << 20]  # long metadata (at most 16 MB is searched)
+        while i < len(data) and data[i] == 0xFF and i + 1 < len(data) and data[i + 1] == 0xFF:
+            i += 1  # fill bytes
+        if i + 4 > len(data) or data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        if marker in (0xD9, 0xDA):  # the end or the scan before any frame header
+            return None
+        length = struct.unpack(">H", data[i + 2:i + 4])[0]
+        if marker in _JPEG_FRAMES:
+            height, width = struct.unpack(">HH", data[i + 5:i + 9])
+            return width, height
+        i += 2 + length
+    return None
+
+
+def _tiff_size(head: bytes) -> tuple[int, int] | None:
+    """ImageWidth (tag 256) and ImageLength (257) of a TIFF's first image file directory."""
+    order = "<" if head[:2] == b"II" else ">"
+    offset = struct.unpack(order + "I", head[4:8])[0]
+    count = struct.unpack(order + "H", head[offset:offset + 2])[0]
+    found: dict[int, int] = {}
+    for k in range(min(count, 1000)):
+        entry = head[offset + 2 + 12 * k: offset + 14 + 12 * k]
+        tag, kind = struct.unpack(order + "HH", entry[:4])
+        if tag in (256, 257):
+            found[tag] = struct.unpack(order + ("H" if kind == 3 else "I"), entry[8:10 if kind == 3 else 12])[0]
+    return (found[256], found[257]) if 256 in found and 257 in found else None
 
 
 def selected(result: ImageResult, only: str | None) -> bool:
@@ -557,11 +720,10 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
             summary.warnings.append(missing)
             note = "image file not found: blank canvas"
         elif path is not None:
-            background = read_image(path)
+            background, why = read_image(path)
             if background is None:
-                summary.warnings.append(f"image {result.id}: {path} cannot be read as an image; drawn on a blank "
-                                        f"canvas")
-                note = "image file unreadable: blank canvas"
+                summary.warnings.append(f"image {result.id}: {path}: {why}; drawn on a blank canvas")
+                note = "image file not read: blank canvas"
             else:
                 expected = image_size_of(result, image)
                 found = (background.shape[1], background.shape[0])
@@ -570,6 +732,21 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
                                             f"annotation says {expected[0]}x{expected[1]}")
                 note = None
         if background is None:
+            size = image_size_of(result, image)
+            scale = canvas_scale(size)
+            if scale is None:
+                summary.warnings.append(f"image {result.id}: {size[0]}x{size[1]} pixels cannot be drawn (a side would "
+                                        f"be under one pixel once scaled to at most {MAX_CANVAS_SIDE} px a side and "
+                                        f"{MAX_CANVAS_PIXELS} pixels): left out")
+                summary.refused.append(result.id)
+                if progress is not None:
+                    progress(1)
+                continue
+            if scale < 1.0:
+                drawn = scaled_size(size, scale)
+                summary.warnings.append(f"image {result.id}: {size[0]}x{size[1]} pixels, beyond the {MAX_CANVAS_SIDE} "
+                                        f"px a side or {MAX_CANVAS_PIXELS} pixels render draws: drawn scaled by "
+                                        f"{scale:.3g} to {drawn[0]}x{drawn[1]}")
             summary.blank.append(result.id)
         gt = ground_truth_cuboids(source, result, summary.warnings) if source is not None else []
         picture = render_image(result, image, background, gt, options.overlay, note, tracks)

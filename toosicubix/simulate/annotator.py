@@ -11,7 +11,7 @@ ground-truth cuboids. The annotator modelled here is a person, not an oracle:
 3. the vertical cuboid edges (``edge-*``) of the visible faces (silhouette edges included);
 4. a direction arrow on the ground when the view is nearly straight (within 15 degrees) from the front or
    rear (``forward`` / ``backward`` beside the vehicle) or from the side (``leftward`` / ``rightward``
-   ahead of the vehicle, pointing away from the camera side);
+   ahead of the vehicle, pointing away from the camera side), 30 to 100 % as long as the vehicle along it;
 5. when the roof can be seen (camera above it): a symmetric pair on the roof and a roof antenna or light
    (``top-center``);
 6. on vans and trucks, whose bodies are boxes: the visible top corners of the body (``corner-top-*``).
@@ -31,7 +31,8 @@ real cars, see ``TYRE_INSET_MAX``), axles set in from the ends by the vehicle's 
 20 cm behind the end faces; vertical edges (rounded body corners) 5 to 20 cm inside the cuboid's corner;
 roof features up to 5 cm below the top; box corners up to 5 cm inside; an arrow on the ground drawn within
 a few degrees (sigma 2 degrees) of the vehicle's axis. With ``exact_placement`` every part lies exactly
-where the parts model puts it (the arrows too), which tests the solver rather than the model.
+where the parts model puts it (an arrow along its axis exactly, at its drawn length), which tests the solver
+rather than the model.
 
 **Noise.** Every click gets independent Gaussian noise of ``noise_px`` pixels per coordinate.
 
@@ -92,6 +93,10 @@ from toosicubix.simulate.boxes import BodyShape, draw_body_shape, simulated_box2
 #: KITTI's vehicle types (defined once, in :mod:`toosicubix.formats.datasets`).
 VEHICLE_CLASSES = KITTI_VEHICLE_CLASSES
 STRAIGHT_VIEW_DEG = 15.0
+#: How long a person draws a direction arrow, as a share of the dimension along it (uniform): along part of the
+#: vehicle, never exactly its length (the parts model's gauge is that length; a drawn arrow of any length says the
+#: same direction). Fixed by rule 22 of benchmarks/decisions.md, before any fit with it.
+ARROW_LENGTH = (0.3, 1.0)
 EDGE_MARGIN_PX = 2.0
 MIN_PAIR_SEPARATION_PX = 3.0
 OCCLUSION_DROP = {0: 0.0, 1: 0.3, 2: 0.6, 3: 0.6}
@@ -441,11 +446,12 @@ def _candidate_specs(gt: GroundTruthVehicle, d: np.ndarray, wheel_x: tuple[float
         axis = "forward" if rng.uniform() < 0.5 else "backward"
         start = -dx / 2 if axis == "forward" else dx / 2
         out.append(PartSpec("direction", axis, {"X": start + u(-0.3, 0.3), "Y": side * (dy / 2 + u(0.2, 0.6)),
-                                               "Z": 0.0}))
+                                               "Z": 0.0, "_len": u(*ARROW_LENGTH)}))
     elif along_y < STRAIGHT_VIEW_DEG:  # straight from a side: an arrow ahead of the vehicle, away from us
         side = 1.0 if camera_vehicle[1] >= 0 else -1.0
         axis = "rightward" if side > 0 else "leftward"
-        out.append(PartSpec("direction", axis, {"X": dx / 2 + u(0.3, 0.8), "Y": side * dy / 2, "Z": 0.0}))
+        out.append(PartSpec("direction", axis, {"X": dx / 2 + u(0.3, 0.8), "Y": side * dy / 2, "Z": 0.0,
+                                               "_len": u(*ARROW_LENGTH)}))
     out.append(PartSpec("symmetry", "roof", {"X": u(-0.25, 0.05) * dx, "Y": u(0.3, 0.4) * dy,
                                             "_Z": dz - inset(0.0, 0.05)}))
     out.append(PartSpec("point", "top-center", {"X": u(-0.3, 0.1) * dx, "_Z": dz - inset(0.0, 0.05)}))
@@ -504,13 +510,20 @@ def _real_points(spec: PartSpec, d: np.ndarray, wheel_x: tuple[float, float], ty
     tail = np.array([a["X"], a["Y"], a["Z"]])
     axis = ("dx", "dy", "dz").index(e.get("axis"))
     step = np.zeros(3)
-    step[axis] = float(e.get("sign")) * d[axis]
+    step[axis] = float(e.get("sign")) * d[axis] * a.get("_len", 1.0)
     return np.array([tail, tail + rot_z(arrow_yaw) @ step])
 
 
-def _model_spec(spec: PartSpec, d: np.ndarray) -> PartSpec:
-    """The spec with only the parts model's auxiliary values (private placement keys dropped)."""
-    return PartSpec(spec.kind, spec.name, {k: v for k, v in spec.aux.items() if not k.startswith("_")})
+def _model_spec(spec: PartSpec, d: np.ndarray, camera_vehicle: np.ndarray) -> PartSpec:
+    """The spec with only the parts model's auxiliary values (private placement keys dropped). An arrow drawn
+    ``_len`` times its axis's dimension long is the model's arrow (as long as the dimension) moved along its rays
+    from the camera centre ``camera_vehicle`` (3,) by the factor ``1 / _len``: the same clicks, the model's gauge."""
+    aux = {k: v for k, v in spec.aux.items() if not k.startswith("_")}
+    if spec.kind == "direction" and "_len" in spec.aux:
+        tail = np.array([aux["X"], aux["Y"], aux["Z"]])
+        moved = camera_vehicle + (tail - camera_vehicle) / spec.aux["_len"]
+        aux.update(X=float(moved[0]), Y=float(moved[1]), Z=float(moved[2]))
+    return PartSpec(spec.kind, spec.name, aux)
 
 
 def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> SimulatedVehicle:
@@ -569,7 +582,7 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
             continue  # the person sees the two clicks land on one spot and leaves the pair out
         k = len(specs)
         parts.append(Part(spec.kind, spec.name, noisy, f"simulated[{k}]"))
-        specs.append(_model_spec(spec, d))
+        specs.append(_model_spec(spec, d, camera_vehicle))
         clicks += len(uv)
     p_true = true_parameters(specs, d, wheel_x)[1] if specs else np.zeros(3)
     return SimulatedVehicle(gt, parts, specs, R, t, d, wheel_x, p_true, notes, spare)

@@ -161,6 +161,7 @@ _QUANTITY_FIX = {
     "length": ("both wheels on one side", "point", ()),
     "width": ("a left-right pair (two lights, two wheels, the plate's ends)", "point", ()),
     "height": ("a top corner, or an upward arrow", "point", ()),
+    "arrow": ("a longer arrow along the vehicle in its place", "point", ()),
 }
 
 
@@ -197,7 +198,8 @@ def _undetermined(parts: PartsModel, unknowns: list[str]) -> str:
     return f"the clicks do not fix {loose}{advice}"
 
 
-_GROUPED = {"length": "where the clicked parts sit along it", "width": "how wide the clicked parts are",
+_GROUPED = {"arrow": "where the arrows lie", "length": "where the clicked parts sit along it",
+            "width": "how wide the clicked parts are",
             "height": "how high the clicked parts sit"}
 
 
@@ -215,6 +217,8 @@ def _quantity(parts: PartsModel, name: str) -> tuple[str, str]:
         return "its height", "height"
     k, _, axis = name.removeprefix("parts[").partition("].")
     part = _part_words(parts, int(k))
+    if click(parts.click_labels[int(np.flatnonzero(parts.click_part == int(k))[0])]).kind == "direction":
+        return f"where {part} lies", "arrow"  # an arrow's own unknowns: where along its rays it was drawn
     return {"X": (f"where {part} sits along it", "length"), "Y": (f"how wide {part} is", "width"),
             "Z": (f"how high {part} sits", "height")}[axis]
 

@@ -72,8 +72,9 @@ class Fitted(Protocol):
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
-#: A part predicted this close to a click (pixels) is not suggested: the person sees a click there already.
-ALREADY_CLICKED_PX = 6.0
+#: A part predicted closer to a click than this many click sigmas is not suggested: no click could tell it from the
+#: one already there (2 sigmas: 3 px at the default 1.5 px, whatever the vehicle's size in the image).
+ALREADY_CLICKED_SIGMAS = 2.0
 TINY = 1e-12
 
 
@@ -199,7 +200,8 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty, and say what
     clicking all the visible ones would reach. A part is not suggested where the person has clicked already: a
     wheel whose hub is clicked (or the hub of a clicked wheel), or a part of the vocabulary predicted within
-    :data:`ALREADY_CLICKED_PX` of a click (a mapping's keypoints sit closer together than that on far cars).
+    :data:`ALREADY_CLICKED_SIGMAS` click sigmas of a click (a mapping's keypoints may sit closer together than that
+    on far cars, and are left to their own ranking).
 
     Parameters
     ----------
@@ -239,12 +241,13 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
                          spread=np.asarray(k.spread, dtype=float)), (d * np.asarray(k.at, dtype=float))[None])
                    for name, k in keypoints.items() if name not in clicked]
     clicked_uv = np.concatenate([p.uv for p in parts]) if parts else np.empty((0, 2))
+    already = ALREADY_CLICKED_SIGMAS * options.click_sigma
     for part, points_vehicle in typical:
         points_cam = points_vehicle @ R.T + t
         if np.all(points_cam[:, 2] > MIN_DEPTH):
             uv = camera.project(points_cam)
             gaps = np.linalg.norm(uv[:, None] - clicked_uv[None], axis=2) if len(clicked_uv) else np.empty((0, 0))
-            if keypoints is None and gaps.size and np.any(gaps.min(axis=1) < ALREADY_CLICKED_PX):
+            if keypoints is None and gaps.size and np.any(gaps.min(axis=1) < already):
                 continue  # the person sees a click there already
             placed.append(replace(part, uv=uv))
             placed_vehicle.append(points_vehicle)

@@ -16,13 +16,16 @@ with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`
 road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
 does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
 
-Arrow zone: a direction arrow is drawn on the vehicle or on the ground beside it, so the midpoint ``c`` of each
-arrow (vehicle frame) is kept inside a zone around the cuboid, ``|c_x| <= 1.5 dx``, ``|c_y| <= 1.5 dy``,
-``-0.5 dz <= c_z <= 1.5 dz``: a row ``(distance outside the zone) / ARROW_ZONE_SIGMA`` per coordinate, zero
-inside (no pull on an arrow drawn anywhere near the vehicle). Without it an arrow seen nearly end-on (front
-and rear views) can slide along its rays tens of metres, under the road, at almost no cost: a flat valley
-with spurious minima that the starts cannot all reach. The rows are piecewise linear in ``p`` and, like the
-scale rows, change with the scale only through ``p``.
+Arrow rows: a direction arrow's two points are a gauge (the paper moves them along their rays until the segment is
+as long as the dimension it runs along), so only the rays say where the arrow was drawn. The arrow is drawn on the
+vehicle or on the ground beside it, so the midpoint's ray, taken at the distance of the vehicle's centre, passes
+through a zone around the cuboid, ``|c_x| <= 1.5 dx``, ``|c_y| <= 1.5 dy``, ``-0.5 dz <= c_z <= 1.5 dz``: a row
+``(distance outside the zone) / ARROW_ZONE_SIGMA`` per coordinate, zero inside (no pull on an arrow drawn anywhere
+near the vehicle). The gauge needs no pin: a segment as long as the dimension between the two rays, along the
+vehicle's axis, is one segment (its two points are determined). Without the zone an arrow seen nearly end-on
+(front and rear views) can slide along its rays tens of metres at almost no cost: a flat valley with spurious
+minima that the starts cannot all reach. Judging the gauge point itself (as this zone once did) pulls the pose
+whenever an arrow is drawn shorter or longer than the vehicle (rule 22 of benchmarks/decisions.md).
 """
 
 from __future__ import annotations
@@ -39,8 +42,19 @@ from toosicubix.size_priors import SizePrior
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5
+#: Rows per arrow: the zone's three.
+ARROW_ROWS = 3
 #: The arrow zone, as multiples of (dx, dy, dz) per coordinate: (low, high).
 _ARROW_ZONE = ((-1.5, 1.5), (-1.5, 1.5), (-0.5, 1.5))
+
+
+def _hat_batch(x: np.ndarray) -> np.ndarray:
+    """The cross-product matrices of vectors ``x`` (..., 3): (..., 3, 3)."""
+    out = np.zeros((*x.shape, 3))
+    out[..., 0, 1], out[..., 0, 2] = -x[..., 2], x[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = x[..., 2], -x[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -x[..., 1], x[..., 0]
+    return out
 
 
 @dataclass(frozen=True)
@@ -133,7 +147,7 @@ class Problem:
 
     @property
     def n_arrow_rows(self) -> int:
-        return len(self.arrow_mid)
+        return ARROW_ROWS * (len(self.arrow_mid) // 3)
 
     @cached_property
     def scale_rows_jacobian(self) -> np.ndarray:
@@ -154,17 +168,65 @@ class Problem:
         """(2N,) the click weights repeated for each click's two pixel rows, or None for all ones."""
         return None if self.click_weights is None else np.repeat(self.click_weights, 2)
 
-    def arrow_zone_residuals(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """How far each arrow midpoint coordinate lies outside its zone, metres (0 inside), and its gradient
-        over ``p``: (B, k) and (B, k, P) for ``p`` (B, P), with ``k = n_arrow_rows``."""
-        c = p @ self.arrow_mid.T
-        above = c - p @ self.arrow_high.T
-        below = c - p @ self.arrow_low.T
+    def arrow_rows(self, R: np.ndarray, t: np.ndarray, p: np.ndarray,
+                   pivot: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The arrows' standardized rows (see the module docstring) and their Jacobian over ``(delta, t, p)`` (the
+        refinement's step, rotations about ``pivot``): (B, k) and (B, k, 6 + P) for ``R`` (B, 3, 3), ``t`` (B, 3),
+        ``p`` (B, P) and ``pivot`` (B, 3) or None, with ``k = n_arrow_rows``: per arrow, how far its midpoint, moved
+        along its ray to the vehicle centre's distance from the camera, lies outside its zone (three rows, metres
+        over ``ARROW_ZONE_SIGMA``, 0 inside).
+
+        The arrow's own points are a gauge (the paper fixes the length of its 3D segment to the dimension, so a
+        drawn arrow of another length sits farther along its rays); the ray is not, so the zone judges the point
+        of the midpoint's ray at the distance of the vehicle's centre: ``c' = C + rho (c - C)`` with ``C`` the
+        camera centre (vehicle frame) and ``rho = |v_cam| / |c_cam|``, ``v`` the centre ``(0, 0, dz / 2)``."""
+        B, P = p.shape
+        n = self.n_arrow_rows // ARROW_ROWS
+        mid = self.arrow_mid.reshape(n, 3, P)
+        c = np.einsum("kip,bp->bki", mid, p)  # (B, n, 3) the gauge midpoints, vehicle frame
+        v = np.zeros((B, 3))
+        v[:, 2] = 0.5 * p[:, 2]
+        a = np.einsum("bij,bkj->bki", R, c) + t[:, None, :]  # (B, n, 3) camera frame
+        b = np.einsum("bij,bj->bi", R, v) + t  # (B, 3)
+        na, nb = np.linalg.norm(a, axis=2), np.linalg.norm(b, axis=1)  # (B, n), (B,)
+        rho = nb[:, None] / na  # (B, n)
+        w = rho[..., None] * a - t[:, None, :]  # (B, n, 3)
+        c_ray = np.einsum("bji,bkj->bki", R, w)  # R^T w: (B, n, 3)
+        low = (p @ self.arrow_low.T).reshape(B, n, 3)
+        high = (p @ self.arrow_high.T).reshape(B, n, 3)
+        above, below = c_ray - high, c_ray - low
         is_above, is_below = above > 0.0, below < 0.0
         outside = np.where(is_above, above, np.where(is_below, below, 0.0))
-        gradient = (is_above[..., None] * (self.arrow_mid - self.arrow_high)
-                    + is_below[..., None] * (self.arrow_mid - self.arrow_low))
-        return outside, gradient
+        # Jacobians (B, n, 3, 6 + P) of a, b, w and c_ray; d(R^T w) = [c_ray]x delta + R^T dw.
+        q = np.zeros((B, 3)) if pivot is None else pivot
+        eye = np.eye(3)
+
+        def d_point(x_minus_q: np.ndarray, A_p: np.ndarray) -> np.ndarray:  # d(R x + t) for x (B, ..., 3)
+            out = np.zeros((*x_minus_q.shape, 6 + P))
+            out[..., 0:3] = -np.einsum("bij,b...jk->b...ik", R, _hat_batch(x_minus_q))
+            out[..., 3:6] = eye
+            out[..., 6:] = A_p
+            return out
+
+        Rm = np.einsum("bij,kjp->bkip", R, mid)  # R (d c / d p): (B, n, 3, P)
+        da = d_point(c - q[:, None, :], Rm)
+        V = np.zeros((3, P))
+        V[2, 2] = 0.5
+        db = d_point(v - q, np.einsum("bij,jp->bip", R, V))  # (B, 3, 6 + P)
+        d_rho = rho[..., None] * (np.einsum("bi,bip->bp", b, db)[:, None, :] / (nb**2)[:, None, None]
+                                  - np.einsum("bki,bkip->bkp", a, da) / (na**2)[..., None])  # (B, n, 6 + P)
+        dt_total = np.zeros((B, 3, 6 + P))  # t's own change: dt + R [q]x delta
+        dt_total[:, :, 0:3] = np.einsum("bij,bjk->bik", R, _hat_batch(q))
+        dt_total[:, :, 3:6] = eye
+        dw = a[..., None] * d_rho[:, :, None, :] + rho[..., None, None] * da - dt_total[:, None]
+        d_ray = np.einsum("bji,bkjp->bkip", R, dw)
+        d_ray[..., 0:3] += _hat_batch(c_ray)
+        bounds = np.where(is_above[..., None], self.arrow_high.reshape(n, 3, P)[None],
+                          np.where(is_below[..., None], self.arrow_low.reshape(n, 3, P)[None], 0.0))
+        zone_gradient = np.where((is_above | is_below)[..., None], d_ray, 0.0)
+        zone_gradient[..., 6:] -= bounds
+        return ((outside / ARROW_ZONE_SIGMA).reshape(B, 3 * n),
+                (zone_gradient / ARROW_ZONE_SIGMA).reshape(B, 3 * n, 6 + P))
 
     def with_contact_distance(self, distance: float) -> Problem:
         """The same problem with the ground contact's sigma widened for a vehicle ``distance`` metres away."""
@@ -230,7 +292,7 @@ class Problem:
         if self.upright_sigma is not None:
             cues += float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2)) / self.upright_sigma**2
         if self.n_arrow_rows:
-            cues += float(np.sum(self.arrow_zone_residuals(p[None])[0] ** 2)) / ARROW_ZONE_SIGMA**2
+            cues += float(np.sum(self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None])[0] ** 2))
         return float(np.sum(e * e) + self.lambda_px * cues)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:

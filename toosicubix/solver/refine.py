@@ -23,7 +23,7 @@ import numpy as np
 
 from toosicubix.geometry import hat, so3_exp
 from toosicubix.solver import lm
-from toosicubix.solver.problem import ARROW_ZONE_SIGMA, Problem
+from toosicubix.solver.problem import Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
 MIN_DEPTH = 1e-3
@@ -56,8 +56,8 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
                     pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """Residuals (B, M) and Jacobians (B, M, 6 + P) of B poses: ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P),
     ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
-    problem has a ground plane, then 3 arrow-zone rows per arrow; the cue rows are multiplied by
-    ``sqrt(lambda_px)``."""
+    problem has a ground plane, then 3 arrow rows per arrow (:meth:`Problem.arrow_rows`); the cue rows are
+    multiplied by ``sqrt(lambda_px)``."""
     K_ = problem.K
     N, _, P = problem.A.shape
     B = len(R)
@@ -86,9 +86,8 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         w_up = w / problem.upright_sigma
         r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
     if n_arrow:
-        w_arrow = w / ARROW_ZONE_SIGMA
-        outside, arrow_gradient = problem.arrow_zone_residuals(p)
-        r[:, 2 * N + m + n_up:] = w_arrow * outside
+        arrow_r, arrow_gradient = problem.arrow_rows(R, t, p, pivot)
+        r[:, 2 * N + m + n_up:] = w * arrow_r
     row_weights = problem.pixel_row_weights
     if row_weights is not None:  # per-click weights (:mod:`.robust`) on the pixel rows
         r[:, 0:2 * N] *= row_weights
@@ -131,7 +130,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         J[:, 2 * N + m:2 * N + m + n_up, 0] = -w_up * R[:, :, 1]
         J[:, 2 * N + m:2 * N + m + n_up, 1] = w_up * R[:, :, 0]
     if n_arrow:
-        J[:, 2 * N + m + n_up:, 6:] = w_arrow * arrow_gradient
+        J[:, 2 * N + m + n_up:] = w * arrow_gradient
     return r, J
 
 

@@ -229,7 +229,19 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     base_rows = np.arange(2 * n_base_clicks)
     base_cols = 6 + np.asarray(base_params)
     cols0 = np.concatenate([np.arange(6), base_cols])
-    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[:, cols0], problem.lambda_px,
+    # The cue rows: the scale and upright rows, then each arrow's rows (:meth:`Problem.arrow_rows`), which see the
+    # pose: a candidate arrow's rows count only with that candidate.
+    tails = np.asarray(problem.parts.arrow_tails, dtype=int)
+    per_arrow = problem.n_arrow_rows // max(len(tails), 1)
+    first_arrow_row = len(J_cue) - problem.n_arrow_rows
+
+    def cue_rows(clicks: np.ndarray) -> np.ndarray:
+        arrows = np.flatnonzero(np.isin(tails, clicks))
+        own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
+        return np.concatenate([np.arange(first_arrow_row), own]).astype(int)
+
+    base_cues = cue_rows(np.arange(n_base_clicks))
+    now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], problem.lambda_px,
                                      sigmas[base_rows], G, t)
     out = []
     for entry in added:
@@ -237,7 +249,9 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
         own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
-        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[:, cols], problem.lambda_px, sigmas[r], G, t))
+        cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]))
+        out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], problem.lambda_px, sigmas[r],
+                                              G, t))
     return now, out
 
 
