@@ -67,6 +67,7 @@ from toosicubix.annotations.mapping import MappingFile
 from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE, MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
+from toosicubix.fields import shown
 from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
@@ -389,7 +390,7 @@ class Session:
         if sequence is not None:
             if not isinstance(sequence, str) or not _IMAGE_ID.match(sequence) or len(sequence) > MAX_ID_LENGTH:
                 raise ApiError(f"sequence: expected a name of letters, digits, '_', '.', '-' (the first a letter or "
-                               f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {sequence!r:.60}")
+                               f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {shown(sequence)}")
             numbers, self.frames_from_names = frame_numbers([p.name for p in self._paths])
             self._new_frames = dict(zip(ids, numbers, strict=True))
         self.revision = 0
@@ -1040,14 +1041,14 @@ class Session:
             image = self.image(index)
             revision = request.get("revision")
             if not isinstance(revision, int) or isinstance(revision, bool):
-                raise ApiError(f"revision: expected the integer revision the page last saw, got {revision!r:.60}")
+                raise ApiError(f"revision: expected the integer revision the page last saw, got {shown(revision)}")
             if revision != self.revision:
                 raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision} "
                                "(another page changed them); nothing was changed, reload and apply it again")
             op = request.get("op")
             handler = _OPS.get(op) if isinstance(op, str) else None
             if handler is None:
-                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r:.60}")
+                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {shown(op)}")
             before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
@@ -1084,7 +1085,7 @@ class Session:
             raise ApiError('expected {"image": index, "vehicle": {...a vehicle of the annotation file v1...}}')
         index = body["image"]
         if not isinstance(index, int) or isinstance(index, bool):
-            raise ApiError(f"image: expected an index, got {index!r:.60}")
+            raise ApiError(f"image: expected an index, got {shown(index)}")
         doc = {"toosicubix": 1, "images": [{"id": "request", "camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
                                             "vehicles": [body["vehicle"]]}]}
         try:
@@ -1124,7 +1125,7 @@ class Session:
             prototype = self._check_carried(image, track)
             if r.get("prototype", prototype) != prototype:
                 raise ApiError(f"prototype: track {track!r} is a {prototype} (one prototype per track), got "
-                               f"{r['prototype']!r:.60}")
+                               f"{shown(r['prototype'])}")
         else:
             prototype = r.get("prototype", self.prototype)
             self._check_prototype(prototype)
@@ -1162,7 +1163,7 @@ class Session:
             prototype = self._check_carried(image, r["track"])
             if r.get("prototype", prototype) != prototype:
                 raise ApiError(f"prototype: track {r['track']!r} is a {prototype} (one prototype per track), got "
-                               f"{r['prototype']!r:.60}")
+                               f"{shown(r['prototype'])}")
             v.track = r["track"]
             self._set_prototype(v, prototype)
         elif "prototype" in r:
@@ -1178,7 +1179,7 @@ class Session:
             v.box2d = checked_box2d(r["box2d"], image.camera.image_size)
         if "done" in r:
             if not isinstance(r["done"], bool):
-                raise ApiError(f"done: expected true or false, got {r['done']!r:.60}")
+                raise ApiError(f"done: expected true or false, got {shown(r['done'])}")
             v.done = r["done"]
 
     def _set_prototype(self, v: VehicleState, prototype: str) -> None:
@@ -1221,7 +1222,7 @@ class Session:
         part = self._part(v, r)
         click = r.get("click", 0)
         if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
-            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r:.60}")
+            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {shown(click)}")
         part.uv[click] = checked_pixels([r.get("uv")], 1, "uv", image.camera.image_size)[0]
 
     def _op_rename(self, image: ImageState, r: dict) -> None:
@@ -1316,7 +1317,7 @@ class Session:
     def _op_restore_prediction(self, image: ImageState, r: dict) -> None:
         track = r.get("track")
         if track not in image.dismissed:
-            raise ApiError(f"track: {track!r:.60} is not dismissed on image {image.id} (dismissed: "
+            raise ApiError(f"track: {shown(track)} is not dismissed on image {image.id} (dismissed: "
                            f"{', '.join(image.dismissed) or 'none'})")
         image.dismissed.remove(track)
 
@@ -1330,7 +1331,7 @@ class Session:
 
     def _check_prototype(self, prototype: Any) -> None:
         if not isinstance(prototype, str) or prototype not in self.priors:
-            raise ApiError(f"prototype: unknown {prototype!r:.60}; known: {', '.join(sorted(self.priors))}")
+            raise ApiError(f"prototype: unknown {shown(prototype)}; known: {', '.join(sorted(self.priors))}")
 
     def _check_carried(self, image: ImageState, track: Any) -> str:
         """``track`` may get a vehicle on ``image`` (ApiError otherwise): a frame of a sequence, a track of that
@@ -1339,11 +1340,11 @@ class Session:
             raise ApiError(f"track: image {image.id} is not a frame of a sequence (start the page with --sequence, or "
                            "give the file's image a sequence and frame)")
         if not isinstance(track, str):
-            raise ApiError(f"track: expected the name of a track of sequence {image.sequence}, got {track!r:.60}")
+            raise ApiError(f"track: expected the name of a track of sequence {image.sequence}, got {shown(track)}")
         frames = self._tracks(image.sequence).get(track)
         if not frames:
             names = sorted(self._tracks(image.sequence), key=track_sort_key)
-            raise ApiError(f"track: no track {track!r:.60} in sequence {image.sequence} (its tracks: "
+            raise ApiError(f"track: no track {shown(track)} in sequence {image.sequence} (its tracks: "
                            f"{', '.join(names) or 'none yet'})")
         if image.frame in frames:
             here = next(v.id for v in image.vehicles if v.track == track)
@@ -1357,14 +1358,14 @@ class Session:
         for v in image.vehicles:
             if v.id == vehicle_id:
                 return v
-        raise ApiError(f"vehicle: no vehicle {vehicle_id!r:.60} on image {image.id} "
+        raise ApiError(f"vehicle: no vehicle {shown(vehicle_id)} on image {image.id} "
                        f"(it has {', '.join(v.id for v in image.vehicles) or 'none'})")
 
     @staticmethod
     def _part(v: VehicleState, r: dict) -> ClickedPart:
         k = r.get("part")
         if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < len(v.parts):
-            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r:.60}")
+            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {shown(k)}")
         return v.parts[k]
 
     def _check_page_made(self, kind: Any, name: Any) -> None:
@@ -1378,8 +1379,8 @@ class Session:
         if self.mapping is None:
             raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
                            "keypoint mapping: start the page with --mapping (e.g. apollocar3d-66) to click keypoints")
-        raise ApiError(f"name: {kind} {name!r:.60} is not a keypoint of the mapping {self.mapping.name} (its keypoints "
-                       f"are in the palette; plates are not made on the page)")
+        raise ApiError(f"name: {kind} {shown(name)} is not a keypoint of the mapping {self.mapping.name} (its "
+                       f"keypoints are in the palette; plates are not made on the page)")
 
     @staticmethod
     def _check_room(v: VehicleState, clicks: int) -> None:
