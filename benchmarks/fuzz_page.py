@@ -333,11 +333,11 @@ class PageTarget(Target):
         started = time.monotonic()
         if not self.out.exists():
             return {"command": "validate the file", "kind": "check", "hang": False, "max_rss_mb": 0.0,
-                    "seconds": 0.0, "validate_exit": None}
+                    "seconds": 0.0, "status": "no file yet"}
         done = subprocess.run([sys.executable, "-m", "toosicubix", "validate", str(self.out)], capture_output=True,
                               text=True, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=120)
         record = {"command": "validate the file", "kind": "check", "hang": False, "max_rss_mb": 0.0,
-                  "seconds": time.monotonic() - started, "validate_exit": done.returncode}
+                  "seconds": time.monotonic() - started, "status": f"exit {done.returncode}"}
         if done.returncode not in (0, 1):
             record["unreadable"] = f"exit {done.returncode}: {(done.stderr or done.stdout)[-300:]}"
         return record
