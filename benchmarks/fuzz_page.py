@@ -95,10 +95,11 @@ class PageTarget(Target):
             self.port = s.getsockname()[1]
         self.stderr_path = work / "server.stderr"
         env = {**os.environ, "PYTHONPATH": str(REPO)}
-        self.server = subprocess.Popen(
-            [sys.executable, "-m", "toosicubix", "annotate", *map(str, frames), "--cameras", str(cameras),
-             "--sequence", SEQUENCE, "-o", str(self.out), "--host", "127.0.0.1", "--port", str(self.port)],
-            stdout=subprocess.DEVNULL, stderr=open(self.stderr_path, "wb"), env=env, cwd=work)
+        with open(self.stderr_path, "wb") as stderr:  # the server's own copy stays open
+            self.server = subprocess.Popen(
+                [sys.executable, "-m", "toosicubix", "annotate", *map(str, frames), "--cameras", str(cameras),
+                 "--sequence", SEQUENCE, "-o", str(self.out), "--host", "127.0.0.1", "--port", str(self.port)],
+                stdout=subprocess.DEVNULL, stderr=stderr, env=env, cwd=work)
         deadline = time.monotonic() + 120
         while True:
             try:
