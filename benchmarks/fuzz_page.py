@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from fuzz_targets import HOSTILE, Target, nodes, set_at
+from fuzz_targets import HOSTILE, TARGETS, Target, nodes, set_at
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -371,3 +371,17 @@ class PageTarget(Target):
         self.summary = {"requests": self.requests, "peak_server_mb": round(self.peak_server_mb),
                         "peak_fitting_process_mb": round(self.peak_children_mb)}
         return records
+
+
+TARGETS[PageTarget.name] = PageTarget
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python benchmarks/fuzz_page.py [fuzz.py's options]``: ``benchmarks/fuzz.py --targets page``."""
+    import fuzz
+
+    return fuzz.main_(["--targets", "page", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

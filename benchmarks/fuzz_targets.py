@@ -724,10 +724,9 @@ class RenderTarget(Target):
 TARGETS: dict[str, type[Target]] = {t.name: t for t in (CocoTarget, CvatTarget, LabelStudioTarget, LearnPartsTarget,
                                                          EvalApolloTarget, ExportTarget, RenderTarget)}
 
-# The page's JSON API: requests to a live server per worker, in a module of its own (it imports this one).
-from fuzz_page import PageTarget  # noqa: E402
-
-TARGETS[PageTarget.name] = PageTarget
+# The page's JSON API: requests to a live server per worker, in a module of its own, which imports this one and adds
+# its target to TARGETS (whichever of the two is imported first).
+import fuzz_page  # noqa: E402, F401
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,6 +14,8 @@ BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 @pytest.fixture
 def page_target(monkeypatch, tmp_path):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
+    for name in ("fuzz", "fuzz_targets", "fuzz_page"):  # fresh: another test may have imported some of them
+        sys.modules.pop(name, None)
     import fuzz_targets
 
     target = fuzz_targets.TARGETS["page"]()
