@@ -490,28 +490,32 @@ def run_target_chunk(job: tuple[str, list[int], int, float, str, float]) -> dict
     import toosicubix.render.folder  # noqa: F401
     summary: dict[str, Any] = {"cases": Counter(), "exits": Counter(), "kinds": Counter(), "tracebacks": Counter(),
                                "non_finite": [], "written_on_error": [], "hangs": [], "signals": [], "unclear": [],
-                               "bad_exit": [], "harness": [], "over_memory": [], "max_seconds": Counter(),
+                               "bad_exit": [], "harness": [], "over_memory": [], "unreadable": [],
+                               "max_seconds": Counter(),
                                "max_rss_mb": Counter(), "seconds": 0.0}
     with tempfile.TemporaryDirectory(prefix=f"toosicubix-fuzz-{name}-") as tmp:
         work = Path(tmp)
         target = TARGETS[name]()
         (work / "base").mkdir()
         target.prepare(work / "base")
-        for n, index in enumerate(indices):
+        # A target with checks after its last case (the page: the server still answers, the file still reads) runs
+        # them as one more step, its records counted as a case's.
+        steps = [*indices, None] if hasattr(target, "finish") else indices
+        for n, index in enumerate(steps):
             folder = work / f"c{index}"
             folder.mkdir()
             start = time.perf_counter()
             try:
-                records = target.run_case(index, seed, folder, timeout,
-                                          lambda c, t, f: run_isolated(c, t, f, address_limit))
+                records = target.finish() if index is None else target.run_case(
+                    index, seed, folder, timeout, lambda c, t, f: run_isolated(c, t, f, address_limit))
             except Exception as exc:  # the case could not be made: the harness's fault, counted, the run goes on
                 records = [{"command": "(making the case)", "kind": "harness", "hang": False, "max_rss_mb": 0.0,
                             "seconds": 0.0, "harness_error": f"{type(exc).__name__}: {str(exc)[:200]}"}]
             summary["seconds"] += time.perf_counter() - start
-            summary["cases"][name] += 1
+            summary["cases"][name] += index is not None
             for r in records:
                 c = f"{name}: {r['command']}"
-                summary["exits"][f"{c} {'hang' if r.get('hang') else r.get('exit', 'signal')}"] += 1
+                summary["exits"][f"{c} {'hang' if r.get('hang') else r.get('exit', r.get('status', 'signal'))}"] += 1
                 summary["kinds"][f"{name}: {r['kind'].split(':')[0]}"] += 1
                 summary["max_seconds"][c] = max(summary["max_seconds"][c], r["seconds"])
                 summary["max_rss_mb"][c] = max(summary["max_rss_mb"][c], r["max_rss_mb"])
@@ -521,7 +525,8 @@ def run_target_chunk(job: tuple[str, list[int], int, float, str, float]) -> dict
                     summary["tracebacks"][f"{c}: {r['traceback']}"] += 1
                     finding = True
                 for key, target_key in (("non_finite", "non_finite"), ("written_on_error", "written_on_error"),
-                                        ("hang", "hangs"), ("signal", "signals"), ("harness_error", "harness")):
+                                        ("hang", "hangs"), ("signal", "signals"), ("harness_error", "harness"),
+                                        ("unreadable", "unreadable")):
                     if r.get(key):
                         summary[target_key].append(f"{where}: {r[key]}")
                         finding = True
@@ -541,9 +546,10 @@ def run_target_chunk(job: tuple[str, list[int], int, float, str, float]) -> dict
                         shutil.copytree(folder, dest, symlinks=True)
                         (dest / "finding.json").write_text(json.dumps(r, indent=1, default=str))
             shutil.rmtree(folder, ignore_errors=True)
-            if (n + 1) % 250 == 0:
+            if (n + 1) % 250 == 0 and index is not None:
                 print(f"[{name}] {n + 1} of {len(indices)} cases, {sum(summary['tracebacks'].values())} tracebacks, "
                       f"max {max(summary['max_rss_mb'].values(), default=0):.0f} MB", file=sys.stderr, flush=True)
+        summary["details"] = {name: getattr(target, "summary", None)} if hasattr(target, "finish") else {}
     return summary
 
 
@@ -559,11 +565,12 @@ def target_figures(total: dict[str, Any], names: list[str]) -> dict[str, Any]:
             "tracebacks": sum(v for k, v in total["tracebacks"].items() if k.startswith(f"{name}: ")),
             **{key: sum(1 for x in total[key] if x.startswith(f"{name}: "))
                for key in ("non_finite", "written_on_error", "hangs", "signals", "bad_exit", "unclear", "harness",
-                           "over_memory")},
+                           "over_memory", "unreadable")},
             "peak_memory_mb": {k[len(name) + 2:]: round(v) for k, v in total["max_rss_mb"].items()
                                if k.startswith(f"{name}: ")},
             "max_seconds": {k[len(name) + 2:]: round(v, 2) for k, v in total["max_seconds"].items()
                             if k.startswith(f"{name}: ")},
+            **({"servers": total["details"][name]} if name in total.get("details", {}) else {}),
         }
     return out
 
@@ -586,6 +593,9 @@ def merge(parts: list[dict[str, Any]]) -> dict[str, Any]:
                 total.setdefault(key, Counter())
                 for k, v in value.items():
                     total[key][k] = max(total[key][k], v)
+            elif key == "details":  # per target, each worker's (the page: its server's requests and memory)
+                for name, detail in value.items():
+                    total.setdefault(key, {}).setdefault(name, []).append(detail)
             elif isinstance(value, Counter):
                 total.setdefault(key, Counter()).update(value)
             elif isinstance(value, list):
@@ -666,7 +676,7 @@ def main_(argv: list[str] | None = None) -> int:
         total = merge(parts)
         per_target = target_figures(total, others)
         findings = ("tracebacks", "non_finite", "written_on_error", "hangs", "signals", "bad_exit", "unclear",
-                    "harness", "over_memory")
+                    "harness", "over_memory", "unreadable")
         figures["targets"] = {
             "cases": sum(total["cases"].values()), "address_limit_gb": args.address_limit,
             "memory_target_mb": MEMORY_TARGET >> 20,

@@ -13,7 +13,8 @@ on it.
 - ``eval-apollocar3d``: ``eval --apollocar3d`` of a fit against mutated ground truth;
 - ``export``: ``export openlabel`` and ``export cvat`` on a fit folder whose results.json (or annotation file) is
   mutated;
-- ``render``: ``render`` with absurd image sizes, broken or lying image files and mutated results.
+- ``render``: ``render`` with absurd image sizes, broken or lying image files and mutated results;
+- ``page``: the annotate page's JSON API, mutated requests to a live server (:mod:`fuzz_page`).
 
 A new surface (the page's JSON API) is a new :class:`Target` in :data:`TARGETS`; one whose case is not a command
 line overrides :meth:`Target.run_case`. ``python benchmarks/fuzz_targets.py TARGET INDEX [--seed S] -o DIR`` writes
@@ -722,6 +723,10 @@ class RenderTarget(Target):
 #: Every target by name, in the order a run takes them.
 TARGETS: dict[str, type[Target]] = {t.name: t for t in (CocoTarget, CvatTarget, LabelStudioTarget, LearnPartsTarget,
                                                          EvalApolloTarget, ExportTarget, RenderTarget)}
+
+# The page's JSON API: requests to a live server per worker, in a module of its own, which imports this one and adds
+# its target to TARGETS (whichever of the two is imported first).
+import fuzz_page  # noqa: E402, F401
 
 
 def main(argv: list[str] | None = None) -> int:

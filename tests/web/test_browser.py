@@ -145,6 +145,69 @@ def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
         server.server_close()
 
 
+def test_a_click_beside_the_image_is_not_sent(page, scene, tmp_path: Path):
+    """Issue 34: a click on the grey area below the image (the whole image shown, 1240 x 375 px in a taller view) was
+    sent and saved; now the page says it is outside the image and sends nothing. A box dragged past the image's edge
+    is cut at it."""
+    out = tmp_path / "annotations.json"
+    server = serve_in_thread(make_session(scene, out))
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        x, y = _screen(page, [600.0, 375.0])
+        page.mouse.click(x, y + 40)
+        page.wait_for_function("document.querySelector('#message').textContent.includes('outside the image')",
+                               timeout=20000)
+        assert page.evaluate("state.revision") == 0 and not out.exists()
+        page.keyboard.press("b")
+        page.mouse.move(*_screen(page, [1000.0, 200.0]))
+        page.mouse.down()
+        page.mouse.move(*_screen(page, [1200.0, 420.0]), steps=3)  # below the image, on the canvas
+        page.mouse.up()
+        _wait_revision(page, 1)
+        assert load_images(out)[0].vehicles[0].box2d.tolist() == pytest.approx([1000.0, 200.0, 1200.0, 375.0],
+                                                                                 abs=1.0)
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_a_second_server_on_the_file_is_refused_and_its_page_reloads_from_the_file(page, scene, tmp_path: Path):
+    """Issue 34: two servers on one file. Page B's change after page A's is refused (409, nothing written); B's page
+    shows a reload button, which reads the files as A left them; B's next click joins A's."""
+    out = tmp_path / "annotations.json"
+    server_a = serve_in_thread(make_session(scene, out))
+    server_b = serve_in_thread(make_session(scene, out))
+    other = page.context.browser.new_page(viewport={"width": 1700, "height": 700})
+    try:
+        for p, server in ((page, server_a), (other, server_b)):
+            p.goto(server.url)
+            p.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        a, b = clicks(NAMED)[:2]
+        page.keyboard.press(KEYS[a.name])
+        page.mouse.click(*_screen(page, a.uv[0]))
+        _wait_revision(page, 2)
+        on_disk = out.read_bytes()
+        other.keyboard.press(KEYS[b.name])
+        other.mouse.click(*_screen(other, b.uv[0]))
+        other.wait_for_selector("#reload:not([hidden])", timeout=20000)
+        assert "changed on disk" in other.locator("#message").inner_text()
+        assert out.read_bytes() == on_disk
+        other.click("#reload")
+        other.wait_for_function("state.view.vehicles.length === 1 && state.view.vehicles[0].parts.length === 1",
+                                timeout=20000)
+        assert other.locator("#reload").is_hidden()
+        other.keyboard.press(KEYS[b.name])
+        other.mouse.click(*_screen(other, b.uv[0]))
+        other.wait_for_function("state.view.vehicles[0].parts.length === 2", timeout=20000)
+        assert [[p.name for p in v.parts] for v in load_images(out)[0].vehicles] == [[a.name, b.name]]
+    finally:
+        other.close()
+        for server in (server_a, server_b):
+            server.shutdown()
+            server.server_close()
+
+
 def test_click_keypoints_of_a_mapping_in_the_browser(page, scene, tmp_path: Path):
     """With a mapping, a keypoint is named by typing in the filter box and pressing Enter; an unnamed click is
     then named the nearest of the mapping's keypoints, and x takes the runner-up (a keypoint too)."""

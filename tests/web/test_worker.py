@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from concurrent.futures.process import BrokenProcessPool
 from functools import partial
 
@@ -11,7 +12,7 @@ import pytest
 
 from toosicubix.annotations.priors_file import load_priors
 from toosicubix.errors import InputFileError
-from toosicubix.web.worker import WorkerProcess
+from toosicubix.web.worker import DeadlineWorker, OutOfTime, WorkerDied, WorkerProcess
 
 
 def test_work_is_done_in_one_other_process_kept_between_calls():
@@ -37,3 +38,45 @@ def test_a_worker_that_died_is_replaced_on_the_next_call():
         with pytest.raises(BrokenProcessPool):
             worker()
         assert worker() not in (pid, os.getpid())
+
+
+# -- the refits' process: an answer within the bound, or the process ended (issue 34, item 4) ----------------------
+
+
+@pytest.fixture(scope="module")
+def deadline_worker():
+    with DeadlineWorker() as worker:
+        yield worker.start()
+
+
+def test_a_call_within_its_bound_is_answered_by_a_process_of_its_own(deadline_worker):
+    assert deadline_worker.call(abs, (-3,), timeout=5.0) == 3
+    assert deadline_worker.call(os.getpid, (), timeout=5.0) != os.getpid()
+
+
+def test_a_call_over_its_bound_ends_its_process_within_the_bound_and_the_spare_answers_at_once(deadline_worker):
+    pid = deadline_worker.call(os.getpid, (), timeout=5.0)
+    killed = deadline_worker.killed
+    started = time.monotonic()
+    with pytest.raises(OutOfTime, match=r"no answer within 0\.3 s"):
+        deadline_worker.call(time.sleep, (30,), timeout=0.3)
+    late = time.monotonic() - started
+    # 0.3 s of waiting, then a SIGKILL and its join (milliseconds): well within a second.
+    assert 0.3 <= late < 0.8, late
+    assert deadline_worker.killed == killed + 1
+    started = time.monotonic()
+    assert deadline_worker.call(os.getpid, (), timeout=5.0) not in (pid, os.getpid())
+    assert time.monotonic() - started < 0.5  # the spare was warm: no interpreter started for this call
+
+
+def test_an_exception_in_the_call_arrives_as_itself(deadline_worker):
+    with pytest.raises(ValueError, match="invalid literal"):
+        deadline_worker.call(int, ("x",), timeout=5.0)
+    assert deadline_worker.call(abs, (-1,), timeout=5.0) == 1
+
+
+def test_a_process_that_died_is_said_and_replaced(deadline_worker):
+    pid = deadline_worker.call(os.getpid, (), timeout=5.0)
+    with pytest.raises(WorkerDied):
+        deadline_worker.call(os.kill, (pid, signal.SIGKILL), timeout=5.0)
+    assert deadline_worker.call(os.getpid, (), timeout=5.0) not in (pid, os.getpid())

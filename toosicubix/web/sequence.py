@@ -22,6 +22,9 @@ from toosicubix.annotations.schema import MAX_FRAME
 TRACK_WINDOW = 30
 
 _DIGITS = re.compile(r"\d+")
+#: Runs of ASCII digits: what a track's name is ordered by (a name of other digits, e.g. '²', which ``int``
+#: refuses though ``str.isdigit`` passes it, or of hundreds of digits, sorts as text).
+_ASCII_DIGITS = re.compile(r"([0-9]{1,18})")
 
 
 def frame_numbers(names: list[str]) -> tuple[list[int], bool]:
@@ -49,7 +52,8 @@ def new_track_name(sequence: str, used: Iterable[str]) -> str:
 
 def track_sort_key(track: str) -> tuple:
     """Tracks in natural order: '0003-2' before '0003-10'."""
-    return tuple((0, int(piece)) if piece.isdigit() else (1, piece) for piece in re.split(r"(\d+)", track) if piece)
+    return tuple((0, int(piece)) if _ASCII_DIGITS.match(piece) else (1, piece)
+                 for piece in _ASCII_DIGITS.split(track) if piece)
 
 
 def frames_to_fit(target: int, frames: dict[int, bool], window: int = TRACK_WINDOW) -> list[int]:

@@ -5,14 +5,15 @@ Concurrency (two pages on one file): **refuse, never merge.** Every change carri
 last saw; a change made on an older revision is refused (:class:`Conflict`, HTTP 409) and the page gets the
 current state, re-applies a click it was adding and tells the person. A change is also refused when the file
 on disk was changed by another program since this session read or wrote it (a second ``toosicubix annotate``
-on the same file, an editor): its content hash is checked under a lock file beside it before each write, and
-the person is told to reload. So no click is ever silently overwritten: the one that would be lost is refused
-and said so.
+on the same file, an editor): the content hashes of both files it writes (the annotation file and its extras file,
+below) are checked under a lock file beside them before each write, and the person is told to reload. So no click
+is ever silently overwritten: the one that would be lost is refused and said so.
 
 What the file cannot hold: the annotation file v1 names every part, so a click not named yet (waiting for
 the cuboid to be fixed, see below) and the *done* mark of a vehicle go to a second file beside it,
 ``<file>.annotate.json`` (:attr:`Session.extras_path`), written atomically right after it and read back on start
-(unnamed clicks come back after their vehicle's named ones); it is removed when there is nothing in it.
+(unnamed clicks come back after their vehicle's named ones; the entries of images not served are kept as read); it
+is removed when there is nothing in it.
 
 Naming (:mod:`toosicubix.web.placement`, :mod:`toosicubix.web.naming`): a click made without a name takes the most
 probable name when the page is sure enough of it, else it waits with the few names that fit there for the person to
@@ -35,6 +36,7 @@ are its keypoints.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import fcntl
 import hashlib
@@ -45,8 +47,9 @@ import re
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from http import HTTPStatus
 from pathlib import Path
 from typing import Any
 
@@ -61,10 +64,11 @@ from toosicubix.annotations.convert import (
     part_from_schema,
 )
 from toosicubix.annotations.mapping import MappingFile
-from toosicubix.annotations.schema import MAX_ID_LENGTH, parse_annotations
+from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE, MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
-from toosicubix.formats.atomic import atomic_write_json, atomic_write_text
+from toosicubix.fields import shown
+from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
@@ -78,20 +82,23 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.tracks import results_of_track
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
-from toosicubix.size_priors import Priors
+from toosicubix.size_priors import Priors, SizePrior
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.track import TrackOptions
+from toosicubix.web.images import image_size
 from toosicubix.web.naming import naming_candidates, nearest_parts
 from toosicubix.web.placement import NAMING_SETTINGS, NamingSettings, propose
 from toosicubix.web.request_fields import (
     ApiError,
     Conflict,
+    check_on_image,
     checked_box2d,
     checked_kind_name,
     checked_known,
     checked_pixels,
 )
 from toosicubix.web.sequence import TRACK_WINDOW, frame_numbers, frames_to_fit, new_track_name, track_sort_key
+from toosicubix.web.worker import DeadlineWorker, OutOfTime, WorkerDied
 
 #: How many changes per image ``undo`` can take back.
 UNDO_DEPTH = 500
@@ -104,8 +111,25 @@ CHOICES = 5
 #: How far (fractions of the dimensions) a mapping's keypoint may lie from another's mirror place to be its mirror
 #: partner: apollocar3d-66's partners lie within 0.046 of each other's mirror places (median 0.023).
 MIRROR_TOLERANCE = 0.1
+#: The most vehicles the page adds to one image (a file may have more; the page's answers and undo grow with them).
+MAX_VEHICLES_PER_IMAGE = 500
+#: A vehicle id the page numbers from: ASCII digits, few enough for any integer conversion.
+_VEHICLE_NUMBER = re.compile(r"^[0-9]{1,18}$")
 #: How many suggestions a fit on the page computes (the targets shown and the candidates of auto-naming).
 NEXT_CLICKS = 1000
+#: Seconds the fits of one request may take in all, from the moment the session takes the request (issue 34: an
+#: answer or an error within a second; the rest of the second is for reading the request, writing the files and the
+#: answer). A fit already on the page (cached) takes none of it.
+FIT_SECONDS = 0.75
+#: What the fitting process imports before its first fit (so that the first one does not pay for it).
+FIT_MODULES = ("toosicubix.web.session",)
+
+
+class OutOfFitTime(ApiError):
+    """A request whose fits did not finish within the session's bound (:data:`FIT_SECONDS`): 422, nothing changed."""
+
+    def __init__(self, message: str):
+        super().__init__(message, HTTPStatus.UNPROCESSABLE_ENTITY)
 
 
 @dataclass
@@ -274,15 +298,6 @@ def _looks_like_json(path: Path) -> bool:
     return head[:1] in ("{", "[")
 
 
-def _image_size(path: Path) -> tuple[int, int]:
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise InputFileError(path, [("$", "cannot read the image (missing or not a format OpenCV reads)")])
-    return int(image.shape[1]), int(image.shape[0])
-
-
 def _digest(data: bytes | None) -> str | None:
     return None if data is None else hashlib.sha256(data).hexdigest()
 
@@ -324,6 +339,10 @@ class Session:
         track's nearby frames, and a track with a vehicle near this frame but none in it is shown as predicted
     track_options : the tracks' motion model and box cue, as ``fit`` takes them (its ``--frame-rate``)
     naming : how unnamed clicks are named (:class:`toosicubix.web.placement.NamingSettings`)
+    fitter : the process the fits are computed in, each request's within ``fit_seconds`` (``annotate`` gives one):
+        an edit or a preview whose fits would take longer is refused (:class:`OutOfFitTime`, 422) and nothing
+        changes; an image's view shows a vehicle not fitted in time as such. None: fits are computed in this
+        process, unbounded (a thread cannot be stopped)
     """
 
     def __init__(self, image_paths: list[Path], out: Path, cameras: dict[str, Camera], priors: Priors,
@@ -332,8 +351,14 @@ class Session:
                  road_grounds: dict[tuple, GroundOverride] | None = None,
                  estimate: Callable[[Path], tuple[SolverOptions, dict[tuple, GroundOverride] | None]] | None = None,
                  mapping: MappingFile | None = None, sequence: str | None = None,
-                 track_options: TrackOptions | None = None, naming: NamingSettings = NAMING_SETTINGS):
+                 track_options: TrackOptions | None = None, naming: NamingSettings = NAMING_SETTINGS,
+                 fitter: DeadlineWorker | None = None, fit_seconds: float = FIT_SECONDS):
         self.out = Path(out)
+        self._fitter, self.fit_seconds = fitter, fit_seconds
+        #: When the fits of the request being answered must be done (:meth:`_bounded`); None between requests.
+        self._deadline: float | None = None
+        #: Whether a fit not done in time refuses the request being answered (an edit, a preview) or shows as such.
+        self._strict = False
         self.naming = naming
         self.mapping = mapping if mapping is not None and mapping.keypoint_positions(prototype) else None
         self._ground_block, self._ground = (None, None) if not ground else ground_with(None, ground, "ground")
@@ -365,7 +390,7 @@ class Session:
         if sequence is not None:
             if not isinstance(sequence, str) or not _IMAGE_ID.match(sequence) or len(sequence) > MAX_ID_LENGTH:
                 raise ApiError(f"sequence: expected a name of letters, digits, '_', '.', '-' (the first a letter or "
-                               f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {sequence!r:.60}")
+                               f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {shown(sequence)}")
             numbers, self.frames_from_names = frame_numbers([p.name for p in self._paths])
             self._new_frames = dict(zip(ids, numbers, strict=True))
         self.revision = 0
@@ -375,25 +400,23 @@ class Session:
     # -- loading and saving ------------------------------------------------------------------------------------
 
     def _load(self) -> None:
-        """(Re)read the annotation file, if any, and build the state of every given image."""
-        data = _read_bytes(self.out)
-        self._disk_digest = _digest(data)
-        loaded: list[Image] = load_images(self.out) if data is not None else []
+        """(Re)read the annotation file and its extras file, if any, and build the state of every given image.
+
+        Both files are read under the lock file's shared lock (a second session writes them under its exclusive
+        lock), so the pair read is one that session wrote together. Nothing of this session's state changes until
+        everything is read: a file that cannot be read (an error naming it) leaves the session as it was."""
+        with self._file_lock(exclusive=False):
+            data, extras = _read_bytes(self.out), _read_bytes(self.extras_path)
+            loaded: list[Image] = load_images(self.out) if data is not None else []
+            extras_doc = read_json(self.extras_path, at_root=True) if extras is not None else None
         check_prototypes(loaded, self.priors, self.out)
         by_id = {im.id: im for im in loaded}
         served_ids = {p.stem for p in self._paths}
-        self._others = [image_json(im) for im in loaded if im.id not in served_ids]
-        # The file's frames that are not served: their tracked vehicles are fitted with the served frames' (never
-        # changed here, so kept as read).
-        self._other_frames = [im for im in loaded if im.id not in served_ids and im.sequence is not None]
-        self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
         taken = {(im.sequence, im.frame): im.id for im in loaded if im.sequence is not None}
-        #: The served images the file did not have when it was read.
-        self.new_ids = {p.stem for p in self._paths} - set(by_id)
-        self.images: list[ImageState] = []
+        images: list[ImageState] = []
         for index, path in enumerate(self._paths):
             image_id = path.stem
-            size = _image_size(path)
+            size = image_size(path)
             known = by_id.get(image_id)
             if known is not None:
                 camera = Camera(K=known.camera.K, distortion=known.camera.distortion,
@@ -413,9 +436,20 @@ class Session:
                     raise ApiError(f"--sequence {sequence}: {path.name} would be frame {frame}, which is image "
                                    f"{taken[(sequence, frame)]!r}'s in {self.out} already (the file's images keep "
                                    "their frames): give the sequence another name, or files numbered as the file's")
-            self.images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles,
-                                          sequence=sequence, frame=frame))
-        self._restore_extras()
+            images.append(ImageState(index, image_id, path, file, camera, block, ground, vehicles,
+                                     sequence=sequence, frame=frame))
+        other_extras = self._restore_extras(images, extras_doc)
+        # Read: now the session's state.
+        self._disk_digest, self._extras_digest = _digest(data), _digest(extras)
+        self._others = [image_json(im) for im in loaded if im.id not in served_ids]
+        # The file's frames that are not served: their tracked vehicles are fitted with the served frames' (never
+        # changed here, so kept as read).
+        self._other_frames = [im for im in loaded if im.id not in served_ids and im.sequence is not None]
+        self._order = [im.id for im in loaded] + [i for i in (p.stem for p in self._paths) if i not in by_id]
+        #: The served images the file did not have when it was read.
+        self.new_ids = served_ids - set(by_id)
+        self.images = images
+        self._other_extras = other_extras
 
     @property
     def order(self) -> list[int]:
@@ -522,23 +556,45 @@ class Session:
                 images.append(others[image_id])
         return {"toosicubix": 1, "images": images}
 
-    def _save(self) -> None:
-        """Write the file atomically, unless someone else changed it since we read or wrote it (Conflict)."""
-        text = json.dumps(self.document(), indent=1, allow_nan=False) + "\n"
+    @contextlib.contextmanager
+    def _file_lock(self, exclusive: bool = True) -> Iterator[None]:
+        """The lock file beside the annotation file (``.<name>.lock``), held exclusively to write the annotation
+        file and its extras file, shared to read them (every session on the file takes it)."""
         lock_path = self.out.with_name(f".{self.out.name}.lock")
         with open(lock_path, "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+            fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
             try:
-                now = _digest(_read_bytes(self.out))
-                if now != self._disk_digest:
-                    raise Conflict(f"{self.out} was changed on disk by another program since this session read "
-                                   "or wrote it; the change was not saved. Reload (POST /api/reload) to continue "
-                                   "from the file as it is now.")
-                atomic_write_text(self.out, text)
-                self._disk_digest = _digest(text.encode("utf-8"))
-                self._save_extras()
+                yield
             finally:
                 fcntl.flock(lock, fcntl.LOCK_UN)
+
+    def _save(self) -> None:
+        """Write the annotation file and its extras file atomically, unless someone else changed either since this
+        session read or wrote them (Conflict: nothing is written).
+
+        Both are checked by content hash under the lock file (:meth:`_file_lock`) before either is written: a
+        second ``annotate`` on the file writes them under the same lock, so what it wrote is never overwritten."""
+        text = json.dumps(self.document(), indent=1, allow_nan=False) + "\n"
+        extras = self._extras_document()
+        extras_text = None if extras is None else json.dumps(extras, indent=1, allow_nan=False) + "\n"
+        try:
+            with self._file_lock():
+                for path, digest in ((self.out, self._disk_digest), (self.extras_path, self._extras_digest)):
+                    if _digest(_read_bytes(path)) != digest:
+                        raise Conflict(f"{path} was changed on disk by another program (a second annotate page on "
+                                       "this file, an editor) since this session read or wrote it; the change was "
+                                       "not saved. Reload (the page's reload button, or POST /api/reload) to "
+                                       "continue from the files as they are now.")
+                atomic_write_text(self.out, text)
+                self._disk_digest = _digest(text.encode("utf-8"))
+                if extras_text is not None:
+                    atomic_write_text(self.extras_path, extras_text)
+                else:
+                    self.extras_path.unlink(missing_ok=True)
+                self._extras_digest = None if extras_text is None else _digest(extras_text.encode("utf-8"))
+        except OSError as exc:
+            raise ApiError(f"cannot write {exc.filename or self.out}: {exc.strerror or exc}; the change was not "
+                           "saved", HTTPStatus.SERVICE_UNAVAILABLE) from None
 
     @property
     def extras_path(self) -> Path:
@@ -546,47 +602,99 @@ class Session:
         tracks whose prediction was dismissed on a frame."""
         return self.out.with_name(f"{self.out.name}.annotate.json")
 
-    def _save_extras(self) -> None:
-        images = {}
+    def _extras_document(self) -> dict[str, Any] | None:
+        """The extras file of the current state (the served images', and the other images' entries as read), or
+        None when there is nothing in it."""
+        images = dict(self._other_extras["images"])
         for im in self.images:
             vehicles = {v.id: {"done": v.done, "unnamed": [p.uv[0] for p in v.parts if not p.named]}
                         for v in im.vehicles if v.done or any(not p.named for p in v.parts)}
             if vehicles:
                 images[im.id] = vehicles
-        dismissed = {im.id: list(im.dismissed) for im in self.images if im.dismissed}
-        if images or dismissed:
-            extras: dict[str, Any] = {"toosicubix_annotate": 1, "images": images}
-            if dismissed:
-                extras["dismissed"] = dismissed
-            atomic_write_json(self.extras_path, extras)
-        else:
-            self.extras_path.unlink(missing_ok=True)
+        dismissed = {**self._other_extras["dismissed"],
+                     **{im.id: list(im.dismissed) for im in self.images if im.dismissed}}
+        if not images and not dismissed:
+            return None
+        extras: dict[str, Any] = {"toosicubix_annotate": 1, "images": images}
+        if dismissed:
+            extras["dismissed"] = dismissed
+        return extras
 
-    def _restore_extras(self) -> None:
-        """Unnamed clicks (appended to their vehicle) and done marks of vehicles that still exist."""
-        if not self.extras_path.exists():
-            return
-        data = read_json(self.extras_path, at_root=True)
+    def _restore_extras(self, images: list[ImageState], data: Any) -> dict[str, dict[str, Any]]:
+        """Put the extras file's unnamed clicks (appended to their vehicle) and done marks of vehicles that still
+        exist, and its dismissed tracks, on ``images``. The entries of images not served, kept as read (written
+        back with the served ones')."""
+        others: dict[str, dict[str, Any]] = {"images": {}, "dismissed": {}}
+        if data is None:
+            return others
         if not isinstance(data, dict) or data.get("toosicubix_annotate") != 1:
             raise InputFileError(self.extras_path, [("$.toosicubix_annotate", "expected 1 (an annotate session file)")])
         try:
-            by_id = {im.id: im for im in self.images}
+            by_id = {im.id: im for im in images}
             for image_id, vehicles in data["images"].items():
+                # Checked as an edit's clicks are (the entries of images not served are written back as read).
+                entries = {vehicle_id: {"done": bool(extra["done"]),
+                                        "unnamed": [checked_pixels([uv], 1, "uv")[0] for uv in extra["unnamed"]]}
+                           for vehicle_id, extra in vehicles.items()}
+                if image_id not in by_id:
+                    others["images"][image_id] = entries
                 for v in by_id[image_id].vehicles if image_id in by_id else []:
-                    extra = vehicles.get(v.id)
+                    extra = entries.get(v.id)
                     if extra is not None:
-                        v.done = bool(extra["done"])
-                        v.parts.extend(ClickedPart(None, None, checked_pixels([uv], 1, "uv"))
-                                       for uv in extra["unnamed"])
+                        v.done = extra["done"]
+                        v.parts.extend(ClickedPart(None, None, [uv]) for uv in extra["unnamed"])
             for image_id, tracks in data.get("dismissed", {}).items():
+                if not isinstance(tracks, list) or not all(isinstance(t, str) for t in tracks):
+                    raise TypeError("dismissed tracks that are not a list of strings")
                 if image_id in by_id:
-                    if not all(isinstance(t, str) for t in tracks):
-                        raise TypeError("a dismissed track that is not a string")
                     by_id[image_id].dismissed = list(tracks)
+                else:
+                    others["dismissed"][image_id] = tracks
         except (KeyError, TypeError, AttributeError, ApiError) as exc:
             raise InputFileError(self.extras_path, [("$", f"not a toosicubix annotate session file ({exc})")]) from None
+        return others
 
     # -- the model and the fit --------------------------------------------------------------------------------
+
+    def use_fitter(self, fitter: DeadlineWorker | None) -> None:
+        """Compute the fits in ``fitter`` from now on, each request's within :attr:`fit_seconds` (None: here)."""
+        with self._lock:
+            self._fitter = fitter
+
+    @contextlib.contextmanager
+    def _bounded(self, started: float) -> Iterator[None]:
+        """The fits computed in the block (:meth:`_compute`) must be done :attr:`fit_seconds` after ``started`` (a
+        :func:`time.monotonic`; the request's, taken before waiting for the lock). Called under the lock; a block
+        within another's keeps the outer deadline."""
+        outer = self._deadline
+        if outer is None:
+            self._deadline = started + self.fit_seconds
+        try:
+            yield
+        finally:
+            self._deadline = outer
+
+    def _compute(self, function: Callable[..., Any], *args: Any) -> Any:
+        """``function(*args)``: in the fitting process within the request's deadline (:meth:`_bounded`) when the
+        session has one, else here.
+
+        Raises
+        ------
+        OutOfFitTime
+            Not done by the deadline (the fitting process computing it was ended), or that process died.
+        """
+        if self._fitter is None:
+            return function(*args)
+        deadline = self._deadline if self._deadline is not None else time.monotonic() + self.fit_seconds
+        try:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise OutOfTime("no time left for it")
+            return self._fitter.call(function, args, remaining)
+        except (OutOfTime, WorkerDied) as exc:
+            raise OutOfFitTime(f"the fits of this request did not finish within {self.fit_seconds:g} s ({exc}); "
+                               "nothing was changed. A vehicle with fewer clicks, or on a frame with fewer tracked "
+                               "frames near it, fits faster") from None
 
     def _model_vehicle(self, image: ImageState, j: int, v: VehicleState) -> Vehicle:
         """The vehicle with its named clicks, as :mod:`toosicubix.model` has it."""
@@ -605,10 +713,10 @@ class Session:
                           sorted(v.known_dimensions.items())])
         cached = self._fits.get(key)
         if cached is None:
-            cached = self._cache(key, {"result": fit_one(vehicle, image.camera, self.priors[v.prototype],
-                                                         self.options, self._ground_of(image),
-                                                         next_clicks=NEXT_CLICKS,
-                                                         keypoints=self._keypoints(v.prototype))})
+            cached = self._cache(key, {"result": self._compute(_fit_one, vehicle, image.camera,
+                                                               self.priors[v.prototype], self.options,
+                                                               self._ground_of(image),
+                                                               self._keypoints(v.prototype))})
         return cached["result"]
 
     def _cache(self, key: str, entry: dict[str, Any]) -> dict[str, Any]:
@@ -666,11 +774,10 @@ class Session:
         key = json.dumps(["track", track, image.index, [[im.id, im.frame, _vehicle_key(v)] for im, v in pairs]])
         cached = self._fits.get(key)
         if cached is None:
-            prior = self.priors[vehicle.prototype]
             started = time.perf_counter()
-            result = results_of_track(track, pairs, prior, self.options, self.track_options)[-1]
-            result = with_next_clicks(vehicle, image.camera, prior, result, self.options, self._ground_of(image),
-                                      NEXT_CLICKS, self._keypoints(vehicle.prototype))
+            result = self._compute(_track_result, track, pairs, self.priors[vehicle.prototype], self.options,
+                                   self.track_options, image.camera, self._ground_of(image),
+                                   self._keypoints(vehicle.prototype))
             cached = self._cache(key, {"result": result, "frames": sorted(im.frame for im, _ in pairs),
                                        "seconds": time.perf_counter() - started})
         return cached
@@ -754,7 +861,7 @@ class Session:
                 if result.sigma is not None:
                     sd = np.fmin(np.nan_to_num(np.asarray(result.sigma.dimensions, dtype=float), nan=np.inf), sd)
                 dims = (np.asarray(result.dimensions, dtype=float), np.diag(sd**2))
-            proposal = propose(image.camera, prior, named, np.asarray(part.uv[0], dtype=float),
+            proposal = self._compute(propose, image.camera, prior, named, np.asarray(part.uv[0], dtype=float),
                                None if v.box2d is None else np.asarray(v.box2d, dtype=float), self._ground_of(image),
                                self.options.click_sigma, self.naming, dims)
             cached = self._cache(key, {"proposal": proposal})
@@ -785,10 +892,16 @@ class Session:
                 "thresholds": self.thresholds.to_json(),
             }
 
-    def image_view(self, index: int) -> dict[str, Any]:
+    def image_view(self, index: int, strict: bool = False) -> dict[str, Any]:
         """One image: its vehicles, each with its clicks, fit, cuboid, sigmas and targets; on a frame of a sequence
-        also the predictions of the tracks carried to it and how each track's pose here is determined."""
-        with self._lock:
+        also the predictions of the tracks carried to it and how each track's pose here is determined.
+
+        The fits it computes are bounded (:meth:`_bounded`): one not done in time shows as not fitted (status
+        'failed', error 'out_of_time') and is tried again on the next view; ``strict``: raises
+        :class:`OutOfFitTime` instead (an edit's view)."""
+        started = time.monotonic()
+        with self._lock, self._bounded(started):
+            self._strict = strict
             image = self.image(index)
             view: dict[str, Any] = {"revision": self.revision, "index": index, "id": image.id,
                                     "size": list(image.camera.image_size), "sequence": image.sequence,
@@ -809,16 +922,28 @@ class Session:
             view["tracks"] = sorted(states, key=lambda s: track_sort_key(s["track"]))
             return view
 
+    def _out_of_time(self, exc: OutOfFitTime) -> dict[str, Any]:
+        """A fit not done in time, as the view shows it; raised again in an edit's view."""
+        if self._strict:
+            raise exc
+        return {"status": "failed", "error": "out_of_time", "error_detail": str(exc)}
+
     def _vehicle_view(self, image: ImageState, j: int, v: VehicleState,
                       tracks: dict[str, dict[int, _TrackedOn]] | None = None) -> dict[str, Any]:
         tracked = v.track is not None and image.sequence is not None
-        entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
-        result = entry["result"] if entry is not None else self._fit(image, j, v)
-        for part in v.parts:  # a click read back unnamed from the extras file: the names it may have
-            if not part.named and part.choices is None:
-                part.choices = self._choices(image, j, v, part)[0][:CHOICES] or None
         parts = [{"index": k, "kind": p.kind, "name": p.name, "uv": p.uv, "auto": p.auto, "residuals_px": None,
                   "choices": p.choices} for k, p in enumerate(v.parts)]
+        base = {"id": v.id, "prototype": v.prototype, "track": v.track, "box2d": v.box2d, "done": v.done,
+                "parts": parts, "unnamed": sum(not p.named for p in v.parts), "targets": []}
+        try:
+            entry = self._track_fit(image, v.track, self._model_vehicle(image, j, v), tracks) if tracked else None
+            result = entry["result"] if entry is not None else self._fit(image, j, v)
+            for view_part, part in zip(parts, v.parts, strict=True):
+                if not part.named and part.choices is None:  # a click read back unnamed from the extras file
+                    part.choices = self._choices(image, j, v, part)[0][:CHOICES] or None
+                    view_part["choices"] = part.choices
+        except OutOfFitTime as exc:
+            return {**base, "fit": self._out_of_time(exc)}
         fit = self._fit_view(image, result)
         if result.ok and len(result.residuals_px) == sum(len(p.uv) for p in v.parts if p.named):
             # (a track's frame whose clicks it left out has none)
@@ -831,22 +956,25 @@ class Session:
         if entry is not None:
             fit.update({"pose_from": result.pose_from, "track_frames": entry["frames"]})
         targets = [s for s in (result.next_clicks or []) if s["visible"] and s["inside_image"]][:TARGETS]
-        return {"id": v.id, "prototype": v.prototype, "track": v.track, "box2d": v.box2d, "done": v.done,
-                "parts": parts, "unnamed": sum(not p.named for p in v.parts), "fit": fit, "targets": targets}
+        return {**base, "fit": fit, "targets": targets}
 
     def _prediction_view(self, image: ImageState, track: str, tracks: dict[str, dict[int, _TrackedOn]]
                          ) -> dict[str, Any]:
         """A track carried to ``image``: its pose here from its other frames (interpolated between them, or held
         beyond its ends), the cuboid and sigmas, and the frames it comes from."""
-        entry = self._track_fit(image, track, None, tracks)
-        result = entry["result"]
         own = [f for f in tracks[track] if f != image.frame]
         before = max((f for f in own if f < image.frame), default=None)
         after = min((f for f in own if f > image.frame), default=None)
-        return {"track": track, "prototype": result.prototype,
+        view = {"track": track, "prototype": next(iter(tracks[track].values())).vehicle.prototype,
                 "source": "interpolated" if before is not None and after is not None else "held",
-                "from_frames": [before, after], "fit": {**self._fit_view(image, result), "pose_from": "predicted",
-                                                        "track_frames": entry["frames"]}}
+                "from_frames": [before, after]}
+        try:
+            entry = self._track_fit(image, track, None, tracks)
+        except OutOfFitTime as exc:
+            return {**view, "fit": {**self._out_of_time(exc), "pose_from": "predicted"}}
+        result = entry["result"]
+        return {**view, "prototype": result.prototype,
+                "fit": {**self._fit_view(image, result), "pose_from": "predicted", "track_frames": entry["frames"]}}
 
     def _fit_view(self, image: ImageState, result: VehicleResult) -> dict[str, Any]:
         """A fit as the page draws it: the cuboid's corners in pixels, the pose, size and sigmas, the verdict."""
@@ -906,24 +1034,27 @@ class Session:
         Conflict
             ``revision`` is not the current one, or the file changed on disk (409); nothing changed.
         """
+        started = time.monotonic()
         if not isinstance(request, dict):
             raise ApiError("expected a JSON object {\"revision\": ..., \"op\": ...}")
-        with self._lock:
+        with self._lock, self._bounded(started):
             image = self.image(index)
             revision = request.get("revision")
             if not isinstance(revision, int) or isinstance(revision, bool):
-                raise ApiError(f"revision: expected the integer revision the page last saw, got {revision!r}")
+                raise ApiError(f"revision: expected the integer revision the page last saw, got {shown(revision)}")
             if revision != self.revision:
                 raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision} "
                                "(another page changed them); nothing was changed, reload and apply it again")
             op = request.get("op")
             handler = _OPS.get(op) if isinstance(op, str) else None
             if handler is None:
-                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {op!r}")
+                raise ApiError(f"op: expected one of {', '.join(sorted(_OPS))}, got {shown(op)}")
             before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
                 auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
+                # Every fit the answer shows, before anything is written: one not done in time refuses the change.
+                view = self.image_view(index, strict=True)
                 self._save()
             except BaseException:
                 image.restore(before)
@@ -935,7 +1066,7 @@ class Session:
                 del image.undo[:-UNDO_DEPTH]
             self.revision += 1
             self.estimate_again_if_grown()
-            return {**self.image_view(index), "op": op, **outcome, "auto_named": auto}
+            return {**view, "revision": self.revision, "op": op, **outcome, "auto_named": auto}
 
     def save(self, request: Any) -> dict[str, Any]:
         """Write the file now (it is written after every change anyway)."""
@@ -949,11 +1080,12 @@ class Session:
     def preview(self, body: Any) -> dict[str, Any]:
         """``POST /api/fit``: the view of a vehicle given in the request, ``{"image": index, "vehicle": {...}}``
         (a vehicle of the annotation file v1), fitted on that image's camera; nothing is stored."""
+        started = time.monotonic()
         if not isinstance(body, dict) or set(body) != {"image", "vehicle"}:
             raise ApiError('expected {"image": index, "vehicle": {...a vehicle of the annotation file v1...}}')
         index = body["image"]
         if not isinstance(index, int) or isinstance(index, bool):
-            raise ApiError(f"image: expected an index, got {index!r}")
+            raise ApiError(f"image: expected an index, got {shown(index)}")
         doc = {"toosicubix": 1, "images": [{"id": "request", "camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
                                             "vehicles": [body["vehicle"]]}]}
         try:
@@ -963,10 +1095,18 @@ class Session:
             raise ApiError("; ".join(f"{'vehicle' + p.removeprefix(prefix)}: {m}" for p, m in exc.problems)) from None
         self._check_prototype(v.prototype)
         parts = [part_from_schema(p, "") for p in v.parts]
+        image = self.image(index)
+        size = image.camera.image_size
+        for k, part in enumerate(parts):  # on the image, as an edit's clicks
+            for name, xy in zip(vocabulary.KINDS[part.kind].clicks, part.uv, strict=True):
+                check_on_image((float(xy[0]), float(xy[1])), size, f"vehicle.parts[{k}].{name}")
+        if v.box2d is not None:
+            checked_box2d(list(v.box2d), size)
         state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
                              parts=[ClickedPart.of(p) for p in parts])
-        with self._lock:
-            return {"revision": self.revision, **self._vehicle_view(self.image(index), 0, state)}
+        with self._lock, self._bounded(started):
+            self._strict = True
+            return {"revision": self.revision, **self._vehicle_view(image, 0, state)}
 
     def reload(self) -> dict[str, Any]:
         """Read the file again (after another program changed it); undo history is dropped."""
@@ -985,13 +1125,13 @@ class Session:
             prototype = self._check_carried(image, track)
             if r.get("prototype", prototype) != prototype:
                 raise ApiError(f"prototype: track {track!r} is a {prototype} (one prototype per track), got "
-                               f"{r['prototype']!r:.60}")
+                               f"{shown(r['prototype'])}")
         else:
             prototype = r.get("prototype", self.prototype)
             self._check_prototype(prototype)
             if image.sequence is not None:
                 track = new_track_name(image.sequence, self._all_tracks())
-        box = checked_box2d(r.get("box2d"))
+        box = checked_box2d(r.get("box2d"), image.camera.image_size)
         vehicle_id = self._new_vehicle_id(image)
         image.vehicles.append(VehicleState(vehicle_id, prototype, box, track=track))
         if track in image.dismissed:
@@ -1000,8 +1140,22 @@ class Session:
 
     @staticmethod
     def _new_vehicle_id(image: ImageState) -> str:
-        used = {int(v.id) for v in image.vehicles if v.id.isdigit()}
-        return str(max(used, default=0) + 1)
+        """One more than the largest id of ASCII digits on the image (ids of other characters, e.g. '²', which
+        ``int`` refuses though ``str.isdigit`` passes them, or '007', are left alone), never one it has.
+
+        Raises
+        ------
+        ApiError
+            The image has :data:`MAX_VEHICLES_PER_IMAGE` vehicles already.
+        """
+        if len(image.vehicles) >= MAX_VEHICLES_PER_IMAGE:
+            raise ApiError(f"image {image.id} has {len(image.vehicles)} vehicles, as many as the page adds to one "
+                           f"image (MAX_VEHICLES_PER_IMAGE)")
+        taken = {v.id for v in image.vehicles}
+        k = max((int(v.id) for v in image.vehicles if _VEHICLE_NUMBER.match(v.id)), default=0) + 1
+        while str(k) in taken:
+            k += 1
+        return str(k)
 
     def _op_set_vehicle(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1009,7 +1163,7 @@ class Session:
             prototype = self._check_carried(image, r["track"])
             if r.get("prototype", prototype) != prototype:
                 raise ApiError(f"prototype: track {r['track']!r} is a {prototype} (one prototype per track), got "
-                               f"{r['prototype']!r:.60}")
+                               f"{shown(r['prototype'])}")
             v.track = r["track"]
             self._set_prototype(v, prototype)
         elif "prototype" in r:
@@ -1022,10 +1176,10 @@ class Session:
                                    "the track has no other frame, or delete those")
             self._set_prototype(v, r["prototype"])
         if "box2d" in r:
-            v.box2d = checked_box2d(r["box2d"])
+            v.box2d = checked_box2d(r["box2d"], image.camera.image_size)
         if "done" in r:
             if not isinstance(r["done"], bool):
-                raise ApiError(f"done: expected true or false, got {r['done']!r}")
+                raise ApiError(f"done: expected true or false, got {shown(r['done'])}")
             v.done = r["done"]
 
     def _set_prototype(self, v: VehicleState, prototype: str) -> None:
@@ -1041,17 +1195,21 @@ class Session:
     def _op_add_click(self, image: ImageState, r: dict) -> dict[str, Any]:
         v = self._vehicle(image, r)
         kind, name = r.get("kind"), r.get("name")
+        size = image.camera.image_size
         if kind is None and name is None:
-            uv = checked_pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv", size)
+            self._check_room(v, 1)
             v.parts.append(ClickedPart(None, None, uv))
         elif kind == "keypoint" and (extra := self._keypoint_extra(v.prototype, name)) is not None:
-            uv = checked_pixels(r.get("uv"), 1, "uv")
+            uv = checked_pixels(r.get("uv"), 1, "uv", size)
+            self._check_room(v, 1)
             self._check_not_clicked(v, kind, name)
             v.parts.append(ClickedPart(kind, name, uv, extra=extra))
         else:
             self._check_page_made(kind, name)
             kind, name = checked_kind_name(kind, name)
-            uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv")
+            uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv", size)
+            self._check_room(v, len(uv))
             self._check_not_clicked(v, kind, name)
             known = None
             if vocabulary.KINDS[kind].known:
@@ -1064,8 +1222,8 @@ class Session:
         part = self._part(v, r)
         click = r.get("click", 0)
         if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
-            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {click!r}")
-        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv")[0]
+            raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {shown(click)}")
+        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv", image.camera.image_size)[0]
 
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1159,7 +1317,7 @@ class Session:
     def _op_restore_prediction(self, image: ImageState, r: dict) -> None:
         track = r.get("track")
         if track not in image.dismissed:
-            raise ApiError(f"track: {track!r:.60} is not dismissed on image {image.id} (dismissed: "
+            raise ApiError(f"track: {shown(track)} is not dismissed on image {image.id} (dismissed: "
                            f"{', '.join(image.dismissed) or 'none'})")
         image.dismissed.remove(track)
 
@@ -1173,7 +1331,7 @@ class Session:
 
     def _check_prototype(self, prototype: Any) -> None:
         if not isinstance(prototype, str) or prototype not in self.priors:
-            raise ApiError(f"prototype: unknown {prototype!r:.60}; known: {', '.join(sorted(self.priors))}")
+            raise ApiError(f"prototype: unknown {shown(prototype)}; known: {', '.join(sorted(self.priors))}")
 
     def _check_carried(self, image: ImageState, track: Any) -> str:
         """``track`` may get a vehicle on ``image`` (ApiError otherwise): a frame of a sequence, a track of that
@@ -1182,11 +1340,11 @@ class Session:
             raise ApiError(f"track: image {image.id} is not a frame of a sequence (start the page with --sequence, or "
                            "give the file's image a sequence and frame)")
         if not isinstance(track, str):
-            raise ApiError(f"track: expected the name of a track of sequence {image.sequence}, got {track!r:.60}")
+            raise ApiError(f"track: expected the name of a track of sequence {image.sequence}, got {shown(track)}")
         frames = self._tracks(image.sequence).get(track)
         if not frames:
             names = sorted(self._tracks(image.sequence), key=track_sort_key)
-            raise ApiError(f"track: no track {track!r:.60} in sequence {image.sequence} (its tracks: "
+            raise ApiError(f"track: no track {shown(track)} in sequence {image.sequence} (its tracks: "
                            f"{', '.join(names) or 'none yet'})")
         if image.frame in frames:
             here = next(v.id for v in image.vehicles if v.track == track)
@@ -1200,14 +1358,14 @@ class Session:
         for v in image.vehicles:
             if v.id == vehicle_id:
                 return v
-        raise ApiError(f"vehicle: no vehicle {vehicle_id!r} on image {image.id} "
+        raise ApiError(f"vehicle: no vehicle {shown(vehicle_id)} on image {image.id} "
                        f"(it has {', '.join(v.id for v in image.vehicles) or 'none'})")
 
     @staticmethod
     def _part(v: VehicleState, r: dict) -> ClickedPart:
         k = r.get("part")
         if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < len(v.parts):
-            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {k!r}")
+            raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {shown(k)}")
         return v.parts[k]
 
     def _check_page_made(self, kind: Any, name: Any) -> None:
@@ -1221,8 +1379,18 @@ class Session:
         if self.mapping is None:
             raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
                            "keypoint mapping: start the page with --mapping (e.g. apollocar3d-66) to click keypoints")
-        raise ApiError(f"name: {kind} {name!r} is not a keypoint of the mapping {self.mapping.name} (its keypoints "
-                       f"are in the palette; plates are not made on the page)")
+        raise ApiError(f"name: {kind} {shown(name)} is not a keypoint of the mapping {self.mapping.name} (its "
+                       f"keypoints are in the palette; plates are not made on the page)")
+
+    @staticmethod
+    def _check_room(v: VehicleState, clicks: int) -> None:
+        """Room on ``v`` for ``clicks`` more clicked points, named or not: a file with more than the schema's
+        :data:`MAX_CLICKS_PER_VEHICLE` on a vehicle is one ``fit`` refuses (ApiError otherwise)."""
+        have = sum(len(p.uv) for p in v.parts)
+        if have + clicks > MAX_CLICKS_PER_VEHICLE:
+            raise ApiError(f"uv: vehicle {v.id} has {have} clicked points; a file may hold at most "
+                           f"{MAX_CLICKS_PER_VEHICLE} on one vehicle (MAX_CLICKS_PER_VEHICLE), so this click would "
+                           "make one that fit refuses")
 
     @staticmethod
     def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None) -> None:
@@ -1259,3 +1427,18 @@ def _vehicle_key(v: Vehicle) -> list[Any]:
             [[p.kind, p.name, p.uv.tolist(), p.known, None if p.at is None else p.at.tolist(),
               None if p.spread is None else p.spread.tolist(), p.visible] for p in v.parts],
             sorted(v.known_dimensions.items())]
+
+
+def _fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverOptions, ground: GroundPlane | None,
+             keypoints: dict[str, TypicalKeypoint] | None) -> VehicleResult:
+    """One vehicle fitted as ``fit`` fits it, with the page's suggestions (computed in the fitting process)."""
+    return fit_one(vehicle, camera, prior, options, ground, next_clicks=NEXT_CLICKS, keypoints=keypoints)
+
+
+def _track_result(track: str, pairs: list[tuple[Image, Vehicle]], prior: SizePrior, options: SolverOptions,
+                  track_options: TrackOptions, camera: Camera, ground: GroundPlane | None,
+                  keypoints: dict[str, TypicalKeypoint] | None) -> VehicleResult:
+    """The last of ``pairs`` (a frame and the track's vehicle there) fitted with the others as ``fit`` fits a track,
+    with the page's suggestions (computed in the fitting process)."""
+    result = results_of_track(track, pairs, prior, options, track_options)[-1]
+    return with_next_clicks(pairs[-1][1], camera, prior, result, options, ground, NEXT_CLICKS, keypoints)

@@ -168,6 +168,8 @@ async function edit(change, retryable = false) {
     }
     if (status === 409) await loadView();
     say(doc.error, true);
+    // Another program (a second page's server) changed the files: this page continues only from them, on request.
+    if (status === 409 && doc.error.includes("changed on disk")) $("reload").hidden = false;
     return null;
   }
   say("the annotations keep changing under this page; the click was not added", true);
@@ -469,7 +471,7 @@ function panels() {
     const named = v.parts.length - v.unnamed;
     const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml(f.error || "") : (waiting || "no click yet") + ". A fit needs about five named " +
+      "ones: " : "") + escapeHtml((f.error === "out_of_time" ? f.error_detail : f.error) || "") : (waiting || "no click yet") + ". A fit needs about five named " +
       "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
@@ -599,6 +601,16 @@ function fitToView() {
 
 const toScreen = ([u, v]) => [u * state.zoom + state.panX, v * state.zoom + state.panY];
 const toImage = (x, y) => [(x - state.panX) / state.zoom, (y - state.panY) / state.zoom];
+// Whether an image pixel lies on the image shown (not on the grey around it): only such clicks are sent.
+function onImage([u, v]) {
+  const [w, h] = state.session.images[state.index].size;
+  return u >= 0 && v >= 0 && u <= w && v <= h;
+}
+const clampToImage = ([u, v]) => {
+  const [w, h] = state.session.images[state.index].size;
+  return [Math.min(Math.max(u, 0), w), Math.min(Math.max(v, 0), h)];
+};
+const OFF_IMAGE = "that is outside the image: click on the image itself (zoom out with the wheel or 0 to see all of it)";
 
 function line(a, b, colour, width = 1.5, dash = []) {
   ctx.strokeStyle = colour;
@@ -809,7 +821,7 @@ canvas.addEventListener("mouseup", async (e) => {
   if (!d) return;
   if (d.kind === "box") {
     state.mode = "click";
-    const [u0, v0] = d.from, [u1, v1] = toImage(e.offsetX, e.offsetY);
+    const [u0, v0] = clampToImage(d.from), [u1, v1] = clampToImage(toImage(e.offsetX, e.offsetY));
     const box = [Math.min(u0, u1), Math.min(v0, v1), Math.max(u0, u1), Math.max(v0, v1)];
     if (box[2] - box[0] < 2 || box[3] - box[1] < 2) { say("box too small", true); render(); return; }
     if (state.prediction !== null) {  // the prediction's box: its track gets a vehicle with that box only
@@ -824,14 +836,19 @@ canvas.addEventListener("mouseup", async (e) => {
     }
   } else if (d.kind === "move") {
     state.selectedPart = d.part;
-    if (d.moved) {
-      await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click,
-        uv: toImage(e.offsetX, e.offsetY) });
+    const uv = toImage(e.offsetX, e.offsetY);
+    if (d.moved && !onImage(uv)) {
+      await loadView();  // the click back where it was
+      say(OFF_IMAGE, true);
+    } else if (d.moved) {
+      await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click, uv });
     } else {
       render();
     }
   } else if (d.kind === "click") {
-    await addClick(toImage(e.offsetX, e.offsetY));
+    const uv = toImage(e.offsetX, e.offsetY);
+    if (onImage(uv)) await addClick(uv);
+    else say(OFF_IMAGE, true);
   }
 });
 canvas.addEventListener("wheel", (e) => {
@@ -880,6 +897,19 @@ async function toggleDone() {
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
 }
 
+// Read the annotation file and its extras file again (after another program changed them); this page's undo
+// history is dropped.
+async function reloadFiles() {
+  const { status, doc } = await api("POST", "/api/reload", {});
+  if (status !== 200) { say(doc.error, true); return; }
+  $("reload").hidden = true;
+  state.session = doc;
+  state.revision = doc.revision;
+  await loadView();
+  say("reloaded from the files as they are now");
+}
+
+$("reload").onclick = reloadFiles;
 $("prev").onclick = () => step(-1);
 $("next").onclick = () => step(1);
 $("confirm").onclick = confirmPrediction;
