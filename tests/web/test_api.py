@@ -488,3 +488,19 @@ def test_swap_needs_named_clicks(served):
     vehicle = _add_vehicle(client)
     status, doc = client.edit({"op": "swap_sides", "vehicle": vehicle})
     assert status == 400 and doc["error"] == f"vehicle {vehicle} has no named click to swap"
+
+
+def test_road_users_are_drawn_in_their_class_s_colours_as_render_draws_them(served):
+    """Issue 35: each class in its own palette on the page too; a pedestrian or a cyclist takes its class's colour in
+    the order the class's objects come (as render does), a car none (the page draws it in its track's colour)."""
+    from toosicubix.vocabulary import CLASSES
+
+    client, _ = served
+    for prototype in ("Car", "Pedestrian", "Pedestrian", "Cyclist"):
+        status, doc = client.edit({"op": "add_vehicle", "prototype": prototype})
+        assert status == 200, doc
+    colours = [(v["prototype"], v["colour"]) for v in doc["vehicles"]]
+    assert colours == [("Car", None), ("Pedestrian", CLASSES["Pedestrian"].palette[0]),
+                       ("Pedestrian", CLASSES["Pedestrian"].palette[1]), ("Cyclist", CLASSES["Cyclist"].palette[0])]
+    status, view = client.request("GET", "/api/images/0")
+    assert status == 200 and [v["colour"] for v in view["vehicles"]] == [c for _, c in colours]

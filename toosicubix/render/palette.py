@@ -37,11 +37,12 @@ def _drawn_class(prototype: str | None) -> RoadUserClass | None:
     return class_of(prototype)
 
 
-def class_colours(prototypes: Sequence[str | None]) -> list[tuple[int, int, int] | None]:
-    """The colour of each object of an image (``prototypes`` in image order): its class's palette in the order the
-    class's objects come, or None for a vehicle of the cuboid vocabulary (drawn in the overlay's palette)."""
+def class_colours_hex(prototypes: Sequence[str | None]) -> list[str | None]:
+    """The colour of each object of an image (``prototypes`` in image order) as ``#rrggbb``: its class's palette in
+    the order the class's objects come, or None for a vehicle of the cuboid vocabulary (drawn in the overlay's
+    palette, or on the page in its track's colour)."""
     seen: dict[str, int] = {}
-    out: list[tuple[int, int, int] | None] = []
+    out: list[str | None] = []
     for prototype in prototypes:
         cls = _drawn_class(prototype)
         if cls is None:
@@ -49,6 +50,10 @@ def class_colours(prototypes: Sequence[str | None]) -> list[tuple[int, int, int]
             continue
         k = seen.get(cls.name, 0)
         seen[cls.name] = k + 1
-        palette = CLASS_PALETTES_BGR[cls.name]
-        out.append(palette[k % len(palette)])
+        out.append(cls.palette[k % len(cls.palette)])
     return out
+
+
+def class_colours(prototypes: Sequence[str | None]) -> list[tuple[int, int, int] | None]:
+    """As :func:`class_colours_hex`, BGR (what the overlay draws with)."""
+    return [None if colour is None else hex_to_bgr(colour) for colour in class_colours_hex(prototypes)]

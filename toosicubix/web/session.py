@@ -82,6 +82,7 @@ from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
 from toosicubix.pipeline.tracks import results_of_track
 from toosicubix.pipeline.validation import Thresholds, judge
 from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
+from toosicubix.render.palette import class_colours_hex
 from toosicubix.size_priors import Priors, SizePrior
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.track import TrackOptions
@@ -907,10 +908,11 @@ class Session:
                                     "size": list(image.camera.image_size), "sequence": image.sequence,
                                     "frame": image.frame}
             if image.sequence is None:
-                view["vehicles"] = [self._vehicle_view(image, j, v) for j, v in enumerate(image.vehicles)]
+                view["vehicles"] = _coloured([self._vehicle_view(image, j, v) for j, v in enumerate(image.vehicles)])
                 return {**view, "predictions": [], "dismissed": [], "tracks": []}
             tracks = self._tracks(image.sequence)
-            view["vehicles"] = [self._vehicle_view(image, j, v, tracks) for j, v in enumerate(image.vehicles)]
+            view["vehicles"] = _coloured([self._vehicle_view(image, j, v, tracks)
+                                          for j, v in enumerate(image.vehicles)])
             carried = self._carried(image, tracks)
             view["predictions"] = [self._prediction_view(image, t, tracks) for t in carried
                                    if t not in image.dismissed]
@@ -1442,3 +1444,13 @@ def _track_result(track: str, pairs: list[tuple[Image, Vehicle]], prior: SizePri
     with the page's suggestions (computed in the fitting process)."""
     result = results_of_track(track, pairs, prior, options, track_options)[-1]
     return with_next_clicks(pairs[-1][1], camera, prior, result, options, ground, NEXT_CLICKS, keypoints)
+
+
+def _coloured(vehicles: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """An image's vehicle views, each with the ``colour`` its cuboid is drawn in: a road user of a class with a palette
+    of its own (a pedestrian, a cyclist, ...) its class's, as ``render`` draws it (:mod:`toosicubix.render.palette`);
+    None for a vehicle of the cuboid vocabulary (the page draws it in its track's colour)."""
+    for vehicle, colour in zip(vehicles, class_colours_hex([v["prototype"] for v in vehicles]), strict=True):
+        vehicle["colour"] = colour
+    return vehicles
+

@@ -28,6 +28,11 @@ const state = {
 // A track's colour: its number's (a name "<sequence>-<k>"), else its name's hash. No red (the front face), magenta
 // (residuals), yellow (targets) or orange (unnamed clicks).
 const TRACK_COLOURS = ["#38d9ff", "#69f0ae", "#b388ff", "#ff80ab", "#8c9eff", "#a7ffeb", "#c6ff00", "#80d8ff"];
+// A vehicle's cuboid colour: a road user of a class with a palette of its own (a pedestrian, a cyclist, ...) in its
+// class's colour, as the server gives it (the colours render draws it in), else its track's.
+function vehicleColour(v) {
+  return v.colour || trackColour(v.track);
+}
 function trackColour(track) {
   if (!track) return "#38d9ff";
   const m = /(\d+)$/.exec(track);
@@ -160,6 +165,10 @@ async function edit(change, retryable = false) {
     if (status === 200) {
       applyView(doc);
       return doc;
+    }
+    if (status === 422 && attempt < 2) {  // its refit ran out of time (a busy machine): nothing was written, send again
+      say("the fit is taking longer than usual: trying again");
+      continue;
     }
     if (status === 409 && retryable && doc.error.startsWith("stale revision")) {
       await loadView();  // another page changed the file: take its state, then add this click again
@@ -413,7 +422,7 @@ function panels() {
   list.textContent = "";
   for (const v of state.view ? state.view.vehicles : []) {
     const li = document.createElement("li");
-    const swatch = `<span class="swatch" style="border-color:${trackColour(v.track)}"></span>`;
+    const swatch = `<span class="swatch" style="border-color:${vehicleColour(v)}"></span>`;
     const track = v.track ? ` · ${swatch}${escapeHtml(v.track)}` +
       (v.fit.pose_from ? ` (${v.fit.pose_from})` : "") : "";
     li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${v.parts.length} clicks` +
@@ -697,10 +706,10 @@ function drawVehicle(v, selected) {
   }
   if (f.status === "ok" && f.corners_uv) {
     const c = f.corners_uv;
-    drawCuboid(f, "rgba(255, 80, 80, 0.25)", "#ff5050", trackColour(v.track), (front) => (front ? 2.5 : 1.5), []);
+    drawCuboid(f, "rgba(255, 80, 80, 0.25)", "#ff5050", vehicleColour(v), (front) => (front ? 2.5 : 1.5), []);
     state.drawn.push({ track: v.track, vehicle: v.id, style: "solid" });
     if (v.track) {
-      label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), trackColour(v.track), selected);
+      label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), vehicleColour(v), selected);
     }
   }
   if (selected) {
