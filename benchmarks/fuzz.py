@@ -80,19 +80,20 @@ TEXT_NOISE = (b"\xff", b"\xfe\xff", b"\xef\xbb\xbf", b"\x00", b"\xc3", b"\"", b"
 
 # --- mutations ------------------------------------------------------------------------------------------
 
-def _nodes(doc: Any, path: tuple = ()) -> list[tuple[tuple, Any]]:
+def nodes(doc: Any, path: tuple = ()) -> list[tuple[tuple, Any]]:
     """Every (path, node) of a JSON document, the root included."""
     out = [(path, doc)]
     if isinstance(doc, dict):
         for k, v in doc.items():
-            out += _nodes(v, (*path, k))
+            out += nodes(v, (*path, k))
     elif isinstance(doc, list):
         for i, v in enumerate(doc):
-            out += _nodes(v, (*path, i))
+            out += nodes(v, (*path, i))
     return out
 
 
-def _set(doc: Any, path: tuple, value: Any) -> Any:
+def set_at(doc: Any, path: tuple, value: Any) -> Any:
+    """``doc`` with the node at ``path`` replaced by ``value`` (the new root when ``path`` is empty)."""
     if not path:
         return value
     parent = doc
@@ -109,13 +110,13 @@ def _parent(doc: Any, path: tuple) -> Any:
 
 
 def mutate_structure(doc: Any, rng: random.Random) -> tuple[Any, str]:
-    nodes = _nodes(doc)
-    path, node = rng.choice(nodes)
+    every = nodes(doc)
+    path, node = rng.choice(every)
     kind = rng.choice(["drop", "replace", "duplicate", "unknown_key", "rename", "nest", "swap", "empty_list"])
     if kind == "drop" and path:
         del _parent(doc, path)[path[-1]]
     elif kind == "replace":
-        doc = _set(doc, path, copy.deepcopy(rng.choice([None, {}, [], "x", 0, True, [1, 2], {"a": 1}, "a" * 300])))
+        doc = set_at(doc, path, copy.deepcopy(rng.choice([None, {}, [], "x", 0, True, [1, 2], {"a": 1}, "a" * 300])))
     elif kind == "duplicate" and isinstance(node, list) and node:
         node.extend(copy.deepcopy(rng.choice(node)) for _ in range(rng.choice([1, 2, 10, 50])))
     elif kind == "unknown_key" and isinstance(node, dict):
@@ -128,18 +129,18 @@ def mutate_structure(doc: Any, rng: random.Random) -> tuple[Any, str]:
         value: Any = node
         for _ in range(depth):
             value = [value] if rng.random() < 0.5 else {"a": value}
-        doc = _set(doc, path, value)
+        doc = set_at(doc, path, value)
     elif kind == "swap":
-        other_path, other = rng.choice(nodes)
+        other_path, other = rng.choice(every)
         if path and other_path and path[: len(other_path)] != other_path and other_path[: len(path)] != path:
-            doc = _set(doc, path, copy.deepcopy(other))
+            doc = set_at(doc, path, copy.deepcopy(other))
     elif kind == "empty_list" and isinstance(node, list):
         node.clear()
     return doc, f"structure:{kind}"
 
 
 def mutate_numbers(doc: Any, rng: random.Random) -> tuple[Any, str]:
-    numbers = [(p, v) for p, v in _nodes(doc) if isinstance(v, int | float) and not isinstance(v, bool)]
+    numbers = [(p, v) for p, v in nodes(doc) if isinstance(v, int | float) and not isinstance(v, bool)]
     vehicles = [v for im in doc.get("images", []) if isinstance(im, dict)
                 for v in im.get("vehicles", []) if isinstance(v, dict)] if isinstance(doc, dict) else []
     kind = rng.choice(["extreme", "extreme", "perturb", "scale_clicks", "collinear", "clustered", "camera"])
@@ -160,7 +161,7 @@ def mutate_numbers(doc: Any, rng: random.Random) -> tuple[Any, str]:
             vehicle.pop("box2d", None)
         return doc, f"numeric:{kind}"
     if kind == "camera":
-        cameras = [n for p, n in _nodes(doc) if p and p[-1] in ("K", "P") and isinstance(n, list)]
+        cameras = [n for p, n in nodes(doc) if p and p[-1] in ("K", "P") and isinstance(n, list)]
         if cameras:
             camera = rng.choice(cameras)
             row = rng.randrange(len(camera))
@@ -174,7 +175,7 @@ def mutate_numbers(doc: Any, rng: random.Random) -> tuple[Any, str]:
         new = value * rng.choice([-1, 10, 1e6, 1e-6, 0.5]) + rng.choice([0, 0.5, -1])
     else:
         new = rng.choice(EXTREMES)
-    return _set(doc, path, new), f"numeric:{kind}"
+    return set_at(doc, path, new), f"numeric:{kind}"
 
 
 def mutate_text(data: bytes, rng: random.Random) -> tuple[bytes, str]:

@@ -41,6 +41,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from fuzz import nodes, set_at  # noqa: E402  (the generic mutations are fuzz.py's)
 
 SAMPLE = REPO / "samples" / "annotations.json"
 CVAT_VIDEO = REPO / "tests" / "formats" / "fixtures" / "cvat-video-1.1.xml"
@@ -89,28 +91,6 @@ class Target:
 
 
 # --- generic mutations ------------------------------------------------------------------------------------------
-
-def nodes(doc: Any, path: tuple = ()) -> list[tuple[tuple, Any]]:
-    """Every (path, node) of a JSON document, the root included."""
-    out = [(path, doc)]
-    if isinstance(doc, dict):
-        for k, v in doc.items():
-            out += nodes(v, (*path, k))
-    elif isinstance(doc, list):
-        for i, v in enumerate(doc):
-            out += nodes(v, (*path, i))
-    return out
-
-
-def set_at(doc: Any, path: tuple, value: Any) -> Any:
-    if not path:
-        return value
-    parent = doc
-    for key in path[:-1]:
-        parent = parent[key]
-    parent[path[-1]] = value
-    return doc
-
 
 def hostile_value(rng: random.Random) -> Any:
     return copy.deepcopy(rng.choice(HOSTILE))
@@ -607,8 +587,9 @@ ROTATIONS = {"reflection": [[-1, 0, 0], [0, 1, 0], [0, 0, 1]], "zero": [[0, 0, 0
              "nearly": [[1, 1e-5, 0], [0, 1, 0], [0, 0, 1]]}
 
 
-class ExportTarget(Target):
-    name = "export"
+class SampleFitTarget(Target):
+    """A target whose base input is the bundled sample's fit: :attr:`annotations` (the sample, copied), :attr:`fit`
+    (its output folder) and :attr:`results` (its results.json)."""
 
     def prepare(self, work: Path) -> None:
         super().prepare(work)
@@ -617,6 +598,10 @@ class ExportTarget(Target):
         self.fit = work / "sample_fit"
         fit_in_process(self.annotations, self.fit)
         self.results = json.loads((self.fit / "results.json").read_text())
+
+
+class ExportTarget(SampleFitTarget):
+    name = "export"
 
     def case(self, index: int, seed: int, folder: Path) -> tuple[str, list[Command]]:
         rng = self.rng(index, seed)
@@ -664,19 +649,14 @@ def png_declaring(width: int, height: int) -> bytes:
             + chunk(b"IDAT", zlib.compress(b"\x00" * 4096)) + chunk(b"IEND", b""))
 
 
-class RenderTarget(Target):
+class RenderTarget(SampleFitTarget):
     name = "render"
 
     def prepare(self, work: Path) -> None:
         super().prepare(work)
         import cv2
 
-        self.annotations = work / "sample.json"
-        shutil.copy(SAMPLE, self.annotations)
-        self.fit = work / "sample_fit"
-        fit_in_process(self.annotations, self.fit)
         self.sample = json.loads(SAMPLE.read_text())
-        self.results = json.loads((self.fit / "results.json").read_text())
         w, h = self.sample["images"][0]["size"]
         self.photo = cv2.imencode(".png", np.full((h, w, 3), 90, np.uint8))[1].tobytes()
         self.jpeg = cv2.imencode(".jpg", np.full((h, w, 3), 90, np.uint8))[1].tobytes()
