@@ -352,11 +352,15 @@ def main() -> None:
     parser.add_argument("--memory-parts", type=int, default=None,
                         help="keep only this many parts per vehicle in the peak-memory part (1: every vehicle "
                              "fails at once; the batch's own memory without the solver's time)")
+    parser.add_argument("--only", choices=["memory"], default=None,
+                        help="memory: the same as --parts memory (the earlier spelling)")
     parser.add_argument("--worker", choices=PARTS[:3], default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker is not None:
         _worker(args.worker, args)
         return
+    if args.only == "memory":
+        args.parts = "memory"
     args.parts = [p.strip() for p in args.parts.split(",")]
     if unknown := [p for p in args.parts if p not in PARTS]:
         sys.exit(f"unknown part(s) {', '.join(unknown)}; known: {', '.join(PARTS)}")
