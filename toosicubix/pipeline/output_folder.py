@@ -224,20 +224,32 @@ def sync_folder(folder: Path) -> None:
     OSError
         The write-back failed (a full or failing disk): the folder must not be swapped in.
     """
-    fd = os.open(folder, os.O_RDONLY)
     try:
-        if _syncfs(fd):
-            return
-    finally:
-        os.close(fd)
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # a folder cannot be opened everywhere (Windows): the files one by one
+        fd = None
+    if fd is not None:
+        try:
+            if _syncfs(fd):
+                return
+        finally:
+            os.close(fd)
     for root, _, files in os.walk(folder, topdown=False):
         for name in files:
-            file_fd = os.open(os.path.join(root, name), os.O_RDONLY)
-            try:
-                os.fsync(file_fd)
-            finally:
-                os.close(file_fd)
+            _fsync_file(os.path.join(root, name))
         _fsync_dir(Path(root))
+
+
+def _fsync_file(path: str) -> None:
+    """``fsync`` one file (opened for writing where that is allowed: Windows flushes only such a handle)."""
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except OSError:
+        fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _fsync_dir(folder: Path) -> None:
