@@ -1,22 +1,33 @@
-"""Speed and memory of ``toosicubix fit`` on simulated clicks over real KITTI tracking ground truth.
+"""Speed and memory of ``toosicubix fit``, interleaved with another checkout so that a ratio holds on a noisy machine.
 
-1. Per-vehicle fit time in one process: ``toosicubix.pipeline.vehicle.fit_one`` (parts model, solver, result) on
-   every vehicle of the accuracy benchmark's test split at 1 px click noise; median, p95 and mean, over
-   all vehicles and over those fitted (vehicles with too few clicks return at once).
-2. Throughput of the command line with ``--jobs 1`` and ``--jobs 2`` on the same annotation file of
-   ``--throughput-vehicles`` vehicles (wall time, process start included), and whether the outputs are
-   byte-identical.
-3. Peak memory (maximum resident set size) of ``toosicubix fit --jobs 1`` on 1,000 and 10,000 vehicles,
-   each run in a fresh process.
-4. Peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
-   1,000, 10,000 and 100,000): the main process and the largest worker, each run in a fresh process, on
-   annotation files made by replicating 1,000 simulated vehicles (images copied under new ids). Flat in
-   the number of vehicles is the target (issue 13: under 500 MB at 100,000).
+Parts (``--parts``, comma-separated; the first three by default):
 
-Run from the repository root (about four minutes on 2 cores for parts 1-3; part 4 fits every vehicle,
-about 40 minutes at 100,000):
+1. ``per-vehicle``: fit time per vehicle in one process, ``toosicubix.pipeline.vehicle.fit_one`` (parts model,
+   solver, result) on every vehicle of the accuracy benchmark's test split at 1 px click noise: median, p90, p95
+   and mean, over all vehicles and over those fitted (vehicles with too few clicks return at once).
+2. ``apollocar3d``: vehicles per second on ApolloCar3D's cars (``apollocar3d_val_dev.json``, 1,034 cars) with
+   ``--jobs 2``: the keypoints imported (``import coco --mapping apollocar3d-66``), then
+   ``toosicubix.pipeline.batch.fit_file`` with ``fit``'s defaults (the pilot estimates the click noise and the road
+   normals) and two processes, output written; timed from the import's start to the written folder.
+3. ``refit``: the annotation page's refit (``toosicubix.web.session.Session._fit``: ``fit_one`` with every
+   suggestion of what to click next, ``next_clicks=NEXT_CLICKS``) on the first ``--refit-vehicles`` vehicles of
+   part 1: median and p90.
+4. ``throughput``: the command line with ``--jobs 1`` and ``--jobs 2`` on ``--throughput-vehicles`` vehicles
+   (wall time, process start included), whether the outputs are byte-identical, and the peak memory of
+   ``--jobs 1`` on 1,000 and 10,000 vehicles.
+5. ``memory``: peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
+   1,000, 10,000 and 100,000; about 40 minutes at 100,000): the main process and the largest worker, each run in
+   a fresh process, on annotation files made by replicating 1,000 simulated vehicles (images copied under new ids).
 
-    python benchmarks/speed.py [--json benchmarks/results/speed.json] [--only memory]
+Parts 1-3 run in fresh worker processes (``--worker``), ``--rounds`` rounds each; with ``--against PATH`` (another
+checkout, e.g. ``git worktree add /tmp/base f35ec77``) every round runs this checkout and the other one in turn,
+alternating which goes first, with this file's code over either checkout's package: both see the same load, and
+the report gives each one's figures over all rounds and the ratio (other / this).
+
+Run from the repository root (parts 1-3, 3 rounds, against another checkout: about 12 minutes on 2 cores):
+
+    python benchmarks/speed.py [--against ../base] [--rounds 3] [--json benchmarks/results/speed.json]
+    python benchmarks/speed.py --parts memory --memory-vehicles 1000,100000
 """
 
 from __future__ import annotations
@@ -24,6 +35,7 @@ from __future__ import annotations
 import argparse
 import filecmp
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -33,19 +45,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SPLITS, default_data_dir, machine
-
-from toosicubix.annotations.priors_file import load_priors
-from toosicubix.model import Vehicle
-from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.simulate.annotator import (
-    AnnotatorOptions,
-    SelectionOptions,
-    select_kitti_tracking,
-    simulate,
-    write_simulation,
-)
-from toosicubix.solver.fit import SolverOptions
+from common import REPO, SPLITS, default_data_dir, machine
 
 _PEAK_MEMORY_CHILD = """
 import resource, sys
@@ -64,34 +64,172 @@ print(own, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 """
 
 
-def per_vehicle_times(data: Path) -> dict:
+def _kitti_tasks(data: Path) -> list[tuple]:
+    """``fit_one``'s arguments for the test split's vehicles at 1 px click noise."""
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.model import Vehicle
+    from toosicubix.simulate.annotator import AnnotatorOptions, SelectionOptions, select_kitti_tracking, simulate
+
     vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
     priors = load_priors()
+    return [(Vehicle(sv.source.vehicle_id, sv.source.label.type, sv.source.label.box2d, tuple(sv.parts), "$"),
+             sv.source.camera, priors[sv.source.label.type]) for sv in simulated]
+
+
+def per_vehicle_times(data: Path) -> dict:
+    """Part 1 in this process: seconds per vehicle of ``fit_one``, and whether each was fitted."""
+    from toosicubix.pipeline.vehicle import fit_one
+    from toosicubix.solver.fit import SolverOptions
+
+    tasks = _kitti_tasks(data)
     options = SolverOptions()
-    tasks = [(Vehicle(sv.source.vehicle_id, sv.source.label.type, sv.source.label.box2d, tuple(sv.parts), "$"),
-              sv.source.camera, priors[sv.source.label.type]) for sv in simulated]
     for task in tasks[:20]:  # warm-up: imports, caches
         fit_one(*task, options)
-    times, fitted = [], []
+    times, ok = [], []
     for task in tasks:
         start = time.perf_counter()
         result = fit_one(*task, options)
-        elapsed = time.perf_counter() - start
-        times.append(elapsed)
-        if result.ok:
-            fitted.append(elapsed)
+        times.append(time.perf_counter() - start)
+        ok.append(result.ok)
+    return {"seconds": times, "ok": ok}
 
-    def stats(values: list[float]) -> dict:
-        ms = np.array(values) * 1e3
-        return {"n": len(ms), "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
-                "mean_ms": float(ms.mean())}
 
-    return {"all": stats(times), "fitted": stats(fitted)}
+def refit_times(data: Path, n: int) -> dict:
+    """Part 3 in this process: seconds per refit as the page asks it (``fit_one`` with ``NEXT_CLICKS``
+    suggestions), on the first ``n`` vehicles of part 1."""
+    from toosicubix.pipeline.vehicle import fit_one
+    from toosicubix.solver.fit import SolverOptions
+    from toosicubix.web.session import NEXT_CLICKS
+
+    tasks = _kitti_tasks(data)[:n]
+    options = SolverOptions()
+    for task in tasks[:5]:  # warm-up
+        fit_one(*task, options, next_clicks=NEXT_CLICKS)
+    times = []
+    for task in tasks:
+        start = time.perf_counter()
+        fit_one(*task, options, next_clicks=NEXT_CLICKS)
+        times.append(time.perf_counter() - start)
+    return {"seconds": times}
+
+
+def apollocar3d_rate(data: Path, jobs: int) -> dict:
+    """Part 2 in this process: ApolloCar3D's keypoints imported and fitted with ``jobs`` processes, output
+    written; seconds from the import's start to the written folder."""
+    from toosicubix.annotations.mapping import load_mapping
+    from toosicubix.formats.cameras import load_cameras
+    from toosicubix.formats.coco import coco_to_annotations
+    from toosicubix.pipeline.batch import fit_file
+    from toosicubix.pipeline.settings import BatchSettings
+
+    folder = data / "apollocar3d"
+    settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_road_normal=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        document, _ = coco_to_annotations(folder / "apollocar3d_val_dev.json", load_mapping("apollocar3d-66")[0],
+                                          load_cameras(folder / "cameras.json"))
+        annotations = Path(tmp) / "annotations.json"
+        annotations.write_text(json.dumps(document))
+        imported = time.perf_counter()
+        summary = fit_file(annotations, Path(tmp) / "out", settings)
+        done = time.perf_counter()
+    return {"vehicles": summary.vehicles, "ok": summary.ok, "seconds": done - start, "import_seconds": imported - start}
+
+
+def _stats(seconds: list[float]) -> dict:
+    ms = np.array(seconds) * 1e3
+    return {"n": len(ms), "median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
+            "p95_ms": float(np.percentile(ms, 95)), "mean_ms": float(ms.mean())}
+
+
+def _run_worker(tree: Path, part: str, args: argparse.Namespace) -> dict:
+    """One part in a fresh process over ``tree``'s package (this file's code)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", part, "--data", str(args.data),
+               "--refit-vehicles", str(args.refit_vehicles), "--jobs", str(args.jobs)]
+    output = subprocess.run(command, env=env, capture_output=True, text=True, check=True).stdout
+    return json.loads(output.strip().splitlines()[-1])
+
+
+def _worker(part: str, args: argparse.Namespace) -> None:
+    import toosicubix
+
+    if part == "per-vehicle":
+        result = per_vehicle_times(args.data)
+    elif part == "refit":
+        result = refit_times(args.data, args.refit_vehicles)
+    else:
+        result = apollocar3d_rate(args.data, args.jobs)
+    result["package"] = str(Path(toosicubix.__file__).resolve().parents[1])
+    print(json.dumps(result))
+
+
+def interleaved(args: argparse.Namespace, report: dict) -> None:
+    """Parts 1-3, ``args.rounds`` rounds, this checkout and ``args.against`` in turn."""
+    trees = {"this": REPO} | ({"against": args.against.resolve()} if args.against else {})
+    report["trees"] = {name: str(tree) for name, tree in trees.items()}
+    for part in [p for p in ("per-vehicle", "apollocar3d", "refit") if p in args.parts]:
+        runs: dict[str, list[dict]] = {name: [] for name in trees}
+        for k in range(args.rounds):
+            order = list(trees) if k % 2 == 0 else list(trees)[::-1]
+            for name in order:
+                runs[name].append(_run_worker(trees[name], part, args))
+                if runs[name][-1]["package"] != str(trees[name]):
+                    sys.exit(f"the worker for {trees[name]} imported toosicubix from {runs[name][-1]['package']}")
+        out: dict = {}
+        for name, rs in runs.items():
+            if part == "apollocar3d":
+                rates = [r["vehicles"] / r["seconds"] for r in rs]
+                out[name] = {"vehicles": rs[0]["vehicles"], "ok": rs[0]["ok"], "jobs": args.jobs,
+                             "vehicles_per_second": float(np.median(rates)), "per_round": rates,
+                             "import_seconds": [r["import_seconds"] for r in rs]}
+            elif part == "per-vehicle":
+                pooled = [t for r in rs for t in r["seconds"]]
+                fitted = [t for r in rs for t, ok in zip(r["seconds"], r["ok"], strict=True) if ok]
+                out[name] = {"all": _stats(pooled), "fitted": _stats(fitted),
+                             "per_round_median_ms": [_stats(r["seconds"])["median_ms"] for r in rs]}
+            else:
+                out[name] = {**_stats([t for r in rs for t in r["seconds"]]),
+                             "per_round_median_ms": [_stats(r["seconds"])["median_ms"] for r in rs]}
+        if "against" in out:
+            if part == "apollocar3d":
+                out["ratio"] = out["this"]["vehicles_per_second"] / out["against"]["vehicles_per_second"]
+                out["ratio_per_round"] = [a / b for a, b in zip(out["this"]["per_round"], out["against"]["per_round"],
+                                                                 strict=True)]
+            else:
+                key = out["this"]["all"] if part == "per-vehicle" else out["this"]
+                other = out["against"]["all"] if part == "per-vehicle" else out["against"]
+                out["ratio"] = {"median": other["median_ms"] / key["median_ms"], "p90": other["p90_ms"] / key["p90_ms"]}
+                out["ratio_per_round"] = [a / b for a, b in zip(out["against"]["per_round_median_ms"],
+                                                                 out["this"]["per_round_median_ms"], strict=True)]
+        report[part] = out
+        for name in trees:
+            o = out[name]
+            if part == "apollocar3d":
+                line = (f"{o['vehicles_per_second']:.0f} vehicles/s with --jobs {o['jobs']} ({o['vehicles']} cars, "
+                        f"{o['ok']} fitted; rounds {', '.join(f'{v:.0f}' for v in o['per_round'])})")
+            else:
+                o = o["all"] if part == "per-vehicle" else o
+                rounds = ", ".join(f"{v:.2f}" for v in out[name]["per_round_median_ms"])
+                line = (f"median {o['median_ms']:.2f} ms, p90 {o['p90_ms']:.2f} ms, mean {o['mean_ms']:.2f} ms "
+                        f"(n={o['n']}; round medians {rounds})")
+            print(f"{part}, {name} ({trees[name]}): {line}", flush=True)
+        if "ratio" in out:
+            print(f"{part}: ratio {json.dumps(out['ratio'])} (per round "
+                  f"{', '.join(f'{v:.2f}' for v in out['ratio_per_round'])}); > 1: this checkout is faster", flush=True)
 
 
 def annotation_file(data: Path, n: int, folder: Path) -> Path:
     """An annotation file of the first ``n`` vehicles of all tracking sequences, every frame, 1 px noise."""
+    from toosicubix.simulate.annotator import (
+        AnnotatorOptions,
+        SelectionOptions,
+        select_kitti_tracking,
+        simulate,
+        write_simulation,
+    )
+
     vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(frames_per_track=None))[:n]
     if len(vehicles) < n:
         sys.exit(f"only {len(vehicles)} vehicles available, {n} asked")
@@ -120,6 +258,14 @@ def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 100
     vehicles, 1 px noise), copied under new image ids until there are ``n`` vehicles. With ``parts``, each
     vehicle keeps only its first ``parts`` parts (``parts=1``: every vehicle fails at once with too few
     constraints, which measures what the batch keeps per vehicle without the solver's time)."""
+    from toosicubix.simulate.annotator import (
+        AnnotatorOptions,
+        SelectionOptions,
+        select_kitti_tracking,
+        simulate,
+        write_simulation,
+    )
+
     base_path = folder / f"annotations-base-{base}.json"
     if not base_path.is_file():
         vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(frames_per_track=None))[:base]
@@ -144,13 +290,8 @@ def replicated_annotation_file(data: Path, n: int, folder: Path, base: int = 100
     return path
 
 
-def speed_and_memory(args: argparse.Namespace, report: dict) -> None:
-    """Parts 1-3 of the module docstring."""
-    report["per_vehicle"] = per_vehicle_times(args.data)
-    for which, s in report["per_vehicle"].items():
-        print(f"fit time per vehicle ({which}, n={s['n']}): median {s['median_ms']:.2f} ms, p95 {s['p95_ms']:.1f} ms, "
-              f"mean {s['mean_ms']:.2f} ms", flush=True)
-
+def throughput(args: argparse.Namespace, report: dict) -> None:
+    """Part 4 of the module docstring (this checkout only)."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         n = args.throughput_vehicles
@@ -173,26 +314,8 @@ def speed_and_memory(args: argparse.Namespace, report: dict) -> None:
             print(f"peak memory, {size} vehicles, --jobs 1: {peak:.0f} MB", flush=True)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=default_data_dir())
-    parser.add_argument("--throughput-vehicles", type=int, default=3000)
-    parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--memory-vehicles", default="1000,10000,100000",
-                        help="batch sizes for the --jobs 2 peak-memory part, comma-separated")
-    parser.add_argument("--only", choices=["all", "memory"], default="all",
-                        help="memory: only the --jobs 2 peak-memory part")
-    parser.add_argument("--memory-parts", type=int, default=None,
-                        help="keep only this many parts per vehicle in the peak-memory part (1: every vehicle "
-                             "fails at once; the batch's own memory without the solver's time)")
-    args = parser.parse_args()
-    if not (args.data / "kitti_tracking").is_dir():
-        sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
-    report: dict = {"machine": machine()}
-    print(f"machine: {report['machine']}", flush=True)
-
-    if args.only == "all":
-        speed_and_memory(args, report)
+def memory(args: argparse.Namespace, report: dict) -> None:
+    """Part 5 of the module docstring (this checkout only)."""
     report["peak_memory_jobs2_mb"] = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -207,6 +330,53 @@ def main() -> None:
             print(f"peak memory, {size} vehicles, --jobs 2: main process {main_mb:.0f} MB, largest worker "
                   f"{worker_mb:.0f} MB ({seconds:.0f} s; annotation file {ann.stat().st_size / 2**20:.0f} MB)",
                   flush=True)
+
+
+PARTS = ("per-vehicle", "apollocar3d", "refit", "throughput", "memory")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=default_data_dir())
+    parser.add_argument("--parts", default="per-vehicle,apollocar3d,refit",
+                        help=f"comma-separated, of {', '.join(PARTS)}")
+    parser.add_argument("--against", type=Path, default=None,
+                        help="another checkout (its repository root) to run parts 1-3 against, round by round")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of parts 1-3 (each checkout once a round)")
+    parser.add_argument("--jobs", type=int, default=2, help="processes of the apollocar3d part")
+    parser.add_argument("--refit-vehicles", type=int, default=100, help="vehicles of the refit part")
+    parser.add_argument("--throughput-vehicles", type=int, default=3000)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--memory-vehicles", default="1000,10000,100000",
+                        help="batch sizes for the --jobs 2 peak-memory part, comma-separated")
+    parser.add_argument("--memory-parts", type=int, default=None,
+                        help="keep only this many parts per vehicle in the peak-memory part (1: every vehicle "
+                             "fails at once; the batch's own memory without the solver's time)")
+    parser.add_argument("--only", choices=["memory"], default=None,
+                        help="memory: the same as --parts memory (the earlier spelling)")
+    parser.add_argument("--worker", choices=PARTS[:3], default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker is not None:
+        _worker(args.worker, args)
+        return
+    if args.only == "memory":
+        args.parts = "memory"
+    args.parts = [p.strip() for p in args.parts.split(",")]
+    if unknown := [p for p in args.parts if p not in PARTS]:
+        sys.exit(f"unknown part(s) {', '.join(unknown)}; known: {', '.join(PARTS)}")
+    if not (args.data / "kitti_tracking").is_dir():
+        sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
+    if args.against is not None and not (args.against / "toosicubix" / "__init__.py").is_file():
+        sys.exit(f"--against {args.against}: no toosicubix package there (give a checkout's root)")
+    report: dict = {"machine": machine(), "command": " ".join(sys.argv),
+                    "load_average": list(os.getloadavg())}
+    print(f"machine: {report['machine']}; load average {report['load_average']}", flush=True)
+    interleaved(args, report)
+    if "throughput" in args.parts:
+        throughput(args, report)
+    if "memory" in args.parts:
+        memory(args, report)
+    report["load_average_after"] = list(os.getloadavg())
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1) + "\n")

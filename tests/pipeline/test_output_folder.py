@@ -202,3 +202,32 @@ def test_a_file_the_file_system_refuses_leaves_the_folder_unchanged(tmp_path):
     assert "Error:" in result.output and "Traceback" not in result.output
     assert files(out) == before
     assert not list(tmp_path.glob(".out.toosicubix-*"))
+
+
+def test_the_staging_folder_is_synced_once_before_the_swap(tmp_path, monkeypatch):
+    """One sync of the whole staging folder (not an fsync per file), and before the folder is swapped in."""
+    calls = []
+    real_sync, real_swap = output_folder.sync_folder, output_folder._swap_in
+    monkeypatch.setattr(output_folder, "sync_folder", lambda folder: calls.append(("sync", folder.name))
+                        or real_sync(folder))
+    monkeypatch.setattr(output_folder, "_swap_in", lambda staging, out: calls.append(("swap", staging.name))
+                        or real_swap(staging, out))
+    fsyncs = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: fsyncs.append(fd) or real_fsync(fd))
+    assert run("fit", str(SAMPLE), "-o", str(tmp_path / "out"), "-q").exit_code == 0
+    assert [kind for kind, _ in calls] == ["sync", "swap"] and calls[0][1] == calls[1][1]
+    assert len(fsyncs) <= 2  # the parent folder after the swap (and nothing per file where syncfs exists)
+
+
+def test_sync_folder_without_syncfs_fsyncs_every_file_and_folder(tmp_path, monkeypatch):
+    (tmp_path / "label_2").mkdir()
+    for name in ("a.txt", "b.txt"):
+        (tmp_path / "label_2" / name).write_text("x\n")
+    (tmp_path / "results.json").write_text("{}\n")
+    monkeypatch.setattr(output_folder, "_syncfs", lambda fd: False)
+    fsyncs = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: fsyncs.append(fd) or real_fsync(fd))
+    output_folder.sync_folder(tmp_path)
+    assert len(fsyncs) == 3 + 2  # three files, two folders

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -109,11 +108,9 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
     (sorted by frame): each track gets an integer id per sequence in the order the file first names it, and
     results.json's ``track_ids`` maps the tracks' names to them."""
 
-    def write_label(path: Path, text: str) -> None:
+    def write_label(path: Path, text: str) -> None:  # made durable with the whole folder (staged_output)
         with open(path, "w", encoding="utf-8", newline="\n") as handle:
             handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
         pause_after_file()
 
     try:
@@ -143,8 +140,6 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
 
             with open(staging / RESULTS_FILENAME, "w", encoding="utf-8", newline="\n") as handle:
                 summary = write_results_stream(handle, labelled(), header, on_image, trailer)
-                handle.flush()
-                os.fsync(handle.fileno())
             pause_after_file()
             if tracking:
                 tracking_dir = staging / TRACKING_LABEL_DIR

@@ -9,7 +9,8 @@ files without the marker), or a folder with one file it did not write.
 Writing (:func:`staged_output`), for an output folder ``OUT`` in ``PARENT``:
 
 1. every file is written into a sibling staging folder ``PARENT/.OUT.toosicubix-new-<pid>``, the marker
-   first (so a leftover staging folder is recognisably ours), ``results.json`` last;
+   first (so a leftover staging folder is recognisably ours), ``results.json`` last; then the whole folder is
+   made durable at once (:func:`sync_folder`: one ``syncfs`` on Linux, not one ``fsync`` per file);
 2. the staging folder and ``OUT`` are swapped in one step (Linux ``renameat2(RENAME_EXCHANGE)``); where
    that is not available, ``OUT`` is renamed to ``PARENT/.OUT.toosicubix-old-<pid>`` and the staging
    folder to ``OUT``;
@@ -200,6 +201,57 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(err, os.strerror(err), str(b))
 
 
+def _syncfs(fd: int) -> bool:
+    """Write back every file and folder of the file system holding ``fd`` and wait (Linux ``syncfs``, one
+    call); False where it is not available."""
+    libc_name = ctypes.util.find_library("c")
+    syncfs = getattr(ctypes.CDLL(libc_name, use_errno=True), "syncfs", None) if libc_name else None
+    if syncfs is None:
+        return False
+    if syncfs(fd) != 0:
+        err = ctypes.get_errno()
+        raise OSError(err, os.strerror(err))
+    return True
+
+
+def sync_folder(folder: Path) -> None:
+    """Make every file and folder under ``folder`` durable before the folder is swapped in: one ``syncfs`` of
+    its file system where Linux has it (a file written without its own ``fsync`` is then on disk), else an
+    ``fsync`` of each file and folder under it, deepest first.
+
+    Raises
+    ------
+    OSError
+        The write-back failed (a full or failing disk): the folder must not be swapped in.
+    """
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # a folder cannot be opened everywhere (Windows): the files one by one
+        fd = None
+    if fd is not None:
+        try:
+            if _syncfs(fd):
+                return
+        finally:
+            os.close(fd)
+    for root, _, files in os.walk(folder, topdown=False):
+        for name in files:
+            _fsync_file(os.path.join(root, name))
+        _fsync_dir(Path(root))
+
+
+def _fsync_file(path: str) -> None:
+    """``fsync`` one file (opened for writing where that is allowed: Windows flushes only such a handle)."""
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except OSError:
+        fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def _fsync_dir(folder: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(folder, os.O_RDONLY)
@@ -257,6 +309,9 @@ def staged_output(out_dir: str | Path, marker: dict[str, Any] | None = None) -> 
         (staging / MARKER_NAME).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         _pause()
         yield staging
+        # Once for the whole folder, not per file: what the swap brings in is on disk first (a power cut after
+        # it leaves the new output whole), and a kill before it leaves the previous output.
+        sync_folder(staging)
         _swap_in(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -191,6 +191,8 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
     status = np.full(B, _RUNNING)
     abandon = options.abandon_factor is not None or options.abandon_above is not None
     gradient_tolerance_sq = options.gradient_tolerance**2
+    moved = True  # whether any start moved since g, J^T J and D were formed
+    diagonal = np.arange(0, n * n, n + 1)  # H's diagonal in its rows of n * n
 
     for iteration in range(options.max_iterations):
         running = status == _RUNNING
@@ -199,22 +201,28 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
             running &= ~_abandoned(options, cost, iterations, running, status)
         if not np.count_nonzero(running):  # (count_nonzero: a fraction of any()'s overhead on a few starts)
             break
-        g = np.einsum("kmi,km->ki", Jw, rw)
-        column_sq = np.einsum("kmi,kmi->ki", Jw, Jw)  # squared column norms: the diagonal of H
-        rr = cost if trivial else np.einsum("km,km->k", rw, rw)
-        # max_j |g_j| / |J_j| <= gtol |r|, squared
-        cosines_sq = (g * g / np.maximum(column_sq, 1e-300)).max(axis=1)
-        done = running & ((rr == 0.0) | (cosines_sq <= gradient_tolerance_sq * rr))
-        if np.count_nonzero(done):
-            status[done] = _GRADIENT
-            running &= ~done
-            if not np.count_nonzero(running):
-                break
+        if moved:
+            # After an iteration that moved no start, the same residuals give the same g, J^T J and D (and the
+            # gradient test, which every running start failed on them): they are kept, not formed again.
+            g = np.einsum("kmi,km->ki", Jw, rw)
+            column_sq = np.einsum("kmi,kmi->ki", Jw, Jw)  # squared column norms: the diagonal of H
+            rr = cost if trivial else np.einsum("km,km->k", rw, rw)
+            # max_j |g_j| / |J_j| <= gtol |r|, squared
+            cosines_sq = (g * g / np.maximum(column_sq, 1e-300)).max(axis=1)
+            done = running & ((rr == 0.0) | (cosines_sq <= gradient_tolerance_sq * rr))
+            if np.count_nonzero(done):
+                status[done] = _GRADIENT
+                running &= ~done
+                if not np.count_nonzero(running):
+                    break
+            JtJ = (Jw.transpose(0, 2, 1) @ Jw).reshape(B, n * n)
+            Dg = np.maximum(column_sq, 1e-12 * column_sq.max(axis=1, keepdims=True) + 1e-300)
+            minus_g = -g
+            moved = False
         iterations += running
-        H = Jw.transpose(0, 2, 1) @ Jw
-        Dg = np.maximum(column_sq, 1e-12 * column_sq.max(axis=1, keepdims=True) + 1e-300)
-        H.reshape(B, n * n)[:, :: n + 1] += mu[:, None] * Dg  # the diagonal, through a view
-        step = _solve_batch(H, -g, running)
+        H = JtJ.copy()
+        H[:, diagonal] += mu[:, None] * Dg
+        step = _solve_batch(H.reshape(B, n, n), minus_g, running)
         solved = np.isfinite(step).all(axis=1)  # only running starts are solved
         step[~solved] = 0.0
         trial = problem.update(state, step)
@@ -243,6 +251,7 @@ def levenberg_marquardt(problem: LeastSquaresProblem, state: State, options: LMO
         ka = accept.nonzero()[0]
         if not len(ka):
             continue
+        moved = True
         small = problem.step_is_small(step[ka], options.step_tolerance, ka)
         if len(ka) == B:  # every start moved (hence every trial was evaluated): the trial is the iterate
             state, r, J = trial, r_try, J_try

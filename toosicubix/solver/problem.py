@@ -214,8 +214,8 @@ class Problem:
         """(2N,) the click weights repeated for each click's two pixel rows, or None for all ones."""
         return None if self.click_weights is None else np.repeat(self.click_weights, 2)
 
-    def arrow_rows(self, R: np.ndarray, t: np.ndarray, p: np.ndarray,
-                   pivot: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def arrow_rows(self, R: np.ndarray, t: np.ndarray, p: np.ndarray, pivot: np.ndarray | None = None,
+                   with_jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """The arrows' standardized rows (see the module docstring) and their Jacobian over ``(delta, t, p)`` (the
         refinement's step, rotations about ``pivot``): (B, k) and (B, k, 6 + P) for ``R`` (B, 3, 3), ``t`` (B, 3),
         ``p`` (B, P) and ``pivot`` (B, 3) or None, with ``k = n_arrow_rows``: per arrow, how far its midpoint, moved
@@ -225,7 +225,8 @@ class Problem:
         The arrow's own points are a gauge (the paper fixes the length of its 3D segment to the dimension, so a
         drawn arrow of another length sits farther along its rays); the ray is not, so the zone judges the point
         of the midpoint's ray at the distance of the vehicle's centre: ``c' = C + rho (c - C)`` with ``C`` the
-        camera centre (vehicle frame) and ``rho = |v_cam| / |c_cam|``, ``v`` the centre ``(0, 0, dz / 2)``."""
+        camera centre (vehicle frame) and ``rho = |v_cam| / |c_cam|``, ``v`` the centre ``(0, 0, dz / 2)``. Without
+        ``with_jacobian`` the Jacobian is None (the rows are the same)."""
         B, P = p.shape
         n = self.n_arrow_rows // ARROW_ROWS
         mid = self.arrow_mid.reshape(n, 3, P)
@@ -234,7 +235,8 @@ class Problem:
         v[:, 2] = 0.5 * p[:, 2]
         a = np.einsum("bij,bkj->bki", R, c) + t[:, None, :]  # (B, n, 3) camera frame
         b = np.einsum("bij,bj->bi", R, v) + t  # (B, 3)
-        na, nb = np.linalg.norm(a, axis=2), np.linalg.norm(b, axis=1)  # (B, n), (B,)
+        # |a|, |b|: np.linalg.norm's own arithmetic (the root of the summed squares), without its dispatch.
+        na, nb = np.sqrt(np.add.reduce(a * a, axis=2)), np.sqrt(np.add.reduce(b * b, axis=1))  # (B, n), (B,)
         rho = nb[:, None] / na  # (B, n)
         w = rho[..., None] * a - t[:, None, :]  # (B, n, 3)
         c_ray = np.einsum("bji,bkj->bki", R, w)  # R^T w: (B, n, 3)
@@ -243,6 +245,10 @@ class Problem:
         above, below = c_ray - high, c_ray - low
         is_above, is_below = above > 0.0, below < 0.0
         outside = np.where(is_above, above, np.where(is_below, below, 0.0))
+        if not with_jacobian:
+            return (outside / ARROW_ZONE_SIGMA).reshape(B, 3 * n), None
+        if not (is_above | is_below).any():  # every midpoint in its zone (the usual case): a zero gradient
+            return (outside / ARROW_ZONE_SIGMA).reshape(B, 3 * n), np.zeros((B, 3 * n, 6 + P))
         # Jacobians (B, n, 3, 6 + P) of a, b, w and c_ray; d(R^T w) = [c_ray]x delta + R^T dw.
         q = np.zeros((B, 3)) if pivot is None else pivot
         eye = np.eye(3)
@@ -342,7 +348,8 @@ class Problem:
         elif self.upright_sigma is not None:
             upright = self.upright_weight**2 * float(np.sum((R_cam_vehicle[:, 2] - self.up) ** 2))
         if self.n_arrow_rows:
-            cues += float(np.sum(self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None])[0] ** 2))
+            arrows, _ = self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None], None, False)
+            cues += float(np.sum(arrows[0] ** 2))
         return float(np.sum(e * e) + self.lambda_px * cues + upright)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:

@@ -87,7 +87,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
         w_up = problem.upright_weight  # sqrt(lambda_px) / sigma_up, or the clicks' noise over it (keypoints)
         r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
     if n_arrow:
-        arrow_r, arrow_gradient = problem.arrow_rows(R, t, p, pivot)
+        arrow_r, arrow_gradient = problem.arrow_rows(R, t, p, pivot, with_jacobian)
         r[:, 2 * N + m + n_up:] = w * arrow_r
     row_weights = problem.pixel_row_weights
     if row_weights is not None:  # per-click weights (:mod:`.robust`) on the pixel rows
