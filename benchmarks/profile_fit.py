@@ -28,27 +28,16 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SPLITS, default_data_dir, machine
+from common import default_data_dir, machine
+from speed import kitti_tasks
 
 from toosicubix.annotations.mapping import load_mapping
-from toosicubix.annotations.priors_file import load_priors
 from toosicubix.formats.cameras import load_cameras
 from toosicubix.formats.coco import coco_to_annotations
-from toosicubix.model import Vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.vehicle import fit_one
-from toosicubix.simulate.annotator import AnnotatorOptions, SelectionOptions, select_kitti_tracking, simulate
 from toosicubix.solver.fit import SolverOptions
-
-
-def kitti_tasks(data: Path) -> list[tuple]:
-    """``fit_one``'s arguments for the test split's vehicles at 1 px, as ``benchmarks/speed.py`` builds them."""
-    vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))
-    simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
-    priors = load_priors()
-    return [(Vehicle(sv.source.vehicle_id, sv.source.label.type, sv.source.label.box2d, tuple(sv.parts), "$"),
-             sv.source.camera, priors[sv.source.label.type]) for sv in simulated]
 
 
 def apollocar3d_annotations(data: Path, out: Path) -> Path:

@@ -64,7 +64,7 @@ print(own, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 """
 
 
-def _kitti_tasks(data: Path) -> list[tuple]:
+def kitti_tasks(data: Path) -> list[tuple]:
     """``fit_one``'s arguments for the test split's vehicles at 1 px click noise."""
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.model import Vehicle
@@ -82,7 +82,7 @@ def per_vehicle_times(data: Path) -> dict:
     from toosicubix.pipeline.vehicle import fit_one
     from toosicubix.solver.fit import SolverOptions
 
-    tasks = _kitti_tasks(data)
+    tasks = kitti_tasks(data)
     options = SolverOptions()
     for task in tasks[:20]:  # warm-up: imports, caches
         fit_one(*task, options)
@@ -102,7 +102,7 @@ def refit_times(data: Path, n: int) -> dict:
     from toosicubix.solver.fit import SolverOptions
     from toosicubix.web.session import NEXT_CLICKS
 
-    tasks = _kitti_tasks(data)[:n]
+    tasks = kitti_tasks(data)[:n]
     options = SolverOptions()
     for task in tasks[:5]:  # warm-up
         fit_one(*task, options, next_clicks=NEXT_CLICKS)
