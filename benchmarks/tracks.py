@@ -192,10 +192,19 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     frame_of = {(sv.source.image_id, sv.source.vehicle_id): sv.source.frame for sv in simulated}
     per_frame = [m for m in result.matched]
     e_r = np.array([m.metrics.e_r_deg for m in per_frame])
+    e_yaw = np.array([m.metrics.e_yaw_deg for m in per_frame])  # KITTI's yaw alone: E_R without the tilt
     e_t = np.array([m.metrics.e_t for m in per_frame])
     iou = np.array([m.metrics.iou for m in per_frame])
     siou = np.array([m.metrics.siou for m in per_frame])
     fits = {(im.id, v.id): v for im in read_results(work / "out" / "results.json") for v in im.vehicles}
+    # The up axis's error (degrees): the rotation's part that KITTI's yaw leaves out, over every frame fitted and by
+    # what the frame's pose came from (its clicks, its box alone, interpolated).
+    tilt: dict[str, list[float]] = {}
+    for key, v in fits.items():
+        if v.ok:
+            up = float(np.clip(v.R_cam_vehicle[:, 2] @ truth[key].R_cam_vehicle[:, 2], -1.0, 1.0))
+            for group in ("all", v.pose_from or "alone"):
+                tilt.setdefault(group, []).append(float(np.degrees(np.arccos(up))))
     by_track: dict[str, list] = {}
     for key, v in fits.items():
         if v.ok:
@@ -220,6 +229,8 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
         "tracks_count": len({sv.source.track for sv in simulated}),
         "fitted": summary.ok, "fitted_share": summary.ok / len(simulated), "matched": len(per_frame),
         "e_r_mean_deg": float(e_r.mean()), "e_r_median_deg": float(np.median(e_r)),
+        "e_yaw_mean_deg": float(e_yaw.mean()), "e_yaw_median_deg": float(np.median(e_yaw)),
+        "tilt_median_deg": {group: float(np.median(values)) for group, values in sorted(tilt.items())},
         "e_t_mean": float(e_t.mean()), "e_t_median": float(np.median(e_t)),
         "iou_mean": float(iou.mean()), "siou_mean": float(siou.mean()),
         "size_error_median": float(np.median(size_error)), "sizes_per_track_max": int(max(sizes)),
@@ -304,7 +315,9 @@ def main() -> None:
                 row = run_row(label, keyframes, as_tracks, vehicles, Path(tmp), args.jobs, box_cue)
                 rows.append(row)
                 print(f"{label:6s} fitted {row['fitted']}/{row['frames']}  E_R mean {row['e_r_mean_deg']:.2f} median "
-                      f"{row['e_r_median_deg']:.2f}  E_t mean {row['e_t_mean']:.3f} median {row['e_t_median']:.3f}  "
+                      f"{row['e_r_median_deg']:.2f}  yaw median {row['e_yaw_median_deg']:.2f}  tilt median "
+                      f"{', '.join(f'{k} {v:.2f}' for k, v in row['tilt_median_deg'].items())}  "
+                      f"E_t mean {row['e_t_mean']:.3f} median {row['e_t_median']:.3f}  "
                       f"IoU {row['iou_mean']:.3f} sIoU {row['siou_mean']:.3f}  size err {row['size_error_median']:.3f}"
                       f" (sizes/track <= {row['sizes_per_track_max']})  jitter {row['jitter_median_m']:.3f} m  "
                       f"clicks/cuboid {row['clicks_per_cuboid']:.1f}  {1000 * row['seconds_per_frame']:.0f} ms/frame",
