@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from toosicubix import fields
 from toosicubix.errors import InputError
 from toosicubix.fields import (
     MAX_ID_LENGTH,
@@ -135,3 +136,14 @@ def test_every_rule_answers_any_json_value_with_its_type_or_a_field_error(value)
         assert isinstance(result, int | float | str) and not isinstance(result, bool)
         if isinstance(result, float):
             assert math.isfinite(result)
+
+
+def test_passes_tells_a_value_s_form_by_a_rule_and_sigma_metres_has_the_schema_s_bounds():
+    assert fields.passes(fields.number, 1.5) and fields.passes(fields.pixel, -3)
+    assert not fields.passes(fields.number, 10**400) and not fields.passes(fields.number, True)
+    assert not fields.passes(fields.pixel, 2 * fields.MAX_PIXEL)
+    assert fields.passes(fields.identifier, "35") and not fields.passes(fields.identifier, "")
+    assert fields.sigma_metres(0.05, "f.json", "$.known[1]") == 0.05
+    for refused in (fields.MIN_SIGMA_METRES / 2, 2 * fields.MAX_METRES, float("nan")):
+        with pytest.raises(fields.FieldError, match=r"f\.json: \$\.known\[1\]: expected a sigma in metres"):
+            fields.sigma_metres(refused, "f.json", "$.known[1]")

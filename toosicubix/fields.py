@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import re
 import unicodedata
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any
 
@@ -221,6 +221,21 @@ def metres(value: Any, file: str | Path | None, where: Where, *, low: float = 0.
     return result
 
 
+def sigma_metres(value: Any, file: str | Path | None, where: Where, label: str | None = None) -> float:
+    """A sigma in metres (a known length's): a finite number from :data:`MIN_SIGMA_METRES` to :data:`MAX_METRES`."""
+    return number(value, file, where, low=MIN_SIGMA_METRES, high=MAX_METRES, what="a sigma in metres", label=label)
+
+
+def passes(rule: Callable[..., Any], value: Any) -> bool:
+    """Whether ``value`` passes the field ``rule`` (:func:`number`, :func:`pixel`, :func:`identifier`, ...), for a
+    reader that tells a value's form by it rather than refusing it."""
+    try:
+        rule(value, None, None)
+    except FieldError:
+        return False
+    return True
+
+
 def identifier(value: Any, file: str | Path | None, where: Where, *, what: str = "an id",
                label: str | None = None) -> str | int:
     """An id as a dataset writes it: a string of 1 to :data:`MAX_ID_LENGTH` characters without control characters
@@ -334,5 +349,5 @@ class DistinctKeys:
 __all__ = [
     "MAX_FRAME", "MAX_ID_DIGITS", "MAX_ID_LENGTH", "MAX_METRES", "MAX_NUMBER_TEXT", "MAX_PIXEL", "MIN_SIGMA_METRES",
     "DistinctKeys", "FieldError", "identifier", "image_side", "integer", "metres", "number", "numeric_key",
-    "pixel", "shown", "text_integer", "text_number",
+    "passes", "pixel", "shown", "sigma_metres", "text_integer", "text_number",
 ]

@@ -53,14 +53,6 @@ def _key_path(key: str) -> str:
     return f"$.{key}" if len(key) <= 40 and re.fullmatch(r"\w+", key) else f"$[{shown(key, 40)}]"
 
 
-def _is_identifier(value: str) -> bool:
-    try:
-        fields.identifier(value, None, None)
-    except fields.FieldError:
-        return False
-    return True
-
-
 def read_car_models(path: str | Path) -> dict[int, CarModel]:
     """The car models of ``car_models.json`` by id.
 
@@ -90,7 +82,7 @@ def read_car_models(path: str | Path) -> dict[int, CarModel]:
         text = {}
         for name, default in (("name", key), ("type", "")):
             value = entry.get(name, default)
-            if value != "" and (not isinstance(value, str) or not _is_identifier(value)):
+            if value != "" and (not isinstance(value, str) or not fields.passes(fields.identifier, value)):
                 raise InputFileError(path, [(f"{where}.{name}", f"expected a string of at most {fields.MAX_ID_LENGTH} "
                                                                 f"characters (no control characters), got "
                                                                 f"{shown(value)}")])

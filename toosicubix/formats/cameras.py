@@ -184,27 +184,18 @@ def _checked(camera: dict[str, Any], path: Path, where: str | None, line: int | 
     return camera
 
 
-def _is_number(value: Any) -> bool:
-    """Whether ``value`` is a finite number by the field rules (an integer of 400 digits is none)."""
-    try:
-        fields.number(value, None, None)
-    except fields.FieldError:
-        return False
-    return True
-
-
 def _json_K(K: Any, path: Path, where: str) -> list:
     """``K`` as 3x3 rows: as given when 3x3, else from 9 numbers row by row."""
-    if isinstance(K, list) and len(K) == 9 and all(_is_number(v) for v in K):
+    if isinstance(K, list) and len(K) == 9 and all(fields.passes(fields.number, v) for v in K):
         return [K[0:3], K[3:6], K[6:9]]
-    if isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r)
-                                                   for r in K):
+    if isinstance(K, list) and len(K) == 3 and all(
+            isinstance(r, list) and len(r) == 3 and all(fields.passes(fields.number, v) for v in r) for r in K):
         return K
     raise FormatError(path, f"{where}.K: expected {_K_SHAPE}, got {shown(K, 80)}")
 
 
 def _json_distortion(d: Any, path: Path, where: str) -> list:
-    if not (isinstance(d, list) and all(_is_number(v) for v in d) and len(d) in DISTORTION_COUNTS):
+    if not (isinstance(d, list) and all(fields.passes(fields.number, v) for v in d) and len(d) in DISTORTION_COUNTS):
         raise FormatError(path, f"{where}.distortion: expected {_DISTORTION_SHAPE}, got {shown(d, 80)}")
     if any(abs(v) > MAX_DISTORTION for v in d):
         raise FormatError(path, f"{where}.distortion: expected coefficients within +-{MAX_DISTORTION:g}, got {d}")

@@ -346,15 +346,6 @@ class CocoImport:
         return atomic_write_json_items(out_path, {"toosicubix": schemas.SCHEMA_VERSION}, "images", self.images())
 
 
-def _pixel(value: Any) -> bool:
-    """Whether ``value`` is a pixel coordinate by the field rules."""
-    try:
-        fields.pixel(value, None, None)
-    except fields.FieldError:
-        return False
-    return True
-
-
 def _image_index(where: str) -> int:
     """The index of the image a JSON path ``$.images[i]...`` is in."""
     return int(re.match(r"\$\.images\[(\d+)\]", where).group(1))  # type: ignore[union-attr]
@@ -476,7 +467,8 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
     out = {}
     for j, name in enumerate(names):
         x, y, v = kp[3 * j: 3 * j + 3]
-        if not (_pixel(x) and _pixel(y) and v in (0, 1, 2)) or isinstance(v, bool):
+        if not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2)) \
+                or isinstance(v, bool):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
                         f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
                         f"v in 0, 1, 2, got {shown([x, y, v])}")

@@ -356,7 +356,8 @@ def _check_fields(v: dict[str, Any], path: str | Path, where: str) -> None:
             _check_numbers(v[key], shape, path, f"{where}.{key}")
     for key in ("parameters", "scale_shares"):
         value = v.get(key)
-        if value is not None and not (isinstance(value, dict) and all(_is_finite(x) for x in value.values())):
+        if value is not None and not (isinstance(value, dict)
+                                      and all(field_rules.passes(field_rules.number, x) for x in value.values())):
             raise FormatError(path, f"{where}.{key}: expected an object of finite numbers, got {shown(value)}")
     if v.get("status") == "ok":
         _check_pose(v, path, where)
@@ -371,21 +372,14 @@ def _encodable(text: str) -> bool:
     return True
 
 
-def _is_finite(value: Any) -> bool:
-    try:
-        field_rules.number(value, None, None)
-    except field_rules.FieldError:
-        return False
-    return True
-
-
 def _check_numbers(value: Any, shape: tuple[int, ...], path: str | Path, where: str) -> np.ndarray:
     """``value`` as finite numbers of ``shape`` (-1: any length)."""
     flat = value if isinstance(value, list) else None
     if flat is not None and len(shape) == 2:
         flat = [x for row in value for x in row] if all(isinstance(row, list) and len(row) == shape[1]
                                                        for row in value) else None
-    if flat is None or not all(_is_finite(x) for x in flat) or (shape[0] >= 0 and len(value) != shape[0]):
+    if flat is None or not all(field_rules.passes(field_rules.number, x) for x in flat) \
+            or (shape[0] >= 0 and len(value) != shape[0]):
         what = "finite numbers" + (f" of shape {shape}" if shape[0] >= 0 else f", {shape[-1]} per row"
                                    if len(shape) == 2 else "")
         raise FormatError(path, f"{where}: expected {what}, got {shown(value)}")

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from toosicubix import fields, vocabulary
-from toosicubix.fields import MAX_METRES, MIN_SIGMA_METRES, FieldError, shown
+from toosicubix.fields import FieldError, shown
 
 #: How far outside the image a click or box may lie, as a fraction of the image's width (for x) and height (for
 #: y): a wheel or corner of a vehicle cut off by the image's edge is clicked where the person guesses it, a little
@@ -38,16 +38,10 @@ class Conflict(ApiError):
     status = 409
 
 
-def _sigma_metres(value: Any, file: None, where: str) -> float:
-    """A sigma in metres as the schema bounds it (``SigmaMetres``): from :data:`~toosicubix.fields.MIN_SIGMA_METRES`
-    to :data:`~toosicubix.fields.MAX_METRES`."""
-    return fields.number(value, file, where, low=MIN_SIGMA_METRES, high=MAX_METRES, what="a sigma in metres")
-
-
 def checked_number(value: Any, what: str, rule: Callable[[Any, None, str], float] = fields.number) -> float:
     """``value`` through the readers' field ``rule`` (:func:`toosicubix.fields.pixel`,
-    :func:`~toosicubix.fields.metres`, a sigma; by default any finite number), as a float; the refusal names ``what``,
-    the request's field, and says what the rule expected and found."""
+    :func:`~toosicubix.fields.metres`, :func:`~toosicubix.fields.sigma_metres`; by default any finite number), as a
+    float; the refusal names ``what``, the request's field, and says what the rule expected and found."""
     try:
         return rule(value, None, what)
     except FieldError as exc:
@@ -102,7 +96,8 @@ def checked_known(value: Any) -> tuple[float, float]:
     """A length annotation's ``known`` size: ``[metres, sigma]``, within the schema's bounds for them."""
     if not isinstance(value, list) or len(value) != 2:
         raise ApiError(f"known: expected [metres, sigma] for a length, got {shown(value)}")
-    return checked_number(value[0], "known[0]", fields.metres), checked_number(value[1], "known[1]", _sigma_metres)
+    return (checked_number(value[0], "known[0]", fields.metres),
+            checked_number(value[1], "known[1]", fields.sigma_metres))
 
 
 def checked_kind_name(kind: Any, name: Any) -> tuple[str, str]:
