@@ -72,9 +72,8 @@ def _checked_plausible(fit: FitResult, model: PartsModel, vehicle: Vehicle, imag
     one gets :attr:`FitResult.implausible` and its likely cause among its warnings, as
     :func:`~toosicubix.pipeline.vehicle.fit_one` gives them (its clicks alone, with left and right swapped, fitting a
     plausible pose: the sides look swapped)."""
-    max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
     up = None if image.ground is None else image.ground.normal
-    why = implausibility(model.click_labels, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p[:3], max_tilt, up,
+    why = implausibility(model.click_labels, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p[:3], options.max_tilt, up,
                          model.click_faces)
     if why is None:
         return fit

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from toosicubix.vocabulary import CLASSES, RoadUserClass, class_of
+from toosicubix.vocabulary import CLASSES, class_of
 
 
 def hex_to_bgr(colour: str) -> tuple[int, int, int]:
@@ -32,11 +32,6 @@ CLASS_PALETTES_BGR: dict[str, tuple[tuple[int, int, int], ...]] = {
     name: tuple(hex_to_bgr(c) for c in cls.palette) for name, cls in CLASSES.items()}
 
 
-def _drawn_class(prototype: str | None) -> RoadUserClass | None:
-    """The class whose palette a prototype is drawn in: a class of road users beyond the box-shaped vehicles."""
-    return class_of(prototype)
-
-
 def class_colours_hex(prototypes: Sequence[str | None]) -> list[str | None]:
     """The colour of each object of an image (``prototypes`` in image order) as ``#rrggbb``: its class's palette in
     the order the class's objects come, or None for a vehicle of the cuboid vocabulary (drawn in the overlay's
@@ -44,7 +39,7 @@ def class_colours_hex(prototypes: Sequence[str | None]) -> list[str | None]:
     seen: dict[str, int] = {}
     out: list[str | None] = []
     for prototype in prototypes:
-        cls = _drawn_class(prototype)
+        cls = class_of(prototype)  # a class of road users beyond the box-shaped vehicles, or None
         if cls is None:
             out.append(None)
             continue

@@ -134,6 +134,11 @@ class SolverOptions:
     upright_weight: str = "lambda"
     misfit_level: float | None = None
 
+    @property
+    def max_tilt(self) -> float | None:
+        """:attr:`max_tilt_deg` in radians (None: the check is off)."""
+        return None if self.max_tilt_deg is None else float(np.deg2rad(self.max_tilt_deg))
+
 
 @dataclass(frozen=True)
 class FitResult:
@@ -296,7 +301,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         return FitResult.refused(short, **counts)
 
     problem = Problem.build(parts, camera, prior, options.lambda_3d, options.lambda_px, ground)
-    max_tilt = None if options.max_tilt_deg is None else np.deg2rad(options.max_tilt_deg)
+    max_tilt = options.max_tilt
     # Starts stand upright on the road: rotate the rays so that the road normal is the camera's -y.
     R_align = rotation_between(np.array([0.0, -1.0, 0.0]), problem.up)
     yaws, from_lines = yaw_candidates(parts, problem.u @ R_align, options.sweep_starts)
