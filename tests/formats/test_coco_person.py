@@ -88,7 +88,7 @@ def test_a_person_without_ankles_is_fitted_from_the_height_prior_and_said_so(tmp
     assert walker["status"] == no_feet["status"] == "ok"
     assert not any(w.startswith("no ankle clicked") for w in walker["warnings"])
     (note,) = [w for w in no_feet["warnings"] if w.startswith("no ankle clicked")]
-    assert "Pedestrian height prior (1.71 m)" in note
+    assert "Pedestrian height prior (1.76 m)" in note
     # The clicks sit exactly where the vocabulary puts them on a box of the prior's size 12 m away (the height prior
     # is then exact too): the feet land on the truth within the rounding of the clicks to 0.01 px, ~1e-4 m at 12 m.
     np.testing.assert_allclose(no_feet["t_cam_vehicle"], [2.5, 1.6, 12.0], atol=0.01)

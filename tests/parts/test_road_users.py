@@ -139,8 +139,8 @@ def test_bundled_road_user_mappings_are_the_vocabulary():
 def test_class_notes_say_what_a_fit_cannot_measure():
     assert class_notes("Car", ["nose"]) == ()
     assert class_notes("Pedestrian", ["nose", "left_ankle"]) == ()
-    (ankles,) = class_notes("Pedestrian", ["nose", "left_knee"], 1.71)
-    assert ankles.startswith("no ankle clicked") and "height prior (1.71 m)" in ankles
+    (ankles,) = class_notes("Pedestrian", ["nose", "left_knee"], 1.76)
+    assert ankles.startswith("no ankle clicked") and "height prior (1.76 m)" in ankles
     assert class_notes("Traffic cone", ["tip"])[0].startswith("yaw undetermined")
     assert class_notes("Barrier", ["left_end_top"])[0].startswith("yaw known modulo 180 degrees")
 
