@@ -69,6 +69,22 @@ def test_what_no_camera_or_click_can_be_is_refused(tmp_path, mutate, path, fragm
     assert any(p == path and fragment in m for p, m in problems), problems
 
 
+@pytest.mark.parametrize(("mutate", "path"), [
+    # pydantic's lax mode read these as 1.0, 12.0 and 3: no labelling tool means a boolean or a string as a number.
+    (lambda d: d["images"][0]["vehicles"][0]["parts"][0].update(xy=[True, 3.0]),
+     "$.images[0].vehicles[0].parts[0].xy[0]"),
+    (lambda d: d["images"][0]["vehicles"][0].update(box2d=[0, 0, "12", 10]), "$.images[0].vehicles[0].box2d[2]"),
+    (lambda d: d["images"][0].update(sequence="s", frame="3"), "$.images[0].frame"),
+    (lambda d: d["images"][0].update(ground={"camera_height": "1.65"}), "$.images[0].ground.camera_height"),
+    (lambda d: d["images"][0].update(size=[True, 375]), "$.images[0].size[0]"),
+])
+def test_booleans_and_strings_are_not_numbers(tmp_path, mutate, path):
+    doc = sample()
+    mutate(doc)
+    problems = problems_of(tmp_path, doc)
+    assert any(p == path and "valid" in m for p, m in problems), problems
+
+
 def load_annotations_ok(tmp_path, doc):
     path = tmp_path / "ok.json"
     path.write_text(json.dumps(doc))

@@ -504,3 +504,8 @@ def test_road_users_are_drawn_in_their_class_s_colours_as_render_draws_them(serv
                        ("Pedestrian", CLASSES["Pedestrian"].palette[1]), ("Cyclist", CLASSES["Cyclist"].palette[0])]
     status, view = client.request("GET", "/api/images/0")
     assert status == 200 and [v["colour"] for v in view["vehicles"]] == [c for _, c in colours]
+    # A preview (POST /api/fit) carries the colour as an image's views do: its class's first.
+    status, doc = client.request("POST", "/api/fit", {"image": 0, "vehicle": {"id": "p", "prototype": "Cyclist"}})
+    assert status == 200 and doc["colour"] == CLASSES["Cyclist"].palette[0]
+    status, doc = client.request("POST", "/api/fit", {"image": 0, "vehicle": {"id": "c", "prototype": "Car"}})
+    assert status == 200 and doc["colour"] is None

@@ -48,6 +48,14 @@ FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$"
 
 
 
+#: A real number as JSON writes it, an integer likewise: strict, so that ``true`` is not read as 1 nor ``"12"`` as 12
+#: (pydantic's lax mode would), which no labelling tool means as a pixel, a size or a frame.
+Real = Annotated[float, Field(strict=True)]
+Integer = Annotated[int, Field(strict=True)]
+#: ``true`` or ``false`` (never 1, "yes" or "false").
+Flag = Annotated[bool, Field(strict=True)]
+
+
 def _ensure_pixel(value: float) -> float:
     if not -MAX_PIXEL <= value <= MAX_PIXEL:
         raise ValueError(f"expected a pixel coordinate within +-{MAX_PIXEL:g} (no camera image is that large; "
@@ -69,16 +77,16 @@ def _ensure_sigma_metres(value: float) -> float:
     return value
 
 
-Coordinate = Annotated[float, AfterValidator(_ensure_pixel),
+Coordinate = Annotated[Real, AfterValidator(_ensure_pixel),
                        Field(json_schema_extra={"minimum": -MAX_PIXEL, "maximum": MAX_PIXEL})]
 Pixel = Annotated[tuple[Coordinate, Coordinate], Field(description="Pixel position (x, y): x right, y down.")]
-Row3 = tuple[float, float, float]
-Row4 = tuple[float, float, float, float]
-Metres = Annotated[float, AfterValidator(_ensure_metres),
+Row3 = tuple[Real, Real, Real]
+Row4 = tuple[Real, Real, Real, Real]
+Metres = Annotated[Real, AfterValidator(_ensure_metres),
                    Field(json_schema_extra={"exclusiveMinimum": 0, "maximum": MAX_METRES})]
-SigmaMetres = Annotated[float, AfterValidator(_ensure_sigma_metres),
+SigmaMetres = Annotated[Real, AfterValidator(_ensure_sigma_metres),
                         Field(json_schema_extra={"minimum": MIN_SIGMA_METRES, "maximum": MAX_METRES})]
-ImageSide = Annotated[int, Field(gt=0, le=int(MAX_PIXEL))]
+ImageSide = Annotated[Integer, Field(gt=0, le=int(MAX_PIXEL))]
 
 
 
@@ -106,7 +114,7 @@ PositiveRow3 = Annotated[Row3, AfterValidator(_ensure_positive_row)]
 _EXTRA_FIELD_TYPES: dict[str, tuple[Any, Any]] = {
     "row3": (Row3, ...),
     "positive_row3": (PositiveRow3, ...),
-    "bool_default_true": (bool, True),
+    "bool_default_true": (Flag, True),
 }
 
 
@@ -163,14 +171,14 @@ class GroundModel(_Model):
     normal: Row3 | None = Field(
         default=None, description="Road normal in camera coordinates (x right, y down, z forward), pointing up; "
                                   "default [0, -1, 0] (a level camera).")
-    camera_pitch_deg: float | None = Field(
+    camera_pitch_deg: Real | None = Field(
         default=None, ge=-90, le=90,
         description="Instead of the normal: the camera's pitch above the road, degrees (nose up > 0).")
-    camera_roll_deg: float | None = Field(
+    camera_roll_deg: Real | None = Field(
         default=None, ge=-180, le=180,
         description="Instead of the normal: the camera's roll, degrees (clockwise as seen > 0).")
-    normal_sigma_deg: float = Field(default=1.0, ge=1e-6, le=180, description="Uncertainty of the normal, degrees.")
-    upright_sigma_deg: float = Field(
+    normal_sigma_deg: Real = Field(default=1.0, ge=1e-6, le=180, description="Uncertainty of the normal, degrees.")
+    upright_sigma_deg: Real = Field(
         default=2.0, ge=1e-6, le=180,
         description="How far vehicles lean from the road normal (pitch and roll), degrees.")
 
@@ -196,7 +204,7 @@ class CameraModel(_Model):
     P: tuple[Row4, Row4, Row4] | None = Field(
         default=None, description="KITTI projection matrix K [I | t]; poses come out in the K = P[:, :3] frame."
     )
-    distortion: list[Annotated[float, Field(ge=-1e6, le=1e6)]] | None = Field(
+    distortion: list[Annotated[Real, Field(ge=-1e6, le=1e6)]] | None = Field(
         default=None,
         description="OpenCV distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]).",
     )
@@ -319,7 +327,7 @@ class ImageAnnotation(_Model):
         default=None, pattern=FILE_NAME_PATTERN, max_length=MAX_ID_LENGTH,
         description="The video (sequence) the image is a frame of, e.g. '0003'; names the KITTI tracking label file "
                     "label_02/<sequence>.txt. Given with 'frame'.")
-    frame: int | None = Field(
+    frame: Integer | None = Field(
         default=None, ge=0, le=MAX_FRAME,
         description="The image's frame number in its sequence: orders the frames (each number at most once per "
                     "sequence; gaps are frames not annotated). Given with 'sequence'.")

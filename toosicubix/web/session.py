@@ -1108,7 +1108,7 @@ class Session:
                              parts=[ClickedPart.of(p) for p in parts])
         with self._lock, self._bounded(started):
             self._strict = True
-            return {"revision": self.revision, **self._vehicle_view(image, 0, state)}
+            return {"revision": self.revision, **_coloured([self._vehicle_view(image, 0, state)])[0]}
 
     def reload(self) -> dict[str, Any]:
         """Read the file again (after another program changed it); undo history is dropped."""
