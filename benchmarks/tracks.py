@@ -17,7 +17,9 @@ Rows (each through the product's own pipeline: simulate, fit, eval):
 Per row, over the frames of the selected tracks: how many were fitted, mean and median E_R (degrees), E_t, IoU and
 sIoU against the ground truth; per track the error of its one size (the median over its frames, relative) and the
 jitter of the bottom centre (the median over its frames of ``|second difference of the fit - that of the truth|``,
-metres); clicked points per labelled cuboid; fit seconds per frame.
+metres); clicked points per labelled cuboid; fit seconds per frame; and the median E_R over the frames the
+``alone`` row fitted too (``alone`` fits fewer frames: those its clicks cannot fit alone, the hardest, are not in
+its median).
 
 ``--motion-model`` instead measures, on the tuning sequences only, what rules 19 and 19a of benchmarks/decisions.md fix
 the track solver's motion model and box cue from (and prints them).
@@ -192,6 +194,7 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     frame_of = {(sv.source.image_id, sv.source.vehicle_id): sv.source.frame for sv in simulated}
     per_frame = [m for m in result.matched]
     e_r = np.array([m.metrics.e_r_deg for m in per_frame])
+    e_r_by_frame = {f"{m.image_id}/{m.pred_id}": float(m.metrics.e_r_deg) for m in per_frame}
     e_yaw = np.array([m.metrics.e_yaw_deg for m in per_frame])  # KITTI's yaw alone: E_R without the tilt
     e_t = np.array([m.metrics.e_t for m in per_frame])
     iou = np.array([m.metrics.iou for m in per_frame])
@@ -236,7 +239,24 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
         "size_error_median": float(np.median(size_error)), "sizes_per_track_max": int(max(sizes)),
         "jitter_median_m": float(np.median(jitter)), "clicks_per_cuboid": clicks / max(summary.ok, 1),
         "seconds_per_frame": seconds / len(simulated), "pose_from": dict(summary.pose_from),
+        "_e_r_by_frame": e_r_by_frame,
     }
+
+
+def common_rows(rows: list[dict]) -> None:
+    """Each row's median E_R over the frames the ``alone`` row fitted too (``e_r_median_common_deg``), beside its
+    median over every frame it fitted: ``alone`` leaves out the frames its clicks cannot fit alone, the hardest, which
+    a track fits; on the frames both fit, the comparison is of the same frames. Removes the rows' per-frame maps."""
+    by_frame = {row["row"]: row.pop("_e_r_by_frame") for row in rows}
+    alone = by_frame.get("alone")
+    if alone is None:
+        return
+    for row in rows:
+        common = [e for key, e in by_frame[row["row"]].items() if key in alone]
+        row["e_r_median_common_deg"] = float(np.median(common)) if common else None
+        row["common_frames"] = len(common)
+        print(f"{row['row']:6s} median E_R on the {len(common)} frames alone fitted too: "
+              f"{row['e_r_median_common_deg']:.2f}", flush=True)
 
 
 def long_tracks(lengths: tuple[int, ...] = (75, 150, 300, 600, 1200)) -> list[dict]:
@@ -322,6 +342,7 @@ def main() -> None:
                       f" (sizes/track <= {row['sizes_per_track_max']})  jitter {row['jitter_median_m']:.3f} m  "
                       f"clicks/cuboid {row['clicks_per_cuboid']:.1f}  {1000 * row['seconds_per_frame']:.0f} ms/frame",
                       flush=True)
+        common_rows(rows)
         out = {"machine": machine(), "split": args.split, "noise_px": NOISE_PX, "frames_per_track": FRAMES_PER_TRACK,
                "rows": rows}
     if args.json is not None:

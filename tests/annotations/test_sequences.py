@@ -55,6 +55,7 @@ def test_sequences_and_tracks_round_trip(tmp_path):
     path.write_text(json.dumps(doc))
     index = index_annotations(path)
     assert index.sequences == (("0003", 0), ("0003", 1), ("0003", 2), None) and index.tracked == 3
+    assert index.vehicles == 3 and index.clicked == 0  # boxes only: nothing a pilot could fit alone
 
 
 @pytest.mark.parametrize(("images", "path", "message"), [

@@ -26,6 +26,7 @@ def test_streamed_images_equal_the_whole_file():
     whole = load_images(SAMPLE)
     streamed = [image_from_schema(im, i) for i, im in iter_image_annotations(index)]
     assert index.vehicles == sum(len(im.vehicles) for im in whole)
+    assert index.clicked == sum(bool(v.parts) for im in whole for v in im.vehicles) > 0
     assert [im.id for im in streamed] == [im.id for im in whole]
     for a, b in zip(streamed, whole, strict=True):
         assert a.json_path == b.json_path

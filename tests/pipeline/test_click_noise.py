@@ -88,6 +88,19 @@ def test_pilot_takes_every_kth_vehicle_that_can_tell_the_noise():
     assert not list(pilot_images([image(0, 5, (wheel,)), image(1, 5, (keypoint, wheel))], 10))
 
 
+def test_pilot_counts_only_vehicles_with_clicks():
+    # A track clicked on one frame in five: four of five vehicles carry only a box. The pilot strides over the
+    # clicked ones (here 200, every one taken), not over all 1,000, which would leave it a fifth of its sample.
+    wheel = Part("point", "wheel-front-left", np.zeros((1, 2)), "")
+    vehicles = tuple(Vehicle(id=f"v{j}", prototype="Car", box2d=np.array([0.0, 0.0, 9.0, 9.0]),
+                             parts=(wheel,) if j % 5 == 0 else (), json_path="") for j in range(1000))
+    images = [Image(id="im", file=None, camera=CAMERA, json_path="$.images[0]", vehicles=vehicles)]
+    chosen = [v.id for im in pilot_images(images, 200, keep=None) for v in im.vehicles]
+    assert chosen == [f"v{j}" for j in range(0, 1000, 5)]
+    chosen = [v.id for im in pilot_images(images, 1000, keep=None) for v in im.vehicles]
+    assert chosen == [f"v{j}" for j in range(0, 1000, 15)]  # told of 1,000 clicked: every 3rd clicked one
+
+
 def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int) -> tuple[Vehicle, np.ndarray]:
     d, R, t = scene(rng)
     parts = []

@@ -36,6 +36,7 @@ class AnnotationIndex:
     prototypes : the prototype names the vehicles use
     sequences : per image, its ``(sequence, frame)``, or None for an image of no sequence
     tracked : how many vehicles carry a ``track``
+    clicked : how many vehicles carry clicks (the ones a pilot can fit alone; a tracked vehicle may have only a box)
     """
 
     path: Path
@@ -45,6 +46,7 @@ class AnnotationIndex:
     prototypes: frozenset[str]
     sequences: tuple[tuple[str, int] | None, ...] = ()
     tracked: int = 0
+    clicked: int = 0
 
 
 class _Scanner:
@@ -155,7 +157,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     known = None if known_prototypes is None else set(known_prototypes)
     problems: list[tuple[str, str]] = []
     first_index: dict[str, int] = {}
-    vehicles = tracked = 0
+    vehicles = tracked = clicked = 0
     sequences: list[tuple[str, int] | None] = []
     tracks = TrackBook()
     images_seen = False
@@ -188,6 +190,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
                                                        f"[{first_index[image.id]}] and [{i}]"))
             first_index.setdefault(image.id, i)
             vehicles += len(image.vehicles)
+            clicked += sum(bool(v.parts) for v in image.vehicles)
             prototypes.update(v.prototype for v in image.vehicles)
             if known is not None:
                 problems += [(f"$.images[{i}].vehicles[{j}].prototype",
@@ -200,7 +203,8 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     problems += tracks.problems
     if problems:
         raise InputFileError(path, problems[:MAX_PROBLEMS])
-    return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes), tuple(sequences), tracked)
+    return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes), tuple(sequences), tracked,
+                           clicked)
 
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:

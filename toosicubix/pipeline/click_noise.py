@@ -107,18 +107,20 @@ def telling(vehicle: Vehicle) -> bool:
     return bool(vehicle.parts) and all(KINDS[part.kind].soft for part in vehicle.parts)
 
 
-def pilot_images(images: Iterable[Image], n_vehicles: int,
+def pilot_images(images: Iterable[Image], n_clicked: int,
                  keep: Callable[[Vehicle], bool] | None = telling) -> Iterator[Image]:
-    """The images of a batch of ``n_vehicles`` with only the pilot's vehicles: every k-th vehicle of the batch
-    (counted in file order) that ``keep`` keeps (default: those whose residuals can tell the noise,
-    :func:`telling`, so that a batch of parts on the cuboid has no pilot; None: every k-th, as the road normal's
-    estimate wants); images left without one are skipped."""
-    k = pilot_stride(n_vehicles)
+    """The images of a batch with ``n_clicked`` vehicles that carry clicks, with only the pilot's vehicles: every k-th
+    vehicle with clicks (counted in file order) that ``keep`` keeps (default: those whose residuals can tell the
+    noise, :func:`telling`, so that a batch of parts on the cuboid has no pilot; None: every k-th, as the road
+    normal's estimate wants); images left without one are skipped. Vehicles without clicks (a track's frames with
+    only a box, or none) are not counted: the pilot cannot fit them alone, and counting them would leave it few
+    vehicles, or none of one camera, when a track is clicked on one frame in k."""
+    k = pilot_stride(n_clicked)
     seen = 0
     for im in images:
-        chosen = tuple(v for i, v in enumerate(im.vehicles, start=seen)
-                       if i % k == 0 and (keep is None or keep(v)))
-        seen += len(im.vehicles)
+        clicked = [v for v in im.vehicles if v.parts]
+        chosen = tuple(v for i, v in enumerate(clicked, start=seen) if i % k == 0 and (keep is None or keep(v)))
+        seen += len(clicked)
         if chosen:
             yield replace(im, vehicles=chosen)
 

@@ -117,7 +117,7 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
 
     pilot: list[Image] = []
     if estimate_click_sigma or estimate_road_normal:
-        pilot = list(pilot_images(counted(stream_images(index, settings.ground)), index.vehicles,
+        pilot = list(pilot_images(counted(stream_images(index, settings.ground)), index.clicked,
                                   keep=None if estimate_road_normal else telling))
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
