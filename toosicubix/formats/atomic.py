@@ -88,6 +88,36 @@ def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: boo
         raise
 
 
+def atomic_write_texts(files: list[tuple[Path, str | None]]) -> None:
+    """Write several files as one change: every text to its temporary file first (written and synced), then each
+    renamed over its path (None: the path removed). An error while writing any of them leaves every path
+    untouched; only a failing rename, after all were written, can leave some renamed and others not.
+    """
+    staged: list[tuple[str, Path]] = []
+    try:
+        for path, text in files:
+            if text is None:
+                continue
+            remove_stale_temporaries(path.parent)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+            staged.append((tmp, path))
+            os.fchmod(fd, 0o666 & ~current_umask())
+            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+                handle.write(text)
+                handle.flush()
+                os.fsync(handle.fileno())
+    except BaseException:
+        for tmp, _ in staged:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+    for tmp, path in staged:
+        os.replace(tmp, path)
+    for path, text in files:
+        if text is None:
+            path.unlink(missing_ok=True)
+
+
 def atomic_write_bytes(path: str | Path, data: bytes, clean: bool = True) -> None:
     """Write ``data`` to ``path`` atomically (see :func:`atomic_write`)."""
     atomic_write(path, lambda handle: handle.write(data), binary=True, clean=clean)

@@ -68,13 +68,16 @@ def checked_pixels(value: Any, count: int, what: str, size: tuple[int, int] | No
     if not isinstance(value, list) or len(value) != count:
         raise ApiError(f"{what}: expected {count} pixel{'s' if count > 1 else ''} [[x, y], ...], got "
                        f"{shown(value)}")
-    out = []
-    for k, row in enumerate(value):
-        if not isinstance(row, list) or len(row) != 2:
-            raise ApiError(f"{what}[{k}]: expected [x, y], got {shown(row)}")
-        out.append([checked_number(row[k2], f"{what}[{k}][{k2}]", fields.pixel) for k2 in (0, 1)])
-        check_on_image((out[-1][0], out[-1][1]), size, f"{what}[{k}]")
-    return out
+    return [checked_pixel(row, f"{what}[{k}]", size) for k, row in enumerate(value)]
+
+
+def checked_pixel(value: Any, what: str, size: tuple[int, int] | None = None) -> list[float]:
+    """``value`` as one pixel ``[x, y]`` (see :func:`checked_pixels`), the messages naming ``what``."""
+    if not isinstance(value, list) or len(value) != 2:
+        raise ApiError(f"{what}: expected [x, y], got {shown(value)}")
+    xy = [checked_number(value[k], f"{what}[{k}]", fields.pixel) for k in (0, 1)]
+    check_on_image((xy[0], xy[1]), size, what)
+    return xy
 
 
 def checked_box2d(value: Any, size: tuple[int, int] | None = None) -> list[float] | None:

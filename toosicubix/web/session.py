@@ -60,15 +60,15 @@ from toosicubix.annotations.convert import (
     camera_from_schema,
     ground_with,
     image_json,
+    images_from_schema,
     load_images,
-    part_from_schema,
 )
 from toosicubix.annotations.mapping import MappingFile
 from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE, MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.fields import shown
-from toosicubix.formats.atomic import atomic_write_text
+from toosicubix.formats.atomic import atomic_write_texts
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
 from toosicubix.geometry import FRONT_FACE, cuboid_corners_cam
@@ -96,6 +96,7 @@ from toosicubix.web.request_fields import (
     checked_box2d,
     checked_kind_name,
     checked_known,
+    checked_pixel,
     checked_pixels,
 )
 from toosicubix.web.sequence import TRACK_WINDOW, frame_numbers, frames_to_fit, new_track_name, track_sort_key
@@ -451,6 +452,9 @@ class Session:
         self.new_ids = served_ids - set(by_id)
         self.images = images
         self._other_extras = other_extras
+        #: Every track name this session has seen or given: a new track never takes one of them, so an undo that
+        #: brings a deleted track back (or a dismissal kept for it) cannot meet another vehicle under its name.
+        self._track_names = set(self._all_tracks()) | {t for im in images for t in im.dismissed}
 
     @property
     def order(self) -> list[int]:
@@ -586,12 +590,9 @@ class Session:
                                        "this file, an editor) since this session read or wrote it; the change was "
                                        "not saved. Reload (the page's reload button, or POST /api/reload) to "
                                        "continue from the files as they are now.")
-                atomic_write_text(self.out, text)
+                # Both files written before either is renamed: a full disk leaves both as they were.
+                atomic_write_texts([(self.out, text), (self.extras_path, extras_text)])
                 self._disk_digest = _digest(text.encode("utf-8"))
-                if extras_text is not None:
-                    atomic_write_text(self.extras_path, extras_text)
-                else:
-                    self.extras_path.unlink(missing_ok=True)
                 self._extras_digest = None if extras_text is None else _digest(extras_text.encode("utf-8"))
         except OSError as exc:
             raise ApiError(f"cannot write {exc.filename or self.out}: {exc.strerror or exc}; the change was not "
@@ -710,8 +711,7 @@ class Session:
         if v.track is not None and image.sequence is not None:
             return self._track_fit(image, v.track, self._model_vehicle(image, j, v))["result"]
         vehicle = self._model_vehicle(image, j, v)
-        key = json.dumps([image.index, v.prototype, [(p.kind, p.name, p.uv.tolist()) for p in vehicle.parts],
-                          sorted(v.known_dimensions.items())])
+        key = json.dumps(["alone", image.index, _vehicle_key(vehicle)])  # every field a fit depends on
         cached = self._fits.get(key)
         if cached is None:
             cached = self._cache(key, {"result": self._compute(_fit_one, vehicle, image.camera,
@@ -1054,6 +1054,7 @@ class Session:
             before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
+                self._check_tracks_agree(image)
                 auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
                 # Every fit the answer shows, before anything is written: one not done in time refuses the change.
                 view = self.image_view(index, strict=True)
@@ -1074,6 +1075,8 @@ class Session:
         """Write the file now (it is written after every change anyway)."""
         with self._lock:
             revision = request.get("revision") if isinstance(request, dict) else None
+            if revision is not None and (not isinstance(revision, int) or isinstance(revision, bool)):
+                raise ApiError(f"revision: expected the integer revision the page last saw, got {shown(revision)}")
             if revision is not None and revision != self.revision:
                 raise Conflict(f"stale revision {revision}: the annotations are at revision {self.revision}")
             self._save()
@@ -1091,21 +1094,25 @@ class Session:
         doc = {"toosicubix": 1, "images": [{"id": "request", "camera": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
                                             "vehicles": [body["vehicle"]]}]}
         try:
-            v = parse_annotations(doc, "request body").images[0].vehicles[0]
+            v = images_from_schema(parse_annotations(doc, "request body"))[0].vehicles[0]
         except InputFileError as exc:
             prefix = "$.images[0].vehicles[0]"
-            raise ApiError("; ".join(f"{'vehicle' + p.removeprefix(prefix)}: {m}" for p, m in exc.problems)) from None
-        self._check_prototype(v.prototype)
-        parts = [part_from_schema(p, "") for p in v.parts]
+            # A problem of the vehicle names its field; one the vehicle causes above it (a track on an image of
+            # no sequence) names the vehicle.
+            raise ApiError("; ".join(f"{'vehicle' + p.removeprefix(prefix) if p.startswith(prefix) else 'vehicle'}: "
+                                     f"{m}" for p, m in exc.problems)) from None
         image = self.image(index)
         size = image.camera.image_size
-        for k, part in enumerate(parts):  # on the image, as an edit's clicks
-            for name, xy in zip(vocabulary.KINDS[part.kind].clicks, part.uv, strict=True):
-                check_on_image((float(xy[0]), float(xy[1])), size, f"vehicle.parts[{k}].{name}")
-        if v.box2d is not None:
-            checked_box2d(list(v.box2d), size)
-        state = VehicleState(v.id, v.prototype, None if v.box2d is None else list(v.box2d),
-                             parts=[ClickedPart.of(p) for p in parts])
+        try:
+            self._check_prototype(v.prototype)
+            for k, part in enumerate(v.parts):  # on the image, as an edit's clicks
+                for name, xy in zip(vocabulary.KINDS[part.kind].clicks, part.uv, strict=True):
+                    check_on_image((float(xy[0]), float(xy[1])), size, f"parts[{k}].{name}")
+            if v.box2d is not None:
+                checked_box2d([float(x) for x in v.box2d], size)
+        except ApiError as exc:
+            raise ApiError(f"vehicle.{exc}", exc.status) from None
+        state = replace(self._vehicle_state(v), track=None)  # fitted alone: a preview is of no frame
         with self._lock, self._bounded(started):
             self._strict = True
             return {"revision": self.revision, **_coloured([self._vehicle_view(image, 0, state)])[0]}
@@ -1132,7 +1139,8 @@ class Session:
             prototype = r.get("prototype", self.prototype)
             self._check_prototype(prototype)
             if image.sequence is not None:
-                track = new_track_name(image.sequence, self._all_tracks())
+                track = new_track_name(image.sequence, {*self._all_tracks(), *self._track_names})
+                self._track_names.add(track)
         box = checked_box2d(r.get("box2d"), image.camera.image_size)
         vehicle_id = self._new_vehicle_id(image)
         image.vehicles.append(VehicleState(vehicle_id, prototype, box, track=track))
@@ -1168,6 +1176,8 @@ class Session:
                                f"{shown(r['prototype'])}")
             v.track = r["track"]
             self._set_prototype(v, prototype)
+            if v.track in image.dismissed:  # a vehicle of it is here now, as add_vehicle and confirm have it
+                image.dismissed.remove(v.track)
         elif "prototype" in r:
             self._check_prototype(r["prototype"])
             if v.track is not None and r["prototype"] != v.prototype:
@@ -1225,7 +1235,7 @@ class Session:
         click = r.get("click", 0)
         if not isinstance(click, int) or isinstance(click, bool) or not 0 <= click < len(part.uv):
             raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {shown(click)}")
-        part.uv[click] = checked_pixels([r.get("uv")], 1, "uv", image.camera.image_size)[0]
+        part.uv[click] = checked_pixel(r.get("uv"), "uv", image.camera.image_size)
 
     def _op_rename(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1248,10 +1258,18 @@ class Session:
         if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
             raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
                            f"{len(part.uv)}")
-        if vocabulary.KINDS[kind].known and part.known is None:
-            raise ApiError(f"kind: a {kind} annotation needs its known size; delete it and add it again")
+        known = part.known
+        if vocabulary.KINDS[kind].known:
+            if r.get("known") is not None:
+                known = checked_known(r.get("known"))
+            elif part.known is None:
+                raise ApiError(f"known: a {kind} annotation needs its known size [metres, sigma]")
+            elif (kind, name) != (part.kind, part.name):  # another feature: the old one's size is not its own
+                raise ApiError(f"known: {part.name!r} measured {part.known[0]:g} m; renamed to {name!r} it needs that "
+                               "feature's own known size [metres, sigma]")
         self._check_not_clicked(v, kind, name, part)
         part.kind, part.name, part.auto, part.extra, part.choices = kind, name, None, None, None
+        part.known = known if vocabulary.KINDS[kind].known else None
 
     def _op_delete_click(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1330,6 +1348,25 @@ class Session:
         return {}
 
     # -- checks -----------------------------------------------------------------------------------------------
+
+    def _check_tracks_agree(self, image: ImageState) -> None:
+        """ApiError unless ``image``'s tracked vehicles agree with their tracks' other frames, as the file's reader
+        requires: one prototype per track, one vehicle of a track per frame. An op keeps that by itself; an undo
+        brings back a frame as it was, while another frame of its track may have changed since."""
+        if image.sequence is None:
+            return
+        tracks = self._tracks(image.sequence)
+        seen: set[str] = set()
+        for v in image.vehicles:
+            if v.track is None:
+                continue
+            if v.track in seen:
+                raise ApiError(f"track {v.track!r} would have two vehicles on image {image.id}; delete one first")
+            seen.add(v.track)
+            for frame, on in tracks.get(v.track, {}).items():
+                if frame != image.frame and on.vehicle.prototype != v.prototype:
+                    raise ApiError(f"track {v.track!r} would be a {v.prototype} here and a {on.vehicle.prototype} "
+                                   f"on frame {frame} (one prototype per track): change that frame back first")
 
     def _check_prototype(self, prototype: Any) -> None:
         if not isinstance(prototype, str) or prototype not in self.priors:
