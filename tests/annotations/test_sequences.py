@@ -64,6 +64,9 @@ def test_sequences_and_tracks_round_trip(tmp_path):
      "a track stays in one sequence"),
     ((_frame(0), _frame(1, tracks=(("a", "Van"),))), "$.images[1].vehicles[0].track",
      "one prototype (and one size) per track"),
+    # A sequence names its label_02 file: 'Seq' and 'seq' would share one where the file system ignores case.
+    ((_frame(0, sequence="Seq", tracks=()), _frame(1, sequence="seq", tracks=())), "$.images[1].sequence",
+     "differs from 'Seq' (at $.images[0]) only in case"),
 ])
 def test_rules_across_frames_name_the_json_path(tmp_path, images, path, message):
     whole, streamed = _problems(_doc(*copy.deepcopy(images)), tmp_path)
@@ -85,3 +88,12 @@ def test_rules_within_a_frame(tmp_path):
     bad_name = _frame(0)
     bad_name["sequence"] = "../x"
     assert [where for where, _ in _problems(_doc(bad_name), tmp_path)[1]] == ["$.images[0].sequence"]
+
+
+def test_image_ids_that_differ_in_case_are_refused_by_the_stream_as_by_the_whole_file(tmp_path):
+    # They name label_2 files; fit reads the file through the stream, which only refused exact duplicates.
+    images = (_frame(0, tracks=()) | {"id": "Img"}, _frame(1, tracks=()) | {"id": "img"})
+    whole, streamed = _problems(_doc(*images), tmp_path)
+    assert streamed == [("$.images[1].id", "expected unique image (ignoring case: they name files) ids, got 'img' "
+                                           "at [0] and [1]")]
+    assert [m for _, m in whole] == [m for _, m in streamed]

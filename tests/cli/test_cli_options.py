@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import click
+import pytest
 from click.testing import CliRunner
 
 from toosicubix.cli import main
@@ -66,3 +67,13 @@ def test_the_ground_truth_options_are_declared_once():
     car_models = [p.help for name in ("eval", "priors") for p in main.commands[name].params
                   if p.name == "car_models_path"]
     assert len(car_models) == 2 and len(set(car_models)) == 1  # one shared option
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e308"])
+def test_number_options_refuse_what_is_not_a_finite_setting(tmp_path, value):
+    # click's own range passes nan (it fails no comparison); --frame-rate inf made every track's times 0.
+    result = CliRunner().invoke(main, ["fit", "missing.json", "-o", str(tmp_path / "out"), "--frame-rate", value])
+    assert result.exit_code == 2 and "--frame-rate" in result.output, result.output
+    if value != "1e308":  # a finite click noise, however large, is the user's to give
+        result = CliRunner().invoke(main, ["fit", "missing.json", "--click-sigma", value])
+        assert result.exit_code == 2 and "--click-sigma" in result.output, result.output

@@ -153,3 +153,26 @@ def test_a_track_clicked_with_left_and_right_swapped_is_flagged_with_its_likely_
     assert all(any(w.startswith("left and right look swapped") for w in v["warnings"]) for v in frames)
     assert all(v["confidence"] <= IMPLAUSIBLE_CONFIDENCE for v in frames)
     assert "IMPLAUSIBLE: 3 fitted vehicle(s)" in result.output
+
+
+def test_interleaved_sequences_give_each_frame_its_own_track_s_pose(tracked_file, tmp_path):
+    """Two sequences whose images alternate in the file (A0, B0, A1, B1, ...) are fitted as when each comes whole:
+    a sequence's results arrive once its last image is read, before the other's images come (before, an assert
+    stopped fit, or under python -O frames took the other sequence's poses)."""
+    doc = json.loads(tracked_file.read_text())
+    a = doc["images"]
+    # Sequence 0004: the same frames numbered backwards, so each of its frames has another pose than 0003's.
+    b = [{**im, "id": f"b-{im['id']}", "sequence": "0004", "frame": FRAMES - 1 - im["frame"],
+          "vehicles": [{**im["vehicles"][0], "track": "0004-car"}, im["vehicles"][1]]} for im in a]
+    fitted = {}
+    for name, images in (("grouped", a + b), ("interleaved", [im for pair in zip(a, b, strict=True) for im in pair])):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({**doc, "images": images}))
+        summary = fit_file(path, tmp_path / name)
+        assert summary.ok == summary.vehicles == 4 * FRAMES
+        out = json.loads((tmp_path / name / "results.json").read_text())
+        fitted[name] = {im["id"]: [(v.get("track"), v["t_cam_vehicle"]) for v in im["vehicles"]]
+                        for im in out["images"]}
+    assert fitted["interleaved"] == fitted["grouped"]
+    assert fitted["grouped"]["frame-3"][0][0] == "0003-car" and fitted["grouped"]["b-frame-3"][0][0] == "0004-car"
+    assert fitted["grouped"]["frame-3"][0][1] != fitted["grouped"]["b-frame-3"][0][1]

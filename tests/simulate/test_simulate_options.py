@@ -47,9 +47,9 @@ def run_simulate(tmp_path, *args, out=None, mutate=None):
 
 
 @pytest.mark.parametrize(("args", "fragment"), [
-    (["--noise", "inf"], "option noise_px"),
-    (["--noise", "nan"], "option noise_px"),
-    (["--max-depth", "nan"], "option max_depth"),
+    (["--noise", "inf"], "'--noise': 'inf' is not a finite number"),  # refused by the option itself
+    (["--noise", "nan"], "'--noise': 'nan' is not a finite number"),
+    (["--max-depth", "nan"], "'--max-depth': 'nan' is not a finite number"),
     (["--min-depth", "50", "--max-depth", "10"], "option max_depth"),
 ])
 def test_cli_bad_options_exit_2_and_write_nothing(tmp_path, args, fragment):

@@ -384,11 +384,18 @@ class TrackBook:
         self.problems: list[tuple[str, str]] = []
         self._frames: dict[tuple[str, int], int] = {}  # (sequence, frame) -> image index
         self._tracks: dict[str, tuple[str, str, str]] = {}  # track -> (sequence, prototype, JSON path)
+        self._sequences: dict[str, tuple[str, int]] = {}  # lower-cased name -> (name, first image index)
 
     def add(self, index: int, image: ImageAnnotation) -> None:
         if image.sequence is None or image.frame is None:
             return
         where = f"$.images[{index}]"
+        # A sequence names its label_02 file, and some file systems ignore case: 'A' and 'a' would share one.
+        name, first_at = self._sequences.setdefault(image.sequence.lower(), (image.sequence, index))
+        if name != image.sequence:
+            self.problems.append((f"{where}.sequence", f"sequence {image.sequence!r} differs from {name!r} (at "
+                                                       f"$.images[{first_at}]) only in case: they name files, and "
+                                                       "some file systems ignore case"))
         first = self._frames.setdefault((image.sequence, image.frame), index)
         if first != index:
             self.problems.append((f"{where}.frame", f"frame {image.frame} of sequence {image.sequence!r} is given "

@@ -157,6 +157,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     known = None if known_prototypes is None else set(known_prototypes)
     problems: list[tuple[str, str]] = []
     first_index: dict[str, int] = {}
+    first_lower: dict[str, int] = {}
     vehicles = tracked = clicked = 0
     sequences: list[tuple[str, int] | None] = []
     tracks = TrackBook()
@@ -185,10 +186,17 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
                 sequences[-1] = (image.sequence, image.frame)
                 tracked += sum(v.track is not None for v in image.vehicles)
                 tracks.add(i, image)
+            # As the whole-file reader: the same id twice, else two ids that differ only in case (they name files,
+            # and some file systems ignore case).
             if image.id in first_index:
                 problems.append((f"$.images[{i}].id", f"expected unique image ids, got {image.id!r} at "
                                                        f"[{first_index[image.id]}] and [{i}]"))
+            elif image.id.lower() in first_lower:
+                problems.append((f"$.images[{i}].id", f"expected unique image (ignoring case: they name files) ids, "
+                                                       f"got {image.id.lower()!r} at [{first_lower[image.id.lower()]}] "
+                                                       f"and [{i}]"))
             first_index.setdefault(image.id, i)
+            first_lower.setdefault(image.id.lower(), i)
             vehicles += len(image.vehicles)
             clicked += sum(bool(v.parts) for v in image.vehicles)
             prototypes.update(v.prototype for v in image.vehicles)

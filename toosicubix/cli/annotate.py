@@ -10,6 +10,7 @@ import click
 
 from toosicubix.cli.options import (
     BadInput,
+    Finite,
     announced_estimates,
     click_sigma_option,
     keypoint_mapping_option,
@@ -41,7 +42,7 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".webp")
                    "whose normal is -y): vehicles stand on the road, which fixes their scale far better than the "
                    "size prior alone. It is written to the file, so `fit` uses it too.")
 @road_normal_option
-@click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+@click.option("--camera-height", type=Finite(min=0.0, min_open=True), default=None,
               help="With it, the camera's height above that road, metres (+- 0.05; with --kitti-ground 0.1): "
                    "vehicles stand on the road, which fixes their scale. Replaces --kitti-ground's height.")
 @click_sigma_option
@@ -56,7 +57,7 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".webp")
                    "the file has keep their own sequence and frame. A new vehicle gets a new track; a track with a "
                    "vehicle on another frame but not this one is shown predicted, to confirm (Enter), box (b), "
                    "click, or dismiss (x).")
-@click.option("--frame-rate", type=click.FloatRange(min=0.0, min_open=True), default=10.0, show_default=True,
+@click.option("--frame-rate", type=Finite(min=0.0, max=1000.0, min_open=True), default=10.0, show_default=True,
               help="Frames per second of the sequences, as `fit --frame-rate` (the tracks' motion model's clock).")
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on. Anything but 127.0.0.1 lets other machines edit your file.")

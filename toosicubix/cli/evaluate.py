@@ -8,6 +8,7 @@ import click
 
 from toosicubix.cli.options import (
     BadInput,
+    Finite,
     GroundTruth,
     apollocar3d_cameras_option,
     car_models_option,
@@ -22,7 +23,7 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @ground_truth_options("kitti", "kitti-tracking", "cityscapes", "apollocar3d")
 @car_models_option
 @apollocar3d_cameras_option
-@click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
+@click.option("--min-iou", type=Finite(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
 @click.option("--classes", default=None,
               help="Comma-separated ground-truth classes to score, case-insensitive [default: Car,Van,Truck for "

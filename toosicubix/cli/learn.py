@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput
+from toosicubix.cli.options import BadInput, Finite
 from toosicubix.errors import InputError
 from toosicubix.fields import shown
 from toosicubix.parts.learned import CONTRADICTION_M
@@ -26,7 +26,7 @@ from toosicubix.parts.learned import CONTRADICTION_M
               help="Learn from all images, or those at even or odd positions when sorted by file name.")
 @click.option("--min-samples", type=click.IntRange(min=3), default=5, show_default=True,
               help="Keypoints seen on fewer vehicles of a prototype keep only the pooled position.")
-@click.option("--max-offset", type=click.FloatRange(min=0.0, min_open=True), default=CONTRADICTION_M,
+@click.option("--max-offset", type=Finite(min=0.0, min_open=True), default=CONTRADICTION_M,
               show_default=True,
               help="Metres: a second pass leaves out cars whose keypoints lie farther than this (RMS) from the "
                    "first pass's positions at their ground-truth pose (poses that contradict the clicks).")

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -25,6 +26,19 @@ from toosicubix.errors import InputError
 from toosicubix.solver.fit import SolverOptions
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class Finite(click.FloatRange):
+    """A number option within a range, and finite: click's own range passes ``nan`` (it fails no comparison) and,
+    without a bound, ``inf``, which no setting means."""
+
+    name = "float"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
 
 
 class BadInput(InputError, click.ClickException):
@@ -221,7 +235,7 @@ priors_option = click.option(
     help="Size priors file (JSON, see docs/size-priors.md); default: the bundled KITTI and Cityscapes 3D table.")
 #: ``--click-sigma PX`` (fit, validate, tune, annotate): the command receives ``click_sigma`` (None: estimate it).
 click_sigma_option = click.option(
-    "--click-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    "--click-sigma", type=Finite(min=0.0, min_open=True), default=None,
     help="Click noise in pixels the reported uncertainty (sigma, confidence, next clicks) and the keypoints' soft "
          "term are for. Estimated from the file's own residuals when not given, as `fit` does (a pilot fit of up to "
          f"400 vehicles; {SolverOptions.click_sigma:g} when their clicks are too few to tell).")
@@ -263,17 +277,17 @@ def road_normal_choice(value: str | None) -> tuple[str, tuple[float, float, floa
 
 _FITTING_OPTIONS = [
     priors_option,
-    click.option("--lambda", "lambda_3d", type=click.FloatRange(min=0.0, min_open=True),
+    click.option("--lambda", "lambda_3d", type=Finite(min=0.0, min_open=True),
                  default=SolverOptions.lambda_3d, show_default=True,
                  help="Weight of the size prior in the coordinate descent's 3D cost."),
-    click.option("--lambda-p", "lambda_px", type=click.FloatRange(min=0.0, min_open=True),
+    click.option("--lambda-p", "lambda_px", type=Finite(min=0.0, min_open=True),
                  default=SolverOptions.lambda_px, show_default=True,
                  help="Weight of the size prior in the pixel cost, in px^2 per squared Mahalanobis unit: the click "
                       "noise variance at which clicks and prior are weighed evenly. Smaller trusts the clicks more."),
     click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
                  help="Settings file (as `toosicubix tune` writes it); options given on the command line win."),
     click_sigma_option,
-    click.option("--part-sigma", type=click.FloatRange(min=0.0), default=SolverOptions.part_sigma, show_default=True,
+    click.option("--part-sigma", type=Finite(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box. "
                       "Keypoints and plates carry their learned spread instead."),
@@ -287,23 +301,24 @@ _FITTING_OPTIONS = [
                       "size prior (--lambda-p); clicks, as a prior of the stated lean against the click noise (the "
                       "upright sigma about an estimated road normal). Vehicles of cuboid parts: lambda either way "
                       "(benchmarks/decisions.md, rule 23)."),
-    click.option("--misfit-level", type=click.FloatRange(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
+    click.option("--misfit-level", type=Finite(min=0.5, max=1.0, min_open=True, max_open=True), default=None,
                  help="Test each fit's residuals against the click noise (chi-square at this level, e.g. 0.99): a "
                       "fit that fails is warned about ('misfit: ...', `residual_test` in results.json) and its sigmas "
                       "widen to what its residuals show. Off by default (benchmarks/decisions.md, rule 8)."),
     click.option("--kitti-ground", is_flag=True,
                  help="Give every image KITTI's ground: camera 1.65 +- 0.1 m above a road whose normal is -y +- 1 "
                       "deg, vehicles upright within 2 deg. The options below then change single fields."),
-    click.option("--camera-height", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    click.option("--camera-height", type=Finite(min=0.0, min_open=True), default=None,
                  help="Camera height above the road, metres, for every image (enables the ground contact)."),
-    click.option("--camera-height-sigma", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    click.option("--camera-height-sigma", type=Finite(min=0.0, min_open=True), default=None,
                  help="Its uncertainty, metres [default 0.05, KITTI 0.1]."),
     road_normal_option,
-    click.option("--camera-pitch-deg", type=float, default=None, help="Instead of the normal: camera pitch, > 0 up."),
-    click.option("--camera-roll-deg", type=float, default=None, help="Instead of the normal: camera roll."),
-    click.option("--normal-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    click.option("--camera-pitch-deg", type=Finite(), default=None,
+                 help="Instead of the normal: camera pitch, > 0 up."),
+    click.option("--camera-roll-deg", type=Finite(), default=None, help="Instead of the normal: camera roll."),
+    click.option("--normal-sigma-deg", type=Finite(min=0.0, min_open=True), default=None,
                  help="Uncertainty of the normal, degrees [default 1]."),
-    click.option("--upright-sigma-deg", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    click.option("--upright-sigma-deg", type=Finite(min=0.0, min_open=True), default=None,
                  help="How far vehicles lean from the road normal, degrees [default 2]."),
     click.option("--joint-ground", is_flag=True,
                  help="Refine each image's vehicles together with its ground plane (images with a ground block or "
@@ -312,7 +327,7 @@ _FITTING_OPTIONS = [
                  help="on: vehicles that carry a 'track' are fitted with their track's other frames (one size per "
                       "track, a smooth motion; frames with a box only or nothing get a pose too, said in results.json "
                       "as pose_from box / interpolated); off: every frame alone (box-only and empty frames fail)."),
-    click.option("--frame-rate", type=click.FloatRange(min=0.0, min_open=True), default=10.0, show_default=True,
+    click.option("--frame-rate", type=Finite(min=0.0, max=1000.0, min_open=True), default=10.0, show_default=True,
                  help="Frames per second of the sequences (frame numbers over it are the times the tracks' motion "
                       "model runs on; KITTI's 10)."),
     click.option("--box-cue", is_flag=True,

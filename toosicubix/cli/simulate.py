@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, parse_sequences
+from toosicubix.cli.options import BadInput, Finite, GroundTruth, ground_truth_options, parse_sequences
 
 
 @click.command("simulate")
@@ -17,7 +17,7 @@ from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, 
 @click.option("--gt-out", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Where to write the simulated vehicles' ground truth as a KITTI object folder (label_2/, "
                    "calib/) for `toosicubix eval --kitti`. Default: <annotation file without .json>_gt/.")
-@click.option("--noise", "noise_px", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+@click.option("--noise", "noise_px", type=Finite(min=0.0), default=1.0, show_default=True,
               help="Gaussian click noise, pixels per coordinate.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (per vehicle streams).")
 @click.option("--exact-placement", is_flag=True,
@@ -25,13 +25,13 @@ from toosicubix.cli.options import BadInput, GroundTruth, ground_truth_options, 
 @click.option("--max-clicks", type=click.IntRange(min=1), default=12, show_default=True,
               help="The most clicked points per vehicle.")
 @click.option("--classes", default="Car,Van,Truck", show_default=True, help="KITTI types to simulate.")
-@click.option("--max-truncation", type=float, default=0.0, show_default=True,
+@click.option("--max-truncation", type=Finite(), default=0.0, show_default=True,
               help="Keep vehicles truncated at most this much (object labels: fraction; tracking: 0, 1, 2).")
 @click.option("--max-occlusion", type=click.IntRange(0, 3), default=1, show_default=True,
               help="Keep vehicles occluded at most this much (0 visible, 1 partly, 2 largely).")
-@click.option("--min-depth", type=float, default=3.0, show_default=True, help="Metres.")
-@click.option("--max-depth", type=float, default=60.0, show_default=True, help="Metres.")
-@click.option("--min-box-height", type=float, default=25.0, show_default=True, help="2D box height, pixels.")
+@click.option("--min-depth", type=Finite(), default=3.0, show_default=True, help="Metres.")
+@click.option("--max-depth", type=Finite(), default=60.0, show_default=True, help="Metres.")
+@click.option("--min-box-height", type=Finite(), default=25.0, show_default=True, help="2D box height, pixels.")
 @click.option("--frames-per-track", type=click.IntRange(min=1), default=None,
               help="Tracking labels: at most this many frames per track, evenly spread (default 3); with --tracks, "
                    "the first this many frames of each track's run (default: the whole run).")

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from toosicubix.cli.options import (
+    Finite,
     GroundTruth,
     announced_estimates,
     click_sigma_option,
@@ -32,7 +33,7 @@ from toosicubix.cli.options import (
 @click.option("--refine/--no-refine", default=True, show_default=True,
               help="Then try the half-steps around the best pair.")
 @priors_option
-@click.option("--min-iou", type=click.FloatRange(0.0, 1.0), default=0.5, show_default=True,
+@click.option("--min-iou", type=Finite(0.0, 1.0), default=0.5, show_default=True,
               help="2D box IoU needed to pair a fit with a ground-truth vehicle.")
 @jobs_option
 @click_sigma_option

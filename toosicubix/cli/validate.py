@@ -12,6 +12,7 @@ from toosicubix.cli.import_tools import foreign_file
 from toosicubix.cli.options import (
     EXIT_OK,
     EXIT_SOME_FAILED,
+    Finite,
     ProgressBar,
     fitting_options,
     keypoint_mapping_option,
@@ -22,15 +23,15 @@ from toosicubix.pipeline.validation import Thresholds
 
 @click.command("validate")
 @click.argument("annotations", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--max-yaw-sigma", "max_yaw_sigma_deg", type=click.FloatRange(min=0.0, min_open=True),
+@click.option("--max-yaw-sigma", "max_yaw_sigma_deg", type=Finite(min=0.0, min_open=True),
               default=Thresholds.max_yaw_sigma_deg, show_default=True,
               help="A vehicle is well determined when its yaw standard deviation is at most this, degrees ...")
-@click.option("--max-depth-sigma", "max_depth_sigma_rel", type=click.FloatRange(min=0.0, min_open=True),
+@click.option("--max-depth-sigma", "max_depth_sigma_rel", type=Finite(min=0.0, min_open=True),
               default=Thresholds.max_depth_sigma_rel, show_default=True,
               help="... its depth standard deviation at most this share of its depth ...")
 @click.option("--allow-ambiguous", is_flag=True,
               help="... and (unless this flag is given) no second answer fits the clicks about as well.")
-@click.option("--reach-factor", type=click.FloatRange(min=0.0), default=Thresholds.reach_factor, show_default=True,
+@click.option("--reach-factor", type=Finite(min=0.0), default=Thresholds.reach_factor, show_default=True,
               help="Where no click can reach those limits (a far vehicle, a scale only the size prior sets), each is "
                    "raised to this times what clicking every visible part would give, and the report says so; 0 "
                    "keeps the limits fixed. Needs --next-clicks above 0.")

@@ -109,7 +109,7 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, settings: BatchSet
     the workers need them, and each result is handed on as soon as its image is done, so memory does not
     grow with the batch. ``n_vehicles`` (the batch's size) only sets how many vehicles go to a worker at once.
 
-    ``tracked``: the results of the vehicles that carry a ``track``, image by image in file order
+    ``tracked``: the results of the vehicles that carry a ``track``, image by image, a sequence at a time
     (:func:`toosicubix.pipeline.tracks.fit_tracks`), which take their place; None: every vehicle is fitted alone.
     """
     settings = settings or BatchSettings()
@@ -119,12 +119,21 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, settings: BatchSet
     candidates = _candidates_of(settings.keypoints if next_clicks > 0 else None)
     box_cue = settings.box_cue
 
+    # The tracks' results come a sequence at a time, once its last image is read: a file whose sequences are
+    # interleaved (or whose images of one sequence enclose another's) gets some before their images come here.
+    early: dict[str, list[VehicleResult]] = {}
+
+    def tracked_results(image: Image) -> list[VehicleResult]:
+        while image.id not in early:
+            same, results = next(tracked)  # type: ignore[arg-type]
+            early[same.id] = results
+        return early.pop(image.id)
+
     def tasks() -> Iterator[FitTask]:
         for im in images:
             from_tracks: dict[int, VehicleResult] = {}
             if tracked is not None and any(v.track is not None for v in im.vehicles):
-                same, results = next(tracked)
-                assert same.id == im.id, (same.id, im.id)
+                results = tracked_results(im)
                 from_tracks = {j: r for j, r in zip((j for j, v in enumerate(im.vehicles) if v.track is not None),
                                                     results, strict=True)}
             pending.append((im, from_tracks))
