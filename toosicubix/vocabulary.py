@@ -253,10 +253,17 @@ def family_of(*names: str | None) -> str:
     return "vehicle"
 
 
+#: How the yaw of a family is determined, for a ground-truth type that names no class of ours (``TrafficCone``).
+_HEADING_OF_FAMILY = {"cone": "none", "barrier": "axial"}
+
+
 def heading_of(prototype: str | None) -> str:
-    """How the yaw of a ``prototype`` is determined (:data:`HEADINGS`): its class's, ``directed`` for vehicles."""
+    """How the yaw of a ``prototype`` (or a ground-truth type) is determined (:data:`HEADINGS`): its class's, else its
+    family's (a ``traffic_cone`` has none), ``directed`` for vehicles."""
     c = class_of(prototype)
-    return "directed" if c is None else c.heading
+    if c is not None:
+        return c.heading
+    return _HEADING_OF_FAMILY.get(family_of(prototype), "directed")
 
 
 def class_keypoint_faces(name: str) -> tuple[bool, tuple[str, ...] | None]:

@@ -224,3 +224,18 @@ def test_json_files_other_than_gtbbox3d_are_read(tmp_path):
     doc = json.loads((root / "aachen" / "aachen_000000_000019.json").read_text())
     assert CityscapesGroundTruth(root).load("aachen_000000_000019").objects
     assert len(doc["objects"]) == 4
+
+
+def test_one_tracking_frame_is_scored_once(tmp_path):
+    """'0003_11' and '0003_000011' are one frame: a folder predicting it under both ids is refused, naming both
+    (before, its objects were counted twice)."""
+    from tests.eval_scenes import K_KITTI, KITTI_SIZE, kitti_pose, write_results
+    from toosicubix.evaluation import evaluate_folder
+
+    gt = write_kitti_tracking(tmp_path / "gt")
+    poses = [kitti_pose(b) for b in TRACKING_FRAMES[11]]
+    out = write_results(tmp_path / "out", {"0003_11": poses, "0003_000011": poses}, K_KITTI, T2, KITTI_SIZE)
+    with pytest.raises(EvaluationInputError, match=r"'0003_11' .* and '0003_000011' .* are both ground-truth "
+                                                   r"image '0003_000011'"):
+        evaluate_folder(out, "kitti-tracking", gt)
+    assert KittiTrackingGroundTruth(gt).resolve_id("0003_11") == "0003_000011"

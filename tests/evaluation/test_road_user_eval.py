@@ -98,3 +98,41 @@ def test_cityscapes_bicycles_are_scored_as_their_class(tmp_path):
     rows = {r["bin"]: r for r in class_breakdown([r for r in result.matched if r.image_id == image])}
     assert rows["bicycle"]["n"] == 1 and rows["bicycle"]["e_heading_median_deg"] == pytest.approx(0.0, abs=1e-6)
     assert rows["car"]["n"] == 1
+
+
+BARRIER = KittiBox("Barrier", (2.0, 1.6, 10.0), (2.49, 0.49, 0.98), 0.3)
+CONE = KittiBox("TrafficCone", (2.0, 1.6, 10.0), (0.4, 0.4, 0.7), 0.8)
+
+
+def test_a_barrier_turned_end_for_end_is_exact(tmp_path):
+    """Its ends are alike: E_R, the yaw's error and E_comb count what a barrier has (before: E_R 180, E_comb 0.33),
+    and a single class's report still gives its heading error."""
+    gt = _ground_truth(tmp_path / "gt", [BARRIER])
+    turned = rotated(kitti_pose(BARRIER), np.array([0.0, 0.0, np.pi]))
+    out = write_results(tmp_path / "out", {"000001": [turned]}, K_KITTI, T2, KITTI_SIZE)
+    result = evaluate_folder(out, "kitti", gt, EvalOptions(classes=("Barrier",)))
+    (m,) = result.matched
+    assert m.metrics.e_r_deg < 1e-6 and m.metrics.e_yaw_deg < 1e-6 and m.metrics.e_comb < 1e-9 and m.e_heading_deg == 0
+    assert "heading error (degrees, median / mean): Barrier 0.00 / 0.00" in format_report(result)
+
+
+@pytest.mark.parametrize("typed", ["TrafficCone", "traffic_cone"])
+def test_a_cone_has_no_yaw_to_miss_whatever_its_type_is_called(tmp_path, typed):
+    """A cone's yaw is undetermined: a label typed as a cone (nuScenes' names in KITTI format) gets no heading error,
+    and E_R is its up axis's error alone (here 0: the cone is exact but for a 115 degree turn)."""
+    gt = _ground_truth(tmp_path / "gt", [CONE])
+    labels = tmp_path / "out" / "label_2"
+    labels.mkdir(parents=True)
+    wrong = KittiBox(typed, CONE.location_rect, CONE.lwh, CONE.ry + 2.0)
+    (labels / "000001.txt").write_text(kitti_line(wrong) + "\n")
+    (m,) = evaluate_folder(labels.parent, "kitti", gt, EvalOptions(classes=("TrafficCone",))).matched
+    assert m.e_heading_deg is None and m.metrics.e_r_deg < 1e-6
+
+
+def test_label_files_with_misc_predictions_say_their_class_is_unknown(tmp_path):
+    gt = _ground_truth(tmp_path / "gt", [CONE])
+    labels = tmp_path / "out" / "label_2"
+    labels.mkdir(parents=True)
+    (labels / "000001.txt").write_text(kitti_line(KittiBox("Misc", CONE.location_rect, CONE.lwh, CONE.ry)) + "\n")
+    result = evaluate_folder(labels.parent, "kitti", gt, EvalOptions(classes=("TrafficCone",)))
+    assert any("typed Misc" in w and "results.json" in w for w in result.warnings), result.warnings

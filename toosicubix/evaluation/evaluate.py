@@ -20,7 +20,7 @@ import numpy as np
 
 from toosicubix.errors import EvaluationInputError
 from toosicubix.evaluation.matching import box_iou_matrix, match_boxes
-from toosicubix.evaluation.metrics import heading_error_deg, object_metrics, twin_rotation_error_deg
+from toosicubix.evaluation.metrics import heading_error_deg, object_metrics, symmetric_twin, twin_rotation_error_deg
 from toosicubix.evaluation.predictions import Predictions, PredImage, PredObject, load_predictions
 from toosicubix.evaluation.records import EvaluationResult, MatchedObject, UnscoredObject
 from toosicubix.formats.ground_truth import GroundTruthSource, GtImage, GtObject, open_ground_truth
@@ -67,6 +67,9 @@ class _Notes:
         return out
 
 
+_MISC_LABELS = ("{n} label file(s) ({ids}) hold predictions typed Misc: fit writes cones, barriers and two-wheelers "
+                "without a rider so, and without results.json their class is unknown, so they are paired as vehicles; "
+                "evaluate the output folder with its results.json to score them as their class")
 _NO_CALIB_RESULTS = ("no calib file for {n} image(s) ({ids}): ground truth moved into the camera of K by "
                      "results.json's t_cam_rect")
 _NO_CALIB_LABELS = ("no calib file for {n} image(s) ({ids}): KITTI label predictions and ground truth compared in "
@@ -111,13 +114,21 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
     unmatched_gt: list[UnscoredObject] = []
     failed_pred: list[UnscoredObject] = []
     excluded: dict[str, int] = {}
+    scored_by: dict[str, PredImage] = {}  # ground-truth image -> the predicted image scored against it
     for pred_image in predictions.images:
         try:
-            gt_image = ground_truth.load(ground_truth.resolve_id(pred_image.id, pred_image.sequence,
-                                                                 pred_image.frame_number))
+            gt_id = ground_truth.resolve_id(pred_image.id, pred_image.sequence, pred_image.frame_number)
+            gt_image = ground_truth.load(gt_id)
         except EvaluationInputError as exc:
             missing.append(f"{exc} (predictions: {pred_image.source})")
             continue
+        other = scored_by.setdefault(gt_id, pred_image)
+        if other is not pred_image:  # scoring both would count that frame's objects twice
+            raise EvaluationInputError(f"predicted images {other.id!r} ({other.source}) and {pred_image.id!r} "
+                                       f"({pred_image.source}) are both ground-truth image {gt_id!r}: give each "
+                                       "frame once")
+        if pred_image.frame == "rect" and any(p.cls == "Misc" for p in pred_image.objects):
+            notes.add(_MISC_LABELS, pred_image.id)
         gt_offset, pred_offset = _frame_offsets(pred_image, gt_image, notes)
         scored_gt: list[GtObject] = []
         for obj in gt_image.objects:
@@ -170,8 +181,9 @@ def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObje
     ious = box_iou_matrix(pred_boxes, gt_boxes)
     for i, j, iou_2d in matching.pairs:
         p, g = preds[i], scored_gt[j]
-        pred_cuboid = p.cuboid.translated(pred_offset)  # type: ignore[union-attr]
+        heading = heading_of(p.prototype or g.cls)
         gt_cuboid = g.cuboid_rect.translated(gt_offset)  # type: ignore[union-attr]
+        pred_cuboid = symmetric_twin(p.cuboid.translated(pred_offset), gt_cuboid, heading)  # type: ignore[union-attr]
         metrics = object_metrics(pred_cuboid, gt_cuboid)
         matched.append(MatchedObject(
             image_id=pred_image.id, pred_id=p.id, gt_index=g.index, gt_track_id=g.track_id, cls=g.cls,
@@ -182,7 +194,7 @@ def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObje
             keypoints=g.keypoints, keypoints_hidden=g.keypoints_hidden,
             e_r_twin_deg=None if g.keypoints_hidden is None else twin_rotation_error_deg(pred_cuboid, gt_cuboid),
             keypoints_off_rays_m=g.keypoints_off_rays_m,
-            e_heading_deg=heading_error_deg(metrics.e_yaw_deg, heading_of(p.prototype or g.cls)),
+            e_heading_deg=heading_error_deg(metrics.e_yaw_deg, heading),
         ))
     reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
     unmatched_pred.extend(

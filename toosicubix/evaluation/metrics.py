@@ -45,6 +45,23 @@ def yaw_error_deg(R_pred: np.ndarray, R_gt: np.ndarray) -> float:
     return float(abs(np.degrees(wrap_angle(difference))))
 
 
+def symmetric_twin(pred: Cuboid, gt: Cuboid, heading: str) -> Cuboid:
+    """The prediction as the ground truth's class lets it be: turned about its own up axis (through its bottom
+    centre, which leaves the box where it is) by the angle that brings it nearest the ground truth's rotation, for a
+    class whose ends are alike (``axial``: 0 or 180 degrees, a barrier) or that has no yaw (``none``: any angle, a
+    traffic cone); unchanged for a class with a front. E_R and the yaw's error then count only what the class has."""
+    if heading == "directed":
+        return pred
+    M = pred.R_cam_vehicle.T @ gt.R_cam_vehicle  # (3, 3): the gt's rotation in the prediction's vehicle frame
+    if heading == "axial":
+        theta = 0.0 if M[0, 0] + M[1, 1] >= 0.0 else np.pi
+    else:  # the turn about z maximizing trace(Rz(theta)^T M)
+        theta = float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1]))
+    c, s_ = np.cos(theta), np.sin(theta)
+    Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+    return Cuboid(pred.R_cam_vehicle @ Rz, pred.t_cam_vehicle, pred.dimensions)
+
+
 def heading_error_deg(e_yaw_deg: float, heading: str) -> float | None:
     """The heading error (degrees) of a class whose yaw is determined as ``heading`` says
     (:data:`toosicubix.vocabulary.HEADINGS`), from the KITTI yaw's error ``e_yaw_deg`` (0 to 180): that error for a

@@ -26,6 +26,7 @@ from toosicubix.evaluation.records import EvaluationResult, MatchedObject
 from toosicubix.formats.atomic import atomic_write_text
 from toosicubix.formats.ground_truth import GtObject
 from toosicubix.parts.learned import CONTRADICTION_M, HIDES_MIN, hides_clicks
+from toosicubix.vocabulary import class_of, heading_of
 
 #: Depth bins over the ground truth's z, metres: [lo, hi).
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 50.0), (50.0, math.inf))
@@ -272,7 +273,9 @@ def format_report(result: EvaluationResult, max_listed: int = 10) -> str:
         "",
     ]
     by_class = class_breakdown(result.matched)
-    if len(by_class) > 1:
+    # The table with more than one class; the heading errors whenever a class's yaw is not plain (a road user's).
+    if len(by_class) > 1 or any(heading_of(r["bin"]) != "directed" or class_of(r["bin"]) is not None
+                                for r in by_class):
         lines += ["By ground-truth class (means):",
                   *_table([(r["bin"], r["n"], r, "mean") for r in by_class], 20),
                   "heading error (degrees, median / mean): " + "; ".join(

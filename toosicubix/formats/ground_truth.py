@@ -248,9 +248,13 @@ class KittiTrackingGroundTruth(_KittiGroundTruth):
         return self.folder.image_ids()
 
     def resolve_id(self, image_id: str, sequence: str | None = None, frame: int | None = None) -> str:
-        """A frame's id ``<sequence>_<frame as 6 digits>``: the image id itself when it is one, else made from the
-        image's ``sequence`` and ``frame`` (an annotation file whose frames carry other ids)."""
-        if parse_tracking_image_id(image_id) is None and sequence is not None and frame is not None:
+        """A frame's id ``<sequence>_<frame as 6 digits>``: the image id's when it is one (``0001_5`` is
+        ``0001_000005``: one frame, one id), else made from the image's ``sequence`` and ``frame`` (an annotation file
+        whose frames carry other ids)."""
+        parsed = parse_tracking_image_id(image_id)
+        if parsed is not None:
+            return tracking_image_id(*parsed)
+        if sequence is not None and frame is not None:
             return tracking_image_id(sequence, frame)
         return image_id
 
