@@ -88,6 +88,47 @@ class Camera:
         return uv.reshape(-1, 2)
 
 
+#: Directions (about the optical axis) and radii (normalized, up to 4: 76 degrees off the axis) on which a lens's
+#: distortion is checked for folding back.
+_FOLD_DIRECTIONS, _FOLD_RADII = 16, np.linspace(0.0, 4.0, 2001)
+
+
+def fold_radius(camera: Camera) -> float:
+    """The normalized radius ``sqrt(x^2 + y^2)`` from which the camera's distortion folds back: past it, a point
+    farther from the axis lands nearer the image's centre, so a drawn edge would cross the image on the wrong side.
+    The smallest over :data:`_FOLD_DIRECTIONS` directions where the distorted radius stops growing; ``inf`` for a
+    pinhole camera or a lens that does not fold within a radius of 4."""
+    if not camera.has_distortion:
+        return float("inf")
+    phi = np.linspace(0.0, 2.0 * np.pi, _FOLD_DIRECTIONS, endpoint=False)
+    r = _FOLD_RADII
+    points = np.stack([np.outer(np.cos(phi), r), np.outer(np.sin(phi), r), np.ones((len(phi), len(r)))], axis=-1)
+    with np.errstate(all="ignore"):
+        uv = camera.project(points.reshape(-1, 3)).reshape(len(phi), len(r), 2)
+        # Distance from the axis's image, in the undistorted scale: K^-1 applied to the distorted pixels.
+        xy = (uv - camera.K[:2, 2]) @ np.linalg.inv(camera.K[:2, :2]).T
+        radius = np.linalg.norm(xy, axis=-1)  # (directions, radii)
+        folds = ~(np.diff(radius, axis=1) > 0.0)  # NaN counts as a fold
+    first = [r[int(np.argmax(row))] for row in folds if row.any()]
+    return float(min(first)) if first else float("inf")
+
+
+def trusted_radius(camera: Camera, size: tuple[int, int] | None) -> float:
+    """How far from the optical axis (normalized ``sqrt(x^2 + y^2)``) the camera's distortion is trusted for drawing
+    and export: 1.25 times the radius of the image's farthest corner, undistorted (1.5 when the image size is
+    unknown), and never past where the lens model folds back (:func:`fold_radius`; KITTI's raw camera 2 folds at 1.21
+    while its corners undistort past 1.3); ``inf`` for a pinhole camera."""
+    if not camera.has_distortion:
+        return float("inf")
+    if size is None:
+        corner = 1.5
+    else:
+        w, h = size
+        corners_uv = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
+        corner = 1.25 * float(np.max(np.linalg.norm(camera.normalize(corners_uv)[:, :2], axis=1)))
+    return min(corner, 0.98 * fold_radius(camera))
+
+
 def _undistort_points(uv: np.ndarray, K: np.ndarray, distortion: np.ndarray) -> np.ndarray:
     src = uv.reshape(-1, 1, 2)
     if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x

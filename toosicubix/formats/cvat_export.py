@@ -12,10 +12,12 @@ pseudo-cuboid with no 3D meaning, so it is not used. Images are matched by ``nam
 from __future__ import annotations
 
 import itertools
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from toosicubix.camera import trusted_radius
 from toosicubix.fields import MAX_PIXEL
 from toosicubix.formats.fitted import FittedImage
 from toosicubix.formats.templates import CUBOID_LABEL, FRONT_LABEL
@@ -61,9 +63,16 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
         if not corners_cam[:, 2].min() >= Z_NEAR:
             warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid reaches behind the camera: left out")
             continue
+        path_cam = _path_cam(corners_cam, EDGE_WALK, samples, closed=False)
+        front_cam = _path_cam(corners_cam, FRONT_FACE, samples, closed=True)
+        radius = trusted_radius(image.camera, image.size)
+        if not all(np.all(np.hypot(p[:, 0], p[:, 1]) <= radius * p[:, 2]) for p in (path_cam, front_cam)):
+            warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid reaches where the lens model is not "
+                            "trusted (past the image's corners, or where its distortion folds back): left out")
+            continue
         with np.errstate(all="ignore"):  # a far or extreme pose may overflow: checked below
-            polyline = image.camera.project(_path_cam(corners_cam, EDGE_WALK, samples, closed=False))
-            front = image.camera.project(_path_cam(corners_cam, FRONT_FACE, samples, closed=True))
+            polyline = image.camera.project(path_cam)
+            front = image.camera.project(front_cam)
         if not all(np.all(np.abs(uv) <= MAX_WRITTEN_PIXEL) for uv in (polyline, front)):  # NaN fails too
             warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid projects beyond "
                             f"+-{MAX_WRITTEN_PIXEL:.0f} pixels (t_cam_vehicle {np.round(v.t_cam_vehicle, 3).tolist()}):"
@@ -71,6 +80,10 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
             continue
         shapes.append({"id": v.id, "status": v.status, "polyline": polyline, "front": front})
     return shapes, warnings
+
+
+#: What XML 1.0 can carry (its ``Char``): no other control characters, no surrogates, no U+FFFE or U+FFFF.
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
 def _fmt(uv: np.ndarray) -> str:
@@ -87,6 +100,9 @@ def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[st
     warnings: list[str] = []
     for index, image in enumerate(images):
         name = image.file or image.id
+        if _NOT_XML.search(name):
+            warnings.append(f"image {image.id!r}: its file name {name!r} holds a character XML cannot carry: left out")
+            continue
         attrs = {"id": str(index), "name": name}
         if image.size is not None:
             attrs.update(width=str(image.size[0]), height=str(image.size[1]))
@@ -94,6 +110,10 @@ def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[st
         shapes, image_warnings = projected_shapes(image, samples_per_edge)
         warnings += image_warnings
         for shape in shapes:
+            if _NOT_XML.search(shape["id"]):
+                warnings.append(f"image {image.id!r}, vehicle {shape['id']!r}: its id holds a character XML cannot "
+                                "carry: left out")
+                continue
             line = ET.SubElement(node, "polyline", {"label": CUBOID_LABEL, "source": "auto", "occluded": "0",
                                                     "points": _fmt(shape["polyline"]), "z_order": "0"})
             ET.SubElement(line, "attribute", {"name": "vehicle_id"}).text = shape["id"]

@@ -284,15 +284,15 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera,
     of its own (a pedestrian, a cyclist, ...: :mod:`toosicubix.render.palette`) its class's colour.
     """
     annotated = {v.id: v for v in image.vehicles} if image is not None else {}
-    palette = _palette_indices(result, colours or {})
     by_class = class_colours([v.prototype for v in result.vehicles])  # road users: their class's own palette
+    palette = _palette_indices(result, colours or {}, [own is not None for own in by_class])
     out = []
     for v, colour, own in zip(result.vehicles, palette, by_class, strict=True):
         a = annotated.get(v.id)
         clicks = np.concatenate([p.uv for p in a.parts]) if a is not None and a.parts else np.zeros((0, 2))
         sigma = v.sigma
-        next_clicks = tuple((str(s.get("name", "?")), np.asarray(s["uv"], dtype=float))
-                            for s in v.next_clicks or () if isinstance(s, dict) and s.get("uv"))
+        next_clicks = tuple((str(s.get("name", "?")), uv) for s in v.next_clicks or ()
+                            if isinstance(s, dict) and (uv := _pixel_or_none(s.get("uv"))) is not None)
         box = v.box2d if v.box2d is not None else (a.box2d if a is not None else None)
         out.append(DrawnVehicle(
             id=v.id, ok=v.ok and v.R_cam_vehicle is not None, R_cam_vehicle=v.R_cam_vehicle,
@@ -307,15 +307,28 @@ def drawn_vehicles(image: Image | None, result: ImageResult, camera: Camera,
     return out
 
 
-def _palette_indices(result: ImageResult, colours: Mapping[TrackKey, int]) -> list[int | None]:
+def _palette_indices(result: ImageResult, colours: Mapping[TrackKey, int],
+                     own_colour: list[bool]) -> list[int | None]:
     """Each vehicle's palette index: its track's, or the next colour no track of the image has; all None (the
-    overlay's colours by place) when no vehicle of the image has a track colour."""
+    overlay's colours by place) when no vehicle of the image has a track colour. A road user with a colour of its
+    class's own (``own_colour``) and no track keeps that colour (None here)."""
     tracked = [colours.get((result.sequence, v.track)) if v.track is not None else None for v in result.vehicles]
     if all(c is None for c in tracked):
         return tracked
     free = [c for c in range(len(PALETTE_BGR)) if c not in tracked] or list(range(len(PALETTE_BGR)))
     others = itertools.cycle(free)  # more vehicles than free colours: they repeat
-    return [c if c is not None else next(others) for c in tracked]
+    return [c if c is not None else (None if own else next(others))
+            for c, own in zip(tracked, own_colour, strict=True)]
+
+
+def _pixel_or_none(value: object) -> np.ndarray | None:
+    """A next click's ``uv`` as (2,) finite pixels, or None when results.json holds anything else there (its reader
+    keeps suggestions as written; one malformed suggestion must not stop a picture)."""
+    try:
+        uv = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    return uv if uv.shape == (2,) and np.all(np.isfinite(uv)) else None
 
 
 def drawn_tracks(result: ImageResult, tracks: Tracks) -> list[DrawnTrack]:
@@ -453,7 +466,7 @@ def find_image_file(image: Image | None, image_id: str, annotations_path: Path |
     if images_dir is None:
         where = f" ({image.json_path}.file in {annotations_path})" if image is not None else ""
         return None, f"image {image_id}: {candidates[0]} not found{where}; drawn on a blank canvas"
-    names = ", ".join(str(c.relative_to(images_dir)) for c in candidates)
+    names = ", ".join(str(c.relative_to(images_dir) if c.is_relative_to(images_dir) else c) for c in candidates)
     return None, f"image {image_id}: no image file in {images_dir} (looked for {names}); drawn on a blank canvas"
 
 
@@ -595,12 +608,15 @@ def ground_truth_cuboids(source: Any, result: ImageResult, warnings: list[str]) 
 
     ``source`` is a :class:`toosicubix.evaluation.GroundTruthSource`; an image it lacks adds a warning.
     """
-    from toosicubix.errors import EvaluationInputError
+    from toosicubix.errors import EvaluationInputError, FormatError
 
     try:
         gt = source.load(result.id)
     except EvaluationInputError as exc:
         warnings.append(f"image {result.id}: no ground truth ({exc})")
+        return []
+    except FormatError as exc:  # one malformed label file: that image is drawn without ground truth, the rest go on
+        warnings.append(f"image {result.id}: ground truth not drawn: {exc}")
         return []
     offset = gt.t_cam_rect if gt.t_cam_rect is not None else result.t_cam_rect
     wanted = {c.lower() for c in source.default_classes}

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from toosicubix.camera import Camera
+from toosicubix.camera import Camera, trusted_radius
 from toosicubix.geometry import (
     CUBOID_EDGES,
     FRONT_FACE,
@@ -160,22 +160,6 @@ def blank_canvas(size: tuple[int, int]) -> np.ndarray:
     return np.full((height, width, 3), BLANK_GREY, dtype=np.uint8)
 
 
-def valid_radius(camera: Camera, size: tuple[int, int] | None) -> float:
-    """How far from the optical axis (normalized ``sqrt(x^2 + y^2)``) the camera's distortion is trusted.
-
-    1.25 times the radius of the image's farthest corner, undistorted; ``inf`` for a pinhole camera, 1.5
-    when the image size is unknown.
-    """
-    if not camera.has_distortion:
-        return float("inf")
-    if size is None:
-        return 1.5
-    w, h = size
-    corners_uv = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
-    xy = camera.normalize(corners_uv)[:, :2]
-    return 1.25 * float(np.max(np.linalg.norm(xy, axis=1)))
-
-
 def project_polylines(camera: Camera, segments_cam: Sequence[tuple[np.ndarray, np.ndarray]],
                       samples: int, max_radius: float) -> list[np.ndarray]:
     """Project 3D segments already in front of the near plane as image polylines.
@@ -184,36 +168,56 @@ def project_polylines(camera: Camera, segments_cam: Sequence[tuple[np.ndarray, n
     ----------
     segments_cam : pairs of (3,) endpoints in the camera frame, z > 0
     samples : pieces per segment when the camera has lens distortion
-    max_radius : normalized radius beyond which distorted samples are dropped (see :func:`valid_radius`)
+    max_radius : normalized radius beyond which distorted samples are dropped
+        (:func:`toosicubix.camera.trusted_radius`)
 
     Returns
     -------
-    polylines : list of (k, 2) pixel arrays, k >= 2; a segment that leaves the trusted zone is split
+    polylines : list of (k, 2) pixel arrays, k >= 2; a segment that leaves the trusted zone is split, each piece
+    running to where the segment crosses the zone's edge (not only to its last sample inside)
     """
     if not segments_cam:
         return []
     n = samples if camera.has_distortion else 1
-    s = np.linspace(0.0, 1.0, n + 1)[:, None]
-    points_cam = np.concatenate([a + s * (b - a) for a, b in segments_cam])  # (len * (n + 1), 3)
-    inside = np.hypot(points_cam[:, 0], points_cam[:, 1]) <= max_radius * points_cam[:, 2]
-    uv = np.full((len(points_cam), 2), np.nan)
-    if inside.any():
-        uv[inside] = camera.project(points_cam[inside])
+    s = np.linspace(0.0, 1.0, n + 1)
     out = []
-    for k in range(len(segments_cam)):
-        piece = uv[k * (n + 1):(k + 1) * (n + 1)]
-        ok = np.isfinite(piece[:, 0])
-        run: list[np.ndarray] = []
-        for point, good in zip(piece, ok, strict=True):
-            if good:
-                run.append(point)
-            elif run:
-                if len(run) >= 2:
-                    out.append(np.array(run))
-                run = []
-        if len(run) >= 2:
-            out.append(np.array(run))
+    for a, b in segments_cam:
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        points_cam = a + s[:, None] * (b - a)  # (n + 1, 3)
+        inside = _in_zone(points_cam, max_radius)
+        if not inside.any():
+            continue
+        # Each run of samples inside, widened to the zone's edge where the segment leaves it.
+        params: list[list[float]] = []
+        for i in range(n + 1):
+            if not inside[i]:
+                continue
+            if i == 0 or not inside[i - 1]:
+                params.append([] if i == 0 else [_zone_edge(a, b, s[i - 1], s[i], max_radius)])
+            params[-1].append(float(s[i]))
+            if i < n and not inside[i + 1]:
+                params[-1].append(_zone_edge(a, b, s[i + 1], s[i], max_radius))
+        for run in params:
+            if len(run) >= 2:
+                out.append(camera.project(a + np.asarray(run)[:, None] * (b - a)))
     return out
+
+
+def _in_zone(points_cam: np.ndarray, max_radius: float) -> np.ndarray:
+    """(N,) whether points (N, 3) lie within ``max_radius`` of the optical axis (normalized)."""
+    return np.hypot(points_cam[:, 0], points_cam[:, 1]) <= max_radius * points_cam[:, 2]
+
+
+def _zone_edge(a: np.ndarray, b: np.ndarray, s_out: float, s_in: float, max_radius: float) -> float:
+    """The parameter between ``s_out`` (outside the zone) and ``s_in`` (inside) where ``a + s (b - a)`` crosses its
+    edge, by bisection (30 halvings: a thousandth of a pixel on any image), on the inside."""
+    for _ in range(30):
+        mid = 0.5 * (s_out + s_in)
+        if _in_zone((a + mid * (b - a))[None], max_radius)[0]:
+            s_in = mid
+        else:
+            s_out = mid
+    return s_in
 
 
 _FIXED_LIMIT = float(2 ** 28)
@@ -370,7 +374,7 @@ def draw_overlay(canvas: np.ndarray, camera: Camera, vehicles: Sequence[DrawnVeh
     options = options or OverlayOptions()
     colours = _colours(vehicles)
     size = (canvas.shape[1], canvas.shape[0])
-    max_radius = valid_radius(camera, size)
+    max_radius = trusted_radius(camera, size)
     scale = text_scale(size[1])
     thick = line_thickness(size[1])
     fills = canvas.copy()
