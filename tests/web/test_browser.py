@@ -437,7 +437,7 @@ def test_a_newcomer_clicks_a_car_sees_its_cuboid_and_the_swapped_sides_banner(pa
         _wait_revision(page, revision + 1)
         assert page.locator("#banner").is_visible()
         text = page.locator("#banner").inner_text()
-        assert text.startswith("Left and right look swapped.") and "Press s to swap them" in text
+        assert text.startswith("Left and right look swapped.") and "Swap left and right (or press s)" in text
         assert "implausible" in page.locator("#fit").inner_text()
         page.screenshot(path=str(tmp_path / "swapped.png"))
         page.keyboard.press("u")

@@ -201,6 +201,17 @@ def test_a_new_file_is_fitted_with_the_default_click_noise(monkeypatch, scene, t
     assert session.options.click_sigma == 1.5
 
 
+def test_a_ground_option_gives_the_road_and_nothing_is_said_of_estimating_it(monkeypatch, scene, tmp_path):
+    # A newcomer with --kitti-ground read "no road normal estimated yet": the ground option gives every image its
+    # road, as in fit, so the page does not estimate one.
+    image, cameras = scene
+    session, said = _served_session(monkeypatch, str(image), "--cameras", str(cameras), "--kitti-ground", "-o",
+                                    str(tmp_path / "a.json"))
+    assert "the road as the ground options give it" in said and "no road normal" not in said
+    assert "the page estimates the click noise as `fit` does" in said
+    assert session.image_view(0)["vehicles"] == [] and session.images[0].ground is not None
+
+
 def test_the_page_estimates_again_as_the_file_grows(monkeypatch, tmp_path):
     """A file of 20 vehicles gives no road normal (30 needed); once it has 40 (written by another program and
     reloaded), the page estimates again, in the background, and fits as `fit` fits the 40-vehicle file."""

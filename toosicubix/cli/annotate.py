@@ -114,8 +114,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.web.worker import WorkerProcess
 
     road, normal = road_normal_choice(road_normal)
-    estimate_road = road != "none"
     ground = ground_overrides(kitti_ground, normal, camera_height=camera_height)
+    estimate_road = road != "none" and ground is None  # a ground option gives every image its road, as in fit
     images = expand_images(images)
     if not out.parent.is_dir():
         raise BadInput(f"{out}: the folder {out.parent} does not exist")
@@ -204,10 +204,11 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
                        estimate_road_normal=estimate_road, shown=out)  # picklable: run in a worker process too
     if not out.is_file():
         source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
-        what = "the road normal" if click_sigma is not None else "both"
-        click.echo(f"click noise: {options.click_sigma:g} px ({source}); no road normal estimated yet (the page "
-                   f"estimates {what} as `fit` does once the file has {MIN_VEHICLES} vehicles, and again as they "
-                   "double)", err=True)
+        what = ("the road normal" if click_sigma is not None else
+                "the click noise and the road normal" if estimate_road else "the click noise")
+        road = "no road normal estimated yet; " if estimate_road else "the road as the ground options give it; "
+        click.echo(f"click noise: {options.click_sigma:g} px ({source}); {road}the page estimates {what} as `fit` "
+                   f"does once the file has {MIN_VEHICLES} vehicles, and again as they double", err=True)
         return options, None, estimate
     return (*estimate(out), estimate)
 

@@ -522,8 +522,8 @@ function banner(v) {
   el.hidden = false;
   if (f.likely_cause === "swapped") {
     el.innerHTML = "<b>Left and right look swapped.</b> Left = the vehicle's own left, as its driver sees it (seen " +
-      "from the front, its left is on the image's right). Press <kbd>s</kbd> to swap them " +
-      '<button id="swap-now">swap left and right (s)</button>, or rename the clicks.';
+      "from the front, its left is on the image's right). " +
+      '<button id="swap-now">Swap left and right</button> (or press <kbd>s</kbd>), or rename the clicks.';
     $("swap-now").onclick = swapSides;
   } else {
     el.innerHTML = `<b>No one could have clicked this fit</b> (${escapeHtml(f.implausible)}): check the clicks' ` +
