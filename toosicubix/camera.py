@@ -7,6 +7,7 @@ projects through ``K (X_rect + t)``. Fitting uses ``K`` alone, so poses come out
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import cv2
@@ -97,9 +98,16 @@ def fold_radius(camera: Camera) -> float:
     """The normalized radius ``sqrt(x^2 + y^2)`` from which the camera's distortion folds back: past it, a point
     farther from the axis lands nearer the image's centre, so a drawn edge would cross the image on the wrong side.
     The smallest over :data:`_FOLD_DIRECTIONS` directions where the distorted radius stops growing; ``inf`` for a
-    pinhole camera or a lens that does not fold within a radius of 4."""
+    pinhole camera or a lens that does not fold within a radius of 4. Computed once per lens (K and distortion):
+    a batch's images share a few."""
     if not camera.has_distortion:
         return float("inf")
+    return _lens_fold_radius(tuple(camera.K.ravel().tolist()), tuple(np.ravel(camera.distortion).tolist()))
+
+
+@functools.lru_cache(maxsize=64)
+def _lens_fold_radius(K: tuple[float, ...], distortion: tuple[float, ...]) -> float:
+    camera = Camera(K=np.array(K).reshape(3, 3), distortion=np.array(distortion))
     phi = np.linspace(0.0, 2.0 * np.pi, _FOLD_DIRECTIONS, endpoint=False)
     r = _FOLD_RADII
     points = np.stack([np.outer(np.cos(phi), r), np.outer(np.sin(phi), r), np.ones((len(phi), len(r)))], axis=-1)
@@ -127,6 +135,12 @@ def trusted_radius(camera: Camera, size: tuple[int, int] | None) -> float:
         corners_uv = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
         corner = 1.25 * float(np.max(np.linalg.norm(camera.normalize(corners_uv)[:, :2], axis=1)))
     return min(corner, 0.98 * fold_radius(camera))
+
+
+def within_radius(points_cam: np.ndarray, radius: float) -> np.ndarray:
+    """(N,) whether camera-frame points (N, 3), z > 0, lie within the normalized ``radius`` of the optical axis
+    (:func:`trusted_radius`)."""
+    return np.hypot(points_cam[:, 0], points_cam[:, 1]) <= radius * points_cam[:, 2]
 
 
 def _undistort_points(uv: np.ndarray, K: np.ndarray, distortion: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from toosicubix.camera import trusted_radius
+from toosicubix.camera import trusted_radius, within_radius
 from toosicubix.fields import MAX_PIXEL
 from toosicubix.formats.fitted import FittedImage
 from toosicubix.formats.templates import CUBOID_LABEL, FRONT_LABEL
@@ -54,6 +54,7 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
     (shapes, warnings) : shapes are ``{"id", "status", "polyline", "front"}``
     """
     samples = samples_per_edge if image.camera.has_distortion else 1
+    radius = trusted_radius(image.camera, image.size)
     shapes, warnings = [], []
     for fv in image.vehicles:
         v = fv.result
@@ -65,8 +66,7 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
             continue
         path_cam = _path_cam(corners_cam, EDGE_WALK, samples, closed=False)
         front_cam = _path_cam(corners_cam, FRONT_FACE, samples, closed=True)
-        radius = trusted_radius(image.camera, image.size)
-        if not all(np.all(np.hypot(p[:, 0], p[:, 1]) <= radius * p[:, 2]) for p in (path_cam, front_cam)):
+        if not all(np.all(within_radius(p, radius)) for p in (path_cam, front_cam)):
             warnings.append(f"image {image.id!r}, vehicle {v.id!r}: the cuboid reaches where the lens model is not "
                             "trusted (past the image's corners, or where its distortion folds back): left out")
             continue

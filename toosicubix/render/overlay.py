@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from toosicubix.camera import Camera, trusted_radius
+from toosicubix.camera import Camera, trusted_radius, within_radius
 from toosicubix.geometry import (
     CUBOID_EDGES,
     FRONT_FACE,
@@ -180,32 +180,23 @@ def project_polylines(camera: Camera, segments_cam: Sequence[tuple[np.ndarray, n
         return []
     n = samples if camera.has_distortion else 1
     s = np.linspace(0.0, 1.0, n + 1)
-    out = []
+    runs: list[np.ndarray] = []  # each (k, 3), camera frame
     for a, b in segments_cam:
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        points_cam = a + s[:, None] * (b - a)  # (n + 1, 3)
-        inside = _in_zone(points_cam, max_radius)
-        if not inside.any():
-            continue
-        # Each run of samples inside, widened to the zone's edge where the segment leaves it.
-        params: list[list[float]] = []
-        for i in range(n + 1):
-            if not inside[i]:
-                continue
-            if i == 0 or not inside[i - 1]:
-                params.append([] if i == 0 else [_zone_edge(a, b, s[i - 1], s[i], max_radius)])
-            params[-1].append(float(s[i]))
-            if i < n and not inside[i + 1]:
-                params[-1].append(_zone_edge(a, b, s[i + 1], s[i], max_radius))
-        for run in params:
-            if len(run) >= 2:
-                out.append(camera.project(a + np.asarray(run)[:, None] * (b - a)))
-    return out
-
-
-def _in_zone(points_cam: np.ndarray, max_radius: float) -> np.ndarray:
-    """(N,) whether points (N, 3) lie within ``max_radius`` of the optical axis (normalized)."""
-    return np.hypot(points_cam[:, 0], points_cam[:, 1]) <= max_radius * points_cam[:, 2]
+        inside = within_radius(a + s[:, None] * (b - a), max_radius)  # (n + 1,)
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], inside, [False]])))  # run starts and stops
+        for first, stop in zip(edges[0::2], edges[1::2], strict=True):  # samples first .. stop - 1 inside
+            ts = list(s[first:stop])
+            if first > 0:  # the segment enters the zone between samples first - 1 and first
+                ts.insert(0, _zone_edge(a, b, s[first - 1], s[first], max_radius))
+            if stop <= n:  # and leaves it between stop - 1 and stop
+                ts.append(_zone_edge(a, b, s[stop], s[stop - 1], max_radius))
+            if len(ts) >= 2:
+                runs.append(a + np.asarray(ts)[:, None] * (b - a))
+    if not runs:
+        return []
+    uv = camera.project(np.concatenate(runs))  # one projection for every run
+    return np.split(uv, np.cumsum([len(run) for run in runs])[:-1])
 
 
 def _zone_edge(a: np.ndarray, b: np.ndarray, s_out: float, s_in: float, max_radius: float) -> float:
@@ -213,7 +204,7 @@ def _zone_edge(a: np.ndarray, b: np.ndarray, s_out: float, s_in: float, max_radi
     edge, by bisection (30 halvings: a thousandth of a pixel on any image), on the inside."""
     for _ in range(30):
         mid = 0.5 * (s_out + s_in)
-        if _in_zone((a + mid * (b - a))[None], max_radius)[0]:
+        if within_radius((a + mid * (b - a))[None], max_radius)[0]:
             s_in = mid
         else:
             s_out = mid
