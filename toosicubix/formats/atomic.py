@@ -68,23 +68,11 @@ def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: boo
     into one folder does that once and passes False.
     """
     path = Path(path)
-    if clean:
-        remove_stale_temporaries(path.parent)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    tmp = _staged(path, write, binary, clean)
     try:
-        os.fchmod(fd, 0o666 & ~current_umask())
-        handle_of = (lambda: os.fdopen(fd, "wb")) if binary else (
-            lambda: os.fdopen(fd, "w", encoding="utf-8", newline="\n"))
-        with handle_of() as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
         os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        _discard(tmp)
         raise
 
 
@@ -96,26 +84,42 @@ def atomic_write_texts(files: list[tuple[Path, str | None]]) -> None:
     staged: list[tuple[str, Path]] = []
     try:
         for path, text in files:
-            if text is None:
-                continue
-            remove_stale_temporaries(path.parent)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-            staged.append((tmp, path))
-            os.fchmod(fd, 0o666 & ~current_umask())
-            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-                handle.write(text)
-                handle.flush()
-                os.fsync(handle.fileno())
+            if text is not None:
+                staged.append((_staged(path, lambda handle, text=text: handle.write(text)), path))
     except BaseException:
         for tmp, _ in staged:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
+            _discard(tmp)
         raise
     for tmp, path in staged:
         os.replace(tmp, path)
     for path, text in files:
         if text is None:
             path.unlink(missing_ok=True)
+
+
+def _staged(path: Path, write: Callable[[IO[Any]], None], binary: bool = False, clean: bool = True) -> str:
+    """A temporary file beside ``path``, with the user's umask, filled by ``write`` and synced: its path. On any
+    error it is removed (``clean``: the folder's stale temporaries first, :func:`remove_stale_temporaries`)."""
+    if clean:
+        remove_stale_temporaries(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~current_umask())
+        handle_of = (lambda: os.fdopen(fd, "wb")) if binary else (
+            lambda: os.fdopen(fd, "w", encoding="utf-8", newline="\n"))
+        with handle_of() as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+    except BaseException:
+        _discard(tmp)
+        raise
+    return tmp
+
+
+def _discard(tmp: str) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(tmp)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, clean: bool = True) -> None:
