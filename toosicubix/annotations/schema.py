@@ -371,7 +371,7 @@ class AnnotationFile(_Model):
     def _ensure_unique_image_ids(cls, images: list[ImageAnnotation]) -> list[ImageAnnotation]:
         _ensure_unique([im.id for im in images], "image")
         # They name files, and some file systems ignore case: 'A' and 'a' would share one label file.
-        _ensure_unique([im.id.lower() for im in images], "image (ignoring case: they name files)")
+        _ensure_unique([im.id.lower() for im in images], IMAGE_IDS_IGNORING_CASE)
         return images
 
 
@@ -413,11 +413,21 @@ class TrackBook:
                                             f"at {seen}: one prototype (and one size) per track"))
 
 
+#: What image ids that differ only in case are called in the message that refuses them.
+IMAGE_IDS_IGNORING_CASE = "image (ignoring case: they name files)"
+
+
+def duplicate_ids_message(what: str, item: str, first: int, index: int) -> str:
+    """The message refusing id ``item`` given at ``[first]`` and again at ``[index]`` (the whole-file reader's and the
+    streamed index's)."""
+    return f"expected unique {what} ids, got {item!r} at [{first}] and [{index}]"
+
+
 def _ensure_unique(ids: list[str], what: str) -> None:
     first: dict[str, int] = {}
     for index, item in enumerate(ids):
         if item in first:
-            raise ValueError(f"expected unique {what} ids, got {item!r} at [{first[item]}] and [{index}]")
+            raise ValueError(duplicate_ids_message(what, item, first[item], index))
         first[item] = index
 
 

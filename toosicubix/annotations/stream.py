@@ -18,7 +18,15 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from toosicubix.annotations.schema import AnnotationFile, ImageAnnotation, TrackBook, _describe, _json_path
+from toosicubix.annotations.schema import (
+    IMAGE_IDS_IGNORING_CASE,
+    AnnotationFile,
+    ImageAnnotation,
+    TrackBook,
+    _describe,
+    _json_path,
+    duplicate_ids_message,
+)
 from toosicubix.errors import FormatError, InputFileError
 from toosicubix.jsonfile import long_integer_error, read_json_text
 
@@ -188,15 +196,15 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
                 tracks.add(i, image)
             # As the whole-file reader: the same id twice, else two ids that differ only in case (they name files,
             # and some file systems ignore case).
+            lower = image.id.lower()
             if image.id in first_index:
-                problems.append((f"$.images[{i}].id", f"expected unique image ids, got {image.id!r} at "
-                                                       f"[{first_index[image.id]}] and [{i}]"))
-            elif image.id.lower() in first_lower:
-                problems.append((f"$.images[{i}].id", f"expected unique image (ignoring case: they name files) ids, "
-                                                       f"got {image.id.lower()!r} at [{first_lower[image.id.lower()]}] "
-                                                       f"and [{i}]"))
+                problems.append((f"$.images[{i}].id",
+                                 duplicate_ids_message("image", image.id, first_index[image.id], i)))
+            elif lower in first_lower:
+                problems.append((f"$.images[{i}].id",
+                                 duplicate_ids_message(IMAGE_IDS_IGNORING_CASE, lower, first_lower[lower], i)))
             first_index.setdefault(image.id, i)
-            first_lower.setdefault(image.id.lower(), i)
+            first_lower.setdefault(lower, i)
             vehicles += len(image.vehicles)
             clicked += sum(bool(v.parts) for v in image.vehicles)
             prototypes.update(v.prototype for v in image.vehicles)
