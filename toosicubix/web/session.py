@@ -1054,7 +1054,6 @@ class Session:
             before = image.snapshot()
             try:
                 outcome = handler(self, image, request) or {}
-                self._check_tracks_agree(image)
                 auto = [a for j, v in enumerate(image.vehicles) for a in self._auto_name(image, j, v)]
                 # Every fit the answer shows, before anything is written: one not done in time refuses the change.
                 view = self.image_view(index, strict=True)
@@ -1139,7 +1138,7 @@ class Session:
             prototype = r.get("prototype", self.prototype)
             self._check_prototype(prototype)
             if image.sequence is not None:
-                track = new_track_name(image.sequence, {*self._all_tracks(), *self._track_names})
+                track = new_track_name(image.sequence, self._track_names)  # every name the file has had too
                 self._track_names.add(track)
         box = checked_box2d(r.get("box2d"), image.camera.image_size)
         vehicle_id = self._new_vehicle_id(image)
@@ -1345,14 +1344,15 @@ class Session:
         if not image.undo:
             raise ApiError("nothing to undo on this image")
         image.restore(image.undo[-1])  # popped once the change is saved
+        self._check_tracks_agree(image)
         return {}
 
     # -- checks -----------------------------------------------------------------------------------------------
 
     def _check_tracks_agree(self, image: ImageState) -> None:
         """ApiError unless ``image``'s tracked vehicles agree with their tracks' other frames, as the file's reader
-        requires: one prototype per track, one vehicle of a track per frame. An op keeps that by itself; an undo
-        brings back a frame as it was, while another frame of its track may have changed since."""
+        requires: one prototype per track, one vehicle of a track per frame. The other ops keep that by themselves;
+        an undo brings back a frame as it was, while another frame of its track may have changed since."""
         if image.sequence is None:
             return
         tracks = self._tracks(image.sequence)
