@@ -17,7 +17,7 @@ from toosicubix.parts.synthesis import render_parts
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.blocks import BlockArrow
 from toosicubix.solver.fit import SolverOptions
-from toosicubix.solver.track import TrackFrame, TrackOptions, box_residuals, fit_track
+from toosicubix.solver.track import TrackFrame, TrackOptions, box_residuals, fit_track, upright_on
 
 D = np.array([4.3, 1.8, 1.5])
 EXACT_PRIOR = SizePrior.from_mean_cov("Car", D, np.diag([1e-6, 1e-6, 1e-6]))
@@ -118,6 +118,64 @@ def test_the_box_cues_jacobian_matches_central_differences():
         numeric = (at(x + e) - at(x - e)) / (2 * step)
         np.testing.assert_allclose(J[:, k], numeric, rtol=1e-5, atol=1e-5 * (1 + np.abs(numeric).max()))
     assert rng is not None and np.all(np.isfinite(r))
+
+
+#: A road normal a degree off the camera's -y, camera frame.
+ROAD_UP = np.array([0.01, -1.0, 0.013]) / np.linalg.norm([0.01, -1.0, 0.013])
+
+
+def test_on_a_road_the_box_rows_do_not_see_the_lean_and_their_jacobian_holds():
+    """Rule 28: on a road the box rows project the cuboid stood upright on it. Pitching or rolling the vehicle then
+    leaves them as they are (to rounding), turning it about the road's normal does not, and the Jacobian (the
+    heading's derivative taken through the projection onto the road) matches central differences."""
+    R, t = R_cam_vehicle_from_ypr(3 * np.pi / 4, 0.05, -0.03), _truth(4)[1]
+    box = np.array([400.0, 150.0, 700.0, 260.0])
+    r, J = box_residuals(CAMERA.K, box, R, t, D, up=ROAD_UP)
+    upright, _ = upright_on(R, ROAD_UP)
+    np.testing.assert_allclose(box_residuals(CAMERA.K, box, upright, t, D, False)[0], r, atol=1e-9)
+    for lean in ([0.03, 0.0, 0.0], [0.0, -0.04, 0.0]):  # a roll, a pitch (its own axes) of an upright vehicle
+        leaned, _ = box_residuals(CAMERA.K, box, upright @ so3_exp(np.array(lean)), t, D, False, ROAD_UP)
+        np.testing.assert_allclose(leaned, r, atol=1e-9)
+    turned, _ = box_residuals(CAMERA.K, box, so3_exp(0.02 * ROAD_UP) @ R, t, D, False, ROAD_UP)
+    assert np.abs(turned - r).max() > 0.5  # 0.02 rad of heading moves a side of a 15 m car by pixels
+    assert J[:, 0].tolist() == [0.0] * 4
+    x = np.concatenate([np.zeros(3), t, D])
+    step = 1e-6
+    for k in range(9):
+        e = np.zeros(9)
+        e[k] = step
+
+        def at(v):
+            return box_residuals(CAMERA.K, box, R @ so3_exp(v[:3]), v[3:6], v[6:9], False, ROAD_UP)[0]
+
+        numeric = (at(x + e) - at(x - e)) / (2 * step)
+        np.testing.assert_allclose(J[:, k], numeric, rtol=1e-5, atol=1e-5 * (1 + np.abs(numeric).max()))
+
+
+def test_upright_on_keeps_the_heading_and_takes_the_roads_up_axis():
+    R = R_cam_vehicle_from_ypr(0.7, 0.04, -0.02)
+    R_up, _ = upright_on(R, ROAD_UP)
+    np.testing.assert_allclose(R_up.T @ R_up, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R_up) == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(R_up[:, 2], ROAD_UP, atol=1e-12)
+    # The forward axis turns only toward the road: it stays in the plane of R's forward axis and the normal.
+    assert abs(np.cross(R[:, 0], ROAD_UP) @ R_up[:, 0]) < 1e-12
+    assert R_up[:, 0] @ R[:, 0] > np.cos(0.06)
+
+
+def test_a_track_on_a_road_is_recovered_exactly_from_keyframe_clicks_and_boxes():
+    """With a road whose normal is the vehicle's up axis (the truth is upright on it), the upright box rows are
+    exact too: the noise-free track comes back to rounding."""
+    from toosicubix.model import GroundPlane
+
+    up = _truth(0)[0][:, 2]
+    ground = GroundPlane(up, np.radians(3.0), None, 0.1, np.radians(2.0), from_batch=True)
+    frames = [TrackFrame(f.frame, f.parts, f.camera, ground, f.box2d)
+              for f in _track(11, clicked={0, 10}, boxed=set(range(1, 10)))]
+    fit = fit_track(frames, EXACT_PRIOR, EXACT)
+    assert fit.ok, fit.reason
+    t_err, R_err = _errors(fit, frames)
+    assert t_err < 1e-6 and R_err < 1e-6
 
 
 def test_block_arrow_solves_and_inverts_as_dense_algebra():

@@ -10,7 +10,8 @@ standardized residual times ``sqrt(lambda_px)``, as :mod:`.problem` weighs the s
   clicks, known sizes, the ground contact and the upright term with a ground, the arrow zone), but the size prior,
   which the track has once;
 - per frame with a 2D box (:class:`TrackFrame`): each side of the box the image border does not cut is where the
-  projected cuboid's extreme corner lies (:func:`box_residuals`), within :attr:`TrackOptions.box_sigma`;
+  projected cuboid's extreme corner lies (:func:`box_residuals`), within :attr:`TrackOptions.box_sigma`; on a road,
+  the cuboid stood upright on it, so that a box sets the heading, position and size but not the lean (rule 28);
 - per frame without clicks: the ground contact and the upright term when its image has a ground;
 - the size prior, once, weighed as in each clicked frame fitted alone (its information times the number of clicked
   frames): real parts sit off the cuboid model by the same offsets in every frame (a tyre is as far inside the body
@@ -135,7 +136,7 @@ class FrameFit:
     pose_from : 'clicks' (clicked here), 'box' (only a 2D box here) or 'interpolated' (nothing here)
     residuals_px : (N, 2) projected minus clicked (undistorted) pixels; click_weights : (N,) or None
     box_residuals_px : (4,) the projected cuboid's extreme minus the box side, left, top, right, bottom (NaN for a
-        side left out), or None without a box
+        side left out), or None without a box; the rows the fit used (on a road, the cuboid stood upright on it)
     uncertainty : its sigmas, from the track's marginal covariance, or None when it could not be computed
     cost : its share of the track's cost (its pixel and cue rows, not the motion's)
     single : the frame's own fit from its clicks alone, or None (no clicks, or too few)
@@ -208,11 +209,38 @@ def undistorted_box(camera: Camera, box2d: np.ndarray) -> np.ndarray:
     return np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
 
 
+def upright_on(R: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``R_cam_vehicle`` (3, 3) stood upright on a road whose normal is ``up`` (3,), camera frame: the rotation whose
+    forward axis is ``R``'s projected onto the road plane and whose up axis is ``up`` (the heading kept, the lean
+    dropped); and ``g`` (3,), the derivative of its heading about ``up`` on ``R``'s increment ``delta``
+    (``R <- R exp([delta]x)``; its first component is 0: a roll leaves the forward axis where it is).
+
+    ``R``'s forward axis must not be along ``up`` (a vehicle on its nose); the fits keep vehicles within 45 degrees of
+    upright, far from it."""
+    up = np.asarray(up, dtype=float)
+    forward_on_road = R[:, 0] - (R[:, 0] @ up) * up
+    length = float(np.linalg.norm(forward_on_road))
+    h = forward_on_road / length
+    left = np.cross(up, h)
+    # d(forward) = delta_z R e_y - delta_y R e_z; its component along ``left`` over ``length`` turns the heading.
+    g = np.array([0.0, -(left @ R[:, 2]), left @ R[:, 1]]) / length
+    return np.column_stack([h, left, up]), g
+
+
 def box_residuals(K: np.ndarray, box: np.ndarray, R: np.ndarray, t: np.ndarray, d: np.ndarray,
-                  with_jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+                  with_jacobian: bool = True, up: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """The projected cuboid's extremes minus the box's sides: left, top, right, bottom (4,) pixels, and their
     Jacobian (4, 9) on ``(delta, t, d)`` (``R <- R exp([delta]x)``). ``box`` (4,) in the pinhole's pixels; every
-    corner must lie in front of the camera."""
+    corner must lie in front of the camera.
+
+    ``up`` (3,): the road's normal in the camera frame, when the image has a road. The cuboid is then projected
+    standing upright on it (:func:`upright_on`): the box speaks to the heading, the position and the size, not to the
+    lean (rule 28 of benchmarks/decisions.md). A box's sides move with the lean less than with the errors every side
+    carries (the cuboid is not the silhouette, a person's box sits inside its corners, the size is a few per cent
+    off), and least squares would spend the lean absorbing them; the clicks and the road's upright term set it."""
+    g = None
+    if up is not None:
+        R, g = upright_on(R, up)
     X = _CORNERS * d  # (8, 3) vehicle frame
     Y = X @ R.T + t
     inv_z = 1.0 / Y[:, 2]
@@ -231,7 +259,8 @@ def box_residuals(K: np.ndarray, box: np.ndarray, R: np.ndarray, t: np.ndarray, 
         else:
             dY = np.array([0.0, K[1, 1] / z, -(v[k] - K[1, 2]) / z])
         b = dY @ R  # the row of d(pixel)/dY R
-        J[side, 0:3] = np.cross(X[k], b)  # dY = -R [X]x delta: the row (X x b)
+        rotation = np.cross(X[k], b)  # dY = -R [X]x delta: the row (X x b)
+        J[side, 0:3] = rotation if g is None else rotation[2] * g  # upright: only the heading turns it
         J[side, 3:6] = dY
         J[side, 6:9] = b * _CORNERS[k]
     return r, J
@@ -306,6 +335,8 @@ class _TrackProblem:
         self.block_sizes = [sum(self.frame_sizes[2 * k:2 * k + 2]) for k in range((self.F + 1) // 2)]
         self.n_shared = len(layout.shared)
         self.box_sigmas = [None if b is None else self._box_sigma(b) for b in boxes]
+        # The road each frame's box rows stand the cuboid upright on (rule 28), None without a road.
+        self.ups = [None if f.ground is None else np.asarray(f.ground.normal, dtype=float) for f in frames]
 
     def _box_sigma(self, box: np.ndarray) -> np.ndarray:
         width, height = box[2] - box[0], box[3] - box[1]
@@ -326,7 +357,7 @@ class _TrackProblem:
         J = None if J is None else J[0][keep]
         box = self.boxes[f]
         if box is not None:
-            rb, Jb = box_residuals(problem.K, box, R, t, p[:3], jacobian)
+            rb, Jb = box_residuals(problem.K, box, R, t, p[:3], jacobian, self.ups[f])
             used = self.sides[f]
             scale = self.w / self.box_sigmas[f][used]
             r = np.concatenate([r, scale * rb[used]])
@@ -746,7 +777,7 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
         pixel = problems[f].pixel_residuals(R[f], t[f], p) if frame.parts.n_clicks else np.zeros((0, 2))
         box_r = None
         if boxes[f] is not None:
-            rb, _ = box_residuals(problems[f].K, boxes[f], R[f], t[f], p[:3], False)
+            rb, _ = box_residuals(problems[f].K, boxes[f], R[f], t[f], p[:3], False, problem.ups[f])
             box_r = np.where(sides[f], rb, np.nan)
         uncertainty = None if marginals is None else _frame_uncertainty(marginals, problem, f, R[f], t[f])
         pose_from = "clicks" if frame.parts.n_clicks else "box" if boxes[f] is not None else "interpolated"
