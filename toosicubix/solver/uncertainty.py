@@ -411,20 +411,44 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     gradients = _gradients(problem, R, t, p, G)
     full, clicks_only = _information_variances(J_px, C, sigmas, gradients)
     ratios, status = _status(full, clicks_only)
-    whitened = J_px / sigmas[:, None]
-    data = whitened.T @ whitened
-    sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), gradients, full)
-    clicked = _clicked(problem, R, t, p, click_sigma)
-    keypoints_only = problem.parts.keypoints_only
-    advice = {}
-    for name in QUANTITIES:
-        if status[name] == "clicks":
-            continue
-        advice[name] = _advice(name, clicked, keypoints_only) or _limit(
-            name, _follows(name, data, C, gradients, full, status), sources, float(np.linalg.norm(t)))
+    keypoints_only, upright = problem.parts.keypoints_only, problem.upright_sigma is not None
+    end = one_end(problem.parts, p, R, t)
+    said = _advised(status, keypoints_only, upright, end)
+    sources: dict[str, tuple[str, ...]] = {}
+    advice: dict[str, str] = {}
+    if said:  # what sets them and what to click: only for the quantities a sentence advises on
+        whitened = J_px / sigmas[:, None]
+        data = whitened.T @ whitened
+        clicked = _clicked(problem, R, t, p, click_sigma)
+        follows = {name: () if _advice(name, clicked, keypoints_only) else
+                   _follows(name, data, C, gradients, full, status) for name in said}
+        needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
+        sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
+                           {q: full[q] for q in needed})
+        for name in said:
+            advice[name] = _advice(name, clicked, keypoints_only) or _limit(name, follows[name], sources,
+                                                                            float(np.linalg.norm(t)))
     return u, Observability(ratios, status, observability_sentences(
-        status, scale_from, keypoints_only, problem.upright_sigma is not None, tuple(problem.row_cues),
-        one_end(problem.parts, p, R, t), sources, advice))
+        status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end, sources, advice))
+
+
+def _advised(status: dict[str, str], keypoints_only: bool, upright: bool,
+             end: tuple[str, str | None] | None) -> list[str]:
+    """The quantities whose sentence names what sets them and advises a click (:func:`observability_sentences`):
+    those the clicks leave to the cues, but pitch and roll on a road (the road's job: one sentence, no advice) and
+    yaw and length of a vehicle clicked on one end in keypoints (one sentence on the far end)."""
+    skip = set(_on_road(status, upright)) | set(_on_one_end(status, keypoints_only, end))
+    return [q for q in QUANTITIES if status[q] != "clicks" and q not in skip]
+
+
+def _on_road(status: dict[str, str], upright: bool) -> list[str]:
+    return [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
+
+
+def _on_one_end(status: dict[str, str], keypoints_only: bool, end: tuple[str, str | None] | None) -> tuple[str, ...]:
+    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
+        return ("yaw", "length")
+    return ()
 
 
 def _variances(M: np.ndarray, Gm: np.ndarray) -> np.ndarray:
@@ -696,12 +720,11 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
     every such click (:func:`_advice`, :func:`_limit`; every requirement when not given)."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
-    on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
+    on_road = _on_road(status, upright)
     if on_road:
         out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
-    on_one_end = ()
-    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
-        on_one_end = ("yaw", "length")
+    on_one_end = _on_one_end(status, keypoints_only, end)
+    if on_one_end:
         out.append(_far_end_sentence(*end))
     for name in QUANTITIES:
         if name in on_road or name in on_one_end:
