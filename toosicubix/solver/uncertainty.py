@@ -462,6 +462,25 @@ def _variances(M: np.ndarray, Gm: np.ndarray) -> np.ndarray:
     return np.array([Gm[:, i] @ X[:, i] for i in range(Gm.shape[1])])
 
 
+def _variances_each(Ms: np.ndarray, Gm: np.ndarray) -> np.ndarray:
+    """:func:`_variances` of each of a stack of information matrices ``Ms`` (S, n, n): (S, k), in one batched solve
+    (the matrices are a dozen unknowns across: a call each would cost more than the arithmetic). Equal to it but in
+    the last bits, so only for comparisons (what sets a quantity), never for a figure results.json reports."""
+    scale = 1.0 / np.sqrt(np.maximum(np.diagonal(Ms, axis1=1, axis2=2), 1e-300))  # (S, n)
+    try:
+        X = np.linalg.solve(Ms * scale[:, :, None] * scale[:, None, :], Gm[None] * scale[:, :, None])
+        X *= scale[:, :, None]
+    except np.linalg.LinAlgError:
+        X = np.stack([np.linalg.pinv(M, hermitian=True) @ Gm for M in Ms])
+        for i, M in enumerate(Ms):  # the regular ones solved as above
+            try:
+                X[i] = np.linalg.solve(M * scale[i][:, None] * scale[i][None, :], Gm * scale[i][:, None]) * (
+                    scale[i][:, None])
+            except np.linalg.LinAlgError:
+                pass
+    return np.einsum("nk,snk->sk", Gm, X)
+
+
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
                            gradients: dict[str, np.ndarray]) -> tuple[dict[str, float], dict[str, float]]:
     """Posterior variances of the quantities with the ``gradients``, from clicks and cues, and from the clicks
@@ -514,11 +533,13 @@ def _setters(data: np.ndarray, J_c: np.ndarray, groups: dict[str, np.ndarray], g
     Gm = np.column_stack([gradients[k] for k in names])
     information = {g: J_c[rows].T @ J_c[rows] for g, rows in groups.items()}
     every = sum(information.values(), np.zeros_like(data))
-    only, without = {}, {}
-    for g, C_g in information.items():
+    stack = []
+    for C_g in information.values():
         rest = every - C_g
-        only[g] = _variances(data + C_g + CLICKS_ONLY_WEIGHT * rest, Gm)
-        without[g] = _variances(data + rest + CLICKS_ONLY_WEIGHT * C_g, Gm)
+        stack += [data + C_g + CLICKS_ONLY_WEIGHT * rest, data + rest + CLICKS_ONLY_WEIGHT * C_g]
+    v_all = _variances_each(np.array(stack), Gm) if stack else np.zeros((0, len(names)))
+    only = {g: v_all[2 * j] for j, g in enumerate(information)}
+    without = {g: v_all[2 * j + 1] for j, g in enumerate(information)}
     out = {}
     for i, name in enumerate(names):
         v = full[name]
@@ -539,12 +560,13 @@ def _follows(name: str, data: np.ndarray, C: np.ndarray, gradients: dict[str, np
     others = [q for q in QUANTITIES if q != name and status[q] != "clicks"]
     pins = {q: np.outer(gradients[q], gradients[q]) / (CLICKS_ONLY_WEIGHT * full[q]) for q in others}  # known 1000x
     g = gradients[name][:, None]  # better than now
+    base = data + CLICKS_ONLY_WEIGHT * C
     for size in range(1, len(others) + 1):
-        ratios = {subset: float(_variances(data + CLICKS_ONLY_WEIGHT * C + sum(pins[q] for q in subset), g)[0])
-                  / full[name] for subset in combinations(others, size)}
-        best = min(ratios, key=ratios.get)
-        if ratios[best] <= PRIOR_SET_RATIO:
-            return best
+        subsets = list(combinations(others, size))
+        v = _variances_each(np.array([base + sum(pins[q] for q in subset) for subset in subsets]), g)[:, 0]
+        best = int(np.argmin(v))  # the first of the smallest, as min over the subsets in order
+        if v[best] / full[name] <= PRIOR_SET_RATIO:
+            return subsets[best]
     return ()
 
 
@@ -574,6 +596,11 @@ def _source(groups: tuple[str, ...], short: bool = False) -> str:
     return _and([_CUE_NAMES[g] for g in groups] or ["the cues"])
 
 
+#: The annotations the advice may ask for (:data:`_ANY`'s alternatives).
+_HINTED = frozenset(part for options in _ANY.values() for _, alternatives in options for each in alternatives
+                    for part in each)
+
+
 def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float) -> _Clicked:
     """What the vehicle's clicks already give the observability's advice (:class:`_Clicked`): the annotations it has
     (:func:`.clicked.named_as_clicked`), those the advice may name that are predicted within
@@ -588,26 +615,33 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
     terms = {"dx": d[0], "dy": d[1], "dz": d[2], "Xwf": values.get("Xwf", 0.3 * d[0]),
              "Xwr": values.get("Xwr", -0.3 * d[0]), "side": side, "side*dy": side * d[1], "one": 1.0}
     radius = ALREADY_CLICKED_SIGMAS * click_sigma
-    hinted = {part for options in _ANY.values() for _, alternatives in options for each in alternatives
-              for part in each}
-    for kind, name in hinted - names:
+    candidates, points, owner = [], [], []  # the advice's parts not clicked, placed on the fit; their points' owner
+    for kind, name in sorted(_HINTED - names):
         e = vocabulary.entry(kind, name)
         if e.typical is None or not KINDS[kind].on_body:  # an arrow is drawn anywhere: only one drawn counts
             continue
-        points_cam = np.asarray(vocabulary.typical_points(e, terms)) @ R.T + t
-        if np.all(points_cam[:, 2] > 0.0):
-            uv = points_cam[:, :2] / points_cam[:, 2:] @ problem.K[:2, :2].T + problem.K[:2, 2]
-            if near_a_click(uv, problem.uv, radius):
-                names.add((kind, name))
+        xyz = vocabulary.typical_points(e, terms)
+        owner += [len(candidates)] * len(xyz)
+        candidates.append((kind, name))
+        points += xyz
+    if candidates:
+        points_cam = np.asarray(points, dtype=float) @ R.T + t  # (k, 3)
+        owner_of = np.asarray(owner)
+        in_front = np.ones(len(candidates), dtype=bool)
+        np.logical_and.at(in_front, owner_of, points_cam[:, 2] > 0.0)
+        z = np.where(points_cam[:, 2:] > 0.0, points_cam[:, 2:], 1.0)
+        uv = points_cam[:, :2] / z @ problem.K[:2, :2].T + problem.K[:2, 2]
+        for j, part in enumerate(candidates):
+            if in_front[j] and near_a_click(uv[owner_of == j], problem.uv, radius):
+                names.add(part)
     facts = set()
-    at = []  # per on-body click: its position as fractions of (dx, dy, dz), NaN along an axis with an unknown
-    for i, label in enumerate(parts.click_labels):
-        if not vocabulary.on_body(label):
-            continue
-        A = parts.A[i]
-        own = [A[k, k] if not np.any(np.delete(A[k], k)) else math.nan for k in range(3)]
-        at.append(own)
-    at = np.array(at).reshape(-1, 3)
+    on_body = [i for i, label in enumerate(parts.click_labels) if vocabulary.on_body(label)]
+    A = parts.A[on_body][:, :, :3] if on_body else np.zeros((0, 3, 3))  # (M, 3, 3): on the dimensions
+    rows = parts.A[on_body] if on_body else np.zeros((0, 3, 3))
+    own = np.diagonal(A, axis1=1, axis2=2)  # (M, 3)
+    alone = np.count_nonzero(rows, axis=2) == (own != 0.0)  # the row has no term but its own dimension's
+    # per on-body click: its position as fractions of (dx, dy, dz), NaN along an axis with an unknown
+    at = np.where(alone, own, math.nan).reshape(-1, 3)
     with np.errstate(invalid="ignore"):
         x, y, z = at.T
         for fact, hits in (("front", x >= END_FRACTION), ("rear", x <= -END_FRACTION), ("left", y >= SIDE_FRACTION),
