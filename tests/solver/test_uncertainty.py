@@ -384,3 +384,23 @@ def test_the_advice_never_asks_for_a_part_the_vehicle_has(view, seed):
             assert "a light pair" not in asks
         if any({f"wheel-{axle}-left", f"wheel-{axle}-right"} <= names for axle in ("front", "rear")):
             assert "both ends of an axle" not in asks and "both wheels of an axle" not in asks
+
+
+def test_sentences_are_made_once_when_read_and_travel_whole_in_a_pickle():
+    """Observability's sentences are worked out the first time they are read (the page's refits never read them),
+    once, and a pickled one (a worker's result) carries them made."""
+    import pickle
+
+    from toosicubix.solver.uncertainty import Observability
+
+    calls = []
+
+    def make() -> tuple[str, ...]:
+        calls.append(1)
+        return ("yaw set by the size prior, not by the clicks: click a light pair",)
+
+    obs = Observability({"yaw": 2e4}, {"yaw": "cues only"}, make)
+    assert calls == []
+    back = pickle.loads(pickle.dumps(obs))
+    assert calls == [1] and back.sentences == obs.sentences == make()
+    assert back == obs and calls == [1, 1]  # the comparison's own call of make() above, none from obs

@@ -102,6 +102,16 @@ def failed_result(vehicle: Vehicle, prior: SizePrior, reason: str, detail: str |
                          error_detail=detail, kitti_type=prior.kitti_type)
 
 
+def settled(result: VehicleResult) -> VehicleResult:
+    """``result`` with what it makes only when read made now (its observability's sentences,
+    :class:`~toosicubix.solver.uncertainty.Observability`): a batch writes them all, keeps a track's results until
+    its sequence is done, and a worker sends its results to the parent whole. The page, which never reads them,
+    does not call this."""
+    if result.observability is not None:
+        result.observability.sentences  # noqa: B018  (made and kept)
+    return result
+
+
 def checked_result(result: VehicleResult) -> VehicleResult:
     """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
     front of the camera or any number in it (pose, box, uncertainty, diagnostics) is not finite. A failed

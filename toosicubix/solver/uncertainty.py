@@ -33,6 +33,7 @@ together with (:func:`_follows`), or the view.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import combinations
 
@@ -413,23 +414,27 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     ratios, status = _status(full, clicks_only)
     keypoints_only, upright = problem.parts.keypoints_only, problem.upright_sigma is not None
     end = one_end(problem.parts, p, R, t)
-    said = _advised(status, keypoints_only, upright, end)
-    sources: dict[str, tuple[str, ...]] = {}
-    advice: dict[str, str] = {}
-    if said:  # what sets them and what to click: only for the quantities a sentence advises on
-        whitened = J_px / sigmas[:, None]
-        data = whitened.T @ whitened
-        clicked = _clicked(problem, R, t, p, click_sigma)
-        follows = {name: () if _advice(name, clicked, keypoints_only) else
-                   _follows(name, data, C, gradients, full, status) for name in said}
-        needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
-        sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
-                           {q: full[q] for q in needed})
-        for name in said:
-            advice[name] = _advice(name, clicked, keypoints_only) or _limit(name, follows[name], sources,
-                                                                            float(np.linalg.norm(t)))
-    return u, Observability(ratios, status, observability_sentences(
-        status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end, sources, advice))
+
+    def sentences() -> tuple[str, ...]:
+        said = _advised(status, keypoints_only, upright, end)
+        sources: dict[str, tuple[str, ...]] = {}
+        advice: dict[str, str] = {}
+        if said:  # what sets them and what to click: only for the quantities a sentence advises on
+            whitened = J_px / sigmas[:, None]
+            data = whitened.T @ whitened
+            clicked = _clicked(problem, R, t, p, click_sigma)
+            follows = {name: () if _advice(name, clicked, keypoints_only) else
+                       _follows(name, data, C, gradients, full, status) for name in said}
+            needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
+            sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
+                               {q: full[q] for q in needed})
+            for name in said:
+                advice[name] = _advice(name, clicked, keypoints_only) or _limit(name, follows[name], sources,
+                                                                                float(np.linalg.norm(t)))
+        return observability_sentences(status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end,
+                                       sources, advice)
+
+    return u, Observability(ratios, status, sentences)
 
 
 def _advised(status: dict[str, str], keypoints_only: bool, upright: bool,
@@ -685,7 +690,7 @@ def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Observability:
     """For each of yaw, pitch, roll, length, width, height: how much the cues tighten it (results.json's
     ``observability``).
@@ -696,12 +701,33 @@ class Observability:
         alone do not determine it); large means the clicks leave it to the cues
     status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
     sentences : plain sentences, one per quantity the clicks do not fix, and one on the scale
-        (:func:`observability_sentences`)
+        (:func:`observability_sentences`). Given as a tuple, or as a function that makes it: worked out the first
+        time they are read (what sets each quantity and what to click costs several solves a vehicle, and the page's
+        refits never read them), and before the object is pickled (a worker's result goes to the parent whole).
     """
 
     ratios: dict[str, float]
     status: dict[str, str]
-    sentences: tuple[str, ...]
+    _sentences: tuple[str, ...] | Callable[[], tuple[str, ...]] = field(repr=False)
+
+    @property
+    def sentences(self) -> tuple[str, ...]:
+        if callable(self._sentences):
+            object.__setattr__(self, "_sentences", tuple(self._sentences()))
+        return self._sentences
+
+    def __reduce__(self) -> tuple:
+        return type(self), (self.ratios, self.status, self.sentences)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Observability):
+            return NotImplemented
+        return (self.ratios, self.status, self.sentences) == (other.ratios, other.status, other.sentences)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable dicts inside, as the dataclass it was
+
+    def __repr__(self) -> str:
+        return f"Observability(ratios={self.ratios!r}, status={self.status!r}, sentences={self.sentences!r})"
 
     def to_json(self) -> dict:
         return {"determined_by": dict(self.status),
