@@ -391,6 +391,7 @@ def test_sentences_are_made_once_when_read_and_travel_whole_in_a_pickle():
     once, and a pickled one (a worker's result) carries them made."""
     import pickle
 
+    from toosicubix.formats.results import all_finite
     from toosicubix.solver.uncertainty import Observability
 
     calls = []
@@ -400,7 +401,8 @@ def test_sentences_are_made_once_when_read_and_travel_whole_in_a_pickle():
         return ("yaw set by the size prior, not by the clicks: click a light pair",)
 
     obs = Observability({"yaw": 2e4}, {"yaw": "cues only"}, make)
-    assert calls == []
+    assert all_finite(obs) and calls == []  # the check every fit passes does not make them
+    assert not all_finite(Observability({"yaw": float("nan")}, {"yaw": "cues only"}, make))
     back = pickle.loads(pickle.dumps(obs))
     assert calls == [1] and back.sentences == obs.sentences == make()
     assert back == obs and calls == [1, 1]  # the comparison's own call of make() above, none from obs
