@@ -406,3 +406,22 @@ def test_sentences_are_made_once_when_read_and_travel_whole_in_a_pickle():
     back = pickle.loads(pickle.dumps(obs))
     assert calls == [1] and back.sentences == obs.sentences == make()
     assert back == obs and calls == [1, 1]  # the comparison's own call of make() above, none from obs
+
+
+def test_two_quantities_the_clicks_fix_only_together_get_one_sentence_not_two_pointing_at_each_other():
+    """ApolloCar3D's side-on cars: the clicks fix yaw and length only together, each leaving the other to the size
+    prior. Two sentences, each saying the other is the limit, told a person nothing; one says both."""
+    from toosicubix.solver.uncertainty import _jointly, _together, observability_sentences
+
+    follows = {"yaw": ("length",), "length": ("yaw",), "width": ("length",)}
+    together = _together(["yaw", "length", "width"], follows)
+    assert together == {"length": "yaw"}  # width hangs on length, length not on width: no pair
+    status = {"yaw": "mostly cues", "pitch": "clicks", "roll": "clicks", "length": "mostly cues",
+              "width": "clicks", "height": "clicks"}
+    sources = {"yaw": ("size prior",), "length": ("size prior",)}
+    why = _jointly("yaw", "length", sources)
+    sentences = observability_sentences(status, None, True, False, (), None, sources,
+                                        {"yaw": why, "length": why}, together)
+    assert sentences == ("yaw and length mostly set by the size prior: the clicks that usually fix them are there, "
+                         "but they fix the yaw and the length only together (turned and stretched, the cuboid fits "
+                         "them alike), and the size prior picks the pair",)

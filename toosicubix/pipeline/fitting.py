@@ -30,7 +30,6 @@ from toosicubix.pipeline.vehicle import (
     describe_fit,
     failed_result,
     fit_one,
-    settled,
     with_next_clicks,
 )
 from toosicubix.size_priors import Priors, SizePrior
@@ -171,11 +170,11 @@ def _chunk(n_vehicles: int, jobs: int) -> int:
 
 
 def _fit_chunk(tasks: list[FitTask]) -> list[VehicleResult]:
-    return [settled(fit_one(*task)) for task in tasks]
+    return [fit_one(*task) for task in tasks]
 
 
 def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
-    return [settled(with_next_clicks(*task)) for task in tasks]
+    return [with_next_clicks(*task) for task in tasks]
 
 
 def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
@@ -244,9 +243,9 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
             click_weights=own.click_weights, downweighted=vehicles[k].downweighted, residual_test=test,
         )
         try:
-            updated = settled(checked_result(
+            updated = checked_result(
                 describe_fit(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks,
-                             candidates(v.prototype))))
+                             candidates(v.prototype)))
         except UnusableFit as exc:
             out[k] = failed_result(v, jv.problem.prior, f"after the joint refinement: {exc}")
             continue

@@ -37,5 +37,11 @@ def near_a_click(uv: np.ndarray, clicked_uv: np.ndarray, radius: float) -> bool:
     (``clicked_uv`` (N, 2), the same image coordinates)."""
     if not len(uv) or not len(clicked_uv):
         return False
+    return bool(np.any(near_clicks(uv, clicked_uv, radius)))
+
+
+def near_clicks(uv: np.ndarray, clicked_uv: np.ndarray, radius: float) -> np.ndarray:
+    """For each predicted pixel ``uv`` (k, 2), whether it lies within ``radius`` pixels of a click (``clicked_uv``
+    (N, 2), N >= 1): (k,) bool."""
     gaps = np.linalg.norm(np.asarray(uv)[:, None] - np.asarray(clicked_uv)[None], axis=2)
-    return bool(np.any(gaps.min(axis=1) < radius))
+    return gaps.min(axis=1) < radius

@@ -42,7 +42,7 @@ import numpy as np
 from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
 from toosicubix.parts.linear import PartsModel
-from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_a_click
+from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_clicks
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
 from toosicubix.vocabulary import KINDS
@@ -428,11 +428,20 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
             needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
             sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
                                {q: full[q] for q in needed})
+            together = _together(said, follows)
             for name in said:
-                advice[name] = _advice(name, clicked, keypoints_only) or _limit(name, follows[name], sources,
-                                                                                float(np.linalg.norm(t)))
+                if name in together:
+                    continue
+                partner = next((q for q, lead in together.items() if lead == name), None)
+                advice[name] = _advice(name, clicked, keypoints_only) or (
+                    _jointly(name, partner, sources) if partner else
+                    _limit(name, follows[name], sources, float(np.linalg.norm(t))))
+            for q, lead in together.items():
+                advice[q] = advice[lead]
+        else:
+            together = {}
         return observability_sentences(status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end,
-                                       sources, advice)
+                                       sources, advice, together)
 
     return u, Observability(ratios, status, sentences)
 
@@ -575,6 +584,26 @@ def _follows(name: str, data: np.ndarray, C: np.ndarray, gradients: dict[str, np
     return ()
 
 
+def _together(said: list[str], follows: dict[str, tuple[str, ...]]) -> dict[str, str]:
+    """Pairs of quantities the clicks fix only together, each leaving the other to the cues (each one's
+    :func:`_follows` is the other): the second of each pair (in :data:`QUANTITIES`' order) -> the first, whose
+    sentence says both (two sentences each pointing at the other would tell a person nothing)."""
+    out: dict[str, str] = {}
+    for a in said:
+        f = follows.get(a, ())
+        if len(f) == 1 and f[0] in said and follows.get(f[0]) == (a,) and a not in out and f[0] not in out and (
+                QUANTITIES.index(a) < QUANTITIES.index(f[0])):
+            out[f[0]] = a
+    return out
+
+
+def _jointly(name: str, other: str, sources: dict[str, tuple[str, ...]]) -> str:
+    """What limits two quantities the clicks fix only together (:func:`_together`)."""
+    groups = tuple(dict.fromkeys((*sources.get(name, ("size prior",)), *sources.get(other, ("size prior",)))))
+    return (f"the clicks that usually fix them are there, but they fix the {name} and the {other} only together "
+            f"(turned and stretched, the cuboid fits them alike), and {_source(groups, short=True)} picks the pair")
+
+
 def _limit(name: str, follows: tuple[str, ...], sources: dict[str, tuple[str, ...]], distance: float) -> str:
     """What limits ``name`` when the vehicle has every click that usually fixes it: the quantities it hangs on
     (``follows``, :func:`_follows`) and what sets them, or else the view (``distance`` metres away), and for a
@@ -621,7 +650,8 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
              "Xwr": values.get("Xwr", -0.3 * d[0]), "side": side, "side*dy": side * d[1], "one": 1.0}
     radius = ALREADY_CLICKED_SIGMAS * click_sigma
     candidates, points, owner = [], [], []  # the advice's parts not clicked, placed on the fit; their points' owner
-    for kind, name in sorted(_HINTED - names):
+    hinted = () if parts.keypoints_only else sorted(_HINTED - names)  # keypoint advice names no part: not needed
+    for kind, name in hinted:
         e = vocabulary.entry(kind, name)
         if e.typical is None or not KINDS[kind].on_body:  # an arrow is drawn anywhere: only one drawn counts
             continue
@@ -636,9 +666,10 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
         np.logical_and.at(in_front, owner_of, points_cam[:, 2] > 0.0)
         z = np.where(points_cam[:, 2:] > 0.0, points_cam[:, 2:], 1.0)
         uv = points_cam[:, :2] / z @ problem.K[:2, :2].T + problem.K[:2, 2]
-        for j, part in enumerate(candidates):
-            if in_front[j] and near_a_click(uv[owner_of == j], problem.uv, radius):
-                names.add(part)
+        near = np.zeros(len(candidates), dtype=bool)  # any of a part's points near a click (.clicked.near_a_click)
+        if len(problem.uv):
+            np.logical_or.at(near, owner_of, near_clicks(uv, problem.uv, radius))
+        names.update(part for j, part in enumerate(candidates) if in_front[j] and near[j])
     facts = set()
     on_body = [i for i, label in enumerate(parts.click_labels) if vocabulary.on_body(label)]
     A = parts.A[on_body][:, :, :3] if on_body else np.zeros((0, 3, 3))  # (M, 3, 3): on the dimensions
@@ -766,7 +797,8 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
                             upright: bool = False, scale_cues: tuple[str, ...] = (),
                             end: tuple[str, str | None] | None = None,
                             sources: dict[str, tuple[str, ...]] | None = None,
-                            advice: dict[str, str] | None = None) -> tuple[str, ...]:
+                            advice: dict[str, str] | None = None,
+                            together: dict[str, str] | None = None) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
@@ -777,7 +809,8 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
     yaw or the length to the prior, one sentence says so and which click fixes both, in place of their hints.
     ``sources``: per quantity, the cue groups that set it (:func:`_setters`; the size prior when not given), named
     in its sentence. ``advice``: per quantity, what to click that the vehicle lacks, or what limits it when it has
-    every such click (:func:`_advice`, :func:`_limit`; every requirement when not given)."""
+    every such click (:func:`_advice`, :func:`_limit`; every requirement when not given). ``together``: a quantity
+    -> the one whose sentence also says it (:func:`_together`: the clicks fix the two only together)."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
     on_road = _on_road(status, upright)
@@ -786,15 +819,18 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
     on_one_end = _on_one_end(status, keypoints_only, end)
     if on_one_end:
         out.append(_far_end_sentence(*end))
+    together = together or {}
     for name in QUANTITIES:
-        if name in on_road or name in on_one_end:
+        if name in on_road or name in on_one_end or name in together:
             continue
-        source = _source((sources or {}).get(name, ("size prior",)))
-        what = (advice or {}).get(name) or hints[name]
-        if status[name] == "cues only":
-            out.append(f"{name} set by {source}, not by the clicks: {what}")
+        both = [name, *(q for q, lead in together.items() if lead == name)]
+        groups = tuple(dict.fromkeys(g for q in both for g in (sources or {}).get(q, ("size prior",))))
+        source, what = _source(groups), (advice or {}).get(name) or hints[name]
+        said = " and ".join(both)
+        if status[name] == "cues only" or any(status[q] == "cues only" for q in both[1:]):
+            out.append(f"{said} set by {source}, not by the clicks: {what}")
         elif status[name] == "mostly cues":
-            out.append(f"{name} mostly set by {source}: {what}")
+            out.append(f"{said} mostly set by {source}: {what}")
     if scale_from:
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
         out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
