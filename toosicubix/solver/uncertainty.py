@@ -641,6 +641,9 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
     :data:`.clicked.ALREADY_CLICKED_SIGMAS` click sigmas of a click (the fitted cuboid, its axles and the camera's
     side as :mod:`.guidance` places them), and where its on-body clicks pin the cuboid."""
     parts = problem.parts
+    facts = _facts(parts)
+    if parts.keypoints_only:  # keypoint advice names no part, only where the clicks sit
+        return _Clicked(frozenset(), facts)
     labels = [vocabulary.click(label) for label in parts.click_labels]
     names = named_as_clicked((c.kind, c.name) for c in labels)
     values = dict(zip(parts.param_names, p, strict=True))
@@ -650,8 +653,7 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
              "Xwr": values.get("Xwr", -0.3 * d[0]), "side": side, "side*dy": side * d[1], "one": 1.0}
     radius = ALREADY_CLICKED_SIGMAS * click_sigma
     candidates, points, owner = [], [], []  # the advice's parts not clicked, placed on the fit; their points' owner
-    hinted = () if parts.keypoints_only else sorted(_HINTED - names)  # keypoint advice names no part: not needed
-    for kind, name in hinted:
+    for kind, name in sorted(_HINTED - names):
         e = vocabulary.entry(kind, name)
         if e.typical is None or not KINDS[kind].on_body:  # an arrow is drawn anywhere: only one drawn counts
             continue
@@ -670,11 +672,15 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
         if len(problem.uv):
             np.logical_or.at(near, owner_of, near_clicks(uv, problem.uv, radius))
         names.update(part for j, part in enumerate(candidates) if in_front[j] and near[j])
+    return _Clicked(frozenset(names), facts)
+
+
+def _facts(parts: PartsModel) -> frozenset[str]:
+    """Where a vehicle's on-body clicks pin the cuboid (:attr:`_Clicked.facts`)."""
     facts = set()
     on_body = [i for i, label in enumerate(parts.click_labels) if vocabulary.on_body(label)]
-    A = parts.A[on_body][:, :, :3] if on_body else np.zeros((0, 3, 3))  # (M, 3, 3): on the dimensions
-    rows = parts.A[on_body] if on_body else np.zeros((0, 3, 3))
-    own = np.diagonal(A, axis1=1, axis2=2)  # (M, 3)
+    rows = parts.A[on_body] if on_body else np.zeros((0, 3, 3))  # (M, 3, P)
+    own = np.diagonal(rows[:, :, :3], axis1=1, axis2=2)  # (M, 3): each coordinate's term in its own dimension
     alone = np.count_nonzero(rows, axis=2) == (own != 0.0)  # the row has no term but its own dimension's
     # per on-body click: its position as fractions of (dx, dy, dz), NaN along an axis with an unknown
     at = np.where(alone, own, math.nan).reshape(-1, 3)
@@ -690,7 +696,7 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
                 facts.add("along")
             if np.any(on_end & (y >= SIDE_FRACTION)) and np.any(on_end & (y <= -SIDE_FRACTION)):
                 facts.add("across")
-    return _Clicked(frozenset(names), frozenset(facts))
+    return frozenset(facts)
 
 
 def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
