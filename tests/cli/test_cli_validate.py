@@ -33,7 +33,7 @@ def test_validate_exits_1_and_explains_the_vehicles_that_need_clicks(tmp_path, m
     assert "NOT well determined: yaw sigma" in out
     assert "constraints " in out and "auxiliary unknowns" in out
     assert "sigma: yaw " in out and "confidence " in out
-    assert "set by the prior" in out  # an observability sentence
+    assert "set by the size prior" in out  # an observability sentence
     assert "click next:" in out and "    1. " in out and "yaw sigma" in out
     assert _files(tmp_path) == []
 

@@ -245,7 +245,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
         try:
             updated = checked_result(
                 describe_fit(v, image.camera, jv.problem.prior, parts, fit, plane_fitted, options, next_clicks,
-                                candidates(v.prototype)))
+                             candidates(v.prototype)))
         except UnusableFit as exc:
             out[k] = failed_result(v, jv.problem.prior, f"after the joint refinement: {exc}")
             continue

@@ -21,7 +21,14 @@ from toosicubix.formats.results import VehicleResult
 from toosicubix.model import Image, Vehicle
 from toosicubix.parts.linear import PartsModel, build_parts_model
 from toosicubix.pipeline.settings import BatchSettings
-from toosicubix.pipeline.vehicle import UnusableFit, checked_result, describe_fit, failed_result, with_likely_cause
+from toosicubix.pipeline.vehicle import (
+    UnusableFit,
+    checked_result,
+    describe_fit,
+    failed_result,
+    settled,
+    with_likely_cause,
+)
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions
 from toosicubix.solver.plausibility import implausibility
@@ -59,7 +66,7 @@ def results_of_track(track: str, frames: list[tuple[Image, Vehicle]], prior: Siz
                 frame_fit = _checked_plausible(frame_fit, model, v, im, prior, options)
             result = describe_fit(v, im.camera, prior, model, frame_fit, im.ground, options, next_clicks)
             with np.errstate(all="ignore"):
-                out.append(_tracked(checked_result(result), track, frame.pose_from))
+                out.append(_tracked(settled(checked_result(result)), track, frame.pose_from))
         except UnusableFit as exc:
             out.append(_tracked(failed_result(v, prior, f"in its track's fit: {exc}"), track, frame.pose_from))
     return out

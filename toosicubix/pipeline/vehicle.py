@@ -102,6 +102,17 @@ def failed_result(vehicle: Vehicle, prior: SizePrior, reason: str, detail: str |
                          error_detail=detail, kitti_type=prior.kitti_type)
 
 
+def settled(result: VehicleResult) -> VehicleResult:
+    """``result`` with what it makes only when read made now (its observability's sentences,
+    :class:`~toosicubix.solver.uncertainty.Observability`), for a result kept a while before it is written: a
+    track's, held until its sequence is done, would otherwise hold its fit's Jacobians until then. A result written
+    as soon as its image is done needs none (the sentences are made as it is written, or in the worker that pickles
+    it); the pilot's, never written, and the page's, never read, never make them."""
+    if result.observability is not None:
+        result.observability.sentences  # noqa: B018  (made and kept)
+    return result
+
+
 def checked_result(result: VehicleResult) -> VehicleResult:
     """``result`` when it can be written; raises :class:`UnusableFit` when its cuboid (R, t, d) is not in
     front of the camera or any number in it (pose, box, uncertainty, diagnostics) is not finite. A failed

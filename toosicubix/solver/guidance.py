@@ -36,6 +36,7 @@ from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
 from toosicubix.size_priors import SizePrior
+from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_a_click
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.plausibility import faces_turned_to_camera
 from toosicubix.solver.problem import Problem
@@ -72,9 +73,6 @@ class Fitted(Protocol):
 
 #: A suggested part must be on a face turned toward the camera by at least this much, degrees.
 VISIBLE_MIN_DEG = 5.0
-#: A part predicted closer to a click than this many click sigmas is not suggested: no click could tell it from the
-#: one already there (2 sigmas: 3 px at the default 1.5 px, whatever the vehicle's size in the image).
-ALREADY_CLICKED_SIGMAS = 2.0
 TINY = 1e-12
 #: A keypoint is toward the far end of a vehicle clicked on one end when its typical position lies past the middle by
 #: at least this fraction of the length (:attr:`Suggestion.far_end`).
@@ -156,14 +154,8 @@ def _candidates(parts: tuple[Part, ...], corners: bool, camera_side: float) -> l
     some prototypes (corners) when ``corners`` or one is clicked already;
     of a kind suggested once (arrows), none when one is clicked, else those its ``suggest`` admits for the
     camera's side (``camera_side`` +1: the camera is on the vehicle's left)."""
-    clicked = {(p.kind, p.name) for p in parts}
+    clicked = named_as_clicked((p.kind, p.name) for p in parts)
     corners = corners or any(vocabulary.entry(p.kind, p.name).suits != "all" for p in parts)
-    for p in parts:
-        e = vocabulary.entry(p.kind, p.name)
-        if e.get("shape") == "wheelbase":
-            clicked |= {("point", f"wheel-{axle}-{e.get('side')}") for axle in ("front", "rear")}
-        elif e.get("shape") in ("wheel", "hub"):  # one wheel, whichever of its two points was clicked
-            clicked |= {("point", f"{shape}-{e.get('axle')}-{e.get('side')}") for shape in ("wheel", "hub")}
     kinds_clicked = {p.kind for p in parts}
     out = []
     for kind in vocabulary.KINDS.values():
@@ -253,8 +245,7 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
         points_cam = points_vehicle @ R.T + t
         if np.all(points_cam[:, 2] > MIN_DEPTH):
             uv = camera.project(points_cam)
-            gaps = np.linalg.norm(uv[:, None] - clicked_uv[None], axis=2) if len(clicked_uv) else np.empty((0, 0))
-            if keypoints is None and gaps.size and np.any(gaps.min(axis=1) < already):
+            if keypoints is None and near_a_click(uv, clicked_uv, already):
                 continue  # the person sees a click there already
             placed.append(replace(part, uv=uv))
             placed_vehicle.append(points_vehicle)

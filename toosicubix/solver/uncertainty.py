@@ -16,22 +16,36 @@ Reported quantities are functions of ``theta`` whose standard deviations follow 
 What the clicks determine: for each quantity, its posterior variance from the clicks' information alone
 (``A / click_sigma^2`` with ``A = J_px^T J_px``, the cues' information ``C = J_cue^T J_cue`` scaled by 1e-6 to
 keep it invertible) against its variance from both (``(A / click_sigma^2 + C)^-1``). Along a direction no click
-fixes, the first is a million times the second. Both have the scale pinned (a huge weight along the
-direction ``(0, t, p)``), since no click ever fixes it: the scale is always the cues' (or the prior's).
+fixes, the first is a million times the second. No click ever fixes the scale (the direction ``(0, t, p)`` is
+exactly blind to them), but no measured quantity moves along it: the rotations have no part in it, and the
+dimensions are measured against the depth of the clicked parts' centroid (:func:`_gradients`). So the scale never
+inflates a ratio by itself (pinning it moves them by at most a few times where the clicks leave another direction
+free, and not at all where they do not); a large ratio always means a direction the clicks leave free (or nearly).
+
+What sets a quantity the clicks leave to the cues (:func:`_setters`): the cue group (the size prior, the road the
+vehicle stands upright on, the camera height, known sizes, arrows' zones) which with the clicks alone restores its
+variance, else those without which it widens. The advice for it names only the requirements its clicks do not meet
+yet (:func:`_advice`: parts already clicked, by name or within two click sigmas of a click, are never asked for,
+:mod:`.clicked`); when they meet them all, what limits it (:func:`_limit`): another quantity it is fixed only
+together with (:func:`_follows`), or the view.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import combinations
 
 import numpy as np
 
 from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
 from toosicubix.parts.linear import PartsModel
+from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_clicks
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
+from toosicubix.vocabulary import KINDS
 
 #: A vehicle's clicks are all on one end when each sits at least this fraction of its length from the middle, all on
 #: one side (:func:`one_end`): a rear view's lamps, plate, boot and rear glass; a door or a wheel is not.
@@ -44,24 +58,105 @@ PRIOR_SET_RATIO = 4.0
 UNDETERMINED_RATIO = 1e4
 QUANTITIES = ("yaw", "pitch", "roll", "length", "width", "height")
 
-_HINTS = {
-    "yaw": "click two wheels of one side, both ends of an axle, a light pair, or draw a forward arrow",
-    "pitch": "click parts at both ends (front and rear) and on the ground (wheels)",
-    "roll": "click parts on both sides (both wheels of an axle, a light pair)",
-    "length": "click a front and a rear part (both ends of the vehicle)",
-    "width": "click parts on both sides (both wheels of an axle, a light pair, both edges of an end)",
-    "height": "click a roof or top part and one on the ground (a wheel)",
+#: A cue "sets" a quantity when the clicks and that cue alone give it within PRIOR_SET_RATIO of its variance with
+#: every cue; when no single cue does, the cues whose removal multiplies it by more than PRIOR_SET_RATIO set it
+#: together (:func:`_setters`).
+#: A click pins a dimension when its position along that axis is a fixed fraction of the dimension (no unknown of
+#: its own): an end at least END_FRACTION of the length from the middle, a side this fraction of the width, a top or a
+#: bottom at least this high or at most this low (fractions of the height; a cuboid's faces are at 0.5, 1 and 0).
+SIDE_FRACTION = 0.25
+HIGH_FRACTION, LOW_FRACTION = 0.7, 0.35
+
+#: The cue rows' groups as a person knows them (:func:`_cue_groups`), in the order sentences name them.
+_CUE_NAMES = {"size prior": "the size prior", "road": "the road", "camera height": "the camera height",
+              "known sizes": "the known sizes", "arrows": "where its arrows are drawn"}
+
+# What fixes each quantity, as requirements on the clicks: a fact about where clicks sit (:func:`_clicked`), or
+# alternatives of annotations (kind, name) any one of which, all clicked, meets it. A quantity's advice names the
+# requirements not met yet: for yaw and roll any one would do ("or"), for the others each is needed ("and").
+_WHEELS = {(axle, side): ("point", f"wheel-{axle}-{side}") for axle in ("front", "rear") for side in ("left", "right")}
+_ONE_SIDE = tuple((_WHEELS["front", side], _WHEELS["rear", side]) for side in ("left", "right"))
+_ONE_AXLE = tuple((_WHEELS[axle, "left"], _WHEELS[axle, "right"]) for axle in ("front", "rear"))
+_PAIR = ((("symmetry", "front"),), (("symmetry", "rear"),))
+_ARROW = tuple((("direction", axis),) for axis in ("forward", "backward", "leftward", "rightward"))
+_ANY = {
+    "yaw": (("two wheels of one side", _ONE_SIDE), ("both ends of an axle", _ONE_AXLE), ("a light pair", _PAIR),
+            ("a forward or sideways arrow", _ARROW)),
+    "roll": (("both wheels of an axle", _ONE_AXLE), ("a light pair", _PAIR)),
 }
-#: The same advice for a vehicle clicked only in keypoints (a mapping's, e.g. ApolloCar3D's): no arrows,
-#: no ground contacts, no cuboid edges.
-_KEYPOINT_HINTS = {
-    "yaw": "click keypoints front to rear along one side (a front and a rear wheel centre, a side's lamps)",
-    "pitch": "click keypoints at both ends (front and rear) and low on the body (wheel centres)",
-    "roll": "click keypoints on both sides of one end (its left and right lamps)",
-    "length": "click a keypoint at the front and one at the rear",
-    "width": "click keypoints on both sides, as far apart as they go (both mirrors, both lamps of one end)",
-    "height": "click a high keypoint (a glass top corner) and a low one (a wheel centre)",
+_ALL = {"pitch": ("ends", "low"), "length": ("ends",), "width": ("sides",), "height": ("high", "low")}
+_KEYPOINT_ALL = {"yaw": ("along",), "pitch": ("ends", "low"), "roll": ("across",), "length": ("ends",),
+                 "width": ("sides",), "height": ("high", "low")}
+#: Requirement -> (phrase when nothing of it is clicked, phrase per fact when only that one is missing).
+_PHRASES = {
+    "ends": ("a front and a rear part (both ends of the vehicle)", {"front": "a front part", "rear": "a rear part"}),
+    "sides": ("parts on both sides at the body's full width (both wheels of an axle, both edges of an end)",
+              {"left": "a part on its left side (a left wheel or edge)",
+               "right": "a part on its right side (a right wheel or edge)"}),
+    "high": ("a roof or top part", {}),
+    "low": ("a part on the ground (a wheel)", {}),
 }
+_KEYPOINT_PHRASES = {
+    "ends": ("a keypoint at the front and one at the rear",
+             {"front": "a keypoint at the front", "rear": "a keypoint at the rear"}),
+    "sides": ("keypoints on both sides, as far apart as they go (both mirrors, both lamps of one end)",
+              {"left": "a keypoint far out on its left side (a mirror, a lamp)",
+               "right": "a keypoint far out on its right side (a mirror, a lamp)"}),
+    "high": ("a high keypoint (a glass top corner)", {}),
+    "low": ("a low keypoint (a wheel centre)", {}),
+    "along": ("keypoints front to rear along one side (a front and a rear wheel centre, a side's lamps)", {}),
+    "across": ("keypoints on both sides of one end (its left and right lamps)", {}),
+}
+_FACTS = {"ends": ("front", "rear"), "sides": ("left", "right"), "high": ("high",), "low": ("low",),
+          "along": ("along",), "across": ("across",)}
+
+
+@dataclass(frozen=True)
+class _Clicked:
+    """What a vehicle's clicks already give (:func:`_clicked`): ``names``, the annotations (kind, name) it has or
+    that are predicted within two click sigmas of a click (:mod:`.clicked`); ``facts``, where its clicks pin the
+    cuboid: 'front', 'rear' (an end), 'left', 'right' (a side at full width), 'high', 'low', and for keypoints
+    'along' (front and rear on one side) and 'across' (left and right on one end)."""
+
+    names: frozenset[tuple[str, str]] = frozenset()
+    facts: frozenset[str] = frozenset()
+
+
+def _advice(name: str, clicked: _Clicked, keypoints_only: bool = False) -> str | None:
+    """What to click so that the clicks fix ``name``, leaving out what ``clicked`` has; None when they have it all."""
+    if not keypoints_only and name in _ANY:
+        missing = [text for text, alternatives in _ANY[name]
+                   if not any(set(parts) <= clicked.names for parts in alternatives)]
+        clicks = [text for text in missing if "arrow" not in text]
+        arrow = [f"draw {text}" for text in missing if "arrow" in text]
+        if name == "roll":
+            return f"click parts on both sides ({_listing(clicks)})" if clicks else None
+        if clicks and arrow:
+            return f"click {', '.join(clicks)}, or {arrow[0]}"
+        return f"click {_listing(clicks)}" if clicks else (arrow[0] if arrow else None)
+    phrases = _KEYPOINT_PHRASES if keypoints_only else _PHRASES
+    needed = []
+    for requirement in (_KEYPOINT_ALL if keypoints_only else _ALL)[name]:
+        lacking = [f for f in _FACTS[requirement] if f not in clicked.facts]
+        if len(lacking) == len(_FACTS[requirement]):
+            needed.append(phrases[requirement][0])
+        elif lacking:
+            needed.append(phrases[requirement][1][lacking[0]])
+    return f"click {' and '.join(needed)}" if needed else None
+
+
+def _listing(items: list[str]) -> str:
+    """'a', 'a or b', 'a, b, or c'."""
+    if len(items) <= 2:
+        return " or ".join(items)
+    return f"{', '.join(items[:-1])}, or {items[-1]}"
+
+
+#: The advice for a vehicle with nothing clicked: every requirement of each quantity, in the cuboid's vocabulary,
+#: and for a vehicle clicked only in keypoints (a mapping's, e.g. ApolloCar3D's): no arrows, no ground contacts, no
+#: cuboid edges.
+_HINTS = {name: _advice(name, _Clicked()) for name in QUANTITIES}
+_KEYPOINT_HINTS = {name: _advice(name, _Clicked(), keypoints_only=True) for name in QUANTITIES}
 
 
 @dataclass(frozen=True)
@@ -314,10 +409,90 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
     u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
-    full, clicks_only = _information_variances(J_px, C, sigmas, _gradients(problem, R, t, p, G))
-    return u, _observability(full, clicks_only, scale_from, problem.parts.keypoints_only,
-                             problem.upright_sigma is not None, tuple(problem.row_cues),
-                             one_end(problem.parts, p, R, t))
+    gradients = _gradients(problem, R, t, p, G)
+    full, clicks_only = _information_variances(J_px, C, sigmas, gradients)
+    ratios, status = _status(full, clicks_only)
+    keypoints_only, upright = problem.parts.keypoints_only, problem.upright_sigma is not None
+    end = one_end(problem.parts, p, R, t)
+
+    def sentences() -> tuple[str, ...]:
+        said = _advised(status, keypoints_only, upright, end)
+        sources: dict[str, tuple[str, ...]] = {}
+        advice: dict[str, str] = {}
+        if said:  # what sets them and what to click: only for the quantities a sentence advises on
+            whitened = J_px / sigmas[:, None]
+            data = whitened.T @ whitened
+            clicked = _clicked(problem, R, t, p, click_sigma)
+            follows = {name: () if _advice(name, clicked, keypoints_only) else
+                       _follows(name, data, C, gradients, full, status) for name in said}
+            needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
+            sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
+                               {q: full[q] for q in needed})
+            together = _together(said, follows)
+            for name in said:
+                if name in together:
+                    continue
+                partner = next((q for q, lead in together.items() if lead == name), None)
+                advice[name] = _advice(name, clicked, keypoints_only) or (
+                    _jointly(name, partner, sources) if partner else
+                    _limit(name, follows[name], sources, float(np.linalg.norm(t))))
+            for q, lead in together.items():
+                advice[q] = advice[lead]
+        else:
+            together = {}
+        return observability_sentences(status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end,
+                                       sources, advice, together)
+
+    return u, Observability(ratios, status, sentences)
+
+
+def _advised(status: dict[str, str], keypoints_only: bool, upright: bool,
+             end: tuple[str, str | None] | None) -> list[str]:
+    """The quantities whose sentence names what sets them and advises a click (:func:`observability_sentences`):
+    those the clicks leave to the cues, but pitch and roll on a road (the road's job: one sentence, no advice) and
+    yaw and length of a vehicle clicked on one end in keypoints (one sentence on the far end)."""
+    skip = set(_on_road(status, upright)) | set(_on_one_end(status, keypoints_only, end))
+    return [q for q in QUANTITIES if status[q] != "clicks" and q not in skip]
+
+
+def _on_road(status: dict[str, str], upright: bool) -> list[str]:
+    return [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
+
+
+def _on_one_end(status: dict[str, str], keypoints_only: bool, end: tuple[str, str | None] | None) -> tuple[str, ...]:
+    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
+        return ("yaw", "length")
+    return ()
+
+
+def _variances(M: np.ndarray, Gm: np.ndarray) -> np.ndarray:
+    """``diag(Gm^T M^-1 Gm)`` (k,) for an information matrix ``M`` (n, n) and gradients ``Gm`` (n, k), solved with ``M``
+    scaled to a unit diagonal (a pseudo-inverse when it is singular)."""
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(M), 1e-300))
+    try:
+        X = np.linalg.solve(M * scale[:, None] * scale[None, :], Gm * scale[:, None]) * scale[:, None]
+    except np.linalg.LinAlgError:
+        X = np.linalg.pinv(M, hermitian=True) @ Gm
+    return np.array([Gm[:, i] @ X[:, i] for i in range(Gm.shape[1])])
+
+
+def _variances_each(Ms: np.ndarray, Gm: np.ndarray) -> np.ndarray:
+    """:func:`_variances` of each of a stack of information matrices ``Ms`` (S, n, n): (S, k), in one batched solve
+    (the matrices are a dozen unknowns across: a call each would cost more than the arithmetic). Equal to it but in
+    the last bits, so only for comparisons (what sets a quantity), never for a figure results.json reports."""
+    scale = 1.0 / np.sqrt(np.maximum(np.diagonal(Ms, axis1=1, axis2=2), 1e-300))  # (S, n)
+    try:
+        X = np.linalg.solve(Ms * scale[:, :, None] * scale[:, None, :], Gm[None] * scale[:, :, None])
+        X *= scale[:, :, None]
+    except np.linalg.LinAlgError:
+        X = np.stack([np.linalg.pinv(M, hermitian=True) @ Gm for M in Ms])
+        for i, M in enumerate(Ms):  # the regular ones solved as above
+            try:
+                X[i] = np.linalg.solve(M * scale[i][:, None] * scale[i][None, :], Gm * scale[i][:, None]) * (
+                    scale[i][:, None])
+            except np.linalg.LinAlgError:
+                pass
+    return np.einsum("nk,snk->sk", Gm, X)
 
 
 def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
@@ -329,15 +504,199 @@ def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
     names = list(gradients)
     Gm = np.column_stack([gradients[k] for k in names])
     out = []
-    for weight in (1.0, 1e-6):
-        M = data + weight * C
-        scale = 1.0 / np.sqrt(np.maximum(np.diag(M), 1e-300))
-        try:
-            X = np.linalg.solve(M * scale[:, None] * scale[None, :], Gm * scale[:, None]) * scale[:, None]
-        except np.linalg.LinAlgError:
-            X = np.linalg.pinv(M, hermitian=True) @ Gm
-        out.append({k: float(Gm[:, i] @ X[:, i]) for i, k in enumerate(names)})
+    for weight in (1.0, CLICKS_ONLY_WEIGHT):
+        v = _variances(data + weight * C, Gm)
+        out.append({k: float(v[i]) for i, k in enumerate(names)})
     return out[0], out[1]
+
+
+#: The cues' weight in "the clicks alone": small enough that a direction no click fixes shows a ratio of about its
+#: inverse, large enough to keep the information matrix invertible.
+CLICKS_ONLY_WEIGHT = 1e-6
+
+
+def _status(full: dict[str, float], clicks_only: dict[str, float]) -> tuple[dict[str, float], dict[str, str]]:
+    """Each quantity's variance ratio (clicks alone / clicks and cues) and what determines it."""
+    ratios, status = {}, {}
+    for name, v_full in full.items():
+        ratio = clicks_only[name] / v_full if v_full > 0 else math.inf
+        ratios[name] = ratio
+        status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
+                        "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
+    return ratios, status
+
+
+def _cue_groups(problem: Problem, n_rows: int) -> dict[str, np.ndarray]:
+    """The cue rows of :func:`jacobians` (``n_rows`` of them: scale rows, upright rows, arrow rows) by what a person
+    knows them as (:data:`_CUE_NAMES`' keys): the size prior, the known sizes, the camera height (the ground
+    contact), the road (the upright rows) and the arrows' zones; groups without rows left out."""
+    labels = [("camera height" if cue == "ground contact" else cue if cue == "size prior" else "known sizes")
+              for cue in problem.row_cues]
+    labels += ["road"] * (3 if problem.upright_sigma is not None else 0)
+    labels += ["arrows"] * (n_rows - len(labels))
+    return {g: np.flatnonzero([label == g for label in labels]) for g in _CUE_NAMES if g in labels}
+
+
+def _setters(data: np.ndarray, J_c: np.ndarray, groups: dict[str, np.ndarray], gradients: dict[str, np.ndarray],
+             full: dict[str, float]) -> dict[str, tuple[str, ...]]:
+    """For each quantity, the cue groups that set what the clicks leave of it (``data``, the clicks' information;
+    ``J_c``, the cue rows; ``full``, the variances with every cue): the one cue that, with the clicks alone, gives
+    within :data:`PRIOR_SET_RATIO` of ``full`` (the tightest such), else those whose removal widens the variance by
+    more than :data:`PRIOR_SET_RATIO` (or, if none does, the one whose removal widens it most)."""
+    names = list(gradients)
+    Gm = np.column_stack([gradients[k] for k in names])
+    information = {g: J_c[rows].T @ J_c[rows] for g, rows in groups.items()}
+    every = sum(information.values(), np.zeros_like(data))
+    stack = []
+    for C_g in information.values():
+        rest = every - C_g
+        stack += [data + C_g + CLICKS_ONLY_WEIGHT * rest, data + rest + CLICKS_ONLY_WEIGHT * C_g]
+    v_all = _variances_each(np.array(stack), Gm) if stack else np.zeros((0, len(names)))
+    only = {g: v_all[2 * j] for j, g in enumerate(information)}
+    without = {g: v_all[2 * j + 1] for j, g in enumerate(information)}
+    out = {}
+    for i, name in enumerate(names):
+        v = full[name]
+        single = [g for g in groups if only[g][i] <= PRIOR_SET_RATIO * v]
+        if single:
+            out[name] = (min(single, key=lambda g: only[g][i]),)
+            continue
+        needed = tuple(g for g in groups if without[g][i] > PRIOR_SET_RATIO * v)
+        out[name] = needed or ((max(groups, key=lambda g: without[g][i]),) if groups else ())
+    return out
+
+
+def _follows(name: str, data: np.ndarray, C: np.ndarray, gradients: dict[str, np.ndarray], full: dict[str, float],
+             status: dict[str, str]) -> tuple[str, ...]:
+    """The fewest other quantities the cues set that ``name`` hangs on: those which, pinned, would leave ``name`` to
+    the clicks (its clicks-only variance within :data:`PRIOR_SET_RATIO` of ``full``), in :data:`QUANTITIES`' order;
+    empty when no such set does."""
+    others = [q for q in QUANTITIES if q != name and status[q] != "clicks"]
+    pins = {q: np.outer(gradients[q], gradients[q]) / (CLICKS_ONLY_WEIGHT * full[q]) for q in others}  # known 1000x
+    g = gradients[name][:, None]  # better than now
+    base = data + CLICKS_ONLY_WEIGHT * C
+    for size in range(1, len(others) + 1):
+        subsets = list(combinations(others, size))
+        v = _variances_each(np.array([base + sum(pins[q] for q in subset) for subset in subsets]), g)[:, 0]
+        best = int(np.argmin(v))  # the first of the smallest, as min over the subsets in order
+        if v[best] / full[name] <= PRIOR_SET_RATIO:
+            return subsets[best]
+    return ()
+
+
+def _together(said: list[str], follows: dict[str, tuple[str, ...]]) -> dict[str, str]:
+    """Pairs of quantities the clicks fix only together, each leaving the other to the cues (each one's
+    :func:`_follows` is the other): the second of each pair (in :data:`QUANTITIES`' order) -> the first, whose
+    sentence says both (two sentences each pointing at the other would tell a person nothing)."""
+    out: dict[str, str] = {}
+    for a in said:
+        f = follows.get(a, ())
+        if len(f) == 1 and f[0] in said and follows.get(f[0]) == (a,) and a not in out and f[0] not in out and (
+                QUANTITIES.index(a) < QUANTITIES.index(f[0])):
+            out[f[0]] = a
+    return out
+
+
+def _jointly(name: str, other: str, sources: dict[str, tuple[str, ...]]) -> str:
+    """What limits two quantities the clicks fix only together (:func:`_together`)."""
+    groups = tuple(dict.fromkeys((*sources.get(name, ("size prior",)), *sources.get(other, ("size prior",)))))
+    return (f"the clicks that usually fix them are there, but they fix the {name} and the {other} only together "
+            f"(turned and stretched, the cuboid fits them alike), and {_source(groups, short=True)} picks the pair")
+
+
+def _limit(name: str, follows: tuple[str, ...], sources: dict[str, tuple[str, ...]], distance: float) -> str:
+    """What limits ``name`` when the vehicle has every click that usually fixes it: the quantities it hangs on
+    (``follows``, :func:`_follows`) and what sets them, or else the view (``distance`` metres away), and for a
+    dimension the cue that would fix it."""
+    if follows:
+        groups = tuple(dict.fromkeys(g for q in follows for g in sources.get(q, ("size prior",))))
+        return (f"the clicks that fix it are there, but they fix the {name} only together with the "
+                f"{_and(list(follows))}, which they leave to {_source(groups, short=True)}")
+    known = "; known dimensions would fix it" if name in ("length", "width", "height") else ""
+    return (f"the clicks that usually fix it are there, but seen from this view, {distance:.0f} m away, they do not"
+            f"{known}")
+
+
+def _and(items: list[str]) -> str:
+    """'a', 'a and b', 'a, b and c'."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def _source(groups: tuple[str, ...], short: bool = False) -> str:
+    """The cue groups that set a quantity, as a person reads them: 'the road (the vehicle stands upright on it)'
+    ('the road' when ``short``), 'the road and the size prior'."""
+    if groups == ("road",) and not short:
+        return "the road (the vehicle stands upright on it)"
+    return _and([_CUE_NAMES[g] for g in groups] or ["the cues"])
+
+
+#: The annotations the advice may ask for (:data:`_ANY`'s alternatives).
+_HINTED = frozenset(part for options in _ANY.values() for _, alternatives in options for each in alternatives
+                    for part in each)
+
+
+def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float) -> _Clicked:
+    """What the vehicle's clicks already give the observability's advice (:class:`_Clicked`): the annotations it has
+    (:func:`.clicked.named_as_clicked`), those the advice may name that are predicted within
+    :data:`.clicked.ALREADY_CLICKED_SIGMAS` click sigmas of a click (the fitted cuboid, its axles and the camera's
+    side as :mod:`.guidance` places them), and where its on-body clicks pin the cuboid."""
+    parts = problem.parts
+    facts = _facts(parts)
+    if parts.keypoints_only:  # keypoint advice names no part, only where the clicks sit
+        return _Clicked(frozenset(), facts)
+    labels = [vocabulary.click(label) for label in parts.click_labels]
+    names = named_as_clicked((c.kind, c.name) for c in labels)
+    values = dict(zip(parts.param_names, p, strict=True))
+    d = p[:3]
+    side = 1.0 if (R.T @ -np.asarray(t))[1] >= 0.0 else -1.0
+    terms = {"dx": d[0], "dy": d[1], "dz": d[2], "Xwf": values.get("Xwf", 0.3 * d[0]),
+             "Xwr": values.get("Xwr", -0.3 * d[0]), "side": side, "side*dy": side * d[1], "one": 1.0}
+    radius = ALREADY_CLICKED_SIGMAS * click_sigma
+    candidates, points, owner = [], [], []  # the advice's parts not clicked, placed on the fit; their points' owner
+    for kind, name in sorted(_HINTED - names):
+        e = vocabulary.entry(kind, name)
+        if e.typical is None or not KINDS[kind].on_body:  # an arrow is drawn anywhere: only one drawn counts
+            continue
+        xyz = vocabulary.typical_points(e, terms)
+        owner += [len(candidates)] * len(xyz)
+        candidates.append((kind, name))
+        points += xyz
+    if candidates:
+        points_cam = np.asarray(points, dtype=float) @ R.T + t  # (k, 3)
+        owner_of = np.asarray(owner)
+        in_front = np.ones(len(candidates), dtype=bool)
+        np.logical_and.at(in_front, owner_of, points_cam[:, 2] > 0.0)
+        z = np.where(points_cam[:, 2:] > 0.0, points_cam[:, 2:], 1.0)
+        uv = points_cam[:, :2] / z @ problem.K[:2, :2].T + problem.K[:2, 2]
+        near = np.zeros(len(candidates), dtype=bool)  # any of a part's points near a click (.clicked.near_a_click)
+        if len(problem.uv):
+            np.logical_or.at(near, owner_of, near_clicks(uv, problem.uv, radius))
+        names.update(part for j, part in enumerate(candidates) if in_front[j] and near[j])
+    return _Clicked(frozenset(names), facts)
+
+
+def _facts(parts: PartsModel) -> frozenset[str]:
+    """Where a vehicle's on-body clicks pin the cuboid (:attr:`_Clicked.facts`)."""
+    facts = set()
+    on_body = [i for i, label in enumerate(parts.click_labels) if vocabulary.on_body(label)]
+    rows = parts.A[on_body] if on_body else np.zeros((0, 3, 3))  # (M, 3, P)
+    own = np.diagonal(rows[:, :, :3], axis1=1, axis2=2)  # (M, 3): each coordinate's term in its own dimension
+    alone = np.count_nonzero(rows, axis=2) == (own != 0.0)  # the row has no term but its own dimension's
+    # per on-body click: its position as fractions of (dx, dy, dz), NaN along an axis with an unknown
+    at = np.where(alone, own, math.nan).reshape(-1, 3)
+    with np.errstate(invalid="ignore"):
+        x, y, z = at.T
+        for fact, hits in (("front", x >= END_FRACTION), ("rear", x <= -END_FRACTION), ("left", y >= SIDE_FRACTION),
+                           ("right", y <= -SIDE_FRACTION), ("high", z >= HIGH_FRACTION), ("low", z <= LOW_FRACTION)):
+            if np.any(hits):
+                facts.add(fact)
+        for s in (1.0, -1.0):
+            on_side, on_end = s * y >= SIDE_FRACTION, s * x >= END_FRACTION
+            if np.any(on_side & (x >= END_FRACTION)) and np.any(on_side & (x <= -END_FRACTION)):
+                facts.add("along")
+            if np.any(on_end & (y >= SIDE_FRACTION)) and np.any(on_end & (y <= -SIDE_FRACTION)):
+                facts.add("across")
+    return frozenset(facts)
 
 
 def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
@@ -368,7 +727,7 @@ def _gradients(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Observability:
     """For each of yaw, pitch, roll, length, width, height: how much the cues tighten it (results.json's
     ``observability``).
@@ -379,12 +738,33 @@ class Observability:
         alone do not determine it); large means the clicks leave it to the cues
     status : quantity -> 'clicks', 'mostly cues' (ratio > PRIOR_SET_RATIO) or 'cues only' (> UNDETERMINED_RATIO)
     sentences : plain sentences, one per quantity the clicks do not fix, and one on the scale
-        (:func:`observability_sentences`)
+        (:func:`observability_sentences`). Given as a tuple, or as a function that makes it: worked out the first
+        time they are read (what sets each quantity and what to click costs several solves a vehicle, and the page's
+        refits never read them), and before the object is pickled (a worker's result goes to the parent whole).
     """
 
     ratios: dict[str, float]
     status: dict[str, str]
-    sentences: tuple[str, ...]
+    _sentences: tuple[str, ...] | Callable[[], tuple[str, ...]] = field(repr=False)
+
+    @property
+    def sentences(self) -> tuple[str, ...]:
+        if callable(self._sentences):
+            object.__setattr__(self, "_sentences", tuple(self._sentences()))
+        return self._sentences
+
+    def __reduce__(self) -> tuple:
+        return type(self), (self.ratios, self.status, self.sentences)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Observability):
+            return NotImplemented
+        return (self.ratios, self.status, self.sentences) == (other.ratios, other.status, other.sentences)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable dicts inside, as the dataclass it was
+
+    def __repr__(self) -> str:
+        return f"Observability(ratios={self.ratios!r}, status={self.status!r}, sentences={self.sentences!r})"
 
     def to_json(self) -> dict:
         return {"determined_by": dict(self.status),
@@ -421,7 +801,10 @@ def one_end(parts: PartsModel, p: np.ndarray, R: np.ndarray | None = None, t: np
 
 def observability_sentences(status: dict[str, str], scale_from: str | None, keypoints_only: bool = False,
                             upright: bool = False, scale_cues: tuple[str, ...] = (),
-                            end: tuple[str, str | None] | None = None) -> tuple[str, ...]:
+                            end: tuple[str, str | None] | None = None,
+                            sources: dict[str, tuple[str, ...]] | None = None,
+                            advice: dict[str, str] | None = None,
+                            together: dict[str, str] | None = None) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
@@ -429,23 +812,31 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
     since that is its job. ``scale_cues``: the cues that share the scale (:attr:`~toosicubix.solver.fit.FitResult.
     scale_shares`' keys, or every cue of the problem): the scale's advice names only the cues the vehicle lacks.
     ``end``: the end every keypoint sits on and the side the camera sees (:func:`one_end`): when the clicks leave the
-    yaw or the length to the prior, one sentence says so and which click fixes both, in place of their hints."""
+    yaw or the length to the prior, one sentence says so and which click fixes both, in place of their hints.
+    ``sources``: per quantity, the cue groups that set it (:func:`_setters`; the size prior when not given), named
+    in its sentence. ``advice``: per quantity, what to click that the vehicle lacks, or what limits it when it has
+    every such click (:func:`_advice`, :func:`_limit`; every requirement when not given). ``together``: a quantity
+    -> the one whose sentence also says it (:func:`_together`: the clicks fix the two only together)."""
     out = []
     hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
-    on_road = [q for q in ("pitch", "roll") if upright and status[q] != "clicks"]
+    on_road = _on_road(status, upright)
     if on_road:
         out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
-    on_one_end = ()
-    if keypoints_only and end is not None and (status["yaw"] != "clicks" or status["length"] != "clicks"):
-        on_one_end = ("yaw", "length")
+    on_one_end = _on_one_end(status, keypoints_only, end)
+    if on_one_end:
         out.append(_far_end_sentence(*end))
+    together = together or {}
     for name in QUANTITIES:
-        if name in on_road or name in on_one_end:
+        if name in on_road or name in on_one_end or name in together:
             continue
-        if status[name] == "cues only":
-            out.append(f"{name} set by the prior, not by the clicks: {hints[name]}")
+        both = [name, *(q for q, lead in together.items() if lead == name)]
+        groups = tuple(dict.fromkeys(g for q in both for g in (sources or {}).get(q, ("size prior",))))
+        source, what = _source(groups), (advice or {}).get(name) or hints[name]
+        said = " and ".join(both)
+        if status[name] == "cues only" or any(status[q] == "cues only" for q in both[1:]):
+            out.append(f"{said} set by {source}, not by the clicks: {what}")
         elif status[name] == "mostly cues":
-            out.append(f"{name} mostly set by the prior: {hints[name]}")
+            out.append(f"{said} mostly set by {source}: {what}")
     if scale_from:
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
         out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
@@ -474,20 +865,6 @@ def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
     if lacking:
         return f": {' or '.join(lacking)} pins it better"
     return ": the camera height and the known sizes given weigh less than it at this distance"
-
-
-def _observability(full: dict[str, float], clicks_only: dict[str, float], scale_from: str | None,
-                   keypoints_only: bool, upright: bool, scale_cues: tuple[str, ...] = (),
-                   end: tuple[str, str | None] | None = None) -> Observability:
-    ratios, status = {}, {}
-    for name, v_full in full.items():
-        v_clicks = clicks_only[name]
-        ratio = v_clicks / v_full if v_full > 0 else math.inf
-        ratios[name] = ratio
-        status[name] = ("cues only" if ratio > UNDETERMINED_RATIO else
-                        "mostly cues" if ratio > PRIOR_SET_RATIO else "clicks")
-    return Observability(ratios, status,
-                         observability_sentences(status, scale_from, keypoints_only, upright, scale_cues, end))
 
 
 def residual_dof(J: np.ndarray, n_pixel_rows: int) -> float:
