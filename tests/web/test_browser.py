@@ -117,6 +117,35 @@ def test_click_a_vehicle_in_the_browser(page, scene, tmp_path: Path):
         server.server_close()
 
 
+def test_a_click_waiting_for_a_name_is_asked_again_after_a_reload(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 1: a click the page could not name, then the page reloaded. The page asks again
+    for that click's name (the server keeps the unnamed click), and the key pressed next names it, not the next
+    click (before, the prompt was gone and the key armed the next click)."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        first = clicks(NAMED)[0]
+        page.mouse.click(*_screen(page, first.uv[0]))
+        _wait_revision(page, 2)  # the vehicle, and its click
+        assert page.evaluate("state.view.vehicles[0].parts[0].name") is None
+        page.reload()
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.locator("#next-click").inner_text().startswith("Naming click 0:")
+        assert page.locator("#message").inner_text().startswith("which part is click 0?")
+        assert page.locator("#clicks li.naming").count() == 1
+        page.keyboard.press(KEYS[first.name])
+        _wait_revision(page, 3)
+        assert page.evaluate("state.armed") is None
+        (named,) = load_images(out)[0].vehicles[0].parts
+        assert named.name == first.name and np.allclose(named.uv, first.uv, atol=0.5)
+        assert page.locator("#message").inner_text() == f"click 0 named {first.name}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
     """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
     out = tmp_path / "annotations.json"
@@ -397,7 +426,7 @@ def test_a_newcomer_clicks_a_car_sees_its_cuboid_and_the_swapped_sides_banner(pa
             given = page.evaluate(f"state.view.vehicles[0].parts[{k}]")
             if k == 0:  # nothing places the car yet: the page asks, offering the wheels
                 assert given["name"] is None
-                assert page.locator("#message").inner_text().startswith("which part is this?")
+                assert page.locator("#message").inner_text().startswith(f"which part is click {k}?")
                 assert page.locator("#next-click").inner_text().startswith(f"Naming click {k}")
                 offered = page.locator("#choices button").all_inner_texts()
                 assert any(o.startswith(part.name) for o in offered), offered

@@ -22,8 +22,9 @@ const state = {
   armed: null, pending: [], selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0,
   mode: "click", drag: null, drawn: [],
   // The click a name chosen now goes to (click first, then choose): its index, or null (a name chosen now arms the
-  // next click instead: choose first, then click).
-  naming: null,
+  // next click instead: choose first, then click). namingUv: that click's first point (to tell it is still that
+  // click after an edit); renaming: whether it is a named click being renamed (r), not one waiting for a name.
+  naming: null, namingUv: null, renaming: false,
 };
 // A track's colour: its number's (a name "<sequence>-<k>"), else its name's hash. No red (the front face), magenta
 // (residuals), yellow (targets) or orange (unnamed clicks).
@@ -100,6 +101,8 @@ async function showImage(index) {
     state.image.src = `/images/${state.index}`;
   });
   fitToView();
+  const v = currentVehicle();
+  say(state.naming !== null && v ? namingPrompt(v, state.naming) : "");
 }
 
 async function loadView() {
@@ -128,8 +131,44 @@ function applyView(doc) {
     else if (ids.length) state.vehicle = ids[ids.length - 1];
   }
   state.preferPrediction = false;
+  followNaming();
   header();
   render();
+}
+
+// The click the next name chosen goes to (state.naming), set and remembered by its first point.
+function setNaming(part, renaming = false) {
+  const v = currentVehicle();
+  const p = part !== null && v ? v.parts[part] : null;
+  state.naming = p ? part : null;
+  state.namingUv = p ? [...p.uv[0]] : null;
+  state.renaming = Boolean(p) && renaming;
+}
+
+// Keep state.naming in step with the view (after any answer of the server, a reload of the page, a frame change, an
+// undo or delete, another vehicle selected): the same click while it is there (and, unless it is being renamed, still
+// unnamed), else the selected vehicle's oldest click that waits for a name (the server keeps them, with the names
+// that fit), else none. A name chosen first (state.armed) waits for the next click instead.
+function followNaming() {
+  const v = currentVehicle();
+  if (state.naming !== null && v && state.namingUv) {
+    const [u, w] = state.namingUv;
+    const same = v.parts.find((p) => p.uv[0][0] === u && p.uv[0][1] === w);
+    if (same && (state.renaming || !same.name)) { setNaming(same.index, state.renaming); return; }
+  }
+  const waiting = v && !state.armed ? v.parts.find((p) => !p.name) : undefined;
+  setNaming(waiting ? waiting.index : null);
+}
+
+// How a click is numbered for people.
+const clickNumber = (k) => k;
+
+// The question the page asks about a click waiting for a name.
+function namingPrompt(v, k) {
+  const part = v.parts[k];
+  return `which part is click ${clickNumber(k)}? ` + (part.choices && part.choices.length &&
+    part.choices[0].probability > 0.3 ? "The page is not sure: choose below, or press its key" :
+    "Nothing places the vehicle yet (a box or a named click would): choose below, or press its key");
 }
 
 function header() {
@@ -197,6 +236,8 @@ function select(vehicle, prediction = null) {
   state.vehicle = prediction === null ? vehicle : null;
   state.prediction = prediction;
   state.selectedPart = null;
+  setNaming(null);  // a rename started on the vehicle before ends; a click of the selected one that waits is asked
+  followNaming();
   buildPalette();
   header();
   render();
@@ -277,7 +318,7 @@ async function addClick(uv) {
   state.pending = [];
   const armed = state.armed;
   state.armed = null;
-  state.naming = null;
+  setNaming(null);
   const doc = await edit(change, true);
   buildPalette();
   if (!doc) return;
@@ -295,11 +336,8 @@ async function addClick(uv) {
     say(`the page named it ${a.name}, from ${from}${sure}` +
         (a.runner_up ? `; wrong? press x for ${a.runner_up}, or pick another below` : ""));
   } else {
-    state.naming = doc.part;  // the page did not name it: the next name chosen goes to it
-    say(mine.choices && mine.choices.length && mine.choices[0].probability > 0.3 ?
-      "which part is this? The page is not sure: choose below, or press its key" :
-      "which part is this? Nothing places the vehicle yet (a box or a named click would): choose below, or press " +
-      "its key");
+    setNaming(doc.part);  // the page did not name it: the next name chosen goes to it
+    say(namingPrompt(currentVehicle(), doc.part));
   }
   render();
 }
@@ -307,11 +345,12 @@ async function addClick(uv) {
 // The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming).
 async function renameClick(kind, name) {
   const part = state.naming;
-  state.naming = null;
+  setNaming(null);
   const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name });
   if (doc) {
     state.selectedPart = part;
-    say(`click ${part} named ${partLabel(kind, name)}`);
+    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}` +
+      (state.naming !== null ? `; click ${clickNumber(state.naming)} waits for a name too` : ""));
     render();
   }
 }
@@ -321,9 +360,9 @@ function startRename(part) {
   const v = currentVehicle();
   if (!v || part === null || part === undefined || !v.parts[part]) { say("select a click first (click it)", true); return; }
   state.selectedPart = part;
-  state.naming = part;
   state.armed = null;
-  say(`rename click ${part}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
+  setNaming(part, true);
+  say(`rename click ${clickNumber(part)}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
   buildPalette();
   render();
 }
@@ -406,7 +445,7 @@ function arm(choice) {
     const first = oneClick(choice[0]) ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
     say(`next click: ${partLabel(choice[0], choice[1])} (you chose the name first): click ${first}` + sides(choice));
   } else {
-    state.naming = null;
+    setNaming(null);
     say("next click: unnamed (you click first; the page names it, or asks)");
   }
   buildPalette();
@@ -536,8 +575,8 @@ function banner(v) {
 function nextClick(v) {
   const el = $("next-click");
   if (state.naming !== null && v && v.parts[state.naming]) {
-    el.textContent = `Naming click ${state.naming}: press a part's key, or choose below or in the palette. ` +
-      "Esc: leave it as it is.";
+    el.textContent = `Naming click ${clickNumber(state.naming)}: press a part's key, or choose below or in the ` +
+      "palette. Esc: name the next click instead.";
     el.className = "naming";
   } else if (state.armed) {
     el.textContent = `Next click: ${partLabel(state.armed[0], state.armed[1])} (you chose the name first). Esc: ` +
@@ -569,7 +608,7 @@ function choices(v) {
     const sure = c.probability !== undefined && c.probability !== null ? ` ${Math.round(100 * c.probability)} %` : "";
     button.textContent = `${c.name}${sure}`;
     button.dataset.name = c.name;
-    button.onclick = () => { state.naming = k; renameClick(c.kind, c.name); };
+    button.onclick = () => { setNaming(k, Boolean(part.name)); renameClick(c.kind, c.name); };
     el.appendChild(button);
   }
 }
@@ -877,7 +916,7 @@ document.addEventListener("keydown", async (e) => {
   if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   if (HOTKEYS[key]) arm(HOTKEYS[key]);
-  else if (key === "Escape") { state.mode = "click"; state.naming = null; arm(null); }
+  else if (key === "Escape") { state.mode = "click"; setNaming(null); arm(null); }
   else if (key === "s") await swapSides();
   else if (key === "r") startRename(state.selectedPart);
   else if (key === "u") await edit({ op: "undo" });
