@@ -146,6 +146,38 @@ def test_a_click_waiting_for_a_name_is_asked_again_after_a_reload(page, scene, t
         server.server_close()
 
 
+def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 2: the front wheels clicked with each other's names. Select one, r, the other's
+    key: the two names swap in one edit (before, the name was refused as taken: four steps), and u swaps them
+    back."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    for c in clicks(NAMED):
+        session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": c.kind,
+                         "name": c.name, "uv": c.uv})
+    names = [c.name for c in clicks(NAMED)]
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        revision = page.evaluate("state.revision")
+        page.locator("#clicks li").nth(0).click()
+        page.keyboard.press("r")
+        page.keyboard.press(KEYS["wheel-rear-left"])
+        _wait_revision(page, revision + 1)
+        saved = [p.name for p in load_images(out)[0].vehicles[0].parts]
+        assert saved == [names[1], names[0], *names[2:]]
+        message = page.locator("#message").inner_text()
+        assert message == (f"click 0 named {names[1]}; click 1, which had it, is now {names[0]} (names swapped: u "
+                           "undoes)")
+        page.keyboard.press("u")
+        _wait_revision(page, revision + 2)
+        assert [p.name for p in load_images(out)[0].vehicles[0].parts] == names
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
     """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
     out = tmp_path / "annotations.json"

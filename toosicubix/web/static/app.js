@@ -342,15 +342,21 @@ async function addClick(uv) {
   render();
 }
 
-// The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming).
+// The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming). A name
+// another click of the vehicle holds is swapped: that click takes this one's name (one edit, u undoes it).
 async function renameClick(kind, name) {
   const part = state.naming;
+  const v = currentVehicle();
+  const own = v.parts[part];
+  const holder = v.parts.find((p) => p.index !== part && p.kind === kind && p.name === name);
   setNaming(null);
-  const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name });
+  const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name, swap: true });
   if (doc) {
     state.selectedPart = part;
-    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}` +
-      (state.naming !== null ? `; click ${clickNumber(state.naming)} waits for a name too` : ""));
+    const swapped = holder ? `; click ${clickNumber(holder.index)}, which had it, is now ` +
+      (own.name ? partLabel(own.kind, own.name) : "unnamed") + " (names swapped: u undoes)" : "";
+    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}${swapped}` +
+      (state.naming !== null ? `; click ${clickNumber(state.naming)} waits for a name` : ""));
     render();
   }
 }
@@ -418,7 +424,11 @@ function paletteButton(button, kind, name, clicked) {
   button.dataset.kind = kind;
   button.dataset.name = name;
   if (state.armed && state.armed[0] === kind && state.armed[1] === name) button.classList.add("armed");
-  if (clicked.has(`${kind} ${name}`)) button.classList.add("clicked");
+  if (clicked.has(`${kind} ${name}`)) {
+    button.classList.add("clicked");
+    button.title = (button.title ? `${button.title}: ` : "") +
+      "clicked already; given to another click, the two clicks swap their names";
+  }
   button.onclick = () => arm([kind, name]);
   return button;
 }
