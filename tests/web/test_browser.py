@@ -178,6 +178,43 @@ def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene,
         server.server_close()
 
 
+def test_the_message_never_describes_a_state_that_is_gone(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 3: the message at the top after an undo, a delete and a frame change says what
+    happened, or nothing, never what it said about the state before (it kept "which part is this?" after the click
+    was undone, "... added" after the click was deleted, and both on the next image)."""
+    image, cameras = scene
+    second = image.with_name("car2.png")
+    shutil.copy(image, second)
+    out = tmp_path / "annotations.json"
+    session = Session([image, second], out, load_cameras(cameras, ["car", "car2"]), load_priors())
+    server = serve_in_thread(session)
+    message = page.locator("#message")
+    try:
+        _open_zoomed_in(page, server.url)
+        first = clicks(NAMED)[0]
+        page.mouse.click(*_screen(page, first.uv[0]))
+        _wait_revision(page, 2)
+        assert message.inner_text().startswith("which part is click 0?")
+        page.keyboard.press("u")
+        _wait_revision(page, 3)
+        assert message.inner_text() == "undone: the last change on this image is taken back (u again: the one before)"
+        page.keyboard.press(KEYS[first.name])
+        page.mouse.click(*_screen(page, first.uv[0]))
+        _wait_revision(page, 4)
+        assert message.inner_text() == f"{first.name} added (you chose the name first)"
+        page.keyboard.press("Delete")
+        _wait_revision(page, 5)
+        assert message.inner_text() == f"click 0 ({first.name}) deleted: u brings it back"
+        page.keyboard.press("u")
+        _wait_revision(page, 6)
+        page.keyboard.press("]")
+        page.wait_for_function("state.view.index === 1 && state.image.complete", timeout=20000)
+        assert message.inner_text() == ""
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
     """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
     out = tmp_path / "annotations.json"

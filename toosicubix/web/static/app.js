@@ -89,6 +89,8 @@ async function start() {
 async function showImage(index) {
   const n = state.session.images.length;
   state.index = (index + n) % n;
+  state.lastAuto = null;
+  say("");  // what was said was about the image left
   state.vehicle = null;
   state.prediction = null;
   state.preferPrediction = true;  // a frame opens on its first prediction, if it has one: Enter confirms it
@@ -132,6 +134,10 @@ function applyView(doc) {
   }
   state.preferPrediction = false;
   followNaming();
+  const a = state.lastAuto;  // x takes its runner-up only while the click still has the page's name
+  const named = a && doc.vehicles.find((v) => v.id === a.vehicle);
+  const p = named && named.parts[a.part];
+  if (a && (!p || !p.auto || p.name !== a.name)) state.lastAuto = null;
   header();
   render();
 }
@@ -197,11 +203,15 @@ function header() {
 
 // -- changes -----------------------------------------------------------------------------------------------
 
+// One change through the API. Done, the message is cleared (or says what happened on the way): the caller says
+// what the change did, so the message never describes a state before it.
 async function edit(change, retryable = false) {
+  let note = "";
   for (let attempt = 0; attempt < 5; attempt++) {
     const { status, doc } = await api("POST", `/api/images/${state.index}/edit`,
       { revision: state.revision, ...change });
     if (status === 200) {
+      say(note);
       applyView(doc);
       return doc;
     }
@@ -211,7 +221,7 @@ async function edit(change, retryable = false) {
     }
     if (status === 409 && retryable && doc.error.startsWith("stale revision")) {
       await loadView();  // another page changed the file: take its state, then add this click again
-      say("another page changed the annotations: reloaded, your click was added again");
+      note = "another page changed the annotations: reloaded, your click was added again";
       continue;
     }
     if (status === 409) await loadView();
@@ -374,6 +384,28 @@ function startRename(part) {
 }
 
 // s: the vehicle's own left and right swapped in its named clicks (one edit; u undoes it).
+// u, Ctrl+Z or the undo button: the image's last change taken back, said so (and a click waiting for a name asked).
+async function undo() {
+  const doc = await edit({ op: "undo" });
+  if (!doc) return;
+  const v = currentVehicle();
+  say("undone: the last change on this image is taken back (u again: the one before)" +
+    (state.naming !== null && v ? `; ${namingPrompt(v, state.naming)}` : ""));
+}
+
+// Delete: the selected click removed, said so.
+async function deleteClick() {
+  const v = currentVehicle();
+  const part = v.parts[state.selectedPart];
+  const doc = await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
+  state.selectedPart = null;
+  if (doc) {
+    say(`click ${clickNumber(part.index)} (${part.name ? partLabel(part.kind, part.name) : "unnamed"}) deleted: ` +
+      "u brings it back");
+  }
+  render();
+}
+
 async function swapSides() {
   const v = currentVehicle();
   if (!v) { say("no vehicle selected", true); return; }
@@ -923,13 +955,13 @@ document.addEventListener("keydown", async (e) => {
   if (e.target.tagName === "SELECT" || e.target.tagName === "INPUT") return;
   const key = e.key;
   if (key === "Enter" && e.target.tagName === "BUTTON") return;  // the focused button's own click, not a confirm too
-  if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
+  if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await undo(); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   if (HOTKEYS[key]) arm(HOTKEYS[key]);
   else if (key === "Escape") { state.mode = "click"; setNaming(null); arm(null); }
   else if (key === "s") await swapSides();
   else if (key === "r") startRename(state.selectedPart);
-  else if (key === "u") await edit({ op: "undo" });
+  else if (key === "u") await undo();
   else if (key === "Enter" && state.prediction !== null) await confirmPrediction();
   else if (key === "Tab") { e.preventDefault(); cycleSelection(e.shiftKey ? -1 : 1); }
   else if ((key === "x" || key === "Delete" || key === "Backspace") && state.prediction !== null) {
@@ -944,15 +976,15 @@ document.addEventListener("keydown", async (e) => {
   else if (key === "[" || key === "PageUp") await step(-1);
   else if (key === "0") fitToView();
   else if ((key === "Delete" || key === "Backspace") && state.selectedPart !== null && currentVehicle()) {
-    await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
-    state.selectedPart = null;
-    render();
+    await deleteClick();
   }
 });
 
 async function toggleDone() {
   const v = currentVehicle();
-  if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
+  if (v && await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done })) {
+    say(`vehicle ${v.id} marked ${v.done ? "not done" : "done"}`);
+  }
 }
 
 // Read the annotation file and its extras file again (after another program changed them); this page's undo
@@ -975,7 +1007,7 @@ $("dismiss").onclick = dismissPrediction;
 $("new-vehicle").onclick = () => newVehicle();
 $("draw-box").onclick = () => { state.mode = "box"; say("drag the vehicle's box"); };
 $("done").onclick = toggleDone;
-$("undo").onclick = () => edit({ op: "undo" });
+$("undo").onclick = undo;
 $("prototype").onchange = async () => {
   const v = currentVehicle();
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, prototype: $("prototype").value });
