@@ -9,6 +9,7 @@ playwright or the browser is missing (``pip install '.[browser]'`` and ``apt-get
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -132,15 +133,15 @@ def test_a_click_waiting_for_a_name_is_asked_again_after_a_reload(page, scene, t
         assert page.evaluate("state.view.vehicles[0].parts[0].name") is None
         page.reload()
         page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
-        assert page.locator("#next-click").inner_text().startswith("Naming click 0:")
-        assert page.locator("#message").inner_text().startswith("which part is click 0?")
+        assert page.locator("#next-click").inner_text().startswith("Naming click 1:")
+        assert page.locator("#message").inner_text().startswith("which part is click 1?")
         assert page.locator("#clicks li.naming").count() == 1
         page.keyboard.press(KEYS[first.name])
         _wait_revision(page, 3)
         assert page.evaluate("state.armed") is None
         (named,) = load_images(out)[0].vehicles[0].parts
         assert named.name == first.name and np.allclose(named.uv, first.uv, atol=0.5)
-        assert page.locator("#message").inner_text() == f"click 0 named {first.name}"
+        assert page.locator("#message").inner_text() == f"click 1 named {first.name}"
     finally:
         server.shutdown()
         server.server_close()
@@ -168,7 +169,7 @@ def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene,
         saved = [p.name for p in load_images(out)[0].vehicles[0].parts]
         assert saved == [names[1], names[0], *names[2:]]
         message = page.locator("#message").inner_text()
-        assert message == (f"click 0 named {names[1]}; click 1, which had it, is now {names[0]} (names swapped: u "
+        assert message == (f"click 1 named {names[1]}; click 2, which had it, is now {names[0]} (names swapped: u "
                            "undoes)")
         page.keyboard.press("u")
         _wait_revision(page, revision + 2)
@@ -194,7 +195,7 @@ def test_the_message_never_describes_a_state_that_is_gone(page, scene, tmp_path:
         first = clicks(NAMED)[0]
         page.mouse.click(*_screen(page, first.uv[0]))
         _wait_revision(page, 2)
-        assert message.inner_text().startswith("which part is click 0?")
+        assert message.inner_text().startswith("which part is click 1?")
         page.keyboard.press("u")
         _wait_revision(page, 3)
         assert message.inner_text() == "undone: the last change on this image is taken back (u again: the one before)"
@@ -204,12 +205,43 @@ def test_the_message_never_describes_a_state_that_is_gone(page, scene, tmp_path:
         assert message.inner_text() == f"{first.name} added (you chose the name first)"
         page.keyboard.press("Delete")
         _wait_revision(page, 5)
-        assert message.inner_text() == f"click 0 ({first.name}) deleted: u brings it back"
+        assert message.inner_text() == f"click 1 ({first.name}) deleted: u brings it back"
         page.keyboard.press("u")
         _wait_revision(page, 6)
         page.keyboard.press("]")
         page.wait_for_function("state.view.index === 1 && state.image.complete", timeout=20000)
         assert message.inner_text() == ""
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_clicks_are_counted_one_way_and_numbered_from_one(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 4: the page counts a vehicle's clicks one way, the entries of its Clicks list (a
+    pair's two points are one click; before: "clicks" in the list, "clicked points" in the fit, "named parts" in
+    the hint), and numbers them from 1 for people (before: from 0), wherever it names one."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    first, _, pair = clicks(NAMED)[:3]
+    session.edit(0, {"revision": 1, "op": "add_click", "vehicle": "1", "uv": first.uv})
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        assert page.locator("#vehicles li").inner_text() == "1 Car: 1 click (1 waiting for a name), not fitted yet"
+        assert page.locator("#next-click").inner_text().startswith("Naming click 1:")
+        assert page.locator("#choices").inner_text().startswith("Click 1 may be:")
+        assert page.evaluate("document.getElementById('clicks').start") == 1
+        assert page.locator("#fit").inner_text().startswith("not fitted yet: 1 click waiting for a name")
+        page.keyboard.press("Escape")
+        page.keyboard.press(KEYS[pair.name])
+        for uv in pair.uv:
+            page.mouse.click(*_screen(page, uv))
+        _wait_revision(page, 3)
+        fit = page.locator("#fit").inner_text()
+        assert re.search(r"[12] named clicks? cannot place a cuboid yet; click at least \d+ more \(the wheels", fit), fit
+        assert "point" not in fit and "part" not in fit, fit
+        assert page.locator("#vehicles li").inner_text().startswith("1 Car: 2 clicks")
     finally:
         server.shutdown()
         server.server_close()
@@ -495,8 +527,8 @@ def test_a_newcomer_clicks_a_car_sees_its_cuboid_and_the_swapped_sides_banner(pa
             given = page.evaluate(f"state.view.vehicles[0].parts[{k}]")
             if k == 0:  # nothing places the car yet: the page asks, offering the wheels
                 assert given["name"] is None
-                assert page.locator("#message").inner_text().startswith(f"which part is click {k}?")
-                assert page.locator("#next-click").inner_text().startswith(f"Naming click {k}")
+                assert page.locator("#message").inner_text().startswith(f"which part is click {k + 1}?")
+                assert page.locator("#next-click").inner_text().startswith(f"Naming click {k + 1}:")
                 offered = page.locator("#choices button").all_inner_texts()
                 assert any(o.startswith(part.name) for o in offered), offered
             elif given["name"] is not None:

@@ -166,8 +166,12 @@ function followNaming() {
   setNaming(waiting ? waiting.index : null);
 }
 
-// How a click is numbered for people.
-const clickNumber = (k) => k;
+// How a click is numbered for people: from 1, as the Clicks list numbers them (the API's part indices are from 0).
+// A click is one entry of that list (a pair's two points are one click), named or waiting for a name.
+const clickNumber = (k) => k + 1;
+const count = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
+// A vehicle's clicks, as the page counts them everywhere.
+const clickCount = (v) => count(v.parts.length, "click") + (v.unnamed ? ` (${v.unnamed} waiting for a name)` : "");
 
 // The question the page asks about a click waiting for a name.
 function namingPrompt(v, k) {
@@ -506,8 +510,7 @@ function panels() {
     const swatch = `<span class="swatch" style="border-color:${vehicleColour(v)}"></span>`;
     const track = v.track ? ` · ${swatch}${escapeHtml(v.track)}` +
       (v.fit.pose_from ? ` (${v.fit.pose_from})` : "") : "";
-    li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${v.parts.length} clicks` +
-      (v.unnamed ? ` (${v.unnamed} unnamed)` : "") + (v.box2d ? ", box" : "") +
+    li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${clickCount(v)}` + (v.box2d ? ", box" : "") +
       (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.implausible ? ", implausible"
         : v.fit.well_determined ? ", well determined" : ", fitted");
     if (v.id === state.vehicle) li.classList.add("selected");
@@ -559,10 +562,14 @@ function panels() {
   const f = v.fit;
   if (f.status !== "ok") {
     const named = v.parts.length - v.unnamed;
-    const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
+    const waiting = v.unnamed ? `${count(v.unnamed, "click")} waiting for a name (choose under Naming)` : "";
+    // The fit's "too few clicks" counts points (a pair's two): said here in the page's count, named clicks.
+    const few = /^too few clicks: [^;]*; click at least (\d+) more named parts? (\(.*\))$/.exec(f.error || "");
+    const why = few ? `${count(named, "named click")} cannot place a cuboid yet; click at least ${few[1]} more ` +
+      few[2] : (f.error === "out_of_time" ? f.error_detail : f.error) || "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml((f.error === "out_of_time" ? f.error_detail : f.error) || "") : (waiting || "no click yet") + ". A fit needs about five named " +
-      "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
+      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + ". A fit needs about five named " +
+      "clicks: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
       (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
@@ -642,8 +649,9 @@ function choices(v) {
   const offered = (part.choices || []).filter((c) => c.probability === undefined || c.probability === null ||
     c.probability >= 0.01);
   const head = document.createElement("span");
-  head.textContent = part.name ? `Click ${k} is ${part.name} (the page's name)` + (offered.length ? "; or: " : "; r renames it")
-    : `Click ${k} may be: ` + (offered.length ? "" : "any name of the palette");
+  head.textContent = part.name ? `Click ${clickNumber(k)} is ${part.name} (the page's name)` +
+    (offered.length ? "; or: " : "; r renames it") :
+    `Click ${clickNumber(k)} may be: ` + (offered.length ? "" : "any name of the palette");
   el.appendChild(head);
   for (const c of offered) {
     const button = document.createElement("button");
