@@ -247,6 +247,57 @@ def test_clicks_are_counted_one_way_and_numbered_from_one(page, scene, tmp_path:
         server.server_close()
 
 
+def test_a_wide_image_fills_the_canvas_width_and_labels_do_not_overlap(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 5: a 1240 x 375 image fills the canvas's width when the page opens and again
+    when the window changes size (before, it kept the zoom it opened with, a third of a larger window), until the
+    person zooms. Every click of the selected vehicle is labelled with its name and no label overlaps another, a
+    click's dot or a target's circle (before, the targets' labels were drawn first and hid the clicks' names)."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    for c in clicks(NAMED):
+        session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": c.kind,
+                         "name": c.name, "uv": c.uv})
+    server = serve_in_thread(session)
+    fills = "Math.abs(state.zoom * state.view.size[0] - canvas.getBoundingClientRect().width) < 1"
+    try:
+        page.set_viewport_size({"width": 1000, "height": 700})
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.evaluate(fills)
+        zoom = page.evaluate("state.zoom")
+        page.set_viewport_size({"width": 1700, "height": 900})
+        page.wait_for_function(fills, timeout=5000)
+        assert page.evaluate("state.zoom") > 1.5 * zoom
+        # Labels: zoomed in on the vehicle, where its clicks, targets and labels crowd.
+        page.evaluate("() => { const r = canvas.getBoundingClientRect(); state.zoom = 1.5; state.fitted = false; "
+                      "state.panX = r.width / 2 - 1.5 * 700; state.panY = r.height / 2 - 1.5 * 270; render(); }")
+        vehicle = page.evaluate("state.view.vehicles[0]")
+        assert vehicle["targets"], "the test needs targets beside the clicks"
+        labels = page.evaluate("state.labels")
+        texts = [entry["text"] for entry in labels]
+        assert all((p["name"] if p["kind"] == "point" else f"{p['name']} {p['kind']}") in texts
+                   for p in vehicle["parts"]), texts
+        boxes = [entry["box"] for entry in labels]
+
+        def overlap(a, b):
+            return a[0] < b[0] + b[2] and b[0] < a[0] + a[2] and a[1] < b[1] + b[3] and b[1] < a[1] + a[3]
+
+        assert not any(overlap(a, b) for k, a in enumerate(boxes) for b in boxes[k + 1:]), labels
+        zoom, pan_x, pan_y = page.evaluate("[state.zoom, state.panX, state.panY]")
+        points = [uv for p in vehicle["parts"] for uv in p["uv"]] + [uv for t in vehicle["targets"] for uv in t["uv"]]
+        for u, v in points:
+            x, y = pan_x + u * zoom, pan_y + v * zoom
+            assert not any(overlap(b, [x - 4, y - 4, 8, 8]) for b in boxes), (u, v, labels)
+        # Zoomed by the person: the zoom stays when the window changes.
+        page.set_viewport_size({"width": 1500, "height": 900})
+        page.wait_for_timeout(200)
+        assert page.evaluate("state.zoom") == 1.5
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
     """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
     out = tmp_path / "annotations.json"

@@ -46,6 +46,7 @@ const ctx = canvas.getContext("2d");
 
 function say(text, error = false) {
   $("message").textContent = text;
+  $("message").title = text;  // the whole of it, where two lines cut it
   $("message").className = error ? "error" : "";
 }
 
@@ -688,13 +689,23 @@ function escapeHtml(text) {
 
 // -- drawing ---------------------------------------------------------------------------------------------------
 
+// The whole image, as large as the canvas holds it: a wide image (KITTI's 1242 x 375) fills the canvas's width. It
+// stays so (state.fitted) when the canvas changes size, until the person zooms or pans; 0 fits it again. Clicks
+// stay in image pixels whatever the zoom (toImage).
 function fitToView() {
   const rect = canvas.getBoundingClientRect();
   const [w, h] = state.session.images[state.index].size;
   state.zoom = Math.min(rect.width / w, rect.height / h);
   state.panX = (rect.width - w * state.zoom) / 2;
   state.panY = (rect.height - h * state.zoom) / 2;
+  state.fitted = true;
   render();
+}
+
+// The canvas changed size (the window, the side panel): the image fitted again unless the person zoomed or panned.
+function resized() {
+  if (state.fitted && state.session) fitToView();
+  else render();
 }
 
 const toScreen = ([u, v]) => [u * state.zoom + state.panX, v * state.zoom + state.panY];
@@ -732,34 +743,49 @@ function dot(p, colour, radius = 4, outline = "#000") {
   ctx.stroke();
 }
 
-// Label boxes [x, y, w, h] drawn this frame: a label that would overlap one is left out (zoom in to see it),
-// unless it is the selected click's.
+// Boxes [x, y, w, h] taken this frame: the labels drawn, and the selected vehicle's click dots and target circles
+// (obstacles). A label goes above right of its point, else below right, above left or below left, wherever it
+// overlaps nothing taken; where none is free it is left out (zoom in to see it), unless it is the selected click's.
 let placedLabels = [];
+const overlapping = (a, b) => a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3];
 
-function label(p, text, colour, always = false) {
+function obstacle(p, radius) {
+  const [x, y] = toScreen(p);
+  placedLabels.push([x - radius, y - radius, 2 * radius, 2 * radius]);
+}
+
+// `gap`: screen pixels between the point and its label's side (beyond the point's own dot or circle).
+function label(p, text, colour, always = false, gap = 7) {
   const [x, y] = toScreen(p);
   ctx.font = "12px system-ui, sans-serif";
-  const box = [x + 6, y - 18, ctx.measureText(text).width, 15];
-  const overlaps = (b) => box[0] < b[0] + b[2] && b[0] < box[0] + box[2] && box[1] < b[1] + b[3] && b[1] < box[1] + box[3];
-  if (!always && placedLabels.some(overlaps)) return;
+  const w = ctx.measureText(text).width;
+  const places = [[x + gap, y - 19], [x + gap, y + 5], [x - gap - w, y - 19], [x - gap - w, y + 5]].map(
+    ([bx, by]) => [bx, by, w, 15]);
+  let box = places.find((b) => !placedLabels.some((taken) => overlapping(b, taken)));
+  if (!box && !always) return;
+  box = box || places[0];
   placedLabels.push(box);
+  state.labels.push({ text, box });
   ctx.lineWidth = 3;
   ctx.strokeStyle = "rgba(0,0,0,0.7)";
-  ctx.strokeText(text, x + 6, y - 6);
+  ctx.strokeText(text, box[0], box[1] + 12);
   ctx.fillStyle = colour;
-  ctx.fillText(text, x + 6, y - 6);
+  ctx.fillText(text, box[0], box[1] + 12);
 }
 
 const EDGES = [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]];
 
 function render() {
   const rect = canvas.getBoundingClientRect();
-  if (canvas.width !== Math.round(rect.width) || canvas.height !== Math.round(rect.height)) {
-    canvas.width = Math.round(rect.width);
-    canvas.height = Math.round(rect.height);
+  const dpr = window.devicePixelRatio || 1;  // drawn at the screen's pixels, in CSS pixels: sharp lines and labels
+  if (canvas.width !== Math.round(rect.width * dpr) || canvas.height !== Math.round(rect.height * dpr)) {
+    canvas.width = Math.round(rect.width * dpr);
+    canvas.height = Math.round(rect.height * dpr);
   }
-  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, rect.width, rect.height);
   placedLabels = [];
+  state.labels = [];
   if (state.image.complete && state.image.naturalWidth) {
     ctx.imageSmoothingEnabled = state.zoom < 2;
     ctx.drawImage(state.image, state.panX, state.panY, state.image.naturalWidth * state.zoom,
@@ -814,7 +840,6 @@ function drawVehicle(v, selected) {
         ctx.stroke();
         ctx.setLineDash([]);
       });
-      label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479");
     });
   }
   for (const p of v.parts) {
@@ -826,10 +851,16 @@ function drawVehicle(v, selected) {
       const colour = !p.name ? "#ff9800" : p.auto ? "#ffeb3b" : "#4caf50";
       dot(uv, colour, p.index === state.selectedPart && selected ? 6 : 4, selected ? "#000" : "#444");
     });
-    if (selected) {
+  }
+  if (selected) {  // labels last, around what is drawn: the clicks' names first, then the targets'
+    for (const p of v.parts) p.uv.forEach((uv) => obstacle(uv, 5));
+    for (const t of v.targets) t.uv.forEach((uv) => obstacle(uv, 9));
+    const order = [...v.parts].sort((a, b) => (b.index === state.selectedPart) - (a.index === state.selectedPart));
+    for (const p of order) {
       const text = p.name ? (oneClick(p.kind) ? p.name : `${p.name} ${p.kind}`) : "?";
       label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
     }
+    v.targets.forEach((t, k) => label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479", false, 11));
   }
   ctx.globalAlpha = 1;
 }
@@ -901,6 +932,7 @@ canvas.addEventListener("mousemove", (e) => {
   if (!d) return;
   if (d.kind === "pan") {
     state.panX = d.panX + e.offsetX - d.x;
+    state.fitted = false;
     state.panY = d.panY + e.offsetY - d.y;
     render();
   } else if (d.kind === "box") {
@@ -954,6 +986,7 @@ canvas.addEventListener("wheel", (e) => {
   const factor = Math.exp(-e.deltaY * 0.0015);
   const [u, v] = toImage(e.offsetX, e.offsetY);
   state.zoom = Math.min(Math.max(state.zoom * factor, 0.05), 40);
+  state.fitted = false;
   state.panX = e.offsetX - u * state.zoom;
   state.panY = e.offsetY - v * state.zoom;
   render();
@@ -1020,5 +1053,6 @@ $("prototype").onchange = async () => {
   const v = currentVehicle();
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, prototype: $("prototype").value });
 };
-window.addEventListener("resize", render);
+window.addEventListener("resize", resized);
+new ResizeObserver(resized).observe($("view"));
 start();
