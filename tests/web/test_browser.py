@@ -239,7 +239,8 @@ def test_clicks_are_counted_one_way_and_numbered_from_one(page, scene, tmp_path:
             page.mouse.click(*_screen(page, uv))
         _wait_revision(page, 3)
         fit = page.locator("#fit").inner_text()
-        assert re.search(r"[12] named clicks? cannot place a cuboid yet; click at least \d+ more \(the wheels", fit), fit
+        assert re.search(r"[12] named clicks? cannot place a cuboid yet; click at least \d+ more \(the wheels",
+                         fit), fit
         assert "point" not in fit and "part" not in fit, fit
         assert page.locator("#vehicles li").inner_text().startswith("1 Car: 2 clicks")
     finally:
