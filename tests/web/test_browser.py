@@ -299,6 +299,35 @@ def test_a_wide_image_fills_the_canvas_width_and_labels_do_not_overlap(page, sce
         server.server_close()
 
 
+def test_a_lamp_named_alone_is_told_that_lights_are_a_pair(page, scene, tmp_path: Path):
+    """Issue 33 follow-up: the vocabulary has no single lamp (lights are the symmetry pair). A click waiting for a
+    name given the front lights' key is not renamed nor left: the page says lights are clicked as a pair, both
+    lamps, and how (before, the key silently armed the next two clicks and the waiting click lost its prompt)."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    wheel, pair = clicks(NAMED)[0], clicks(NAMED)[2]
+    session.edit(0, {"revision": 1, "op": "add_click", "vehicle": "1", "uv": wheel.uv})
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        page.keyboard.press(KEYS["front"])
+        assert page.locator("#message").inner_text() == (
+            "Lights are clicked as a pair, both lamps: press Esc, then l, and click the vehicle's left one, then its "
+            "right. Click 1 still waits for a name of one click (its key), or Delete it.")
+        assert page.evaluate("[state.armed, state.naming]") == [None, 0]
+        assert "(both lights)" in page.locator("#palette").inner_text()
+        page.keyboard.press("Escape")
+        page.keyboard.press(KEYS["front"])
+        for uv in pair.uv:
+            page.mouse.click(*_screen(page, uv))
+        _wait_revision(page, 3)
+        assert ("symmetry", "front") in [(p.kind, p.name) for p in load_images(out)[0].vehicles[0].parts]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_pages_on_one_file_keep_every_click(page, scene, tmp_path: Path):
     """Page B clicks on a stale revision after page A: the server refuses, B reloads and adds its click again."""
     out = tmp_path / "annotations.json"

@@ -440,7 +440,9 @@ function buildPalette() {
     for (const name of entry.names) {
       const button = document.createElement("button");
       const key = keys[`${kind} ${name}`];
-      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + partLabel(kind, name);
+      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + partLabel(kind, name) +
+        (kind === "symmetry" && name !== "roof" ? " (both lights)" : "");
+      if (kind === "symmetry") button.title = "a pair: two clicks, the vehicle's left one first (lights: both lamps)";
       palette.appendChild(paletteButton(button, kind, name, clicked));
     }
   }
@@ -470,6 +472,26 @@ function paletteButton(button, kind, name, clicked) {
   return button;
 }
 
+// A name of two clicks (a pair, an arrow) chosen for a click of one: the vocabulary has no single lamp (nor half
+// an arrow), so the page says how the pair is clicked; the click keeps waiting for its name.
+function pairOnly([kind, name], target) {
+  const rest = `Click ${clickNumber(target.index)} still waits for a name of one click (its key), or Delete it.`;
+  const key = keyOf(kind, name);
+  if (kind === "symmetry") {
+    const what = name === "roof" ? "Roof features are" : "Lights are";
+    return `${what} clicked as a pair, both lamps: press Esc, then ${key}, and click the vehicle's left one, then its ` +
+      `right. ${rest}`;
+  }
+  return `${partLabel(kind, name)} takes two clicks: press Esc, then ${key}, and click its ` +
+    `${CLICK_NAMES[kind].join(", then its ")}. ${rest}`;
+}
+
+// How a part's name is chosen: its key, else in the palette.
+function keyOf(kind, name) {
+  const key = Object.keys(HOTKEYS).find((k) => HOTKEYS[k][0] === kind && HOTKEYS[k][1] === name);
+  return key || `${partLabel(kind, name)} in the palette`;
+}
+
 // Where left and right matter (a part of one side, or a pair clicked left first): what they mean.
 function sides([kind, name]) {
   return /left|right/.test(name) || kind === "symmetry" ?
@@ -484,6 +506,10 @@ function arm(choice) {
   const target = v && state.naming !== null ? v.parts[state.naming] : null;
   if (choice && target && clicksOf(choice[0]) === target.uv.length) {  // a name for the click being named
     renameClick(choice[0], choice[1]);
+    return;
+  }
+  if (choice && target && clicksOf(choice[0]) !== target.uv.length) {  // a pair's name for one click: say how
+    say(pairOnly(choice, target), true);
     return;
   }
   state.armed = choice;
