@@ -144,6 +144,54 @@ def test_any_click_can_be_renamed(served, tmp_path):
     assert status == 400 and "has a point 'wheel-rear-left' already" in doc["error"]
 
 
+def test_a_name_another_click_holds_is_swapped_in_one_undoable_edit(served, tmp_path):
+    """Issue 33 follow-up, friction 2: two clicks given each other's names are put right in one edit, ``rename`` with
+    ``swap`` (the other click takes this one's old name), which one undo takes back; the file holds each edit. A
+    pair's name is not swapped onto one click, and without ``swap`` the refusal says how to swap."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    _click_named(client, vehicle)
+    original = [p.name for p in load_images(tmp_path / "annotations.json")[0].vehicles[0].parts]
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point",
+                               "name": "wheel-rear-left"})
+    assert status == 400 and "part 1" in doc["error"] and '"swap": true' in doc["error"]
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point",
+                               "name": "wheel-rear-left", "swap": True})
+    assert status == 200 and doc["swapped_with"] == 1
+    parts = doc["vehicles"][0]["parts"]
+    assert [p["name"] for p in parts[:2]] == ["wheel-rear-left", "wheel-front-left"]
+    assert [p["uv"] for p in parts[:2]] == [c.uv for c in clicks(NAMED)[:2]]  # the names moved, not the clicks
+    saved = load_images(tmp_path / "annotations.json")[0].vehicles[0].parts
+    assert [p.name for p in saved] == ["wheel-rear-left", "wheel-front-left", *original[2:]]
+    status, doc = client.edit({"op": "undo"})
+    assert status == 200 and [p["name"] for p in doc["vehicles"][0]["parts"]] == original
+    assert [p.name for p in load_images(tmp_path / "annotations.json")[0].vehicles[0].parts] == original
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "symmetry", "name": "front",
+                               "swap": True})
+    assert status == 400 and doc["error"].startswith("swap: 'front' is a symmetry of 2 click(s)")
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point",
+                               "name": "wheel-rear-left", "swap": "yes"})
+    assert status == 400 and doc["error"] == "swap: expected true or false, got 'yes'"
+
+
+def test_an_unnamed_click_takes_a_held_name_and_the_holder_waits_for_one(served):
+    """Naming a waiting click with a name another click holds, with ``swap``: the holder gives it up and waits for a
+    name (or the page names it again, never with the name it gave)."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    first, second = clicks(NAMED)[:2]
+    client.edit({"op": "add_click", "vehicle": vehicle, "uv": second.uv})
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "kind": "point", "name": first.name,
+                               "uv": first.uv})
+    assert doc["vehicles"][0]["parts"][0]["name"] is None  # the page is not sure of it (see above)
+    status, doc = client.edit({"op": "rename", "vehicle": vehicle, "part": 0, "kind": "point", "name": first.name,
+                               "swap": True})
+    assert status == 200 and doc["swapped_with"] == 1
+    waiting, holder = doc["vehicles"][0]["parts"]
+    assert waiting["name"] == first.name and waiting["auto"] is None
+    assert holder["name"] is None or (holder["auto"] is not None and holder["name"] != first.name)
+
+
 def test_auto_name_changed_to_runner_up(served):
     client, _ = served
     vehicle = _add_vehicle(client)

@@ -1024,7 +1024,8 @@ class Session:
         ``set_vehicle`` (``vehicle``; ``prototype``, ``box2d``, ``done``, ``track``), ``delete_vehicle``
         (``vehicle``), ``add_click`` (``vehicle``, ``uv`` [[x, y], ...]; ``kind`` and ``name``, or neither for a
         point to be auto-named), ``move_click`` (``vehicle``, ``part``, ``click``, ``uv`` [x, y]), ``rename``
-        (``vehicle``, ``part``, ``kind``, ``name``), ``delete_click`` (``vehicle``, ``part``), ``swap_sides``
+        (``vehicle``, ``part``, ``kind``, ``name``; ``swap``: true to give a name another click holds, that click
+        taking this one's, :meth:`_swap_names`), ``delete_click`` (``vehicle``, ``part``), ``swap_sides``
         (``vehicle``: its left and right swapped in every named click),
         ``confirm_prediction`` (``track``: a vehicle of that track without clicks, its pose interpolated),
         ``dismiss_prediction`` and ``restore_prediction`` (``track``: not shown on this frame, or again), ``undo``.
@@ -1236,18 +1237,25 @@ class Session:
             raise ApiError(f"click: expected 0 to {len(part.uv) - 1}, got {shown(click)}")
         part.uv[click] = checked_pixel(r.get("uv"), "uv", image.camera.image_size)
 
-    def _op_rename(self, image: ImageState, r: dict) -> None:
+    def _op_rename(self, image: ImageState, r: dict) -> dict[str, Any] | None:
         v = self._vehicle(image, r)
         part = self._part(v, r)
+        swap = r.get("swap", False)
+        if not isinstance(swap, bool):
+            raise ApiError(f"swap: expected true or false, got {shown(swap)}")
         if (r.get("kind"), r.get("name")) == (part.kind, part.name):  # the same name: now the user's, not auto
             part.auto = part.choices = None
-            return
+            return None
+        holder = next((p for p in v.parts if p is not part and p.named
+                       and (p.kind, p.name) == (r.get("kind"), r.get("name"))), None)
+        if swap and holder is not None:
+            return self._swap_names(v, part, holder)
         if r.get("kind") == "keypoint" and len(part.uv) == 1:
             extra = self._keypoint_extra(v.prototype, r.get("name"), (part.extra or {}).get("visible"))
             if extra is not None:
-                self._check_not_clicked(v, "keypoint", r["name"], part)
+                self._check_not_clicked(v, "keypoint", r["name"], part, swap_hint=True)
                 part.kind, part.name, part.auto, part.extra, part.choices = "keypoint", r["name"], None, extra, None
-                return
+                return None
         if part.extra is not None and r.get("kind") == part.kind:
             other = "" if self.mapping is None else f", or name it a keypoint of {self.mapping.name}"
             raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
@@ -1266,9 +1274,37 @@ class Session:
             elif (kind, name) != (part.kind, part.name):  # another feature: the old one's size is not its own
                 raise ApiError(f"known: {part.name!r} measured {part.known[0]:g} m; renamed to {name!r} it needs that "
                                "feature's own known size [metres, sigma]")
-        self._check_not_clicked(v, kind, name, part)
+        self._check_not_clicked(v, kind, name, part, swap_hint=True)
         part.kind, part.name, part.auto, part.extra, part.choices = kind, name, None, None, None
         part.known = known if vocabulary.KINDS[kind].known else None
+        return None
+
+    @staticmethod
+    def _swap_names(v: VehicleState, part: ClickedPart, holder: ClickedPart) -> dict[str, Any]:
+        """``rename`` with ``swap``: ``part`` takes the name ``holder`` has and ``holder`` the one ``part`` had (none,
+        when ``part`` waits for a name: ``holder`` then waits too), each as the person's own. A name goes with what
+        belongs to it (a keypoint's typical position, a length's known size); whether a click is ``visible`` stays
+        with the click. Both must have as many clicks (a pair's name fits a pair). Answers ``swapped_with``, the
+        holder's part index."""
+        if len(part.uv) != len(holder.uv):
+            raise ApiError(f"swap: {holder.name!r} is a {holder.kind} of {len(holder.uv)} click(s) and this one has "
+                           f"{len(part.uv)}: names are swapped between clicks of as many points")
+
+        def name_of(p: ClickedPart) -> tuple[Any, ...]:
+            extra = {k: x for k, x in (p.extra or {}).items() if k != "visible"}
+            return p.kind, p.name, p.known, extra
+
+        def give(p: ClickedPart, to: tuple[Any, ...]) -> None:
+            visible = (p.extra or {}).get("visible")
+            p.kind, p.name, p.known, extra = to
+            if p.named and visible is not None:
+                extra = {**extra, "visible": visible}
+            p.extra, p.auto, p.choices = extra or None, None, None
+
+        mine, theirs = name_of(part), name_of(holder)
+        give(part, theirs)
+        give(holder, mine)
+        return {"swapped_with": v.parts.index(holder)}
 
     def _op_delete_click(self, image: ImageState, r: dict) -> None:
         v = self._vehicle(image, r)
@@ -1432,10 +1468,13 @@ class Session:
                            "make one that fit refuses")
 
     @staticmethod
-    def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None) -> None:
-        for p in v.parts:
+    def _check_not_clicked(v: VehicleState, kind: str, name: str, this: ClickedPart | None = None,
+                           swap_hint: bool = False) -> None:
+        for k, p in enumerate(v.parts):
             if p is not this and p.kind == kind and p.name == name:
-                raise ApiError(f"name: vehicle {v.id} has a {kind} {name!r} already (move or delete that one)")
+                how = ("move or delete that one, or rename with \"swap\": true to swap the two names" if swap_hint
+                       else "move or delete that one")
+                raise ApiError(f"name: vehicle {v.id} has a {kind} {name!r} already (part {k}: {how})")
 
 
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}

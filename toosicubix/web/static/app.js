@@ -22,8 +22,9 @@ const state = {
   armed: null, pending: [], selectedPart: null, lastAuto: null, image: new Image(), zoom: 1, panX: 0, panY: 0,
   mode: "click", drag: null, drawn: [],
   // The click a name chosen now goes to (click first, then choose): its index, or null (a name chosen now arms the
-  // next click instead: choose first, then click).
-  naming: null,
+  // next click instead: choose first, then click). namingUv: that click's first point (to tell it is still that
+  // click after an edit); renaming: whether it is a named click being renamed (r), not one waiting for a name.
+  naming: null, namingUv: null, renaming: false,
 };
 // A track's colour: its number's (a name "<sequence>-<k>"), else its name's hash. No red (the front face), magenta
 // (residuals), yellow (targets) or orange (unnamed clicks).
@@ -45,6 +46,7 @@ const ctx = canvas.getContext("2d");
 
 function say(text, error = false) {
   $("message").textContent = text;
+  $("message").title = text;  // the whole of it, where two lines cut it
   $("message").className = error ? "error" : "";
 }
 
@@ -88,6 +90,8 @@ async function start() {
 async function showImage(index) {
   const n = state.session.images.length;
   state.index = (index + n) % n;
+  state.lastAuto = null;
+  say("");  // what was said was about the image left
   state.vehicle = null;
   state.prediction = null;
   state.preferPrediction = true;  // a frame opens on its first prediction, if it has one: Enter confirms it
@@ -100,6 +104,8 @@ async function showImage(index) {
     state.image.src = `/images/${state.index}`;
   });
   fitToView();
+  const v = currentVehicle();
+  say(state.naming !== null && v ? namingPrompt(v, state.naming) : "");
 }
 
 async function loadView() {
@@ -128,8 +134,52 @@ function applyView(doc) {
     else if (ids.length) state.vehicle = ids[ids.length - 1];
   }
   state.preferPrediction = false;
+  followNaming();
+  const a = state.lastAuto;  // x takes its runner-up only while the click still has the page's name
+  const named = a && doc.vehicles.find((v) => v.id === a.vehicle);
+  const p = named && named.parts[a.part];
+  if (a && (!p || !p.auto || p.name !== a.name)) state.lastAuto = null;
   header();
   render();
+}
+
+// The click the next name chosen goes to (state.naming), set and remembered by its first point.
+function setNaming(part, renaming = false) {
+  const v = currentVehicle();
+  const p = part !== null && v ? v.parts[part] : null;
+  state.naming = p ? part : null;
+  state.namingUv = p ? [...p.uv[0]] : null;
+  state.renaming = Boolean(p) && renaming;
+}
+
+// Keep state.naming in step with the view (after any answer of the server, a reload of the page, a frame change, an
+// undo or delete, another vehicle selected): the same click while it is there (and, unless it is being renamed, still
+// unnamed), else the selected vehicle's oldest click that waits for a name (the server keeps them, with the names
+// that fit), else none. A name chosen first (state.armed) waits for the next click instead.
+function followNaming() {
+  const v = currentVehicle();
+  if (state.naming !== null && v && state.namingUv) {
+    const [u, w] = state.namingUv;
+    const same = v.parts.find((p) => p.uv[0][0] === u && p.uv[0][1] === w);
+    if (same && (state.renaming || !same.name)) { setNaming(same.index, state.renaming); return; }
+  }
+  const waiting = v && !state.armed ? v.parts.find((p) => !p.name) : undefined;
+  setNaming(waiting ? waiting.index : null);
+}
+
+// How a click is numbered for people: from 1, as the Clicks list numbers them (the API's part indices are from 0).
+// A click is one entry of that list (a pair's two points are one click), named or waiting for a name.
+const clickNumber = (k) => k + 1;
+const count = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
+// A vehicle's clicks, as the page counts them everywhere.
+const clickCount = (v) => count(v.parts.length, "click") + (v.unnamed ? ` (${v.unnamed} waiting for a name)` : "");
+
+// The question the page asks about a click waiting for a name.
+function namingPrompt(v, k) {
+  const part = v.parts[k];
+  return `which part is click ${clickNumber(k)}? ` + (part.choices && part.choices.length &&
+    part.choices[0].probability > 0.3 ? "The page is not sure: choose below, or press its key" :
+    "Nothing places the vehicle yet (a box or a named click would): choose below, or press its key");
 }
 
 function header() {
@@ -158,11 +208,15 @@ function header() {
 
 // -- changes -----------------------------------------------------------------------------------------------
 
+// One change through the API. Done, the message is cleared (or says what happened on the way): the caller says
+// what the change did, so the message never describes a state before it.
 async function edit(change, retryable = false) {
+  let note = "";
   for (let attempt = 0; attempt < 5; attempt++) {
     const { status, doc } = await api("POST", `/api/images/${state.index}/edit`,
       { revision: state.revision, ...change });
     if (status === 200) {
+      say(note);
       applyView(doc);
       return doc;
     }
@@ -172,7 +226,7 @@ async function edit(change, retryable = false) {
     }
     if (status === 409 && retryable && doc.error.startsWith("stale revision")) {
       await loadView();  // another page changed the file: take its state, then add this click again
-      say("another page changed the annotations: reloaded, your click was added again");
+      note = "another page changed the annotations: reloaded, your click was added again";
       continue;
     }
     if (status === 409) await loadView();
@@ -197,6 +251,8 @@ function select(vehicle, prediction = null) {
   state.vehicle = prediction === null ? vehicle : null;
   state.prediction = prediction;
   state.selectedPart = null;
+  setNaming(null);  // a rename started on the vehicle before ends; a click of the selected one that waits is asked
+  followNaming();
   buildPalette();
   header();
   render();
@@ -277,7 +333,7 @@ async function addClick(uv) {
   state.pending = [];
   const armed = state.armed;
   state.armed = null;
-  state.naming = null;
+  setNaming(null);
   const doc = await edit(change, true);
   buildPalette();
   if (!doc) return;
@@ -295,23 +351,27 @@ async function addClick(uv) {
     say(`the page named it ${a.name}, from ${from}${sure}` +
         (a.runner_up ? `; wrong? press x for ${a.runner_up}, or pick another below` : ""));
   } else {
-    state.naming = doc.part;  // the page did not name it: the next name chosen goes to it
-    say(mine.choices && mine.choices.length && mine.choices[0].probability > 0.3 ?
-      "which part is this? The page is not sure: choose below, or press its key" :
-      "which part is this? Nothing places the vehicle yet (a box or a named click would): choose below, or press " +
-      "its key");
+    setNaming(doc.part);  // the page did not name it: the next name chosen goes to it
+    say(namingPrompt(currentVehicle(), doc.part));
   }
   render();
 }
 
-// The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming).
+// The name chosen (hotkey, palette or one of the page's choices) for the click being named (state.naming). A name
+// another click of the vehicle holds is swapped: that click takes this one's name (one edit, u undoes it).
 async function renameClick(kind, name) {
   const part = state.naming;
-  state.naming = null;
-  const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name });
+  const v = currentVehicle();
+  const own = v.parts[part];
+  const holder = v.parts.find((p) => p.index !== part && p.kind === kind && p.name === name);
+  setNaming(null);
+  const doc = await edit({ op: "rename", vehicle: state.vehicle, part, kind, name, swap: true });
   if (doc) {
     state.selectedPart = part;
-    say(`click ${part} named ${partLabel(kind, name)}`);
+    const swapped = holder ? `; click ${clickNumber(holder.index)}, which had it, is now ` +
+      (own.name ? partLabel(own.kind, own.name) : "unnamed") + " (names swapped: u undoes)" : "";
+    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}${swapped}` +
+      (state.naming !== null ? `; click ${clickNumber(state.naming)} waits for a name` : ""));
     render();
   }
 }
@@ -321,14 +381,36 @@ function startRename(part) {
   const v = currentVehicle();
   if (!v || part === null || part === undefined || !v.parts[part]) { say("select a click first (click it)", true); return; }
   state.selectedPart = part;
-  state.naming = part;
   state.armed = null;
-  say(`rename click ${part}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
+  setNaming(part, true);
+  say(`rename click ${clickNumber(part)}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
   buildPalette();
   render();
 }
 
 // s: the vehicle's own left and right swapped in its named clicks (one edit; u undoes it).
+// u, Ctrl+Z or the undo button: the image's last change taken back, said so (and a click waiting for a name asked).
+async function undo() {
+  const doc = await edit({ op: "undo" });
+  if (!doc) return;
+  const v = currentVehicle();
+  say("undone: the last change on this image is taken back (u again: the one before)" +
+    (state.naming !== null && v ? `; ${namingPrompt(v, state.naming)}` : ""));
+}
+
+// Delete: the selected click removed, said so.
+async function deleteClick() {
+  const v = currentVehicle();
+  const part = v.parts[state.selectedPart];
+  const doc = await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
+  state.selectedPart = null;
+  if (doc) {
+    say(`click ${clickNumber(part.index)} (${part.name ? partLabel(part.kind, part.name) : "unnamed"}) deleted: ` +
+      "u brings it back");
+  }
+  render();
+}
+
 async function swapSides() {
   const v = currentVehicle();
   if (!v) { say("no vehicle selected", true); return; }
@@ -358,7 +440,9 @@ function buildPalette() {
     for (const name of entry.names) {
       const button = document.createElement("button");
       const key = keys[`${kind} ${name}`];
-      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + partLabel(kind, name);
+      button.innerHTML = (key ? `<kbd>${key}</kbd>` : "") + partLabel(kind, name) +
+        (kind === "symmetry" && name !== "roof" ? " (both lights)" : "");
+      if (kind === "symmetry") button.title = "a pair: two clicks, the vehicle's left one first (lights: both lamps)";
       palette.appendChild(paletteButton(button, kind, name, clicked));
     }
   }
@@ -379,9 +463,33 @@ function paletteButton(button, kind, name, clicked) {
   button.dataset.kind = kind;
   button.dataset.name = name;
   if (state.armed && state.armed[0] === kind && state.armed[1] === name) button.classList.add("armed");
-  if (clicked.has(`${kind} ${name}`)) button.classList.add("clicked");
+  if (clicked.has(`${kind} ${name}`)) {
+    button.classList.add("clicked");
+    button.title = (button.title ? `${button.title}: ` : "") +
+      "clicked already; given to another click, the two clicks swap their names";
+  }
   button.onclick = () => arm([kind, name]);
   return button;
+}
+
+// A name of two clicks (a pair, an arrow) chosen for a click of one: the vocabulary has no single lamp (nor half
+// an arrow), so the page says how the pair is clicked; the click keeps waiting for its name.
+function pairOnly([kind, name], target) {
+  const rest = `Click ${clickNumber(target.index)} still waits for a name of one click (its key), or Delete it.`;
+  const key = keyOf(kind, name);
+  if (kind === "symmetry") {
+    const what = name === "roof" ? "Roof features are" : "Lights are";
+    return `${what} clicked as a pair, both lamps: press Esc, then ${key}, and click the vehicle's left one, then its ` +
+      `right. ${rest}`;
+  }
+  return `${partLabel(kind, name)} takes two clicks: press Esc, then ${key}, and click its ` +
+    `${CLICK_NAMES[kind].join(", then its ")}. ${rest}`;
+}
+
+// How a part's name is chosen: its key, else in the palette.
+function keyOf(kind, name) {
+  const key = Object.keys(HOTKEYS).find((k) => HOTKEYS[k][0] === kind && HOTKEYS[k][1] === name);
+  return key || `${partLabel(kind, name)} in the palette`;
 }
 
 // Where left and right matter (a part of one side, or a pair clicked left first): what they mean.
@@ -400,13 +508,17 @@ function arm(choice) {
     renameClick(choice[0], choice[1]);
     return;
   }
+  if (choice && target && clicksOf(choice[0]) !== target.uv.length) {  // a pair's name for one click: say how
+    say(pairOnly(choice, target), true);
+    return;
+  }
   state.armed = choice;
   state.pending = [];
   if (choice) {
     const first = oneClick(choice[0]) ? "it" : `the ${CLICK_NAMES[choice[0]][0]}`;
     say(`next click: ${partLabel(choice[0], choice[1])} (you chose the name first): click ${first}` + sides(choice));
   } else {
-    state.naming = null;
+    setNaming(null);
     say("next click: unnamed (you click first; the page names it, or asks)");
   }
   buildPalette();
@@ -425,8 +537,7 @@ function panels() {
     const swatch = `<span class="swatch" style="border-color:${vehicleColour(v)}"></span>`;
     const track = v.track ? ` · ${swatch}${escapeHtml(v.track)}` +
       (v.fit.pose_from ? ` (${v.fit.pose_from})` : "") : "";
-    li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${v.parts.length} clicks` +
-      (v.unnamed ? ` (${v.unnamed} unnamed)` : "") + (v.box2d ? ", box" : "") +
+    li.innerHTML = `${escapeHtml(v.id)} ${escapeHtml(v.prototype)}${track}: ${clickCount(v)}` + (v.box2d ? ", box" : "") +
       (v.fit.status !== "ok" ? ", not fitted yet" : v.fit.implausible ? ", implausible"
         : v.fit.well_determined ? ", well determined" : ", fitted");
     if (v.id === state.vehicle) li.classList.add("selected");
@@ -478,10 +589,14 @@ function panels() {
   const f = v.fit;
   if (f.status !== "ok") {
     const named = v.parts.length - v.unnamed;
-    const waiting = v.unnamed ? `${v.unnamed} click(s) wait for a name (choose under Naming)` : "";
+    const waiting = v.unnamed ? `${count(v.unnamed, "click")} waiting for a name (choose under Naming)` : "";
+    // The fit's "too few clicks" counts points (a pair's two): said here in the page's count, named clicks.
+    const few = /^too few clicks: [^;]*; click at least (\d+) more named parts? (\(.*\))$/.exec(f.error || "");
+    const why = few ? `${count(named, "named click")} cannot place a cuboid yet; click at least ${few[1]} more ` +
+      few[2] : (f.error === "out_of_time" ? f.error_detail : f.error) || "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml((f.error === "out_of_time" ? f.error_detail : f.error) || "") : (waiting || "no click yet") + ". A fit needs about five named " +
-      "parts: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
+      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + ". A fit needs about five named " +
+      "clicks: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
       (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
@@ -536,8 +651,8 @@ function banner(v) {
 function nextClick(v) {
   const el = $("next-click");
   if (state.naming !== null && v && v.parts[state.naming]) {
-    el.textContent = `Naming click ${state.naming}: press a part's key, or choose below or in the palette. ` +
-      "Esc: leave it as it is.";
+    el.textContent = `Naming click ${clickNumber(state.naming)}: press a part's key, or choose below or in the ` +
+      "palette. Esc: name the next click instead.";
     el.className = "naming";
   } else if (state.armed) {
     el.textContent = `Next click: ${partLabel(state.armed[0], state.armed[1])} (you chose the name first). Esc: ` +
@@ -561,15 +676,16 @@ function choices(v) {
   const offered = (part.choices || []).filter((c) => c.probability === undefined || c.probability === null ||
     c.probability >= 0.01);
   const head = document.createElement("span");
-  head.textContent = part.name ? `Click ${k} is ${part.name} (the page's name)` + (offered.length ? "; or: " : "; r renames it")
-    : `Click ${k} may be: ` + (offered.length ? "" : "any name of the palette");
+  head.textContent = part.name ? `Click ${clickNumber(k)} is ${part.name} (the page's name)` +
+    (offered.length ? "; or: " : "; r renames it") :
+    `Click ${clickNumber(k)} may be: ` + (offered.length ? "" : "any name of the palette");
   el.appendChild(head);
   for (const c of offered) {
     const button = document.createElement("button");
     const sure = c.probability !== undefined && c.probability !== null ? ` ${Math.round(100 * c.probability)} %` : "";
     button.textContent = `${c.name}${sure}`;
     button.dataset.name = c.name;
-    button.onclick = () => { state.naming = k; renameClick(c.kind, c.name); };
+    button.onclick = () => { setNaming(k, Boolean(part.name)); renameClick(c.kind, c.name); };
     el.appendChild(button);
   }
 }
@@ -599,13 +715,23 @@ function escapeHtml(text) {
 
 // -- drawing ---------------------------------------------------------------------------------------------------
 
+// The whole image, as large as the canvas holds it: a wide image (KITTI's 1242 x 375) fills the canvas's width. It
+// stays so (state.fitted) when the canvas changes size, until the person zooms or pans; 0 fits it again. Clicks
+// stay in image pixels whatever the zoom (toImage).
 function fitToView() {
   const rect = canvas.getBoundingClientRect();
   const [w, h] = state.session.images[state.index].size;
   state.zoom = Math.min(rect.width / w, rect.height / h);
   state.panX = (rect.width - w * state.zoom) / 2;
   state.panY = (rect.height - h * state.zoom) / 2;
+  state.fitted = true;
   render();
+}
+
+// The canvas changed size (the window, the side panel): the image fitted again unless the person zoomed or panned.
+function resized() {
+  if (state.fitted && state.session) fitToView();
+  else render();
 }
 
 const toScreen = ([u, v]) => [u * state.zoom + state.panX, v * state.zoom + state.panY];
@@ -643,34 +769,49 @@ function dot(p, colour, radius = 4, outline = "#000") {
   ctx.stroke();
 }
 
-// Label boxes [x, y, w, h] drawn this frame: a label that would overlap one is left out (zoom in to see it),
-// unless it is the selected click's.
+// Boxes [x, y, w, h] taken this frame: the labels drawn, and the selected vehicle's click dots and target circles
+// (obstacles). A label goes above right of its point, else below right, above left or below left, wherever it
+// overlaps nothing taken; where none is free it is left out (zoom in to see it), unless it is the selected click's.
 let placedLabels = [];
+const overlapping = (a, b) => a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3];
 
-function label(p, text, colour, always = false) {
+function obstacle(p, radius) {
+  const [x, y] = toScreen(p);
+  placedLabels.push([x - radius, y - radius, 2 * radius, 2 * radius]);
+}
+
+// `gap`: screen pixels between the point and its label's side (beyond the point's own dot or circle).
+function label(p, text, colour, always = false, gap = 7) {
   const [x, y] = toScreen(p);
   ctx.font = "12px system-ui, sans-serif";
-  const box = [x + 6, y - 18, ctx.measureText(text).width, 15];
-  const overlaps = (b) => box[0] < b[0] + b[2] && b[0] < box[0] + box[2] && box[1] < b[1] + b[3] && b[1] < box[1] + box[3];
-  if (!always && placedLabels.some(overlaps)) return;
+  const w = ctx.measureText(text).width;
+  const places = [[x + gap, y - 19], [x + gap, y + 5], [x - gap - w, y - 19], [x - gap - w, y + 5]].map(
+    ([bx, by]) => [bx, by, w, 15]);
+  let box = places.find((b) => !placedLabels.some((taken) => overlapping(b, taken)));
+  if (!box && !always) return;
+  box = box || places[0];
   placedLabels.push(box);
+  state.labels.push({ text, box });
   ctx.lineWidth = 3;
   ctx.strokeStyle = "rgba(0,0,0,0.7)";
-  ctx.strokeText(text, x + 6, y - 6);
+  ctx.strokeText(text, box[0], box[1] + 12);
   ctx.fillStyle = colour;
-  ctx.fillText(text, x + 6, y - 6);
+  ctx.fillText(text, box[0], box[1] + 12);
 }
 
 const EDGES = [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]];
 
 function render() {
   const rect = canvas.getBoundingClientRect();
-  if (canvas.width !== Math.round(rect.width) || canvas.height !== Math.round(rect.height)) {
-    canvas.width = Math.round(rect.width);
-    canvas.height = Math.round(rect.height);
+  const dpr = window.devicePixelRatio || 1;  // drawn at the screen's pixels, in CSS pixels: sharp lines and labels
+  if (canvas.width !== Math.round(rect.width * dpr) || canvas.height !== Math.round(rect.height * dpr)) {
+    canvas.width = Math.round(rect.width * dpr);
+    canvas.height = Math.round(rect.height * dpr);
   }
-  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, rect.width, rect.height);
   placedLabels = [];
+  state.labels = [];
   if (state.image.complete && state.image.naturalWidth) {
     ctx.imageSmoothingEnabled = state.zoom < 2;
     ctx.drawImage(state.image, state.panX, state.panY, state.image.naturalWidth * state.zoom,
@@ -725,7 +866,6 @@ function drawVehicle(v, selected) {
         ctx.stroke();
         ctx.setLineDash([]);
       });
-      label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479");
     });
   }
   for (const p of v.parts) {
@@ -737,10 +877,16 @@ function drawVehicle(v, selected) {
       const colour = !p.name ? "#ff9800" : p.auto ? "#ffeb3b" : "#4caf50";
       dot(uv, colour, p.index === state.selectedPart && selected ? 6 : 4, selected ? "#000" : "#444");
     });
-    if (selected) {
+  }
+  if (selected) {  // labels last, around what is drawn: the clicks' names first, then the targets'
+    for (const p of v.parts) p.uv.forEach((uv) => obstacle(uv, 5));
+    for (const t of v.targets) t.uv.forEach((uv) => obstacle(uv, 9));
+    const order = [...v.parts].sort((a, b) => (b.index === state.selectedPart) - (a.index === state.selectedPart));
+    for (const p of order) {
       const text = p.name ? (oneClick(p.kind) ? p.name : `${p.name} ${p.kind}`) : "?";
       label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
     }
+    v.targets.forEach((t, k) => label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479", false, 11));
   }
   ctx.globalAlpha = 1;
 }
@@ -812,6 +958,7 @@ canvas.addEventListener("mousemove", (e) => {
   if (!d) return;
   if (d.kind === "pan") {
     state.panX = d.panX + e.offsetX - d.x;
+    state.fitted = false;
     state.panY = d.panY + e.offsetY - d.y;
     render();
   } else if (d.kind === "box") {
@@ -865,6 +1012,7 @@ canvas.addEventListener("wheel", (e) => {
   const factor = Math.exp(-e.deltaY * 0.0015);
   const [u, v] = toImage(e.offsetX, e.offsetY);
   state.zoom = Math.min(Math.max(state.zoom * factor, 0.05), 40);
+  state.fitted = false;
   state.panX = e.offsetX - u * state.zoom;
   state.panY = e.offsetY - v * state.zoom;
   render();
@@ -874,13 +1022,13 @@ document.addEventListener("keydown", async (e) => {
   if (e.target.tagName === "SELECT" || e.target.tagName === "INPUT") return;
   const key = e.key;
   if (key === "Enter" && e.target.tagName === "BUTTON") return;  // the focused button's own click, not a confirm too
-  if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await edit({ op: "undo" }); return; }
+  if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await undo(); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   if (HOTKEYS[key]) arm(HOTKEYS[key]);
-  else if (key === "Escape") { state.mode = "click"; state.naming = null; arm(null); }
+  else if (key === "Escape") { state.mode = "click"; setNaming(null); arm(null); }
   else if (key === "s") await swapSides();
   else if (key === "r") startRename(state.selectedPart);
-  else if (key === "u") await edit({ op: "undo" });
+  else if (key === "u") await undo();
   else if (key === "Enter" && state.prediction !== null) await confirmPrediction();
   else if (key === "Tab") { e.preventDefault(); cycleSelection(e.shiftKey ? -1 : 1); }
   else if ((key === "x" || key === "Delete" || key === "Backspace") && state.prediction !== null) {
@@ -895,15 +1043,15 @@ document.addEventListener("keydown", async (e) => {
   else if (key === "[" || key === "PageUp") await step(-1);
   else if (key === "0") fitToView();
   else if ((key === "Delete" || key === "Backspace") && state.selectedPart !== null && currentVehicle()) {
-    await edit({ op: "delete_click", vehicle: state.vehicle, part: state.selectedPart });
-    state.selectedPart = null;
-    render();
+    await deleteClick();
   }
 });
 
 async function toggleDone() {
   const v = currentVehicle();
-  if (v) await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done });
+  if (v && await edit({ op: "set_vehicle", vehicle: v.id, done: !v.done })) {
+    say(`vehicle ${v.id} marked ${v.done ? "not done" : "done"}`);
+  }
 }
 
 // Read the annotation file and its extras file again (after another program changed them); this page's undo
@@ -926,10 +1074,11 @@ $("dismiss").onclick = dismissPrediction;
 $("new-vehicle").onclick = () => newVehicle();
 $("draw-box").onclick = () => { state.mode = "box"; say("drag the vehicle's box"); };
 $("done").onclick = toggleDone;
-$("undo").onclick = () => edit({ op: "undo" });
+$("undo").onclick = undo;
 $("prototype").onchange = async () => {
   const v = currentVehicle();
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, prototype: $("prototype").value });
 };
-window.addEventListener("resize", render);
+window.addEventListener("resize", resized);
+new ResizeObserver(resized).observe($("view"));
 start();
