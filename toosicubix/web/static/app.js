@@ -886,10 +886,14 @@ function drawVehicle(v, selected) {
       const text = p.name ? (oneClick(p.kind) ? p.name : `${p.name} ${p.kind}`) : "?";
       label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
     }
-    v.targets.forEach((t, k) => label(t.uv[0], `${k + 1}. ${t.name}`, "#ffd479", false, 11));
+    // Targets are ranked with circled numbers, so that they are not read as click numbers (click 1, click 2, ...).
+    v.targets.forEach((t, k) => label(t.uv[0], `${TARGET_RANKS[k] ?? k + 1} ${t.name}`, "#ffd479", false, 11));
   }
   ctx.globalAlpha = 1;
 }
+
+// The targets' ranks as drawn beside them, best first.
+const TARGET_RANKS = ["①", "②", "③", "④", "⑤", "⑥", "⑦", "⑧", "⑨"];
 
 // The corner drawn highest on the screen: where a cuboid's track label goes.
 function topCorner(c) {
