@@ -106,6 +106,14 @@ def test_the_box_cues_jacobian_matches_central_differences():
     R, t = R_cam_vehicle_from_ypr(3 * np.pi / 4, 0.05, -0.03), _truth(4)[1]
     box = np.array([400.0, 150.0, 700.0, 260.0])
     r, J = box_residuals(CAMERA.K, box, R, t, D)
+    _assert_central_differences(J, box, R, t, None)
+    assert rng is not None and np.all(np.isfinite(r))
+
+
+def _assert_central_differences(J: np.ndarray, box: np.ndarray, R: np.ndarray, t: np.ndarray,
+                                up: np.ndarray | None) -> None:
+    """``J`` (4, 9), :func:`box_residuals`' Jacobian at ``(R, t, D)``, against central differences of its residuals
+    (steps of 1e-6: rounding at 1e-10 of pixels in the tens, well inside the 1e-5 tolerance)."""
     x = np.concatenate([np.zeros(3), t, D])
     step = 1e-6
     for k in range(9):
@@ -113,11 +121,10 @@ def test_the_box_cues_jacobian_matches_central_differences():
         e[k] = step
 
         def at(v):
-            return box_residuals(CAMERA.K, box, R @ so3_exp(v[:3]), v[3:6], v[6:9], False)[0]
+            return box_residuals(CAMERA.K, box, R @ so3_exp(v[:3]), v[3:6], v[6:9], False, up)[0]
 
         numeric = (at(x + e) - at(x - e)) / (2 * step)
         np.testing.assert_allclose(J[:, k], numeric, rtol=1e-5, atol=1e-5 * (1 + np.abs(numeric).max()))
-    assert rng is not None and np.all(np.isfinite(r))
 
 
 #: A road normal a degree off the camera's -y, camera frame.
@@ -139,17 +146,7 @@ def test_on_a_road_the_box_rows_do_not_see_the_lean_and_their_jacobian_holds():
     turned, _ = box_residuals(CAMERA.K, box, so3_exp(0.02 * ROAD_UP) @ R, t, D, False, ROAD_UP)
     assert np.abs(turned - r).max() > 0.5  # 0.02 rad of heading moves a side of a 15 m car by pixels
     assert J[:, 0].tolist() == [0.0] * 4
-    x = np.concatenate([np.zeros(3), t, D])
-    step = 1e-6
-    for k in range(9):
-        e = np.zeros(9)
-        e[k] = step
-
-        def at(v):
-            return box_residuals(CAMERA.K, box, R @ so3_exp(v[:3]), v[3:6], v[6:9], False, ROAD_UP)[0]
-
-        numeric = (at(x + e) - at(x - e)) / (2 * step)
-        np.testing.assert_allclose(J[:, k], numeric, rtol=1e-5, atol=1e-5 * (1 + np.abs(numeric).max()))
+    _assert_central_differences(J, box, R, t, ROAD_UP)
 
 
 def test_upright_on_keeps_the_heading_and_takes_the_roads_up_axis():

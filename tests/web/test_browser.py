@@ -147,16 +147,22 @@ def test_a_click_waiting_for_a_name_is_asked_again_after_a_reload(page, scene, t
         server.server_close()
 
 
-def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene, tmp_path: Path):
-    """Issue 33 follow-up, friction 2: the front wheels clicked with each other's names. Select one, r, the other's
-    key: the two names swap in one edit (before, the name was refused as taken: four steps), and u swaps them
-    back."""
-    out = tmp_path / "annotations.json"
+def _session_with_named_clicks(scene, out: Path) -> Session:
+    """A session on the scene whose first image has vehicle 1 with every part of NAMED clicked and named."""
     session = make_session(scene, out)
     session.edit(0, {"revision": 0, "op": "add_vehicle"})
     for c in clicks(NAMED):
         session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": c.kind,
                          "name": c.name, "uv": c.uv})
+    return session
+
+
+def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene, tmp_path: Path):
+    """Issue 33 follow-up, friction 2: the front wheels clicked with each other's names. Select one, r, the other's
+    key: the two names swap in one edit (before, the name was refused as taken: four steps), and u swaps them
+    back."""
+    out = tmp_path / "annotations.json"
+    session = _session_with_named_clicks(scene, out)
     names = [c.name for c in clicks(NAMED)]
     server = serve_in_thread(session)
     try:
@@ -254,11 +260,7 @@ def test_a_wide_image_fills_the_canvas_width_and_labels_do_not_overlap(page, sce
     person zooms. Every click of the selected vehicle is labelled with its name and no label overlaps another, a
     click's dot or a target's circle (before, the targets' labels were drawn first and hid the clicks' names)."""
     out = tmp_path / "annotations.json"
-    session = make_session(scene, out)
-    session.edit(0, {"revision": 0, "op": "add_vehicle"})
-    for c in clicks(NAMED):
-        session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": c.kind,
-                         "name": c.name, "uv": c.uv})
+    session = _session_with_named_clicks(scene, out)
     server = serve_in_thread(session)
     fills = "Math.abs(state.zoom * state.view.size[0] - canvas.getBoundingClientRect().width) < 1"
     try:
