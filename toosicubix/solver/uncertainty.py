@@ -129,11 +129,15 @@ def _advice(name: str, clicked: _Clicked, keypoints_only: bool = False) -> str |
                    if not any(set(parts) <= clicked.names for parts in alternatives)]
         clicks = [text for text in missing if "arrow" not in text]
         arrow = [f"draw {text}" for text in missing if "arrow" in text]
+        # Any one usually fixes it; when one is there and it is still the cues', say so, then what else would.
+        there = [text for text, _ in _ANY[name] if text not in missing]
+        but = (f"{_and(there)} {'is' if len(there) == 1 else 'are'} not enough from this view; " if there and
+               (clicks or arrow) else "")
         if name == "roll":
-            return f"click parts on both sides ({_listing(clicks)})" if clicks else None
+            return f"{but}click parts on both sides ({_listing(clicks)})" if clicks else None
         if clicks and arrow:
-            return f"click {', '.join(clicks)}, or {arrow[0]}"
-        return f"click {_listing(clicks)}" if clicks else (arrow[0] if arrow else None)
+            return f"{but}click {', '.join(clicks)}, or {arrow[0]}"
+        return f"{but}click {_listing(clicks)}" if clicks else (f"{but}{arrow[0]}" if arrow else None)
     phrases = _KEYPOINT_PHRASES if keypoints_only else _PHRASES
     needed = []
     for requirement in (_KEYPOINT_ALL if keypoints_only else _ALL)[name]:
@@ -428,6 +432,8 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
             needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
             sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
                                {q: full[q] for q in needed})
+            for q in _on_road(status, upright):  # as their own sentence says, whatever else would do too
+                sources[q] = ("road",)
             together = _together(said, follows)
             for name in said:
                 if name in together:
