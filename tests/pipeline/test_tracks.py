@@ -176,3 +176,28 @@ def test_interleaved_sequences_give_each_frame_its_own_track_s_pose(tracked_file
     assert fitted["interleaved"] == fitted["grouped"]
     assert fitted["grouped"]["frame-3"][0][0] == "0003-car" and fitted["grouped"]["b-frame-3"][0][0] == "0004-car"
     assert fitted["grouped"]["frame-3"][0][1] != fitted["grouped"]["b-frame-3"][0][1]
+
+
+def test_a_tracked_frames_next_clicks_never_widen_its_sigmas(tracked_file, tmp_path):
+    """A track's frame has the track's sigmas; the next clicks were worked out on its own rows and set against them,
+    so a click 'took' yaw 4.1 -> 11.2 deg (a newcomer's validate). Now a click's information on its frame is added
+    to the track's: every suggestion is at most the frame's sigma, and on a frame clicked or boxed it is lower."""
+    fit_file(tracked_file, tmp_path / "out", BatchSettings(next_clicks=3))
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    tracked = [im["vehicles"][0] for im in doc["images"]]
+    assert all(v["next_clicks"] for v in tracked)
+    for v in tracked:
+        for s in v["next_clicks"]:
+            assert s["yaw_sigma_deg"] <= v["sigma"]["yaw_deg"] * (1 + 1e-12)
+            assert s["depth_sigma_rel"] <= v["sigma"]["depth_rel"] * (1 + 1e-12)
+        assert min(s["yaw_sigma_deg"] for s in v["next_clicks"]) < v["sigma"]["yaw_deg"]
+
+
+def test_validate_says_a_box_only_frame_is_placed_by_its_track(tracked_file):
+    """validate described a box-only frame as 'constraints 0 from 0 clicked points ... 8 fix the cuboid up to scale',
+    as if it had been fitted alone; it is placed by its track."""
+    out = CliRunner().invoke(main, ["validate", str(tracked_file), "--all"])
+    assert out.exit_code == 0, out.output
+    assert "its pose from its track (its 2D box here) and the track's other frames" in out.output
+    assert "its pose from its track (nothing here: interpolated)" in out.output
+    assert "constraints 0 from 0 clicked points" not in out.output

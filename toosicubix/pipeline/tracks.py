@@ -64,7 +64,7 @@ def results_of_track(track: str, frames: list[tuple[Image, Vehicle]], prior: Siz
             frame_fit = _as_fit(model, frame, fit)
             if frame.pose_from == "clicks":
                 frame_fit = _checked_plausible(frame_fit, model, v, im, prior, options)
-            result = describe_fit(v, im.camera, prior, model, frame_fit, im.ground, options, next_clicks)
+            result = describe_fit(v, im.camera, prior, model, frame_fit, im.ground, options, next_clicks, tracked=True)
             with np.errstate(all="ignore"):
                 out.append(_tracked(settled(checked_result(result)), track, frame.pose_from))
         except UnusableFit as exc:

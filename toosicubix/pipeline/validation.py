@@ -236,7 +236,10 @@ def describe(check: VehicleCheck) -> str:
     r = check.result
     verdict = "well determined" if check.well_determined else "NOT well determined: " + "; ".join(check.problems)
     lines = [f"image {check.image_id} vehicle {r.id} ({r.prototype}, {check.json_path}): {verdict}"]
-    if r.constraints is not None:
+    if r.pose_from in ("box", "interpolated"):  # a track's frame without clicks: its clicks are the track's
+        here = "its 2D box here" if r.pose_from == "box" else "nothing here: interpolated"
+        lines.append(f"  its pose from its track ({here}) and the track's other frames; its sigmas are the track's")
+    elif r.constraints is not None:
         lines.append(f"  constraints {r.constraints} from {r.clicks} clicked points "
                      f"({r.aux_unknowns} auxiliary unknowns); 8 fix the cuboid up to scale")
     if not r.ok:

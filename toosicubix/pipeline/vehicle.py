@@ -158,9 +158,10 @@ def active_cues(parts: PartsModel, ground: GroundPlane | None) -> Cues:
 
 def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: PartsModel, fit: FitResult,
                  ground: GroundPlane | None, options: SolverOptions, next_clicks: int = 0,
-                 keypoints: Keypoints | None = None) -> VehicleResult:
+                 keypoints: Keypoints | None = None, tracked: bool = False) -> VehicleResult:
     """A vehicle's fit as results.json describes it, with ``next_clicks`` suggestions (0: none); not yet checked
-    (:func:`checked_result`)."""
+    (:func:`checked_result`). ``tracked``: a track's frame (its sigmas the track's; the suggestions' as
+    :func:`toosicubix.solver.guidance.guide` adds a click to a track)."""
     common = {"id": vehicle.id, "prototype": vehicle.prototype, "kitti_type": prior.kitti_type,
               "constraints": fit.constraints, "clicks": fit.n_clicks, "aux_unknowns": fit.n_aux,
               "cues": active_cues(parts, ground), "solver": _solver_stats(fit)}
@@ -172,7 +173,7 @@ def describe_fit(vehicle: Vehicle, camera: Camera, prior: SizePrior, parts: Part
     ry, pitch, roll = ypr_from_R_cam_vehicle(R)
     suggestions: dict[str, Any] = {}
     if next_clicks > 0:
-        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks, keypoints)
+        suggestions = _next_clicks(vehicle, camera, prior, fit, options, ground, next_clicks, keypoints, tracked)
     return VehicleResult(
         status="ok", error=None, R_cam_vehicle=R, t_cam_vehicle=t, dimensions=d, box2d=box2d, **common,
         box2d_source="annotated" if vehicle.box2d is not None else "projected",
@@ -210,7 +211,7 @@ def _keypoint_names(vehicle: Vehicle) -> tuple[str, ...]:
 
 def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted, options: SolverOptions,
                  ground: GroundPlane | None, n: int,
-                 keypoints: Keypoints | None = None) -> dict[str, Any]:
+                 keypoints: Keypoints | None = None, tracked: bool = False) -> dict[str, Any]:
     """The ``n`` best parts (or ``keypoints``) to click next (``next_clicks``, or ``next_clicks_error`` when
     guidance failed) and what clicking every visible one would reach (``reachable_sigma``); an error here never
     fails the vehicle. A road user with a keypoint vocabulary of its own (a pedestrian) is offered its class's
@@ -218,7 +219,8 @@ def _next_clicks(vehicle: Vehicle, camera: Camera, prior: SizePrior, fit: Fitted
     keypoints = class_keypoints(vehicle.prototype) or keypoints
     try:
         guidance = guide(vehicle.parts, camera, prior, fit, options, ground, vehicle.known_dimensions,
-                         box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type), keypoints=keypoints)
+                         box_shaped=is_box_shaped(vehicle.prototype, prior.kitti_type), keypoints=keypoints,
+                         tracked=tracked)
     except Exception as exc:  # guidance is advice: the fit stands without it
         return {"next_clicks": [], "next_clicks_error": f"{type(exc).__name__}: {exc}"}
     return {"next_clicks": [s.to_json() for s in guidance.suggestions[:n]], "reachable_sigma": guidance.reachable}

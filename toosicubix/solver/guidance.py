@@ -195,7 +195,7 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
           options: SolverOptions | None = None, ground: GroundPlane | None = None,
           known_dimensions: dict[str, tuple[float, float]] | None = None,
           box_shaped: bool = False,
-          keypoints: Mapping[str, TypicalKeypoint] | None = None) -> Guidance:
+          keypoints: Mapping[str, TypicalKeypoint] | None = None, tracked: bool = False) -> Guidance:
     """Rank the parts not yet clicked by how much they would shrink the yaw and depth uncertainty, and say what
     clicking all the visible ones would reach. A part is not suggested where the person has clicked already: a
     wheel whose hub is clicked (or the hub of a clicked wheel), or a part of the vocabulary predicted within
@@ -212,6 +212,9 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
         each not clicked yet is placed at ``at`` on the fitted cuboid, weighted by its spread as a fit weighs it,
         and visible when one of the faces it is seen from
         (:attr:`~toosicubix.parts.linear.TypicalKeypoint.faces`) is turned to the camera
+    tracked : the fit is a track's frame (:mod:`toosicubix.pipeline.tracks`): its sigmas are the track's, which the
+        other frames tighten. A click's gain is worked out on this frame's own rows (the information it adds to
+        them) and added to the track's information (:func:`_on_track`): more clicks never widen a sigma.
 
     Returns
     -------
@@ -289,6 +292,9 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     test = fit.residual_test
     if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
         now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]
+    if tracked:
+        added = [_on_track(u, now, fit.uncertainty) for u in added]
+        now = fit.uncertainty
     added, reachable = added[:-1], added[-1]
     # A vehicle clicked in keypoints on one end only: the keypoints toward the far end first. Linearised at a pose
     # the size prior holds, their gain looks small; on ApolloCar3D's comparison half one of them took 268 end-on cars
@@ -306,6 +312,20 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
                               now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score, share, far))
     out.sort(key=lambda s: (not (s.visible and s.inside), not s.far_end, -s.expected_score))
     return Guidance(out, reachable)
+
+
+def _on_track(after: Uncertainty, alone: Uncertainty, track: Uncertainty) -> Uncertainty:
+    """The track's sigmas (``track``) with the information a click adds to its frame's own rows: per quantity (yaw,
+    depth), ``1 / sigma^2 = 1 / track^2 + (1 / after^2 - 1 / alone^2)``, ``alone`` and ``after`` the frame's own
+    sigmas without and with the click (the click's information taken as independent of the other frames'); the
+    rest of ``track`` as it is."""
+    def added(a: float, b: float, c: float) -> float:
+        gain = max(0.0, 1.0 / _bounded(a) ** 2 - 1.0 / _bounded(b) ** 2)
+        return 1.0 / math.sqrt(1.0 / _bounded(c) ** 2 + gain)
+
+    depth_rel = added(after.depth_rel, alone.depth_rel, track.depth_rel)
+    return replace(track, yaw_deg=added(after.yaw_deg, alone.yaw_deg, track.yaw_deg), depth_rel=depth_rel,
+                   depth_m=track.depth_m * depth_rel / _bounded(track.depth_rel))
 
 
 def _bounded(sigma: float) -> float:
