@@ -254,6 +254,28 @@ def test_clicks_are_counted_one_way_and_numbered_from_one(page, scene, tmp_path:
         server.server_close()
 
 
+def test_the_message_keeps_room_to_be_read_on_a_narrow_window(page, scene, tmp_path: Path):
+    """A newcomer's window 1000 px wide showed no message at all (the header's buttons left it 0 px), and at 1280 px
+    with a sequence's buttons it was cut to a few words. The message now takes a row of its own where it would be
+    narrower than 320 px, and the image below does not move when it changes."""
+    out = tmp_path / "annotations.json"
+    session = _session_with_named_clicks(scene, out)
+    server = serve_in_thread(session)
+    try:
+        page.set_viewport_size({"width": 1000, "height": 700})
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        page.evaluate("say('short')")
+        top = page.evaluate("canvas.getBoundingClientRect().top")
+        page.evaluate("say('a long message about the click that waits for a name, which the person must read whole "
+                      "to know what the next key does, and then some more words so that it needs two lines')")
+        assert page.evaluate("document.getElementById('message').getBoundingClientRect().width") >= 320
+        assert page.evaluate("canvas.getBoundingClientRect().top") == top
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_a_wide_image_fills_the_canvas_width_and_labels_do_not_overlap(page, scene, tmp_path: Path):
     """Issue 33 follow-up, friction 5: a 1240 x 375 image fills the canvas's width when the page opens and again
     when the window changes size (before, it kept the zoom it opened with, a third of a larger window), until the
