@@ -147,6 +147,29 @@ def test_a_click_waiting_for_a_name_is_asked_again_after_a_reload(page, scene, t
         server.server_close()
 
 
+def test_a_reload_opens_on_the_image_the_person_was_on(page, tmp_path: Path):
+    """A newcomer reloaded on image 12 of 14 and the page opened on image 1, with nothing saying where their waiting
+    click was. The tab now remembers its image across a reload."""
+    paths, cameras = write_sequence(tmp_path, frames=3)
+    session = Session(paths, tmp_path / "annotations.json", load_cameras(cameras, [p.stem for p in paths]),
+                      load_priors())
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.evaluate("state.index") == 0
+        page.keyboard.press("]")
+        page.keyboard.press("]")
+        page.wait_for_function("state.index === 2 && state.view !== null", timeout=20000)
+        page.reload()
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.evaluate("state.index") == 2
+        assert page.locator("#image-name").inner_text().startswith(paths[2].stem)
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def _session_with_named_clicks(scene, out: Path) -> Session:
     """A session on the scene whose first image has vehicle 1 with every part of NAMED clicked and named."""
     session = make_session(scene, out)

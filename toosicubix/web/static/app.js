@@ -84,12 +84,21 @@ async function start() {
     });
   }
   buildPalette();
-  await showImage(doc.order[0]);
+  // A reload opens where the person was (this tab's last image of this file), else on the first image.
+  const saved = Number(sessionStorage.getItem(placeKey()));
+  const images = doc.images.length;
+  const place = sessionStorage.getItem(placeKey()) !== null && Number.isInteger(saved) && saved >= 0 && saved < images
+    ? saved : doc.order[0];
+  await showImage(place);
 }
+
+// Where this tab remembers its image of this annotation file across a reload.
+const placeKey = () => `toosicubix:image:${state.session.file}:${state.session.images.length}`;
 
 async function showImage(index) {
   const n = state.session.images.length;
   state.index = (index + n) % n;
+  sessionStorage.setItem(placeKey(), String(state.index));
   state.lastAuto = null;
   say("");  // what was said was about the image left
   state.vehicle = null;
