@@ -128,6 +128,25 @@ def test_unnamed_clicks_are_named_as_they_come(served):
     assert doc["vehicles"][0]["fit"]["well_determined"]
 
 
+def test_a_click_far_from_every_part_of_the_fitted_vehicle_says_so(served):
+    """A newcomer's click on the road beside a fitted car was left unnamed with "the page is not sure" while its one
+    choice read 100 %: the click was far from every part, which the page did not say. Its choices now carry
+    ``far``, which the page's question reads ("far from every part of the fitted vehicle"); a click on a part
+    does not."""
+    client, _ = served
+    vehicle = _add_vehicle(client)
+    _click_named(client, vehicle)
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": [[40.0, 30.0]]})
+    assert status == 200 and not doc["auto_named"]
+    waiting = doc["vehicles"][0]["parts"][-1]
+    assert waiting["name"] is None and waiting["choices"] and all(c.get("far") for c in waiting["choices"])
+    status, doc = client.edit({"op": "add_click", "vehicle": vehicle, "uv": clicks(UNNAMED)[0].uv})
+    assert status == 200 and doc["auto_named"]
+    *_, still_waiting, named = doc["vehicles"][0]["parts"]
+    assert named["name"] == clicks(UNNAMED)[0].name and not any(c.get("far") for c in named.get("choices") or [])
+    assert still_waiting["name"] is None and all(c.get("far") for c in still_waiting["choices"])
+
+
 def test_any_click_can_be_renamed(served, tmp_path):
     """A click named by the person is renamed in place (its place kept), in the file too; a rename to a name another
     click has is refused, naming it."""

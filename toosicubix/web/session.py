@@ -867,7 +867,9 @@ class Session:
                                self.options.click_sigma, self.naming, dims)
             cached = self._cache(key, {"proposal": proposal})
         proposal = cached["proposal"]
-        choices = [{"kind": kind, "name": name, "probability": round(p, 4)} for kind, name, p in proposal.choices]
+        far = proposal.placed and proposal.outlier  # farther from every part's place than a click of it would be
+        choices = [{"kind": kind, "name": name, "probability": round(p, 4), **({"far": True} if far else {})}
+                   for kind, name, p in proposal.choices]
         sure = (proposal.placed and not proposal.outlier and bool(choices)
                 and choices[0]["probability"] >= self.naming.confidence)
         return choices, sure, "fit" if result.ok else "prior"

@@ -186,8 +186,13 @@ const clickCount = (v) => count(v.parts.length, "click") + (v.unnamed ? ` (${v.u
 // The question the page asks about a click waiting for a name.
 function namingPrompt(v, k) {
   const part = v.parts[k];
-  return `which part is click ${clickNumber(k)}? ` + (part.choices && part.choices.length &&
-    part.choices[0].probability > 0.3 ? "The page is not sure: choose below, or press its key" :
+  const first = part.choices && part.choices.length ? part.choices[0] : null;
+  if (first && first.far) {  // placed, but no part of the fitted vehicle is where the click is
+    return `which part is click ${clickNumber(k)}? It is far from every part of the fitted vehicle (off the ` +
+      "vehicle, or a name given wrong): choose below if it is one, or press Delete";
+  }
+  return `which part is click ${clickNumber(k)}? ` + (first && first.probability > 0.3 ?
+    "The page is not sure: choose below, or press its key" :
     "Nothing places the vehicle yet (a box or a named click would): choose below, or press its key");
 }
 
@@ -687,7 +692,9 @@ function choices(v) {
   const head = document.createElement("span");
   head.textContent = part.name ? `Click ${clickNumber(k)} is ${part.name} (the page's name)` +
     (offered.length ? "; or: " : "; r renames it") :
-    `Click ${clickNumber(k)} may be: ` + (offered.length ? "" : "any name of the palette");
+    `Click ${clickNumber(k)} may be` + (offered.length && offered[0].far ?
+      " (far from every part of the fitted vehicle; the nearest, by the naming model's odds): " : ": ") +
+    (offered.length ? "" : "any name of the palette");
   el.appendChild(head);
   for (const c of offered) {
     const button = document.createElement("button");
