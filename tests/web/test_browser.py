@@ -170,6 +170,34 @@ def test_a_reload_opens_on_the_image_the_person_was_on(page, tmp_path: Path):
         server.server_close()
 
 
+def test_a_named_click_on_top_of_another_is_added_not_taken_for_a_selection(page, scene, tmp_path: Path):
+    """A newcomer pressed a part's key and clicked 3 px from a click already there: the press selected that click
+    and the named click was lost, silently. With a name chosen first the press is that name's click; without one it
+    selects, and says how to click beside it."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        first, second = clicks(NAMED)[0], clicks(NAMED)[1]
+        page.keyboard.press(KEYS[first.name])
+        page.mouse.click(*_screen(page, first.uv[0]))
+        _wait_revision(page, 2)
+        page.mouse.click(*_screen(page, first.uv[0]))  # nothing chosen: a selection, said so
+        page.wait_for_timeout(200)
+        assert page.evaluate("state.revision") == 2
+        assert page.locator("#message").inner_text().startswith("click 1 selected: drag it to move it")
+        page.keyboard.press(KEYS[second.name])
+        x, y = _screen(page, first.uv[0])
+        page.mouse.click(x + 2, y + 1)  # within the 7 px that select a click
+        _wait_revision(page, 3)
+        names = [p.name for p in load_images(out)[0].vehicles[0].parts]
+        assert names == [first.name, second.name]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def _session_with_named_clicks(scene, out: Path) -> Session:
     """A session on the scene whose first image has vehicle 1 with every part of NAMED clicked and named."""
     session = make_session(scene, out)

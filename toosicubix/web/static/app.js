@@ -1018,7 +1018,10 @@ canvas.addEventListener("mouseup", async (e) => {
       say(OFF_IMAGE, true);
     } else if (d.moved) {
       await edit({ op: "move_click", vehicle: state.vehicle, part: d.part, click: d.click, uv });
+    } else if (state.armed || state.pending.length) {  // a name chosen first: this press is the click it names
+      await addClick(uv);
     } else {
+      say(`click ${clickNumber(d.part)} selected: drag it to move it; to click beside it, zoom in (mouse wheel)`);
       render();
     }
   } else if (d.kind === "click") {
