@@ -198,6 +198,25 @@ def test_a_named_click_on_top_of_another_is_added_not_taken_for_a_selection(page
         server.server_close()
 
 
+def test_selecting_and_renaming_a_click_say_what_is_happening_to_which_click(page, scene, tmp_path: Path):
+    """A newcomer selected click 2 in the Clicks list while the message still spoke of click 6's name; in rename
+    mode the message said Esc keeps the name while the Naming box said Esc names the next click."""
+    out = tmp_path / "annotations.json"
+    session = _session_with_named_clicks(scene, out)
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        page.locator("#clicks li").nth(1).click()
+        assert page.locator("#message").inner_text().startswith("click 2 selected")
+        page.keyboard.press("r")
+        assert page.locator("#message").inner_text().startswith("rename click 2:")
+        assert page.locator("#next-click").inner_text() == ("Renaming click 2: press a part's key, or choose below or "
+                                                              "in the palette. Esc: keep its name.")
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def _session_with_named_clicks(scene, out: Path) -> Session:
     """A session on the scene whose first image has vehicle 1 with every part of NAMED clicked and named."""
     session = make_session(scene, out)

@@ -637,7 +637,11 @@ function panels() {
     }
     if (p.index === state.selectedPart) li.classList.add("selected");
     if (p.index === state.naming) li.classList.add("naming");
-    li.onclick = () => { state.selectedPart = p.index; render(); };
+    li.onclick = () => {  // what the message said was about another click: it now says which one is selected
+      state.selectedPart = p.index;
+      say(`click ${clickNumber(p.index)} selected: r renames it, Delete removes it, drag it on the image to move it`);
+      render();
+    };
     clicks.appendChild(li);
   });
 }
@@ -665,8 +669,9 @@ function banner(v) {
 function nextClick(v) {
   const el = $("next-click");
   if (state.naming !== null && v && v.parts[state.naming]) {
-    el.textContent = `Naming click ${clickNumber(state.naming)}: press a part's key, or choose below or in the ` +
-      "palette. Esc: name the next click instead.";
+    el.textContent = (state.renaming ? `Renaming click ${clickNumber(state.naming)}` :
+      `Naming click ${clickNumber(state.naming)}`) + ": press a part's key, or choose below or in the palette. " +
+      (state.renaming ? "Esc: keep its name." : "Esc: name the next click instead.");
     el.className = "naming";
   } else if (state.armed) {
     el.textContent = `Next click: ${partLabel(state.armed[0], state.armed[1])} (you chose the name first). Esc: ` +
