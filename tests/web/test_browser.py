@@ -217,6 +217,37 @@ def test_selecting_and_renaming_a_click_say_what_is_happening_to_which_click(pag
         server.server_close()
 
 
+def test_clicks_the_page_names_on_the_way_are_said(page, scene, tmp_path: Path):
+    """A newcomer's named click let the page place the vehicle and name a click that had waited, and the message
+    said only "click 2 named rear-center". What the page named in the same edit is now said too."""
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        wheel, rear_wheel, lights, edge = (clicks(NAMED)[k] for k in (0, 1, 2, 3))
+        for c, revision in ((wheel, 2), (edge, 3)):  # two clicks the page cannot name yet: both wait
+            page.keyboard.press("Escape")
+            page.mouse.click(*_screen(page, c.uv[0]))
+            _wait_revision(page, revision)
+        page.keyboard.press("Escape")
+        page.keyboard.press(KEYS[rear_wheel.name])
+        page.mouse.click(*_screen(page, rear_wheel.uv[0]))
+        _wait_revision(page, 4)
+        page.keyboard.press("Escape")
+        page.keyboard.press(KEYS[lights.name])
+        for uv in lights.uv:
+            page.mouse.click(*_screen(page, uv))
+        _wait_revision(page, 5)
+        message = page.locator("#message").inner_text()
+        assert message.startswith("symmetry front added (you chose the name first)"), message
+        assert f"; the page named click 1 {wheel.name}" in message
+        assert f"; the page named click 2 {edge.name}" in message
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def _session_with_named_clicks(scene, out: Path) -> Session:
     """A session on the scene whose first image has vehicle 1 with every part of NAMED clicked and named."""
     session = make_session(scene, out)

@@ -355,7 +355,7 @@ async function addClick(uv) {
   const auto = doc.auto_named.filter((a) => a.vehicle === state.vehicle);
   const mine = currentVehicle().parts[doc.part];
   if (armed) {
-    say(`${partLabel(armed[0], armed[1])} added (you chose the name first)`);
+    say(`${partLabel(armed[0], armed[1])} added (you chose the name first)` + alsoNamed(doc, doc.part));
   } else if (auto.some((a) => a.part === doc.part)) {
     state.lastAuto = auto.find((a) => a.part === doc.part);
     const a = state.lastAuto;
@@ -384,10 +384,17 @@ async function renameClick(kind, name) {
     state.selectedPart = part;
     const swapped = holder ? `; click ${clickNumber(holder.index)}, which had it, is now ` +
       (own.name ? partLabel(own.kind, own.name) : "unnamed") + " (names swapped: u undoes)" : "";
-    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}${swapped}` +
+    say(`click ${clickNumber(part)} named ${partLabel(kind, name)}${swapped}` + alsoNamed(doc, part) +
       (state.naming !== null ? `; click ${clickNumber(state.naming)} waits for a name` : ""));
     render();
   }
+}
+
+// The other clicks of the vehicle the page named in the same edit (a name given lets it place the vehicle and name
+// clicks that waited), said after what the person did: "; the page named click 1 wheel-rear-right".
+function alsoNamed(doc, except) {
+  const others = doc.auto_named.filter((a) => a.vehicle === state.vehicle && a.part !== except);
+  return others.map((a) => `; the page named click ${clickNumber(a.part)} ${a.name}`).join("");
 }
 
 // r (or a click's rename button): the next name chosen renames the selected click.
