@@ -58,6 +58,16 @@ def _wait_revision(page, revision: int) -> None:
     page.wait_for_function(f"state.revision >= {revision}", timeout=20000)
 
 
+def _choose_and_click(page, c, revision: int) -> None:
+    """Choose the name of ``c`` first (Esc: no click being named, then its key), click its points, wait for
+    ``revision``."""
+    page.keyboard.press("Escape")
+    page.keyboard.press(KEYS[c.name])
+    for uv in c.uv:
+        page.mouse.click(*_screen(page, uv))
+    _wait_revision(page, revision)
+
+
 def _open_zoomed_in(page, url: str) -> None:
     """Open the page and zoom in on the synthetic vehicle (the page's mouse wheel does this; set here exactly):
     mouse positions are whole CSS pixels, so at zoom 3 a click lands within 0.17 image pixels of the part."""
@@ -230,15 +240,8 @@ def test_clicks_the_page_names_on_the_way_are_said(page, scene, tmp_path: Path):
             page.keyboard.press("Escape")
             page.mouse.click(*_screen(page, c.uv[0]))
             _wait_revision(page, revision)
-        page.keyboard.press("Escape")
-        page.keyboard.press(KEYS[rear_wheel.name])
-        page.mouse.click(*_screen(page, rear_wheel.uv[0]))
-        _wait_revision(page, 4)
-        page.keyboard.press("Escape")
-        page.keyboard.press(KEYS[lights.name])
-        for uv in lights.uv:
-            page.mouse.click(*_screen(page, uv))
-        _wait_revision(page, 5)
+        _choose_and_click(page, rear_wheel, 4)
+        _choose_and_click(page, lights, 5)
         message = page.locator("#message").inner_text()
         assert message.startswith("symmetry front added (you chose the name first)"), message
         assert f"; the page named click 1 {wheel.name}" in message
@@ -340,11 +343,7 @@ def test_clicks_are_counted_one_way_and_numbered_from_one(page, scene, tmp_path:
         assert page.locator("#choices").inner_text().startswith("Click 1 may be:")
         assert page.evaluate("document.getElementById('clicks').start") == 1
         assert page.locator("#fit").inner_text().startswith("not fitted yet: 1 click waiting for a name")
-        page.keyboard.press("Escape")
-        page.keyboard.press(KEYS[pair.name])
-        for uv in pair.uv:
-            page.mouse.click(*_screen(page, uv))
-        _wait_revision(page, 3)
+        _choose_and_click(page, pair, 3)
         fit = page.locator("#fit").inner_text()
         assert re.search(r"[12] named clicks? cannot place a cuboid yet; click at least \d+ more \(the wheels",
                          fit), fit
