@@ -380,6 +380,21 @@ def suits(name: Name, prototypes: tuple[str, ...] | list[str]) -> bool:
     return any(p in group for p in prototypes)
 
 
+#: Where an axle sits when the fit has no unknown for it: this fraction of the length ahead of (front) or behind
+#: (rear) the middle.
+TYPICAL_AXLE_FRACTION = 0.3
+
+
+def typical_terms(dimensions: Any, params: dict[str, float], camera_side: float) -> dict[str, float]:
+    """The values of :data:`TYPICAL_TERMS` on a fitted cuboid: ``dimensions`` (dx, dy, dz), metres; ``params`` its
+    named unknowns (the axles ``Xwf``, ``Xwr`` where the fit has them, else :data:`TYPICAL_AXLE_FRACTION` of the
+    length); ``camera_side`` +1 when the camera is on the vehicle's left, -1 on its right."""
+    dx, dy, dz = (float(v) for v in dimensions)
+    return {"dx": dx, "dy": dy, "dz": dz, "Xwf": params.get("Xwf", TYPICAL_AXLE_FRACTION * dx),
+            "Xwr": params.get("Xwr", -TYPICAL_AXLE_FRACTION * dx), "side": camera_side, "side*dy": camera_side * dy,
+            "one": 1.0}
+
+
 def typical_points(name: Name, values: dict[str, float]) -> list[list[float]]:
     """Where a part usually sits: per click (X, Y, Z), metres, vehicle frame.
 

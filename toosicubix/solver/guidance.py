@@ -128,14 +128,10 @@ class Suggestion:
                 **({"far_end": True} if self.far_end else {})}
 
 
-def _typical_points(kind: str, name: str, d: np.ndarray, wheels: dict[str, float],
-                    camera_side: float) -> np.ndarray:
-    """Where a part usually is on a cuboid of dimensions ``d``, vehicle frame: (k, 3) (the vocabulary's
-    ``typical``; ``camera_side`` +1: the camera is on the vehicle's left)."""
-    dx, dy, dz = d
-    values = {"dx": dx, "dy": dy, "dz": dz, "Xwf": wheels["front"], "Xwr": wheels["rear"], "side": camera_side,
-              "side*dy": camera_side * dy, "one": 1.0}
-    return np.array(vocabulary.typical_points(vocabulary.entry(kind, name), values))
+def _typical_points(kind: str, name: str, terms: dict[str, float]) -> np.ndarray:
+    """Where a part usually is on the fitted cuboid (``terms``: :func:`toosicubix.vocabulary.typical_terms`),
+    vehicle frame: (k, 3) (the vocabulary's ``typical``)."""
+    return np.array(vocabulary.typical_points(vocabulary.entry(kind, name), terms))
 
 
 def is_box_shaped(*prototypes: str) -> bool:
@@ -228,14 +224,15 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
     base = build_parts_model(parts, known_dimensions)
     values = dict(zip(base.param_names, fit.p, strict=True))
-    wheels = {"front": values.get("Xwf", 0.3 * d[0]), "rear": values.get("Xwr", -0.3 * d[0])}
     camera_side = 1.0 if (R.T @ (-t))[1] >= 0 else -1.0
+    terms = vocabulary.typical_terms(d, values, camera_side)
+    wheels = {"front": terms["Xwf"], "rear": terms["Xwr"]}
     facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
 
     # Every candidate at its typical place, all in one model: one Jacobian serves them all.
     placed, placed_vehicle = [], []
     if keypoints is None:
-        typical = [(Part(kind, name, np.empty((0, 2)), "$"), _typical_points(kind, name, d, wheels, camera_side))
+        typical = [(Part(kind, name, np.empty((0, 2)), "$"), _typical_points(kind, name, terms))
                    for kind, name in _candidates(parts, box_shaped, camera_side)]
     else:
         clicked = {p.name for p in parts if p.kind == "keypoint"}

@@ -58,9 +58,6 @@ PRIOR_SET_RATIO = 4.0
 UNDETERMINED_RATIO = 1e4
 QUANTITIES = ("yaw", "pitch", "roll", "length", "width", "height")
 
-#: A cue "sets" a quantity when the clicks and that cue alone give it within PRIOR_SET_RATIO of its variance with
-#: every cue; when no single cue does, the cues whose removal multiplies it by more than PRIOR_SET_RATIO set it
-#: together (:func:`_setters`).
 #: A click pins a dimension when its position along that axis is a fixed fraction of the dimension (no unknown of
 #: its own): an end at least END_FRACTION of the length from the middle, a side this fraction of the width, a top or a
 #: bottom at least this high or at most this low (fractions of the height; a cuboid's faces are at 0.5, 1 and 0).
@@ -414,7 +411,9 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     G = ypr_gradient(R)
     u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     gradients = _gradients(problem, R, t, p, G)
-    full, clicks_only = _information_variances(J_px, C, sigmas, gradients)
+    whitened = J_px / sigmas[:, None]
+    data = whitened.T @ whitened  # the clicks' information
+    full, clicks_only = _information_variances(data, C, gradients)
     ratios, status = _status(full, clicks_only)
     keypoints_only, upright = problem.parts.keypoints_only, problem.upright_sigma is not None
     end = one_end(problem.parts, p, R, t)
@@ -423,12 +422,12 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
         said = _advised(status, keypoints_only, upright, end)
         sources: dict[str, tuple[str, ...]] = {}
         advice: dict[str, str] = {}
+        together: dict[str, str] = {}
         if said:  # what sets them and what to click: only for the quantities a sentence advises on
-            whitened = J_px / sigmas[:, None]
-            data = whitened.T @ whitened
             clicked = _clicked(problem, R, t, p, click_sigma)
-            follows = {name: () if _advice(name, clicked, keypoints_only) else
-                       _follows(name, data, C, gradients, full, status) for name in said}
+            to_click = {name: _advice(name, clicked, keypoints_only) for name in said}
+            follows = {name: () if to_click[name] else _follows(name, data, C, gradients, full, status)
+                       for name in said}
             needed = list(dict.fromkeys([*said, *(q for name in said for q in follows[name])]))
             sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in needed},
                                {q: full[q] for q in needed})
@@ -439,13 +438,11 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
                 if name in together:
                     continue
                 partner = next((q for q, lead in together.items() if lead == name), None)
-                advice[name] = _advice(name, clicked, keypoints_only) or (
+                advice[name] = to_click[name] or (
                     _jointly(name, partner, sources) if partner else
                     _limit(name, follows[name], sources, float(np.linalg.norm(t))))
             for q, lead in together.items():
                 advice[q] = advice[lead]
-        else:
-            together = {}
         return observability_sentences(status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end,
                                        sources, advice, together)
 
@@ -474,12 +471,17 @@ def _on_one_end(status: dict[str, str], keypoints_only: bool, end: tuple[str, st
 def _variances(M: np.ndarray, Gm: np.ndarray) -> np.ndarray:
     """``diag(Gm^T M^-1 Gm)`` (k,) for an information matrix ``M`` (n, n) and gradients ``Gm`` (n, k), solved with ``M``
     scaled to a unit diagonal (a pseudo-inverse when it is singular)."""
+    X = _solved(M, Gm)
+    return np.array([Gm[:, i] @ X[:, i] for i in range(Gm.shape[1])])
+
+
+def _solved(M: np.ndarray, Gm: np.ndarray) -> np.ndarray:
+    """``M^-1 Gm`` (n, k) with ``M`` (n, n) scaled to a unit diagonal, or its pseudo-inverse's when singular."""
     scale = 1.0 / np.sqrt(np.maximum(np.diag(M), 1e-300))
     try:
-        X = np.linalg.solve(M * scale[:, None] * scale[None, :], Gm * scale[:, None]) * scale[:, None]
+        return np.linalg.solve(M * scale[:, None] * scale[None, :], Gm * scale[:, None]) * scale[:, None]
     except np.linalg.LinAlgError:
-        X = np.linalg.pinv(M, hermitian=True) @ Gm
-    return np.array([Gm[:, i] @ X[:, i] for i in range(Gm.shape[1])])
+        return np.linalg.pinv(M, hermitian=True) @ Gm
 
 
 def _variances_each(Ms: np.ndarray, Gm: np.ndarray) -> np.ndarray:
@@ -490,23 +492,16 @@ def _variances_each(Ms: np.ndarray, Gm: np.ndarray) -> np.ndarray:
     try:
         X = np.linalg.solve(Ms * scale[:, :, None] * scale[:, None, :], Gm[None] * scale[:, :, None])
         X *= scale[:, :, None]
-    except np.linalg.LinAlgError:
-        X = np.stack([np.linalg.pinv(M, hermitian=True) @ Gm for M in Ms])
-        for i, M in enumerate(Ms):  # the regular ones solved as above
-            try:
-                X[i] = np.linalg.solve(M * scale[i][:, None] * scale[i][None, :], Gm * scale[i][:, None]) * (
-                    scale[i][:, None])
-            except np.linalg.LinAlgError:
-                pass
+    except np.linalg.LinAlgError:  # one of them singular: each on its own
+        X = np.stack([_solved(M, Gm) for M in Ms])
     return np.einsum("nk,snk->sk", Gm, X)
 
 
-def _information_variances(J_px: np.ndarray, C: np.ndarray, sigmas: np.ndarray,
+def _information_variances(data: np.ndarray, C: np.ndarray,
                            gradients: dict[str, np.ndarray]) -> tuple[dict[str, float], dict[str, float]]:
     """Posterior variances of the quantities with the ``gradients``, from clicks and cues, and from the clicks
-    alone (cues times 1e-6): ``g^T (J^T W J + c C)^-1 g``, solved with the matrix scaled to a unit diagonal."""
-    whitened = J_px / sigmas[:, None]
-    data = whitened.T @ whitened
+    alone (cues times 1e-6): ``g^T (J^T W J + c C)^-1 g`` (``data`` the clicks' information ``J^T W J``, ``C`` the
+    cues'), solved with the matrix scaled to a unit diagonal."""
     names = list(gradients)
     Gm = np.column_stack([gradients[k] for k in names])
     out = []
@@ -603,11 +598,18 @@ def _together(said: list[str], follows: dict[str, tuple[str, ...]]) -> dict[str,
     return out
 
 
+def _setting(quantities: list[str] | tuple[str, ...], sources: dict[str, tuple[str, ...]] | None
+             ) -> tuple[str, ...]:
+    """The cue groups that set any of ``quantities`` (``sources``: :func:`_setters`; the size prior for one not in
+    it), each once, in order."""
+    return tuple(dict.fromkeys(g for q in quantities for g in (sources or {}).get(q, ("size prior",))))
+
+
 def _jointly(name: str, other: str, sources: dict[str, tuple[str, ...]]) -> str:
     """What limits two quantities the clicks fix only together (:func:`_together`)."""
-    groups = tuple(dict.fromkeys((*sources.get(name, ("size prior",)), *sources.get(other, ("size prior",)))))
     return (f"the clicks that usually fix them are there, but they fix the {name} and the {other} only together "
-            f"(turned and stretched, the cuboid fits them alike), and {_source(groups, short=True)} picks the pair")
+            f"(turned and stretched, the cuboid fits them alike), and {_source(_setting((name, other), sources), True)}"
+            " picks the pair")
 
 
 def _limit(name: str, follows: tuple[str, ...], sources: dict[str, tuple[str, ...]], distance: float) -> str:
@@ -615,9 +617,8 @@ def _limit(name: str, follows: tuple[str, ...], sources: dict[str, tuple[str, ..
     (``follows``, :func:`_follows`) and what sets them, or else the view (``distance`` metres away), and for a
     dimension the cue that would fix it."""
     if follows:
-        groups = tuple(dict.fromkeys(g for q in follows for g in sources.get(q, ("size prior",))))
         return (f"the clicks that fix it are there, but they fix the {name} only together with the "
-                f"{_and(list(follows))}, which they leave to {_source(groups, short=True)}")
+                f"{_and(list(follows))}, which they leave to {_source(_setting(follows, sources), short=True)}")
     known = "; known dimensions would fix it" if name in ("length", "width", "height") else ""
     return (f"the clicks that usually fix it are there, but seen from this view, {distance:.0f} m away, they do not"
             f"{known}")
@@ -652,11 +653,8 @@ def _clicked(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, clic
         return _Clicked(frozenset(), facts)
     labels = [vocabulary.click(label) for label in parts.click_labels]
     names = named_as_clicked((c.kind, c.name) for c in labels)
-    values = dict(zip(parts.param_names, p, strict=True))
-    d = p[:3]
     side = 1.0 if (R.T @ -np.asarray(t))[1] >= 0.0 else -1.0
-    terms = {"dx": d[0], "dy": d[1], "dz": d[2], "Xwf": values.get("Xwf", 0.3 * d[0]),
-             "Xwr": values.get("Xwr", -0.3 * d[0]), "side": side, "side*dy": side * d[1], "one": 1.0}
+    terms = vocabulary.typical_terms(p[:3], dict(zip(parts.param_names, p, strict=True)), side)
     radius = ALREADY_CLICKED_SIGMAS * click_sigma
     candidates, points, owner = [], [], []  # the advice's parts not clicked, placed on the fit; their points' owner
     for kind, name in sorted(_HINTED - names):
@@ -836,8 +834,7 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
         if name in on_road or name in on_one_end or name in together:
             continue
         both = [name, *(q for q, lead in together.items() if lead == name)]
-        groups = tuple(dict.fromkeys(g for q in both for g in (sources or {}).get(q, ("size prior",))))
-        source, what = _source(groups), (advice or {}).get(name) or hints[name]
+        source, what = _source(_setting(both, sources)), (advice or {}).get(name) or hints[name]
         said = " and ".join(both)
         if status[name] == "cues only" or any(status[q] == "cues only" for q in both[1:]):
             out.append(f"{said} set by {source}, not by the clicks: {what}")
