@@ -85,11 +85,9 @@ async function start() {
   }
   buildPalette();
   // A reload opens where the person was (this tab's last image of this file), else on the first image.
-  const saved = Number(sessionStorage.getItem(placeKey()));
-  const images = doc.images.length;
-  const place = sessionStorage.getItem(placeKey()) !== null && Number.isInteger(saved) && saved >= 0 && saved < images
-    ? saved : doc.order[0];
-  await showImage(place);
+  const saved = sessionStorage.getItem(placeKey());  // null, or the index as text
+  const place = saved === null ? NaN : Number(saved);
+  await showImage(Number.isInteger(place) && place >= 0 && place < doc.images.length ? place : doc.order[0]);
 }
 
 // Where this tab remembers its image of this annotation file across a reload.
