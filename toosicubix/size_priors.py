@@ -90,3 +90,33 @@ class Priors(Mapping[str, SizePrior]):
 def bundled_priors_path() -> Path:
     """Path of the priors table shipped with the package."""
     return Path(str(resources.files("toosicubix") / "data" / "priors.json"))
+
+
+@dataclass(frozen=True)
+class AxlePrior:
+    """Where a prototype's axles sit: ``Xwf ~ N(front * dx, sigma^2)`` and ``Xwr ~ N(-rear * dx, sigma^2)``.
+
+    Attributes
+    ----------
+    front, rear : fractions of the length ``dx`` from the middle to each axle (both positive)
+    spread : the standard deviation, as a fraction of the prototype's mean length (``sigma = spread * mu_dx``, metres)
+    """
+
+    front: float
+    rear: float
+    spread: float
+
+
+#: Rule 29 (benchmarks/decisions.md): real cars' axles, from ApolloCar3D's human wheel-centre keypoints on 79 car
+#: models as the bundled ``apollocar3d-66`` mapping learned them (n-weighted means of the two centres per axle;
+#: twice the largest of their four spreads).
+CAR_AXLES = AxlePrior(front=0.299, rear=0.282, spread=0.043)
+#: The prototypes whose axles :data:`CAR_AXLES` states (rule 29): the bundled cars, by name.
+CAR_PROTOTYPES = frozenset({"Car", "Sedan", "SUV", "Station Wagon", "Sports Car", "Mini Car", "Small Size Car",
+                            "Mid Size Car", "Pickup"})
+
+
+def axle_prior(prototype: str) -> AxlePrior | None:
+    """The axle prior of ``prototype``: :data:`CAR_AXLES` for a car (:data:`CAR_PROTOTYPES`), None (free axles) for
+    vans, trucks, buses, other road users and prototypes a user adds."""
+    return CAR_AXLES if prototype in CAR_PROTOTYPES else None

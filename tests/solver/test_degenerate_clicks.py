@@ -64,3 +64,60 @@ def test_absurd_depth():
     far = 720.0 * 4.0 / MIN_CLICK_SPREAD_PX + 1.0
     assert far < MAX_DEPTH_M and "spans 4 px" not in absurd_depth(camera, np.array([0.0, 0.0, far]), d)
     assert absurd_depth(camera, np.array([0.0, 0.0, np.nan]), d) is not None
+
+
+def _roof_pair_problem():
+    """A rear view with its rear light pair, and the Jacobian of its fit (the tests below make the pair's own two
+    unknowns, how wide it is and how high it sits, trade off exactly; rule 30's case in benchmarks/decisions.md was a
+    roof pair seen from straight behind)."""
+    from tests.scenes import CAMERA, random_scene
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.solver.fit import SolverOptions, fit_vehicle
+    from toosicubix.solver.problem import Problem
+    from toosicubix.solver.refine import residuals_and_jacobian
+
+    scene = random_scene(np.random.default_rng(4), "rear")
+    options = SolverOptions()
+    fit = fit_vehicle(scene.model, CAMERA, load_priors()["Car"], options)
+    problem = Problem.build(scene.model, CAMERA, load_priors()["Car"], options.lambda_3d, options.lambda_px)
+    _, J = residuals_and_jacobian(problem, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p)
+    return scene.model, problem, J
+
+
+def test_a_direction_of_one_part_s_own_unknowns_leaves_the_cuboid_fitted():
+    """Rule 30: when the direction the clicks leave undetermined moves only a part's own unknowns, the cuboid does
+    not move along it: the refusal says so (``cuboid`` False), in plain words, and fit_vehicle fits the vehicle with
+    it as a warning; a direction that turns the vehicle is refused as before."""
+    from toosicubix.solver.degenerate import degeneracy
+
+    model, problem, J = _roof_pair_problem()
+    names = ["rotation"] * 3 + ["position"] * 3 + list(model.param_names)
+    k = next(i for i, label in enumerate(model.click_labels) if label.startswith("symmetry-rear"))
+    own = [names.index(f"parts[{model.click_part[k]}].{axis}") for axis in ("Y", "Z")]
+    loose = J.copy()
+    loose[:, own[1]] = loose[:, own[0]] * 2.0  # the pair's Y and Z trade off exactly: rank deficient
+    refusal = degeneracy(problem, loose, 1e-8)
+    assert refusal is not None and not refusal.cuboid
+    assert refusal.reason == ("the clicks do not fix how wide the rear pair is and how high the rear pair sits; the "
+                              "cuboid does not depend on it, so it is fitted without it")
+    turned = J.copy()
+    turned[:, own[0]] = turned[:, 0] * 3.0  # the pair's width trades off with a turn of the vehicle
+    refusal = degeneracy(problem, turned, 1e-8)
+    assert refusal is not None and refusal.cuboid and "rotation" in refusal.detail
+    assert degeneracy(problem, J, 1e-8) is None
+
+
+def test_a_fit_whose_only_loose_direction_is_a_part_s_own_is_kept_with_a_warning(monkeypatch):
+    from tests.scenes import CAMERA, random_scene
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.solver import fit as fit_module
+    from toosicubix.solver.degenerate import Refusal
+
+    scene = random_scene(np.random.default_rng(4), "rear")
+    said = "the clicks do not fix where the roof pair sits along it; the cuboid does not depend on it, so it is fitted"
+    monkeypatch.setattr(fit_module, "degeneracy", lambda *a: Refusal(said, "degenerate clicks: ...", cuboid=False))
+    fit = fit_module.fit_vehicle(scene.model, CAMERA, load_priors()["Car"], fit_module.SolverOptions())
+    assert fit.ok and said in fit.warnings
+    monkeypatch.setattr(fit_module, "degeneracy", lambda *a: Refusal("refused", "degenerate clicks: ..."))
+    fit = fit_module.fit_vehicle(scene.model, CAMERA, load_priors()["Car"], fit_module.SolverOptions())
+    assert not fit.ok and fit.reason == "refused"

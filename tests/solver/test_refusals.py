@@ -106,18 +106,25 @@ def test_the_other_refusals_are_plain_and_keep_the_detail():
 def test_clicks_that_hardly_tie_the_vehicle_to_its_size_are_refused_in_plain_words():
     """Three noisy clicks on a car seen from the side, fitted with the track solver's relaxed single-frame options:
     every start collapses onto the camera and from typical part positions the distance is uncertain by far more
-    than COLLAPSED_MAX_DEPTH_REL (this path once raised a TypeError, the local flag shadowing the refusal)."""
+    than COLLAPSED_MAX_DEPTH_REL (this path once raised a TypeError, the local flag shadowing the refusal). The
+    prior is a car's sizes under a prototype with free axles: a car's axle prior (rule 29) ties these two wheels to
+    its length, and the same clicks then place it."""
     from dataclasses import replace
 
     from tests.scenes import random_scene
     from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.size_priors import SizePrior
     from toosicubix.solver.fit import SolverOptions
     from toosicubix.solver.track import RELAXED
 
     rng = np.random.default_rng(2)
     scene = random_scene(rng, "side")
     parts = [replace(p, uv=p.uv + rng.normal(0.0, 1.5, p.uv.shape)) for p in scene.parts[:3]]
-    fit = fit_vehicle(build_parts_model(parts), CAMERA, load_priors()["Car"], replace(SolverOptions(), **RELAXED))
+    car = load_priors()["Car"]
+    options = replace(SolverOptions(), **RELAXED)
+    assert fit_vehicle(build_parts_model(parts), CAMERA, car, options).ok
+    free_axles = SizePrior.from_mean_cov("Quadricycle", car.mean, car.cov)
+    fit = fit_vehicle(build_parts_model(parts), CAMERA, free_axles, options)
     assert not fit.ok
     assert fit.detail.startswith("degenerate clicks: every start collapsed onto the camera, and from typical part "
                                  "positions the distance is uncertain by")

@@ -99,8 +99,9 @@ def test_uncertainty_json_has_every_quantity_the_results_promise():
 
 def test_a_second_plausible_minimum_close_in_cost_makes_the_fit_ambiguous():
     """A rear view with five parts (wheels, lights, badge, roof antenna) admits a second upright answer
-    rotated by about 38 degrees that fits the exact clicks nearly as well: flagged, with both costs."""
-    scene = random_scene(np.random.default_rng(28), "rear")
+    rotated by about 22 degrees that fits the exact clicks nearly as well: flagged, with both costs. (Since the axle
+    prior, rule 29, such second answers are rare in rear views: 1 of seeds 0-79, seed 28's 38-degree one gone.)"""
+    scene = random_scene(np.random.default_rng(69), "rear")
     fit = fit_vehicle(build_parts_model(tuple(scene.parts[:5])), CAMERA, CAR, SolverOptions())
     assert fit.ambiguous
     close = [a for a in fit.alternatives if a.close]
@@ -111,11 +112,11 @@ def test_a_second_plausible_minimum_close_in_cost_makes_the_fit_ambiguous():
 
 
 def test_a_cheaper_answer_with_clicks_on_hidden_faces_is_rejected_not_ambiguous():
-    """Same kind of view (seed 15): the lowest cost belongs to an answer that puts the roof antenna on a face
-    turned away from the camera. The fit prefers the answer where every clicked part can be seen, records
-    the other with its reason, and does not call the fit ambiguous."""
+    """Same kind of view (seed 15, with the rear edge too): the lowest cost belongs to an answer that puts the roof
+    antenna on a face turned away from the camera. The fit prefers the answer where every clicked part can be seen,
+    records the other with its reason, and does not call the fit ambiguous."""
     scene = random_scene(np.random.default_rng(15), "rear")
-    parts = tuple(scene.parts[:5])
+    parts = tuple(scene.parts[:6])
     fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR, SolverOptions())
     rejected = [a for a in fit.alternatives if a.implausible]
     assert rejected and rejected[0].cost < fit.cost
@@ -290,7 +291,8 @@ def test_pinning_the_scale_leaves_the_clicks_share_of_the_yaw_as_it_was():
     """Issue 33 suspected the scale, which no click fixes, of inflating the yaw's clicks-only variance. It cannot:
     the scale direction (0, t, p) is blind to the clicks to rounding (1e-15 relative) and has no rotation in it, so
     pinning it changes the clicks-only yaw variance of the car above by 0.1 % (measured: 882 and 881 rad^2; 1 %
-    allowed), while leaving out the road's upright rows widens the fitted one more than 20 times (measured 22.9)."""
+    allowed), while leaving out the road's upright rows and where cars have their axles (rule 29), the two cues that
+    each take the turn-and-tilt away, widens the fitted one more than 20 times (measured 46; either alone 2.2-2.5)."""
     from toosicubix.solver.problem import Problem
     from toosicubix.solver.uncertainty import _cue_groups, _gradients, jacobians, row_sigmas
 
@@ -312,7 +314,8 @@ def test_pinning_the_scale_leaves_the_clicks_share_of_the_yaw_as_it_was():
     clicks_only = g @ np.linalg.solve(data + 1e-6 * C, g)
     scale_pinned = g @ np.linalg.solve(data + 1e-6 * C + 1e8 * np.outer(u, u), g)
     assert scale_pinned == pytest.approx(clicks_only, rel=1e-2)
-    rows = _cue_groups(problem, len(J_c))["road"]
+    groups = _cue_groups(problem, len(J_c))
+    rows = np.concatenate([groups["road"], groups["axles"]])
     others = np.setdiff1d(np.arange(len(J_c)), rows)
     full = g @ np.linalg.solve(data + C, g)
     without_road = g @ np.linalg.solve(data + J_c[others].T @ J_c[others] + 1e-6 * J_c[rows].T @ J_c[rows], g)

@@ -173,11 +173,13 @@ def test_a_prediction_interpolates_between_the_tracks_frames(served):
     assert prediction["source"] == "interpolated" and prediction["from_frames"] == [0, FRAMES - 1]
     # Exact clicks on frames 0 and 10 of a vehicle at constant velocity and turn rate: frame 5's pose is the truth's
     # up to the size prior's pull on the scale (depth within 5 %), which leaves the bottom centre's pixel in place
-    # (it scales about the camera): within half a pixel; rotation within 1 degree.
+    # (it scales about the camera), and the axle prior's on the shape (the rear axle 0.30 of the length behind the
+    # middle, a car's 0.282: rule 29): within 0.6 px (0.52 measured; 0.5 allowed before that prior); rotation within
+    # 1 degree.
     R, t = sequence_pose(5)
     fit = prediction["fit"]
     assert abs(fit["t_cam_vehicle"][2] / t[2] - 1) < 0.05
-    assert np.abs(CAMERA.project(np.array([fit["t_cam_vehicle"]])) - CAMERA.project(t[None])).max() < 0.5
+    assert np.abs(CAMERA.project(np.array([fit["t_cam_vehicle"]])) - CAMERA.project(t[None])).max() < 0.6
     assert np.rad2deg(geodesic_angle(np.array(fit["R_cam_vehicle"]), R)) < 1.0
     assert len(fit["corners_uv"]) == 8
 

@@ -29,6 +29,7 @@ from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import FitResult, SolverOptions, fit_vehicle
 from toosicubix.solver.guidance import Fitted, guide, is_box_shaped
 from toosicubix.solver.misfit import ResidualTest
+from toosicubix.solver.plausibility import axle_implausibility
 from toosicubix.solver.track import with_box_cue
 from toosicubix.solver.uncertainty import Uncertainty, confidence
 from toosicubix.vocabulary import heading_of
@@ -56,6 +57,8 @@ def fit_one(vehicle: Vehicle, camera: Camera, prior: SizePrior, options: SolverO
         fit = fit_vehicle(parts, camera, prior, options, ground)
         if fit.ok and fit.implausible is not None:
             fit = with_likely_cause(fit, vehicle, camera, prior, options, ground)
+        elif fit.ok:
+            fit = with_axles_checked(fit, parts, prior)
         if box_cue and vehicle.box2d is not None:
             fit = with_box_cue(fit, parts, camera, prior, options, ground, vehicle.box2d)
         with np.errstate(all="ignore"):  # a non-finite value is caught below, not warned about
@@ -90,6 +93,18 @@ def with_likely_cause(fit: FitResult, vehicle: Vehicle, camera: Camera, prior: S
     return replace(fit, warnings=(*fit.warnings, "the clicks fit no upright cuboid with every clicked part on a face "
                                                  "turned to the camera: check their names (front and rear, left and "
                                                  "right) and that they are on this vehicle"))
+
+
+def with_axles_checked(fit: FitResult, parts: PartsModel, prior: SizePrior) -> FitResult:
+    """A plausible fit whose axles are where no car has them (front and rear wheels swapped, a wheel named on the
+    wrong axle: :func:`~toosicubix.solver.plausibility.axle_implausibility`) made implausible, with what to check
+    among its warnings; any other fit as it is."""
+    why = axle_implausibility(parts.param_names, fit.p, prior.prototype, float(prior.mean[0]))
+    if why is None:
+        return fit
+    return replace(fit, implausible=why, warnings=(*fit.warnings, f"{why}; check the wheels' names (front and rear) "
+                                                                 "and that each is clicked where its tyre touches "
+                                                                 "the road"))
 
 
 class UnusableFit(ValueError):

@@ -21,28 +21,40 @@ _BLOCKS = ("rotation", "rotation", "rotation", "position", "position", "position
 
 
 class Refusal(NamedTuple):
-    """Why no cuboid: ``reason`` in plain words (what to click or add), ``detail`` the technical account."""
+    """Why no cuboid: ``reason`` in plain words (what to click or add), ``detail`` the technical account.
+    ``cuboid`` False: the undetermined direction moves only parts' own unknowns (where a part sits on the body, where
+    an arrow was drawn), not the cuboid, which is then fitted with ``reason`` as a warning (rule 30)."""
 
     reason: str
     detail: str
+    cuboid: bool = True
 
 
 def degeneracy(problem: Problem, J: np.ndarray, tolerance: float) -> Refusal | None:
     """A refusal when the clicks and the prior leave a direction of the unknowns undetermined, else None.
-    ``J`` : (M, 6 + P) the Jacobian at the answer (:func:`.refine.residuals_and_jacobian`)."""
+    ``J`` : (M, 6 + P) the Jacobian at the answer (:func:`.refine.residuals_and_jacobian`). A direction that involves
+    only parts' own unknowns (rule 30 of benchmarks/decisions.md: a roof pair seen from exactly behind slides along the
+    line of sight) leaves the cuboid where it is: its refusal has ``cuboid`` False and says so."""
     names = _unknown_names(problem)
     norms = np.linalg.norm(J, axis=0)
     if np.any(norms == 0.0):
         missing = [names[i] for i in np.flatnonzero(norms == 0.0)]
-        return Refusal(_undetermined(problem.parts, missing),
-                       f"degenerate clicks: nothing constrains {', '.join(missing)}")
+        return _refusal(problem.parts, missing, f"degenerate clicks: nothing constrains {', '.join(missing)}")
     _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
     if s[-1] >= tolerance * s[0]:
         return None
     null = np.abs(Vt[-1])
     involved = sorted({names[i] for i in np.flatnonzero(null > 0.3 * null.max())})
-    return Refusal(_undetermined(problem.parts, involved),
-                   f"degenerate clicks: they do not determine {', '.join(involved)} (Jacobian rank deficient)")
+    return _refusal(problem.parts, involved,
+                    f"degenerate clicks: they do not determine {', '.join(involved)} (Jacobian rank deficient)")
+
+
+def _refusal(parts: PartsModel, unknowns: list[str], detail: str) -> Refusal:
+    """The refusal for ``unknowns`` left undetermined; a warning instead (``cuboid`` False) when all are parts' own."""
+    if all(name.startswith("parts[") for name in unknowns):
+        return Refusal(f"the clicks do not fix {_loose(parts, unknowns)}; the cuboid does not depend on it, so it is "
+                       "fitted without it", detail, cuboid=False)
+    return Refusal(_undetermined(parts, unknowns), detail)
 
 
 def _unknown_names(problem: Problem) -> list[str]:
@@ -184,18 +196,30 @@ def seen_only_from(parts: PartsModel) -> str | None:
 
 def _undetermined(parts: PartsModel, unknowns: list[str]) -> str:
     """Plain words for unknowns the clicks leave undetermined: the view, what is loose, and what would fix it."""
-    phrases: dict[str, list[str]] = {}  # quantity -> its phrases, in the order first met
-    for name in unknowns:
-        words, quantity = _quantity(parts, name)
-        if words not in phrases.setdefault(quantity, []):
-            phrases[quantity].append(words)
-    loose = _join([words[0] if len(words) == 1 else _GROUPED[quantity] for quantity, words in phrases.items()])
+    phrases = _phrases(parts, unknowns)
+    loose = _loose(parts, unknowns)
     view = seen_only_from(parts)
     fixes = _missing(parts, _VIEW_FIX[view] if view is not None else [_QUANTITY_FIX[q] for q in phrases])
     advice = "; add " + ", or ".join(fixes[:2]) if fixes else ""
     if view is not None:
         return f"seen only {_VIEWS[view]}, the clicks do not fix {loose}{advice}"
     return f"the clicks do not fix {loose}{advice}"
+
+
+def _phrases(parts: PartsModel, unknowns: list[str]) -> dict[str, list[str]]:
+    """Each quantity ('heading', 'length', ...) the unknowns belong to, with their plain words, in order first met."""
+    phrases: dict[str, list[str]] = {}
+    for name in unknowns:
+        words, quantity = _quantity(parts, name)
+        if words not in phrases.setdefault(quantity, []):
+            phrases[quantity].append(words)
+    return phrases
+
+
+def _loose(parts: PartsModel, unknowns: list[str]) -> str:
+    """What the unknowns leave loose, in plain words: 'where the roof pair sits along it and how wide it is'."""
+    phrases = _phrases(parts, unknowns)
+    return _join([words[0] if len(words) == 1 else _GROUPED[quantity] for quantity, words in phrases.items()])
 
 
 _GROUPED = {"arrow": "where the arrows lie", "length": "where the clicked parts sit along it",

@@ -377,6 +377,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
         _, J_best = residuals_and_jacobian(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
         dof = residual_dof(J_best, 2 * parts.n_clicks)
     degenerate = degeneracy(problem, J_best, options.rank_tolerance)
+    if degenerate is not None and not degenerate.cuboid:  # only parts' own places are loose: fit it (rule 30)
+        warnings, degenerate = (*warnings, degenerate.reason), None
     residuals = problem.pixel_residuals(best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     prior_r = problem.prior_residual(best.p)
     common = dict(**counts, **base, refine_iterations=refine_iterations, initial_cost=chosen[0].cost_px,
@@ -570,7 +572,8 @@ def scale_shares(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray) 
     sensitivity = a**2  # d/ds of the row s a - b is a
     shares: dict[str, float] = {}
     for cue, value in zip(problem.row_cues, sensitivity, strict=True):
-        shares[cue] = shares.get(cue, 0.0) + float(value)
+        if cue != "axle prior":  # where the axles sit on the length states the shape, not the size
+            shares[cue] = shares.get(cue, 0.0) + float(value)
     total = sum(shares.values())
     return {k: v / total for k, v in shares.items()} if total > 0 else {}
 

@@ -35,7 +35,7 @@ from toosicubix import vocabulary
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane, Part
 from toosicubix.parts.linear import TypicalKeypoint, build_parts_model
-from toosicubix.size_priors import SizePrior
+from toosicubix.size_priors import SizePrior, axle_prior
 from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_a_click
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.solver.plausibility import faces_turned_to_camera
@@ -224,8 +224,10 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     R, t, d = fit.R_cam_vehicle, fit.t_cam_vehicle, fit.dimensions
     base = build_parts_model(parts, known_dimensions)
     values = dict(zip(base.param_names, fit.p, strict=True))
+    axles = axle_prior(prior.prototype)  # an axle the fit has no unknown for sits where the prior puts it (rule 29)
+    where = values if axles is None else {"Xwf": axles.front * float(d[0]), "Xwr": -axles.rear * float(d[0]), **values}
     camera_side = 1.0 if (R.T @ (-t))[1] >= 0 else -1.0
-    terms = vocabulary.typical_terms(d, values, camera_side)
+    terms = vocabulary.typical_terms(d, where, camera_side)
     wheels = {"front": terms["Xwf"], "rear": terms["Xwr"]}
     facing = faces_turned_to_camera(R, t, d, grazing_deg=-VISIBLE_MIN_DEG)
 

@@ -11,8 +11,10 @@ With ``X_i = A_i p`` and ``Y_i = R_cam_vehicle X_i + t_cam_vehicle``:
 
 ``G [t; p] - b`` stacks every term that fixes the scale, each a linear function of ``(t, p)`` divided by
 its standard deviation: the size prior ``W (d - mu)`` (``W`` the upper Cholesky factor of the inverse
-covariance), known sizes ``(c . p - metres) / sigma`` (plates, wheelbases, tyres, known dimensions) and,
-with a ground plane of known height, the ground contact ``(n . t + h) / sigma_c`` (the bottom face on the
+covariance) and, for a car, where its clicked axles sit (``(Xwf - a_f dx) / sigma``, ``(Xwr + a_r dx) / sigma``:
+:func:`toosicubix.size_priors.axle_prior`, rules 29-30 of benchmarks/decisions.md; cue 'axle prior'), known sizes
+``(c . p - metres) / sigma`` (plates, wheelbases, tyres, known dimensions) and, with a ground plane of known
+height, the ground contact ``(n . t + h) / sigma_c`` (the bottom face on the
 road). The upright term ``(R e_z - n) / sigma_up`` keeps the vehicle's up axis near the road normal; it
 does not depend on scale. Every cue is weighed like the prior: ``lambda_px`` plays the click-noise variance.
 
@@ -45,7 +47,7 @@ import numpy as np
 from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
-from toosicubix.size_priors import SizePrior
+from toosicubix.size_priors import SizePrior, axle_prior
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5
@@ -135,6 +137,17 @@ class Problem:
             rows.append(row)
             targets.append(W[k] @ prior.mean)
             cues.append("size prior")
+        axles = axle_prior(prior.prototype)
+        if axles is not None:  # rule 30: a car's axles where real cars have them, weighed as the size prior
+            sigma = axles.spread * float(prior.mean[0])
+            for name, fraction in (("Xwf", axles.front), ("Xwr", -axles.rear)):
+                if name in parts.param_names:
+                    row = np.zeros(3 + P)
+                    row[3 + parts.param_names.index(name)] = 1.0 / sigma
+                    row[3] = -fraction / sigma
+                    rows.append(row)
+                    targets.append(0.0)
+                    cues.append("axle prior")
         for m in parts.measurements:
             row = np.zeros(3 + P)
             row[3:] = m.coefficients / m.sigma

@@ -65,8 +65,9 @@ SIDE_FRACTION = 0.25
 HIGH_FRACTION, LOW_FRACTION = 0.7, 0.35
 
 #: The cue rows' groups as a person knows them (:func:`_cue_groups`), in the order sentences name them.
-_CUE_NAMES = {"size prior": "the size prior", "road": "the road", "camera height": "the camera height",
-              "known sizes": "the known sizes", "arrows": "where its arrows are drawn"}
+_CUE_NAMES = {"size prior": "the size prior", "axles": "where cars have their axles", "road": "the road",
+              "camera height": "the camera height", "known sizes": "the known sizes",
+              "arrows": "where its arrows are drawn"}
 
 # What fixes each quantity, as requirements on the clicks: a fact about where clicks sit (:func:`_clicked`), or
 # alternatives of annotations (kind, name) any one of which, all clicked, meets it. A quantity's advice names the
@@ -348,17 +349,23 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     per_arrow = problem.n_arrow_rows // max(len(tails), 1)
     first_arrow_row = len(J_cue) - problem.n_arrow_rows
 
-    def cue_rows(clicks: np.ndarray) -> np.ndarray:
+    # A scale row on a candidate's own unknowns (the axle prior of an axle only a candidate wheel uses, a candidate's
+    # known size) counts only with that candidate: the rows and the unknowns each row sees.
+    sees = [set(np.flatnonzero(row[6:])) for row in J_cue[:first_arrow_row]]
+
+    def cue_rows(clicks: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        params = set((cols[cols >= 6] - 6).tolist())
         arrows = np.flatnonzero(np.isin(tails, clicks))
         own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
-        return np.concatenate([np.arange(first_arrow_row), own]).astype(int)
+        shared = [r for r, seen in enumerate(sees) if seen <= params]
+        return np.concatenate([np.asarray(shared, dtype=int), own]).astype(int)
 
     lam = _cue_lambdas(problem)  # one weight, or one per cue row (the upright rows weighed against the clicks)
 
     def lam_of(rows: np.ndarray) -> float | np.ndarray:
         return lam if np.ndim(lam) == 0 else np.asarray(lam)[rows]
 
-    base_cues = cue_rows(np.arange(n_base_clicks))
+    base_cues = cue_rows(np.arange(n_base_clicks), cols0)
     now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], lam_of(base_cues),
                                      sigmas[base_rows], G, t)
     out = []
@@ -367,7 +374,7 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
         own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
         cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
-        cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]))
+        cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]), cols)
         out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], lam_of(cues), sigmas[r],
                                               G, t))
     return now, out
@@ -529,10 +536,11 @@ def _status(full: dict[str, float], clicks_only: dict[str, float]) -> tuple[dict
 
 def _cue_groups(problem: Problem, n_rows: int) -> dict[str, np.ndarray]:
     """The cue rows of :func:`jacobians` (``n_rows`` of them: scale rows, upright rows, arrow rows) by what a person
-    knows them as (:data:`_CUE_NAMES`' keys): the size prior, the known sizes, the camera height (the ground
-    contact), the road (the upright rows) and the arrows' zones; groups without rows left out."""
-    labels = [("camera height" if cue == "ground contact" else cue if cue == "size prior" else "known sizes")
-              for cue in problem.row_cues]
+    knows them as (:data:`_CUE_NAMES`' keys): the size prior, where cars have their axles (the axle prior), the known
+    sizes, the camera height (the ground contact), the road (the upright rows) and the arrows' zones; groups without
+    rows left out."""
+    group = {"ground contact": "camera height", "size prior": "size prior", "axle prior": "axles"}
+    labels = [group.get(cue, "known sizes") for cue in problem.row_cues]
     labels += ["road"] * (3 if problem.upright_sigma is not None else 0)
     labels += ["arrows"] * (n_rows - len(labels))
     return {g: np.flatnonzero([label == g for label in labels]) for g in _CUE_NAMES if g in labels}

@@ -85,6 +85,7 @@ from toosicubix.pipeline.vehicle import SWAPPED, fit_one, with_next_clicks
 from toosicubix.render.palette import class_colours_hex
 from toosicubix.size_priors import Priors, SizePrior
 from toosicubix.solver.fit import SolverOptions
+from toosicubix.solver.plausibility import AXLES_MARK
 from toosicubix.solver.track import TrackOptions
 from toosicubix.web.images import image_size
 from toosicubix.web.naming import naming_candidates, nearest_parts
@@ -1002,7 +1003,8 @@ class Session:
             "well_determined": not problems, "problems": list(problems),
             "implausible": result.implausible, "warnings": list(result.warnings),
             "likely_cause": None if result.implausible is None else (
-                "swapped" if SWAPPED in result.warnings else "names"),
+                "swapped" if SWAPPED in result.warnings else "axles" if AXLES_MARK in result.implausible
+                else "names"),
             "R_cam_vehicle": np.asarray(result.R_cam_vehicle).tolist(),
             "t_cam_vehicle": np.asarray(result.t_cam_vehicle).tolist(),
             "click_sigma_px": self.options.click_sigma,

@@ -663,6 +663,10 @@ function banner(v) {
       "from the front, its left is on the image's right). " +
       '<button id="swap-now">Swap left and right</button> (or press <kbd>s</kbd>), or rename the clicks.';
     $("swap-now").onclick = swapSides;
+  } else if (f.likely_cause === "axles") {
+    el.innerHTML = `<b>The wheels look named on the wrong axles</b> (${escapeHtml(f.implausible)}). Front = the ` +
+      "vehicle's own front, where its headlights are; rear, where its tail lights are. Rename the wheel clicks " +
+      "(select one, press r) so each is named for the axle it is on, and click each where its tyre touches the road.";
   } else {
     el.innerHTML = `<b>No one could have clicked this fit</b> (${escapeHtml(f.implausible)}): check the clicks' ` +
       "names (front and rear, left and right: the vehicle's own, as its driver sees them) and that they are all " +
