@@ -131,3 +131,18 @@ def test_axle_prior_rows_state_real_cars_axles():
     a, b = car.scale_terms(np.zeros(3), p)
     np.testing.assert_allclose((a - b)[3:5], [1.0, 0.0], atol=1e-12)
     assert car.row_cues[3:5] == ("axle prior", "axle prior")
+
+
+def test_an_implausible_fit_is_never_well_determined():
+    """However small its sigmas (they are the wrong answer's), a fit no person could have clicked is not well
+    determined, and validate's verdict says why first; the same clicks rightly named are well determined."""
+    from toosicubix.pipeline.validation import Thresholds, judge
+
+    scene = random_scene(np.random.default_rng(0), "oblique-front-left")
+    prior = load_priors()["Car"]
+    right = fit_one(Vehicle("1", "Car", None, tuple(scene.parts), "$"), CAMERA, prior, SolverOptions())
+    swapped = fit_one(Vehicle("1", "Car", None, mirrored(tuple(scene.parts)), "$"), CAMERA, prior, SolverOptions())
+    assert judge(right, Thresholds()) == ()
+    assert swapped.implausible is not None and swapped.sigma.yaw_deg < Thresholds().max_yaw_sigma_deg
+    problems = judge(swapped, Thresholds())
+    assert problems[0] == f"implausible: {swapped.implausible}"

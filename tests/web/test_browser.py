@@ -261,6 +261,45 @@ def _session_with_named_clicks(scene, out: Path) -> Session:
     return session
 
 
+def test_wheels_named_on_the_wrong_axles_get_their_banner(page, scene, tmp_path: Path):
+    """Rule 29, the second newcomer session's first leftover: a car seen from its side with its front and rear wheels
+    named the other way round. The page's banner says the wheels look named on the wrong axles, what front and rear
+    are, and how to rename; the fit says implausible. Renaming one wheel to the other's name (r, then its key: the two
+    names swap) takes the banner away."""
+    from tests.scenes import random_scene
+
+    scene_car = random_scene(np.random.default_rng(1), "side")  # the scenes' camera is the synthetic image's
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    session.edit(0, {"revision": 0, "op": "add_vehicle"})
+    swapped = {"wheel-front-right": "wheel-rear-right", "wheel-rear-right": "wheel-front-right"}
+    for p in scene_car.parts:
+        session.edit(0, {"revision": session.revision, "op": "add_click", "vehicle": "1", "kind": p.kind,
+                         "name": swapped.get(p.name, p.name), "uv": p.uv.tolist()})
+    server = serve_in_thread(session)
+    try:
+        page.goto(server.url)
+        page.wait_for_function("state.view !== null && state.image.complete", timeout=20000)
+        assert page.locator("#banner").is_visible()
+        text = page.locator("#banner").inner_text()
+        assert text.startswith("The wheels look named on the wrong axles (the front axle comes out behind the rear "
+                               "one: front and rear wheels look swapped).")
+        assert "Front = the vehicle's own front, where its headlights are" in text
+        assert "implausible" in page.locator("#fit").inner_text()
+        page.screenshot(path=str(tmp_path / "axles.png"))
+        if os.environ.get("TOOSICUBIX_SCREENSHOT"):
+            shutil.copy(tmp_path / "axles.png", os.environ["TOOSICUBIX_SCREENSHOT"])
+        page.locator("#clicks li").nth(0).click()  # the first click, named wheel-rear-right: give it its own name
+        page.keyboard.press("r")
+        page.keyboard.press("2")  # wheel-front-right, which the other wheel has: the names swap
+        page.wait_for_function("!document.getElementById('banner').checkVisibility()", timeout=20000)
+        assert [p.name for p in load_images(out)[0].vehicles[0].parts][:2] == ["wheel-front-right",
+                                                                              "wheel-rear-right"]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_two_clicks_with_each_other_s_names_are_swapped_in_one_step(page, scene, tmp_path: Path):
     """Issue 33 follow-up, friction 2: the front wheels clicked with each other's names. Select one, r, the other's
     key: the two names swap in one edit (before, the name was refused as taken: four steps), and u swaps them

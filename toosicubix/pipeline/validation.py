@@ -126,10 +126,12 @@ def judge(result: VehicleResult, thresholds: Thresholds) -> tuple[str, ...]:
     """Why a fitted vehicle is not well determined (empty: it is)."""
     if not result.ok:
         return (f"failed: {result.error}",)
-    out = []
+    # A fit no person could have clicked (mirrored, turned away, wheels on the wrong axles) is never well determined,
+    # however small its sigmas: they are the sigmas of the wrong answer.
+    out = [f"implausible: {result.implausible}"] if result.implausible else []
     sigma = result.sigma
     if sigma is None:
-        return ("no uncertainty could be computed",)
+        return (*out, "no uncertainty could be computed")
     yaw, depth = _value(sigma.yaw_deg), _value(sigma.depth_rel)
     max_yaw, max_depth = thresholds.limits(result)
     if not yaw <= max_yaw:
