@@ -351,14 +351,15 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
 
     # A scale row on a candidate's own unknowns (the axle prior of an axle only a candidate wheel uses, a candidate's
     # known size) counts only with that candidate: the rows and the unknowns each row sees.
-    sees = [set(np.flatnonzero(row[6:])) for row in J_cue[:first_arrow_row]]
+    sees = J_cue[:first_arrow_row, 6:] != 0.0  # (rows, P): the unknowns each scale or upright row sees
 
     def cue_rows(clicks: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        params = set((cols[cols >= 6] - 6).tolist())
+        outside = np.ones(sees.shape[1], dtype=bool)
+        outside[cols[cols >= 6] - 6] = False
         arrows = np.flatnonzero(np.isin(tails, clicks))
         own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
-        shared = [r for r, seen in enumerate(sees) if seen <= params]
-        return np.concatenate([np.asarray(shared, dtype=int), own]).astype(int)
+        shared = np.flatnonzero(~(sees & outside).any(axis=1))
+        return np.concatenate([shared, own]).astype(int)
 
     lam = _cue_lambdas(problem)  # one weight, or one per cue row (the upright rows weighed against the clicks)
 
