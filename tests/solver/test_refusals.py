@@ -130,3 +130,25 @@ def test_clicks_that_hardly_tie_the_vehicle_to_its_size_are_refused_in_plain_wor
                                  "positions the distance is uncertain by")
     assert fit.reason.startswith("these clicks hardly tie the vehicle to its size, so its distance is uncertain by")
     assert TECHNICAL.search(fit.reason) is None, fit.reason
+
+
+def test_a_car_s_axles_held_by_its_prior_are_not_the_clicks_to_fix():
+    """Rule 31: both wheels of one side and both edges of it (4 points: 8 equations less the two axles and the two
+    edges' heights) give 4 constraints of the 6 needed for a prototype with free axles; a car's axles are held by the
+    axle prior, as its dimensions by the size prior, so the same clicks give 6 and are fitted."""
+    from tests.scenes import random_scene
+    from toosicubix.annotations.priors_file import load_priors
+
+    scene = random_scene(np.random.default_rng(1), "side")
+    parts = [p for p in scene.parts if p.name in ("wheel-front-right", "wheel-rear-right", "edge-front-right",
+                                                  "edge-rear-right")]
+    model = build_parts_model(parts)
+    assert model.constraints == 4
+    car = fit_vehicle(model, CAMERA, load_priors()["Car"])
+    assert car.ok, car.reason
+    van = fit_vehicle(model, CAMERA, load_priors()["Van"])  # free axles: 4 constraints, 1 more click needed
+    assert van.reason.startswith("too few clicks: 4 clicked points cannot place a cuboid; click at least 1 more")
+    assert "(2 per point minus 4 auxiliary unknowns); at least 6" in van.detail
+    one_wheel = build_parts_model(parts[:1] + parts[2:])  # 3 points, the front axle held: 6 - 3 + 1 = 4, still short
+    refused = fit_vehicle(one_wheel, CAMERA, load_priors()["Car"])
+    assert "give 4 (2 per point minus 3 auxiliary unknowns, 1 of them held by the axle prior)" in refused.detail

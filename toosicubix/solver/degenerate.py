@@ -127,16 +127,19 @@ def too_far(detail: str) -> Refusal:
                    "named: " + _CHECK_NAMES, detail)
 
 
-def too_few(parts: PartsModel, needed: int) -> Refusal:
-    """The refusal of clicks that give fewer than ``needed`` constraints."""
-    short = max(needed - parts.constraints, 0)
+def too_few(parts: PartsModel, needed: int, held: int = 0) -> Refusal:
+    """The refusal of clicks that give fewer than ``needed`` constraints; ``held``: the auxiliary unknowns a prior
+    holds (a car's axles, rule 31 of benchmarks/decisions.md), not counted against the clicks."""
+    constraints = parts.constraints + held
+    short = max(needed - constraints, 0)
     more = max(-(-short // 2), 3 - parts.n_clicks, 1)
+    held_words = f", {held} of them held by the axle prior" if held else ""
     return Refusal(f"too few clicks: {parts.n_clicks} clicked point{'s' if parts.n_clicks != 1 else ''} cannot "
                    f"place a cuboid; click at least {more} more named part{'s' if more != 1 else ''} (the wheels "
                    f"where they touch the road and the body's corners and edges work best)",
-                   f"too few constraints: {parts.n_clicks} clicked points give {parts.constraints} "
-                   f"(2 per point minus {parts.n_aux} auxiliary unknowns); at least {needed} are needed to place "
-                   f"the cuboid with its size prior, 8 to fix its shape from the clicks alone")
+                   f"too few constraints: {parts.n_clicks} clicked points give {constraints} "
+                   f"(2 per point minus {parts.n_aux} auxiliary unknowns{held_words}); at least {needed} are needed "
+                   f"to place the cuboid with its size prior, 8 to fix its shape from the clicks alone")
 
 
 def no_start(parts: PartsModel) -> Refusal:

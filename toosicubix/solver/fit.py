@@ -27,7 +27,7 @@ from toosicubix.camera import Camera
 from toosicubix.geometry import geodesic_angle, rotation_between, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
-from toosicubix.size_priors import SizePrior
+from toosicubix.size_priors import SizePrior, axle_prior
 from toosicubix.solver.degenerate import (
     Refusal,
     absurd_depth,
@@ -294,8 +294,10 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     options = options or SolverOptions()
     t_start = time.perf_counter()
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
-    if parts.n_clicks < 3 or parts.constraints < options.min_constraints:
-        return FitResult.refused(too_few(parts, options.min_constraints), **counts)
+    # A car's axles the axle prior holds are not the clicks' to fix (rule 31), as the dimensions are not.
+    held = sum(name in parts.param_names for name in ("Xwf", "Xwr")) if axle_prior(prior.prototype) else 0
+    if parts.n_clicks < 3 or parts.constraints + held < options.min_constraints:
+        return FitResult.refused(too_few(parts, options.min_constraints, held), **counts)
     short = short_arrows(parts) or degenerate_spread(parts.uv)
     if short:
         return FitResult.refused(short, **counts)
