@@ -280,9 +280,11 @@ def test_too_few_constraints_fail_with_the_count():
              Part("point", "wheel-rear-right", np.array([[600.0, 252.0]]), "$")]
     fit = fit_vehicle(build_parts_model(parts), CAMERA, CAR)
     assert fit.status == "failed"
-    assert fit.detail.startswith("too few constraints: 2 clicked points give 3")
-    # In plain words: 3 of the 7 constraints needed, so 2 more clicks (2 each).
-    assert fit.reason.startswith("too few clicks: 2 clicked points cannot place a cuboid; click at least 2 more")
+    # The rear axle is the clicks' only unknown of their own, and a car's axle prior holds it (rule 31): 4 of the 6
+    # constraints needed, so 1 more click (2 each).
+    assert fit.detail.startswith("too few constraints: 2 clicked points give 4 (2 per point minus 1 auxiliary "
+                                 "unknowns, 1 of them held by the axle prior)")
+    assert fit.reason.startswith("too few clicks: 2 clicked points cannot place a cuboid; click at least 1 more")
     assert fit.R_cam_vehicle is None
 
 
