@@ -155,6 +155,33 @@ def test_a_track_clicked_with_left_and_right_swapped_is_flagged_with_its_likely_
     assert "IMPLAUSIBLE: 3 fitted vehicle(s)" in result.output
 
 
+def test_a_track_clicked_with_front_and_rear_wheels_swapped_is_flagged(tmp_path):
+    """Rule 29: a car seen from its side, its front and rear wheels named the other way round on every clicked frame:
+    the track's poses in those frames are flagged as a car fitted alone is (the front axle behind the rear one),
+    with what to check, and their KITTI score is at most 0.2."""
+    rng = np.random.default_rng(1)
+    swap = {"wheel-front-right": "wheel-rear-right", "wheel-rear-right": "wheel-front-right"}
+    specs = [replace(s, name=swap.get(s.name, s.name)) for s in _specs("side", D, rng)]
+    wheel_x = (-0.3 * D[0], 0.32 * D[0])  # rendered where the names say: the "front" wheels at the rear axle
+    images = []
+    for f in range(0, FRAMES, EVERY):
+        R, t = R_cam_vehicle_from_ypr(0.1), np.array([-2.0 + 0.1 * f, 1.6, 18.0])  # crossing, right side seen
+        vehicle = {"id": "1", "prototype": "Car", "track": "0005-car",
+                   "parts": [part_json(p) for p in render_parts(specs, R, t, D, CAMERA, wheel_x)]}
+        images.append({"id": f"frame-{f}", "sequence": "0005", "frame": f, "size": list(CAMERA.image_size),
+                       "camera": {"K": CAMERA.K.tolist()}, "vehicles": [vehicle]})
+    path = tmp_path / "axles.json"
+    path.write_text(json.dumps({"toosicubix": 1, "images": images}))
+    result = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    frames = [v for im in json.loads((tmp_path / "out" / "results.json").read_text())["images"] for v in im["vehicles"]]
+    assert len(frames) == 3 and all(v["pose_from"] == "clicks" for v in frames)
+    assert all(v.get("implausible") == "the front axle comes out behind the rear one: front and rear wheels look "
+                                       "swapped" for v in frames), [v.get("implausible") for v in frames]
+    assert all(any("check the wheels' names (front and rear)" in w for w in v["warnings"]) for v in frames)
+    assert all(v["confidence"] <= IMPLAUSIBLE_CONFIDENCE for v in frames)
+
+
 def test_interleaved_sequences_give_each_frame_its_own_track_s_pose(tracked_file, tmp_path):
     """Two sequences whose images alternate in the file (A0, B0, A1, B1, ...) are fitted as when each comes whole:
     a sequence's results arrive once its last image is read, before the other's images come (before, an assert

@@ -27,6 +27,7 @@ from toosicubix.pipeline.vehicle import (
     describe_fit,
     failed_result,
     settled,
+    with_axles_checked,
     with_likely_cause,
 )
 from toosicubix.size_priors import SizePrior
@@ -75,15 +76,16 @@ def results_of_track(track: str, frames: list[tuple[Image, Vehicle]], prior: Siz
 def _checked_plausible(fit: FitResult, model: PartsModel, vehicle: Vehicle, image: Image, prior: SizePrior,
                        options: SolverOptions) -> FitResult:
     """A clicked frame's pose from the track, checked as a vehicle fitted alone is
-    (:mod:`toosicubix.solver.plausibility`: upright, every clicked part on a face turned to the camera): an implausible
-    one gets :attr:`FitResult.implausible` and its likely cause among its warnings, as
+    (:mod:`toosicubix.solver.plausibility`: upright, every clicked part on a face turned to the camera, a car's axles
+    where cars have them): an implausible one gets :attr:`FitResult.implausible` and its likely cause among its
+    warnings, as
     :func:`~toosicubix.pipeline.vehicle.fit_one` gives them (its clicks alone, with left and right swapped, fitting a
     plausible pose: the sides look swapped)."""
     up = None if image.ground is None else image.ground.normal
     why = implausibility(model.click_labels, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p[:3], options.max_tilt, up,
                          model.click_faces)
     if why is None:
-        return fit
+        return with_axles_checked(fit, model, prior)  # a car's wheels on the wrong axles (rule 29)
     flagged = replace(fit, implausible=why, warnings=(*fit.warnings, f"the track's pose in this frame is {why}"))
     return with_likely_cause(flagged, vehicle, image.camera, prior, options, image.ground)
 
