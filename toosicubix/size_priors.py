@@ -107,11 +107,11 @@ class AxlePrior:
     spread: float
 
 
-#: Rule 29 (benchmarks/decisions.md): real cars' axles, from ApolloCar3D's human wheel-centre keypoints on 79 car
-#: models as the bundled ``apollocar3d-66`` mapping learned them (n-weighted means of the two centres per axle;
+#: Rules 29 and 30 (benchmarks/decisions.md): real cars' axles, from ApolloCar3D's human wheel-centre keypoints on
+#: 79 car models as the bundled ``apollocar3d-66`` mapping learned them (n-weighted means of the two centres per axle;
 #: twice the largest of their four spreads).
 CAR_AXLES = AxlePrior(front=0.299, rear=0.282, spread=0.043)
-#: The prototypes whose axles :data:`CAR_AXLES` states (rule 29): the bundled cars, by name.
+#: The prototypes whose axles :data:`CAR_AXLES` states (rule 30): the bundled cars, by name.
 CAR_PROTOTYPES = frozenset({"Car", "Sedan", "SUV", "Station Wagon", "Sports Car", "Mini Car", "Small Size Car",
                             "Mid Size Car", "Pickup"})
 

@@ -130,52 +130,47 @@ def test_fit_says_how_the_tracks_frames_were_determined(tracked_file, tmp_path):
     assert off.exit_code == 1 and "tracks:" not in off.output
 
 
-def test_a_track_clicked_with_left_and_right_swapped_is_flagged_with_its_likely_cause(tmp_path):
-    """A person who names left and right as the image's does so on every frame they click: the track's poses in its
-    clicked frames are then implausible, flagged as a vehicle fitted alone is (issue 33, item 2), with the cause."""
-    rng = np.random.default_rng(0)
-    specs = _specs("front", D, rng)
-    wheel_x = (0.32 * D[0], -0.3 * D[0])
+def _fit_clicked_track(tmp_path, clicks, pose) -> tuple[str, list[dict]]:
+    """Fit with ``fit`` a track clicked on its frames 0, 10 and 20 (``clicks(R, t)``: the frame's parts; ``pose(f)``:
+    its (R, t)); its output and the frames' results.json entries."""
     images = []
     for f in range(0, FRAMES, EVERY):
-        R, t = R_cam_vehicle_from_ypr(np.pi / 2 + 0.2), np.array([1.0, 1.6, 20.0 - 0.3 * f])  # driving at us
-        parts = mirrored(tuple(render_parts(specs, R, t, D, CAMERA, wheel_x)))
-        vehicle = {"id": "1", "prototype": "Car", "track": "0003-car", "parts": [part_json(p) for p in parts]}
+        vehicle = {"id": "1", "prototype": "Car", "track": "0003-car",
+                   "parts": [part_json(p) for p in clicks(*pose(f))]}
         images.append({"id": f"frame-{f}", "sequence": "0003", "frame": f, "size": list(CAMERA.image_size),
                        "camera": {"K": CAMERA.K.tolist()}, "vehicles": [vehicle]})
-    path = tmp_path / "swapped.json"
+    path = tmp_path / "track.json"
     path.write_text(json.dumps({"toosicubix": 1, "images": images}))
     result = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     frames = [v for im in json.loads((tmp_path / "out" / "results.json").read_text())["images"] for v in im["vehicles"]]
     assert len(frames) == 3 and all(v["pose_from"] == "clicks" for v in frames)
+    return result.output, frames
+
+
+def test_a_track_clicked_with_left_and_right_swapped_is_flagged_with_its_likely_cause(tmp_path):
+    """A person who names left and right as the image's does so on every frame they click: the track's poses in its
+    clicked frames are then implausible, flagged as a vehicle fitted alone is (issue 33, item 2), with the cause."""
+    specs = _specs("front", D, np.random.default_rng(0))
+    output, frames = _fit_clicked_track(
+        tmp_path, lambda R, t: mirrored(tuple(render_parts(specs, R, t, D, CAMERA, (0.32 * D[0], -0.3 * D[0])))),
+        lambda f: (R_cam_vehicle_from_ypr(np.pi / 2 + 0.2), np.array([1.0, 1.6, 20.0 - 0.3 * f])))  # driving at us
     assert all(v.get("implausible") for v in frames)
     assert all(any(w.startswith("left and right look swapped") for w in v["warnings"]) for v in frames)
     assert all(v["confidence"] <= IMPLAUSIBLE_CONFIDENCE for v in frames)
-    assert "IMPLAUSIBLE: 3 fitted vehicle(s)" in result.output
+    assert "IMPLAUSIBLE: 3 fitted vehicle(s)" in output
 
 
 def test_a_track_clicked_with_front_and_rear_wheels_swapped_is_flagged(tmp_path):
     """Rule 29: a car seen from its side, its front and rear wheels named the other way round on every clicked frame:
     the track's poses in those frames are flagged as a car fitted alone is (the front axle behind the rear one),
     with what to check, and their KITTI score is at most 0.2."""
-    rng = np.random.default_rng(1)
     swap = {"wheel-front-right": "wheel-rear-right", "wheel-rear-right": "wheel-front-right"}
-    specs = [replace(s, name=swap.get(s.name, s.name)) for s in _specs("side", D, rng)]
-    wheel_x = (-0.3 * D[0], 0.32 * D[0])  # rendered where the names say: the "front" wheels at the rear axle
-    images = []
-    for f in range(0, FRAMES, EVERY):
-        R, t = R_cam_vehicle_from_ypr(0.1), np.array([-2.0 + 0.1 * f, 1.6, 18.0])  # crossing, right side seen
-        vehicle = {"id": "1", "prototype": "Car", "track": "0005-car",
-                   "parts": [part_json(p) for p in render_parts(specs, R, t, D, CAMERA, wheel_x)]}
-        images.append({"id": f"frame-{f}", "sequence": "0005", "frame": f, "size": list(CAMERA.image_size),
-                       "camera": {"K": CAMERA.K.tolist()}, "vehicles": [vehicle]})
-    path = tmp_path / "axles.json"
-    path.write_text(json.dumps({"toosicubix": 1, "images": images}))
-    result = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "out")])
-    assert result.exit_code == 0, result.output
-    frames = [v for im in json.loads((tmp_path / "out" / "results.json").read_text())["images"] for v in im["vehicles"]]
-    assert len(frames) == 3 and all(v["pose_from"] == "clicks" for v in frames)
+    specs = [replace(s, name=swap.get(s.name, s.name)) for s in _specs("side", D, np.random.default_rng(1))]
+    # Rendered where the names say: the "front" wheels at the rear axle. Crossing, its right side seen.
+    _, frames = _fit_clicked_track(
+        tmp_path, lambda R, t: render_parts(specs, R, t, D, CAMERA, (-0.3 * D[0], 0.32 * D[0])),
+        lambda f: (R_cam_vehicle_from_ypr(0.1), np.array([-2.0 + 0.1 * f, 1.6, 18.0])))
     assert all(v.get("implausible") == "the front axle comes out behind the rear one: front and rear wheels look "
                                        "swapped" for v in frames), [v.get("implausible") for v in frames]
     assert all(any("check the wheels' names (front and rear)" in w for w in v["warnings"]) for v in frames)

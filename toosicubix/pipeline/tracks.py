@@ -85,7 +85,7 @@ def _checked_plausible(fit: FitResult, model: PartsModel, vehicle: Vehicle, imag
     why = implausibility(model.click_labels, fit.R_cam_vehicle, fit.t_cam_vehicle, fit.p[:3], options.max_tilt, up,
                          model.click_faces)
     if why is None:
-        return with_axles_checked(fit, model, prior)  # a car's wheels on the wrong axles (rule 29)
+        return with_axles_checked(fit, model, prior)  # a car's wheels on the wrong axles (rule 30)
     flagged = replace(fit, implausible=why, warnings=(*fit.warnings, f"the track's pose in this frame is {why}"))
     return with_likely_cause(flagged, vehicle, image.camera, prior, options, image.ground)
 

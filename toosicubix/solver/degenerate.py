@@ -220,7 +220,8 @@ def _phrases(parts: PartsModel, unknowns: list[str]) -> dict[str, list[str]]:
 
 
 def _loose(parts: PartsModel, unknowns: list[str]) -> str:
-    """What the unknowns leave loose, in plain words: 'where the roof pair sits along it and how wide it is'."""
+    """What the unknowns leave loose, in plain words ('where the roof pair sits along it and how wide the roof pair
+    is')."""
     phrases = _phrases(parts, unknowns)
     return _join([words[0] if len(words) == 1 else _GROUPED[quantity] for quantity, words in phrases.items()])
 

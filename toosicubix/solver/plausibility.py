@@ -68,7 +68,7 @@ def implausibility(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_c
 #: What every axle check's reason (:func:`axle_implausibility`) says: the page's likely cause 'axles' reads it.
 AXLES_MARK = "axle comes out"
 #: How many of the axle prior's standard deviations an axle may sit from where cars have theirs before the fit is
-#: implausible (rule 29): 4, a chance of about 1 in 16,000 for a real car of the prior's spread (twice the spread
+#: implausible (rule 30): 4, a chance of about 1 in 16,000 for a real car of the prior's spread (twice the spread
 #: measured on 79 real cars), where a wheel named on the wrong axle sits 14 of them away.
 AXLE_IMPLAUSIBLE_SIGMAS = 4.0
 
