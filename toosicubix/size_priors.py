@@ -106,6 +106,15 @@ class AxlePrior:
     rear: float
     spread: float
 
+    @property
+    def at(self) -> dict[str, float]:
+        """Each axle's unknown (``Xwf``, ``Xwr``) and where the prior puts it, a signed fraction of ``dx``."""
+        return {"Xwf": self.front, "Xwr": -self.rear}
+
+    def sigma(self, mean_length: float) -> float:
+        """The standard deviation of an axle's place, metres, for a prototype of mean length ``mean_length``."""
+        return self.spread * mean_length
+
 
 #: Rules 29 and 30 (benchmarks/decisions.md): real cars' axles, from ApolloCar3D's human wheel-centre keypoints on
 #: 79 car models as the bundled ``apollocar3d-66`` mapping learned them (n-weighted means of the two centres per axle;

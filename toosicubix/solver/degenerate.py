@@ -52,8 +52,8 @@ def degeneracy(problem: Problem, J: np.ndarray, tolerance: float) -> Refusal | N
 def _refusal(parts: PartsModel, unknowns: list[str], detail: str) -> Refusal:
     """The refusal for ``unknowns`` left undetermined; a warning instead (``cuboid`` False) when all are parts' own."""
     if all(name.startswith("parts[") for name in unknowns):
-        return Refusal(f"the clicks do not fix {_loose(parts, unknowns)}; the cuboid does not depend on it, so it is "
-                       "fitted without it", detail, cuboid=False)
+        return Refusal(f"the clicks do not fix {_loose(_phrases(parts, unknowns))}; the cuboid does not depend on "
+                       "it, so it is fitted without it", detail, cuboid=False)
     return Refusal(_undetermined(parts, unknowns), detail)
 
 
@@ -200,7 +200,7 @@ def seen_only_from(parts: PartsModel) -> str | None:
 def _undetermined(parts: PartsModel, unknowns: list[str]) -> str:
     """Plain words for unknowns the clicks leave undetermined: the view, what is loose, and what would fix it."""
     phrases = _phrases(parts, unknowns)
-    loose = _loose(parts, unknowns)
+    loose = _loose(phrases)
     view = seen_only_from(parts)
     fixes = _missing(parts, _VIEW_FIX[view] if view is not None else [_QUANTITY_FIX[q] for q in phrases])
     advice = "; add " + ", or ".join(fixes[:2]) if fixes else ""
@@ -219,10 +219,9 @@ def _phrases(parts: PartsModel, unknowns: list[str]) -> dict[str, list[str]]:
     return phrases
 
 
-def _loose(parts: PartsModel, unknowns: list[str]) -> str:
-    """What the unknowns leave loose, in plain words ('where the roof pair sits along it and how wide the roof pair
-    is')."""
-    phrases = _phrases(parts, unknowns)
+def _loose(phrases: dict[str, list[str]]) -> str:
+    """What the unknowns of :func:`_phrases` leave loose, in plain words ('where the roof pair sits along it and how
+    wide the roof pair is')."""
     return _join([words[0] if len(words) == 1 else _GROUPED[quantity] for quantity, words in phrases.items()])
 
 

@@ -295,7 +295,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_start = time.perf_counter()
     counts = {"constraints": parts.constraints, "n_clicks": parts.n_clicks, "n_aux": parts.n_aux}
     # A car's axles the axle prior holds are not the clicks' to fix (rule 31), as the dimensions are not.
-    held = sum(name in parts.param_names for name in ("Xwf", "Xwr")) if axle_prior(prior.prototype) else 0
+    axles = axle_prior(prior.prototype)
+    held = 0 if axles is None else sum(name in parts.param_names for name in axles.at)
     if parts.n_clicks < 3 or parts.constraints + held < options.min_constraints:
         return FitResult.refused(too_few(parts, options.min_constraints, held), **counts)
     short = short_arrows(parts) or degenerate_spread(parts.uv)

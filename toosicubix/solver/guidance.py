@@ -225,7 +225,7 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     base = build_parts_model(parts, known_dimensions)
     values = dict(zip(base.param_names, fit.p, strict=True))
     axles = axle_prior(prior.prototype)  # an axle the fit has no unknown for sits where the prior puts it (rule 30)
-    where = values if axles is None else {"Xwf": axles.front * float(d[0]), "Xwr": -axles.rear * float(d[0]), **values}
+    where = values if axles is None else {**{k: f * float(d[0]) for k, f in axles.at.items()}, **values}
     camera_side = 1.0 if (R.T @ (-t))[1] >= 0 else -1.0
     terms = vocabulary.typical_terms(d, where, camera_side)
     wheels = {"front": terms["Xwf"], "rear": terms["Xwr"]}

@@ -82,11 +82,11 @@ def axle_implausibility(param_names: tuple[str, ...], p: np.ndarray, prototype: 
     if prior is None:
         return None
     dx = float(p[0])
-    axles = {name: float(p[param_names.index(name)]) for name in ("Xwf", "Xwr") if name in param_names}
+    axles = {name: float(p[param_names.index(name)]) for name in prior.at if name in param_names}
     if len(axles) == 2 and axles["Xwf"] <= axles["Xwr"]:
         return "the front axle comes out behind the rear one: front and rear wheels look swapped"
-    sigma = prior.spread * mean_length
-    for name, fraction, axle in (("Xwf", prior.front, "front"), ("Xwr", -prior.rear, "rear")):
+    sigma = prior.sigma(mean_length)
+    for (name, fraction), axle in zip(prior.at.items(), ("front", "rear"), strict=True):
         if name in axles and abs(axles[name] - fraction * dx) > AXLE_IMPLAUSIBLE_SIGMAS * sigma:
             where = "ahead of" if axles[name] >= 0 else "behind"
             return (f"the {axle} axle comes out {abs(axles[name]):.1f} m {where} the middle of a {dx:.1f} m car, where "

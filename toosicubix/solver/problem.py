@@ -139,8 +139,8 @@ class Problem:
             cues.append("size prior")
         axles = axle_prior(prior.prototype)
         if axles is not None:  # rule 30: a car's axles where real cars have them, weighed as the size prior
-            sigma = axles.spread * float(prior.mean[0])
-            for name, fraction in (("Xwf", axles.front), ("Xwr", -axles.rear)):
+            sigma = axles.sigma(float(prior.mean[0]))
+            for name, fraction in axles.at.items():
                 if name in parts.param_names:
                     row = np.zeros(3 + P)
                     row[3 + parts.param_names.index(name)] = 1.0 / sigma
