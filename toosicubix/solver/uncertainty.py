@@ -356,7 +356,7 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     def cue_rows(clicks: np.ndarray, cols: np.ndarray) -> np.ndarray:
         outside = np.ones(sees.shape[1], dtype=bool)
         outside[cols[cols >= 6] - 6] = False
-        arrows = np.flatnonzero(np.isin(tails, clicks))
+        arrows = np.flatnonzero((tails[:, None] == clicks[None, :]).any(axis=1))  # np.isin's answer, without its sort
         own = (first_arrow_row + per_arrow * arrows[:, None] + np.arange(per_arrow)).ravel()
         shared = np.flatnonzero(~(sees & outside).any(axis=1))
         return np.concatenate([shared, own]).astype(int)
@@ -370,10 +370,12 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     now = uncertainty_from_jacobians(J_px[base_rows][:, cols0], J_cue[base_cues][:, cols0], lam_of(base_cues),
                                      sigmas[base_rows], G, t)
     out = []
+    not_base = np.ones(A.shape[2], dtype=bool)  # the parameters a candidate may add: those the fit does not have
+    not_base[base_cols - 6] = False
     for entry in added:
         clicks = np.arange(*entry) if isinstance(entry, tuple) else np.asarray(entry, dtype=int)
-        own = np.flatnonzero(np.any(A[clicks] != 0, axis=(0, 1)))
-        cols = np.concatenate([cols0, 6 + np.setdiff1d(own, base_cols - 6)])
+        own = np.any(A[clicks] != 0, axis=(0, 1)) & not_base  # (P,): the candidate's own new unknowns
+        cols = np.concatenate([cols0, 6 + np.flatnonzero(own)])
         r = np.concatenate([base_rows, (2 * clicks[:, None] + np.arange(2)).ravel()])
         cues = cue_rows(np.concatenate([np.arange(n_base_clicks), clicks]), cols)
         out.append(uncertainty_from_jacobians(J_px[r][:, cols], J_cue[cues][:, cols], lam_of(cues), sigmas[r],
