@@ -584,12 +584,9 @@ def _at_pose(samples: list, car) -> list:
 
 
 def learned_and_samples(images: list, learn_on: list, cameras, names: list[str]) -> tuple[dict, list]:
-    """Keypoint positions learned (second pass, rule 6) on ``learn_on``, and the labelled keypoints of ``images``.
-    Each keypoint from its own samples alone, as rules 6 and 17 were defined (rule 32 learns mirror pairs together
-    for the fits, not for which cars these rules flag: the cars scored as agreeing stay those agreed with the
-    maintainers)."""
+    """Keypoint positions learned (second pass, rule 6) on ``learn_on``, and the labelled keypoints of ``images``."""
     K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in [*images, *learn_on]}
-    learned = learn_positions(keypoint_samples(learn_on, names, K_of), 5, CONTRADICTION_M, mirror_pairs=False)
+    learned = learn_positions(keypoint_samples(learn_on, names, K_of), 5, CONTRADICTION_M)
     return learned, keypoint_samples(images, names, K_of)
 
 

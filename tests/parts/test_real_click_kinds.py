@@ -10,7 +10,6 @@ from tests.scenes import CAMERA
 from toosicubix.geometry import R_cam_vehicle_from_ypr, geodesic_angle
 from toosicubix.model import Part
 from toosicubix.parts.learned import (
-    MIN_SPREAD,
     KeypointSample,
     LearnedPosition,
     faces_toward,
@@ -18,7 +17,6 @@ from toosicubix.parts.learned import (
     hidden_by_ground_truth,
     learn_positions,
     learned_mapping,
-    mirror_name,
     seen_from,
 )
 from toosicubix.parts.linear import build_parts_model
@@ -125,66 +123,6 @@ def test_learned_positions_of_a_synthetic_fleet_come_back():
         np.testing.assert_allclose(learned[name].at, at, atol=0.01)
         assert learned[name].n == 200
         assert np.all(learned[name].spread < 3 * spread) and np.all(learned[name].spread > 0.3 * spread)
-
-
-def test_mirror_names_swap_left_and_right_as_whole_words():
-    assert mirror_name("top_left_c_left_front_car_light") == "top_right_c_right_front_car_light"
-    assert mirror_name("top_right_c_front_glass") == "top_left_c_front_glass"
-    assert mirror_name("lamp-rear-left") == "lamp-rear-right"
-    assert mirror_name("Left mirror") == "Right mirror"
-    assert mirror_name("LEFT_DOOR") == "RIGHT_DOOR"
-    # Not a whole word: no partner.
-    assert mirror_name("leftover_badge") == "leftover_badge"
-    assert mirror_name("upright_post") == "upright_post"
-    assert mirror_name("roof") == "roof"
-
-
-def _sided_fleet(rng: np.random.Generator, skew: float, n: int = 120) -> list[KeypointSample]:
-    """Exact clicks of a lamp pair on ``n`` cars; each car shows one side, so each side's lamp is labelled on its own
-    cars. ``skew`` (fraction of the length) is how much farther forward people click the left lamp than the right
-    (a labelling habit of one side): its mirror would sit ``skew`` behind."""
-    samples = []
-    left, right = np.array([-0.45 + skew, 0.38, 0.62]), np.array([-0.45, -0.38, 0.62])
-    for v in range(n):
-        d = np.array([4.6, 1.8, 1.5]) * rng.uniform(0.95, 1.05, 3)
-        left_seen = v % 2 == 0
-        yaw = rng.uniform(-170, -100) if left_seen else rng.uniform(100, 170)  # rear and that side in view
-        R = R_cam_vehicle_from_ypr(np.deg2rad(yaw), 0.0, 0.0)
-        t = np.array([rng.uniform(-5, 5), 1.6, rng.uniform(10, 40)])
-        name, at = ("lamp_rear_left", left) if left_seen else ("lamp_rear_right", right)
-        samples.append(KeypointSample("Car", name, str(v), R @ (at * d) + t, R, t, d))
-    return samples
-
-
-def test_a_keypoint_and_its_mirror_partner_are_learned_together():
-    """Each side's samples state the other side's position mirrored (rule 32): the two come out exact mirror images,
-    the average of what each side alone gives; without pooling each keeps its own side's habit. ``seen_from`` and
-    ``n`` stay each keypoint's own."""
-    samples = _sided_fleet(np.random.default_rng(3), skew=0.02)
-    apart = learn_positions(samples, mirror_pairs=False)["Car"]
-    together = learn_positions(samples)["Car"]
-    left, right = together["lamp_rear_left"], together["lamp_rear_right"]
-    flip = np.array([1.0, -1.0, 1.0])
-    # The same least-squares rows, mirrored: equal to the last bits of the solve.
-    np.testing.assert_allclose(left.at, right.at * flip, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(left.spread, right.spread, rtol=0, atol=1e-12)
-    # Apart, exact clicks give each side its own clicked place (algebra tier); together, half way between.
-    np.testing.assert_allclose(apart["lamp_rear_left"].at, [-0.43, 0.38, 0.62], atol=1e-9)
-    np.testing.assert_allclose(apart["lamp_rear_right"].at, [-0.45, -0.38, 0.62], atol=1e-9)
-    assert abs(left.at[0] - (-0.44)) < 0.002  # 60 cars a side, rays from different directions: not an exact mean
-    # The habit shows as spread along the length, not as a place: exact clicks apart are at the floor.
-    assert apart["lamp_rear_left"].spread[0] == MIN_SPREAD
-    assert left.spread[0] > MIN_SPREAD + 0.001
-    assert (left.n, right.n) == (60, 60)
-    assert left.seen_from == apart["lamp_rear_left"].seen_from
-    assert right.seen_from == apart["lamp_rear_right"].seen_from
-
-
-def test_a_keypoint_without_a_partner_is_learned_alone():
-    samples = [s for s in _sided_fleet(np.random.default_rng(4), skew=0.02) if s.name == "lamp_rear_left"]
-    alone = learn_positions(samples)["Car"]
-    assert set(alone) == {"lamp_rear_left"}
-    np.testing.assert_allclose(alone["lamp_rear_left"].at, [-0.43, 0.38, 0.62], atol=1e-9)
 
 
 def test_the_faces_a_keypoint_is_seen_from_are_learned_from_where_it_was_labelled():

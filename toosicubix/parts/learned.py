@@ -11,13 +11,6 @@ The spread per axis is the RMS of each vehicle's offset from its ray, ``R_i^T Q_
 (fractions), times ``sqrt(3 / 2)``: an offset perpendicular to the ray misses the ray's own component, one of
 three on average.
 
-A vehicle is mirror-symmetric about its midplane, on which its ground-truth cuboid is centred, so a keypoint and
-its mirror partner (:func:`mirror_name`: the words ``left`` and ``right`` swapped) are learned together: the
-partner's samples join the keypoint's with their vehicle frame mirrored (``R_i diag(1, -1, 1)``), which gives one
-position and one spread per pair, each keypoint's the other's mirrored (benchmarks/decisions.md, rule 32). Learned
-apart, the two sides of ApolloCar3D's cars differed by some ten times their standard errors. Where a keypoint is
-seen from and how often it is clicked stay each keypoint's own.
-
 Where a keypoint is seen from is learned too: at each labelled vehicle's ground-truth pose, the faces of its
 cuboid turned to the camera (the camera beyond the face's plane). A keypoint's ``seen_from`` is the fewest faces,
 taken greedily (the face turned to the camera on most of the vehicles not yet covered first), such that on at least
@@ -38,7 +31,6 @@ keypoints lie more than ``max_offset`` metres RMS from their rays at the first p
 
 from __future__ import annotations
 
-import re
 from collections import defaultdict
 from dataclasses import dataclass, replace
 
@@ -61,22 +53,6 @@ CONTRADICTION_M = 0.5
 
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
-
-_SIDE_WORD = re.compile(r"(?<![A-Za-z0-9])(left|right)(?![A-Za-z0-9])", re.IGNORECASE)
-#: A sample of a keypoint's mirror partner, its vehicle frame mirrored across the midplane: ``R diag(MIRROR)``.
-MIRROR = np.array([1.0, -1.0, 1.0])
-
-
-def mirror_name(name: str) -> str:
-    """``name`` with the words ``left`` and ``right`` swapped, each a whole word between anything but letters and digits
-    (``top_left_c_left_front_car_light`` <-> ``top_right_c_right_front_car_light``; the case of each word kept); the
-    name itself when it has neither."""
-    def swap(match: re.Match) -> str:
-        word = match.group(0)
-        other = "right" if word.lower() == "left" else "left"
-        return other.upper() if word.isupper() else other.capitalize() if word[0].isupper() else other
-
-    return _SIDE_WORD.sub(swap, name)
 
 
 @dataclass(frozen=True)
@@ -152,8 +128,8 @@ def seen_from(facing: list[frozenset[str]], allowed: tuple[str, ...] = FACES,
     return tuple(face for face in FACES if face in chosen)
 
 
-def learn_positions(samples: list[KeypointSample], min_samples: int = 3, max_offset: float | None = None,
-                    mirror_pairs: bool = True) -> dict[str, dict[str, LearnedPosition]]:
+def learn_positions(samples: list[KeypointSample], min_samples: int = 3,
+                    max_offset: float | None = None) -> dict[str, dict[str, LearnedPosition]]:
     """Per prototype and keypoint name, the typical position and spread (see the module's docstring).
 
     Parameters
@@ -163,25 +139,23 @@ def learn_positions(samples: list[KeypointSample], min_samples: int = 3, max_off
         that differ)
     max_offset : metres; when given, a second pass leaves out the vehicles whose keypoints lie farther than
         this (RMS) from their rays at the first pass's positions
-    mirror_pairs : learn a keypoint and its mirror partner together (the module's docstring); False: each from its
-        own samples alone (how rules 6 and 17 of benchmarks/decisions.md were defined)
 
     Returns
     -------
     ``{prototype: {name: LearnedPosition}}``; a keypoint whose rays leave its position undetermined (all
     parallel) is left out.
     """
-    return _two_passes(samples, min_samples, max_offset, mirror_pairs)[0]
+    return _two_passes(samples, min_samples, max_offset)[0]
 
 
-def _two_passes(samples: list[KeypointSample], min_samples: int, max_offset: float | None, mirror_pairs: bool = True
+def _two_passes(samples: list[KeypointSample], min_samples: int, max_offset: float | None
                 ) -> tuple[dict[str, dict[str, LearnedPosition]], set[str]]:
     """:func:`learn_positions`, and the vehicles its second pass left out."""
-    learned = _learn(samples, min_samples, mirror_pairs)
+    learned = _learn(samples, min_samples)
     if max_offset is None:
         return learned, set()
     bad = contradicting(samples, learned, max_offset)
-    return _learn([s for s in samples if s.vehicle not in bad], min_samples, mirror_pairs), bad
+    return _learn([s for s in samples if s.vehicle not in bad], min_samples), bad
 
 
 def contradicting(samples: list[KeypointSample], learned: dict[str, dict[str, LearnedPosition]],
@@ -252,8 +226,7 @@ def clicked_share(facing_of: dict[str, frozenset[str]], group: list[KeypointSamp
     return sum(v in labelled for v in could) / len(could)
 
 
-def _learn(samples: list[KeypointSample], min_samples: int,
-           mirror_pairs: bool = True) -> dict[str, dict[str, LearnedPosition]]:
+def _learn(samples: list[KeypointSample], min_samples: int) -> dict[str, dict[str, LearnedPosition]]:
     groups: dict[tuple[str, str], list[KeypointSample]] = defaultdict(list)
     facing_of: dict[str, dict[str, frozenset[str]]] = defaultdict(dict)  # prototype -> vehicle -> faces to the camera
     for s in samples:
@@ -264,13 +237,11 @@ def _learn(samples: list[KeypointSample], min_samples: int,
     for (prototype, name), group in sorted(groups.items()):
         if len(group) < min_samples:
             continue
-        partner = mirror_name(name)
-        mirrored = groups.get((prototype, partner), []) if mirror_pairs and partner != name else []
-        rays = np.array([s.ray_cam / np.linalg.norm(s.ray_cam) for s in [*group, *mirrored]])  # (n, 3)
+        rays = np.array([s.ray_cam / np.linalg.norm(s.ray_cam) for s in group])  # (n, 3)
         Q = np.eye(3) - rays[:, :, None] * rays[:, None, :]  # (n, 3, 3)
-        R = np.array([s.R_cam_vehicle for s in group] + [s.R_cam_vehicle * MIRROR for s in mirrored])  # (n, 3, 3)
-        d = np.array([s.dimensions for s in [*group, *mirrored]])
-        t = np.array([s.t_cam_vehicle for s in [*group, *mirrored]])
+        R = np.array([s.R_cam_vehicle for s in group])
+        d = np.array([s.dimensions for s in group])
+        t = np.array([s.t_cam_vehicle for s in group])
         A = Q @ R * d[:, None, :]  # (n, 3, 3): Q R diag(d)
         b = -np.einsum("nij,nj->ni", Q, t)
         A_rows, b_rows = A.reshape(-1, 3), b.reshape(-1)
