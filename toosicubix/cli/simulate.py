@@ -24,6 +24,9 @@ from toosicubix.cli.options import BadInput, Finite, GroundTruth, ground_truth_o
               help="Put every part exactly where the parts model says (default: varied as on real vehicles).")
 @click.option("--max-clicks", type=click.IntRange(min=1), default=12, show_default=True,
               help="The most clicked points per vehicle.")
+@click.option("--order", type=click.Choice(["preference", "random"]), default="preference", show_default=True,
+              help="The order the person takes the parts it can see in: a person's preference (tyres, lights, "
+                   "edges, ...) or random (an annotator whose choice owes nothing to the solver).")
 @click.option("--classes", default="Car,Van,Truck", show_default=True, help="KITTI types to simulate.")
 @click.option("--max-truncation", type=Finite(), default=0.0, show_default=True,
               help="Keep vehicles truncated at most this much (object labels: fraction; tracking: 0, 1, 2).")
@@ -48,7 +51,7 @@ from toosicubix.cli.options import BadInput, Finite, GroundTruth, ground_truth_o
               help="With --tracks: the 2D box on every frame: person = a person's box around the vehicle's "
                    "silhouette, projection = KITTI's own box (the projected cuboid), none (default: person).")
 def simulate_command(ground_truth: GroundTruth, annotations: Path, gt_out: Path | None, noise_px: float, seed: int,
-                     exact_placement: bool, max_clicks: int, classes: str, max_truncation: float,
+                     exact_placement: bool, max_clicks: int, order: str, classes: str, max_truncation: float,
                      max_occlusion: int, min_depth: float, max_depth: float, min_box_height: float,
                      frames_per_track: int | None, sequences: str | None, ground_kind: str, tracks: bool,
                      keyframes: int | None, box_kind: str | None) -> None:
@@ -93,7 +96,7 @@ def simulate_command(ground_truth: GroundTruth, annotations: Path, gt_out: Path 
             frames_per_track=frames_per_track, sequences=parse_sequences(sequences),
         )
         options = AnnotatorOptions(noise_px=noise_px, exact_placement=exact_placement, max_clicks=max_clicks,
-                                   seed=seed)
+                                   seed=seed, order=order)
         track_options = TrackOptions(keyframes=keyframes or 1, boxes=box_kind or "person") if tracks else None
     except ValueError as exc:
         raise BadInput(str(exc)) from None

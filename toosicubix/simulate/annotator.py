@@ -16,7 +16,9 @@ ground-truth cuboids. The annotator modelled here is a person, not an oracle:
    (``top-center``);
 6. on vans and trucks, whose bodies are boxes: the visible top corners of the body (``corner-top-*``).
 
-Clicking stops before ``max_clicks`` (12) would be exceeded; a symmetric pair or an arrow counts 2.
+Clicking stops before ``max_clicks`` (12) would be exceeded; a symmetric pair or an arrow counts 2. With
+``order='random'`` the person takes the same candidates in a random order instead (an annotator whose choice of
+parts owes nothing to what the solver likes best).
 
 **What a person can see.** A part is clickable when it lies on a face of the cuboid turned to the camera
 (tyres also from their end of the vehicle, below the bumper; vertical edges and box corners when an
@@ -117,16 +119,25 @@ class AnnotatorOptions:
     exact_placement : every part exactly where the parts model puts it
     max_clicks : stop before exceeding this many clicked points
     seed : base of the per-vehicle random streams
+    order : 'preference' (the module's list, in its order) or 'random' (the same candidates shuffled per vehicle,
+        from a stream of their own, so that where each part sits and its noise are drawn as in 'preference')
     """
 
     noise_px: float = 1.0
     exact_placement: bool = False
     max_clicks: int = 12
     seed: int = 0
+    order: str = "preference"
 
     def __post_init__(self) -> None:
         _ensure_range("noise_px", self.noise_px, 0.0, MAX_NOISE_PX, "pixels")
         _ensure_range("max_clicks", self.max_clicks, 1, 10_000, "clicks")
+        if self.order not in CLICK_ORDERS:
+            raise ValueError(f"option order: expected one of {', '.join(CLICK_ORDERS)}, got {self.order!r}")
+
+
+#: The orders in which the simulated person takes the parts it can click (:class:`AnnotatorOptions`).
+CLICK_ORDERS = ("preference", "random")
 
 
 @dataclass(frozen=True)
@@ -555,7 +566,11 @@ def simulate_vehicle(gt: GroundTruthVehicle, options: AnnotatorOptions) -> Simul
     spare: list[Part] = []
     spare_rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/spare")
     clicks = 0
-    for spec in _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement):
+    candidates = _candidate_specs(gt, d, wheel_x, visible, camera_vehicle, rng, options.exact_placement)
+    if options.order == "random":
+        order_rng = vehicle_rng(options.seed, gt.image_id, gt.vehicle_id + "/order")
+        candidates = [candidates[i] for i in order_rng.permutation(len(candidates))]
+    for spec in candidates:
         if not _needs(spec, visible):
             continue
         arrow_yaw = 0.0 if options.exact_placement else math.radians(rng.normal(0.0, 2.0))
