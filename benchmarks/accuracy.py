@@ -109,7 +109,7 @@ def failure_kind(reason: str) -> str:
 
 
 def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, road_normal: bool = False,
-            upright_weight: str = SolverOptions.upright_weight) -> dict:
+            upright_weight: str = SolverOptions.upright_weight, estimate_noise: bool = False) -> dict:
     selection = SelectionOptions(sequences=SPLITS[split])
     vehicles = select_kitti_tracking(data / "kitti_tracking", selection)
     simulated = simulate(vehicles, AnnotatorOptions(noise_px=row.noise_px, exact_placement=row.exact, seed=seed))
@@ -120,8 +120,14 @@ def run_row(row: Row, data: Path, split: str, jobs: int, seed: int, work: Path, 
     folder.mkdir(parents=True)
     write_simulation(simulated, annotations, gt_dir)
     start = time.perf_counter()
-    fit_file(annotations, out, BatchSettings(options=options, jobs=jobs, estimate_road_normal=road_normal))
+    fit_file(annotations, out, BatchSettings(options=options, jobs=jobs, estimate_road_normal=road_normal,
+                                             estimate_click_sigma=estimate_noise, estimate_part_sigma=estimate_noise))
     fit_seconds = time.perf_counter() - start
+    if estimate_noise:  # the optimality gap's reference fits take the batch's estimates too
+        header = json.loads((out / "results.json").read_text())
+        placement = header.get("part_placement")
+        if placement is not None:
+            options = replace(options, click_sigma=placement["sigma_px"], part_sigma=placement["part_sigma_m"])
     evaluation = evaluate_folder(out, "kitti", gt_dir)
     summary = summarize(evaluation)
 
@@ -219,6 +225,9 @@ def main() -> None:
     parser.add_argument("--upright-weight", choices=("lambda", "clicks"), default=SolverOptions.upright_weight,
                         help="`fit --upright-weight` (rule 23: 'clicks' weighs only keypoint and plate vehicles' "
                              "upright term differently, so these figures must not move)")
+    parser.add_argument("--estimate-noise", action="store_true",
+                        help="fit as `toosicubix fit` does without --click-sigma and --part-sigma: the click noise and "
+                             "the parts' placement estimated from each row's batch (rule 33)")
     args = parser.parse_args()
     if not (args.data / "kitti_tracking").is_dir():
         sys.exit(f"no KITTI tracking data at {args.data / 'kitti_tracking'} (set --data)")
@@ -228,7 +237,7 @@ def main() -> None:
         for row in ROWS:
             start = time.perf_counter()
             rows.append(run_row(row, args.data, args.split, args.jobs, args.seed, Path(tmp), args.road_normal_estimate,
-                                args.upright_weight))
+                                args.upright_weight, args.estimate_noise))
             print(f"{row.label}: done in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     print_tables(rows)
     for r in rows:

@@ -50,7 +50,9 @@ from toosicubix.formats.results import dumps
 from toosicubix.geometry import geodesic_angle, wrap_angle, ypr_from_R_cam_vehicle
 from toosicubix.model import KITTI_GROUND, GroundOverride
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline import part_placement
 from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline.pilot import file_estimates
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.simulate.annotator import (
     AnnotatorOptions,
@@ -71,11 +73,20 @@ def yaw_error_deg(R_fit: np.ndarray, R_true: np.ndarray) -> float:
     return float(np.rad2deg(wrap_angle(ypr_from_R_cam_vehicle(R_fit)[0] - ypr_from_R_cam_vehicle(R_true)[0])))
 
 
-def calibration(simulated, ground: GroundOverride | None, folder: Path, options: SolverOptions = OPTIONS) -> dict:
-    """Share of fitted vehicles whose yaw (depth) error is within 1 and 2 predicted sigmas."""
+def calibration(simulated, ground: GroundOverride | None, folder: Path, options: SolverOptions = OPTIONS,
+                estimate: bool = False) -> dict:
+    """Share of fitted vehicles whose yaw (depth) error is within 1 and 2 predicted sigmas. With ``estimate`` the
+    click noise and the parts' placement are first estimated from the batch's pilot as `fit` does
+    (:mod:`toosicubix.pipeline.part_placement`, rule 33), and the vehicles fitted with them."""
     path = folder / "annotations.json"
     path.write_text(dumps(annotation_document(simulated, ground)))
     images = load_images(path)
+    estimated = None
+    if estimate:
+        findings = file_estimates(path, load_priors(), options, estimate_click_sigma=True, estimate_road_normal=False,
+                                  estimate_part_sigma=True)
+        options = findings.options
+        estimated = findings.part_placement.to_json() if findings.part_placement is not None else None
     start = time.perf_counter()
     results = fit_images(images, BatchSettings(priors=load_priors(), options=options, jobs=2))
     seconds = time.perf_counter() - start
@@ -107,7 +118,30 @@ def calibration(simulated, ground: GroundOverride | None, folder: Path, options:
         "flips_confidence_median": float(np.median(np.array(conf)[np.array(flip)])) if any(flip) else None,
         "others_confidence_median": float(np.median(np.array(conf)[~np.array(flip)])),
         "ambiguous": int(np.sum(ambiguous)), "misfits": misfits,
+        "click_sigma": options.click_sigma, "part_sigma": options.part_sigma, "estimated": estimated,
     }
+
+
+def kappa_landscape(data: Path, grid: list[float]) -> tuple[float, list[dict]]:
+    """Choose rule 33's ``KAPPA`` on the *tuning* sequences: the simulated person at 1 px (realistic placement, size
+    prior only), fitted as `fit` fits it with the click noise and part placement estimated; the value whose yaw shares
+    within 1 and 2 sigmas are nearest (least squares) to a Gaussian's 68.27 % and 95.45 %."""
+    vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["tuning"]))
+    simulated = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for value in grid:
+            part_placement.KAPPA = value
+            folder = Path(tmp) / f"kappa-{value}"
+            folder.mkdir()
+            c = calibration(simulated, None, folder, SolverOptions(), estimate=True)
+            loss = (c["yaw_within_1_sigma"] - 0.6827) ** 2 + (c["yaw_within_2_sigma"] - 0.9545) ** 2
+            rows.append({"kappa": value, "yaw_within": [c["yaw_within_1_sigma"], c["yaw_within_2_sigma"]],
+                         "loss": loss, "estimated": c["estimated"]})
+            print(f"kappa {value:g} (tuning split): click noise {c['click_sigma']:.2f} px, part_sigma "
+                  f"{c['part_sigma']:.3f} m; yaw within 1 / 2 sigma {100 * c['yaw_within_1_sigma']:.1f} / "
+                  f"{100 * c['yaw_within_2_sigma']:.1f} %; loss {loss:.4f}", flush=True)
+    return min(rows, key=lambda r: r["loss"])["kappa"], rows
 
 
 def part_sigma_landscape(data: Path, grid: list[float], options: SolverOptions = OPTIONS
@@ -203,6 +237,11 @@ def main() -> None:
     parser.add_argument("--misfit-level", type=float, default=None,
                         help="The calibration rows with the chi-square test of each fit's residuals at this level "
                              "(`fit --misfit-level`; rule 8 of benchmarks/decisions.md measured 0.99).")
+    parser.add_argument("--tune-kappa", default=None, metavar="GRID",
+                        help="Instead: choose rule 33's KAPPA on the tuning sequences from this comma-separated grid, "
+                             "e.g. 0.5,0.75,1,1.25,1.5,1.75,2.")
+    parser.add_argument("--split", choices=("test", "tuning"), default="test",
+                        help="The sequences of the calibration rows and the next-click comparison (default: test).")
     parser.add_argument("--upright-weight", choices=("lambda", "clicks"), default=SolverOptions.upright_weight,
                         help="`fit --upright-weight` (rule 23: 'clicks' weighs only keypoint and plate vehicles' "
                              "upright term differently, so these cuboid-part figures must not move)")
@@ -220,25 +259,43 @@ def main() -> None:
             args.json.write_text(json.dumps({"machine": report["machine"], "misfit_level": args.misfit_level,
                                              "landscape": rows, "chosen": best}, indent=1) + "\n")
         return
-    vehicles = select_kitti_tracking(args.data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))
+    if args.tune_kappa:
+        own = part_placement.KAPPA
+        best, rows = kappa_landscape(args.data, [float(v) for v in args.tune_kappa.split(",")])
+        part_placement.KAPPA = own
+        print(f"chosen KAPPA: {best:g} (the module's is {own:g})")
+        if args.json is not None:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({"machine": report["machine"], "landscape": rows, "chosen": best},
+                                            indent=1) + "\n")
+        return
+    report["split"] = args.split
+    vehicles = select_kitti_tracking(args.data / "kitti_tracking", SelectionOptions(sequences=SPLITS[args.split]))
     realistic = simulate(vehicles, AnnotatorOptions(noise_px=1.0))
     exact = simulate(vehicles, AnnotatorOptions(noise_px=1.0, exact_placement=True))
     # Issue 36 item 4's annotator, as near as its description lets us: parts exactly where the cuboid model puts
     # them, taken in random order (not the simulated person's preference), fitted at `fit`'s defaults.
     shuffled = simulate(vehicles, AnnotatorOptions(noise_px=1.0, exact_placement=True, order="random"))
     defaults = replace(SolverOptions(), misfit_level=args.misfit_level, upright_weight=args.upright_weight)
-    rows = [(placement, label, ground, simulated, options)
-            for placement, simulated, options in (("realistic placement", realistic, base),
-                                                   ("exact placement, part_sigma 0", exact,
-                                                    replace(base, part_sigma=0.0)),
-                                                   ("exact placement, parts in random order, fit's defaults",
-                                                    shuffled, defaults))
+    # The same three annotators fitted as `fit` fits them: the click noise and the parts' placement estimated from
+    # the batch (rule 33).
+    rows = [(placement, label, ground, simulated, options, estimate)
+            for placement, simulated, options, estimate in (
+                ("realistic placement", realistic, base, False),
+                ("exact placement, part_sigma 0", exact, replace(base, part_sigma=0.0), False),
+                ("exact placement, parts in random order, fit's default sigmas (1.5 px, 9 cm)", shuffled, defaults,
+                 False),
+                ("realistic placement, as fit estimates", realistic, defaults, True),
+                ("exact placement, as fit estimates", exact, defaults, True),
+                ("exact placement, parts in random order, as fit estimates", shuffled, defaults, True))
             for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND))]
     with tempfile.TemporaryDirectory() as tmp:
-        for placement, label, ground, simulated, options in rows:
-            folder = Path(tmp) / f"{placement}-{label}".replace(" ", "-").replace(",", "")
+        for placement, label, ground, simulated, options, estimate in rows:
+            folder = Path(tmp) / f"{placement}-{label}".replace(" ", "-").replace(",", "").replace("(", "").replace(
+                ")", "")
             folder.mkdir()
-            row = {"placement": placement, "ground": label, **calibration(simulated, ground, folder, options)}
+            row = {"placement": placement, "ground": label,
+                   **calibration(simulated, ground, folder, options, estimate)}
             report["calibration"].append(row)
             print(f"calibration | {placement} | {label}: {row['fitted']} fitted; yaw within 1 sigma "
                   f"{100 * row['yaw_within_1_sigma']:.1f} %, 2 sigma {100 * row['yaw_within_2_sigma']:.1f} %; "
@@ -247,7 +304,8 @@ def main() -> None:
                   f"deg vs median |error| {row['yaw_error_median_deg']:.2f}; flips (E_R > 90) {row['flips']}, of "
                   f"them flagged ambiguous {row['flips_flagged_ambiguous']}, median confidence "
                   f"{row['flips_confidence_median'] or 0:.2f} (others {row['others_confidence_median']:.2f}); "
-                  f"ambiguous {row['ambiguous']}"
+                  f"ambiguous {row['ambiguous']}; sigmas for {row['click_sigma']:.2f} px, parts "
+                  f"{row['part_sigma']:.3f} m"
                   + (f"; misfits {row['misfits']}" if args.misfit_level is not None else ""), flush=True)
     for budget in (int(b) for b in args.budgets.split(",")):
         for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND)):

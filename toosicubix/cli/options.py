@@ -290,7 +290,8 @@ _FITTING_OPTIONS = [
     click.option("--part-sigma", type=Finite(min=0.0), default=SolverOptions.part_sigma, show_default=True,
                  help="How far real parts sit from where the cuboid model puts them (tyres inside the body, lights "
                       "set back, rounded corners), metres; the reported uncertainty includes it. 0: exactly on a box. "
-                      "Keypoints and plates carry their learned spread instead."),
+                      "Keypoints and plates carry their learned spread instead. Not given (and no --click-sigma): a "
+                      "batch of cuboid parts estimates it and the click noise from its own residuals."),
     click.option("--robust-loss", type=click.Choice(["auto", "cauchy", "none"]), default=SolverOptions.robust_loss,
                  show_default=True,
                  help="Cauchy loss on the clicks (down-weights mislabelled ones, listed per vehicle as `downweighted`);"
@@ -413,6 +414,8 @@ def _settings(values: dict[str, Any]) -> Any:
     return BatchSettings(priors=load_priors(values["priors_path"]), options=options, ground=ground,
                          joint_ground=values["joint_ground"], jobs=values["jobs"],
                          estimate_click_sigma=given_sigma is None, estimate_road_normal=estimate,
+                         estimate_part_sigma=given_sigma is None and ctx.get_parameter_source(
+                             "part_sigma") is click.core.ParameterSource.DEFAULT,
                          tracks=values["tracks"] == "on", track_options=TrackOptions(frame_rate=values["frame_rate"]),
                          box_cue=values["box_cue"])
 

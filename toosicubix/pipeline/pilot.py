@@ -17,6 +17,7 @@ from toosicubix.formats.results import ImageResult
 from toosicubix.model import GroundOverride, Image
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, stream_images
+from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence
 from toosicubix.pipeline.road_normal import (
     MIN_VEHICLES,
     RoadNormal,
@@ -50,6 +51,8 @@ class PilotFindings:
         nothing to change); None otherwise. :func:`~toosicubix.pipeline.batch.fitted_batch` then writes them
         instead of fitting again.
     next_clicks : how many next clicks per vehicle those results have
+    part_placement : the click noise and how far the parts sit from the cuboid model, estimated from the residuals
+        of a batch of cuboid parts (:mod:`toosicubix.pipeline.part_placement`), when it was; None otherwise
     """
 
     options: SolverOptions
@@ -58,11 +61,14 @@ class PilotFindings:
     without_pilot: dict[str, int] = field(default_factory=dict)
     results: list[ImageResult] | None = None
     next_clicks: int = 0
+    part_placement: PartPlacement | None = None
 
     def header(self) -> dict[str, Any]:
         """What results.json's header (and validate's report) say about the pilot's estimates."""
         out: dict[str, Any] = {}
-        if self.click_noise.source != "given":
+        if self.part_placement is not None:
+            out["part_placement"] = self.part_placement.to_json()
+        elif self.click_noise.source != "given":
             out["click_noise"] = self.click_noise.to_json()
         if self.road_normals is not None:
             out["road_normal"] = [n.to_json() for n in self.road_normals.values()]
@@ -73,7 +79,7 @@ class PilotFindings:
     def describe(self) -> list[str]:
         """Summary lines for ``fit`` and ``validate``: the click noise; each camera with a road normal (or one
         refused for scattered up axes), at most five; one line for the cameras with too few pilot vehicles."""
-        lines = [self.click_noise.describe()]
+        lines = [self.click_noise.describe() if self.part_placement is None else self.part_placement.describe()]
         cameras = list((self.road_normals or {}).values())
         listed = [n for n in cameras if n.spread_deg is not None]
         few = [n for n in cameras if n.spread_deg is None]
@@ -115,22 +121,29 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
                 cameras[camera_key(im.camera)] += 1
             yield im
 
+    estimate_parts = estimate_click_sigma and settings.estimate_part_sigma
     pilot: list[Image] = []
     if estimate_click_sigma or estimate_road_normal:
         pilot = list(pilot_images(counted(stream_images(index, settings.ground)), index.clicked,
-                                  keep=None if estimate_road_normal else telling))
+                                  keep=None if estimate_road_normal or estimate_parts else telling))
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
     pilot_options = replace(options, robust_loss="none")
     every = n_pilot == index.vehicles
     pilot_settings = replace(settings, options=pilot_options, joint_ground=False, next_clicks=0, keypoints=None,
-                             estimate_click_sigma=False, estimate_road_normal=False, ground=None)
+                             estimate_click_sigma=False, estimate_part_sigma=False, estimate_road_normal=False,
+                             ground=None)
     results = list(iter_fit_images(iter(pilot), n_pilot, pilot_settings, progress)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
+    placement = None
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
+        if estimate_parts and noise.source != "estimated":  # no keypoints tell the noise: the cuboid parts may
+            placement = estimate_placement(evidence(pilot, results))
+            if placement is not None:
+                options = replace(options, click_sigma=placement.sigma_px, part_sigma=placement.part_sigma_m)
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
     # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
     # road normal that would give some images a ground block.
@@ -140,9 +153,10 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
     if own and next_clicks > 0:
         results = add_next_clicks(pilot, results, replace(settings, options=options, next_clicks=next_clicks))
     if normals is None:
-        return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next)
+        return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next,
+                             part_placement=placement)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
-                         pilot_next)
+                         pilot_next, placement)
 
 
 def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: SolverOptions) -> bool:
@@ -156,7 +170,7 @@ def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: Sol
 
 def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptions, estimate_click_sigma: bool = True,
                    estimate_road_normal: bool = True, progress: Callable[[int], None] | None = None,
-                   ground: GroundOverride | None = None) -> PilotFindings:
+                   ground: GroundOverride | None = None, estimate_part_sigma: bool = False) -> PilotFindings:
     """What ``toosicubix fit ANNOTATIONS`` would estimate before fitting, with its default ground settings: the
     click noise (unless ``estimate_click_sigma`` is False: ``options.click_sigma`` was given) and each camera's
     road normal (unless ``estimate_road_normal`` is False), by :func:`run_pilot`. For fitting single vehicles of
@@ -170,7 +184,7 @@ def file_estimates(annotations: str | Path, priors: Priors, options: SolverOptio
     """
     index = index_annotations(Path(annotations), known_prototypes=list(priors))
     settings = BatchSettings(priors, options, ground, estimate_click_sigma=estimate_click_sigma,
-                             estimate_road_normal=estimate_road_normal)
+                             estimate_road_normal=estimate_road_normal, estimate_part_sigma=estimate_part_sigma)
     return run_pilot(index, settings, progress=progress)
 
 

@@ -51,6 +51,10 @@ class BatchSettings:
         (:mod:`toosicubix.pipeline.click_noise`) and fit with it; ``options.click_sigma`` is the pilot's assumption and
         stays when the batch's clicks are too few to estimate it (``toosicubix fit`` does this unless given
         ``--click-sigma``)
+    estimate_part_sigma : with ``estimate_click_sigma``, where no keypoints or plates tell the click noise, estimate
+        it and how far the parts sit from the cuboid model from the same pilot fit's cuboid parts
+        (:mod:`toosicubix.pipeline.part_placement`) and fit with both (``toosicubix fit`` does this unless given
+        ``--click-sigma`` or ``--part-sigma``)
     estimate_road_normal : estimate each camera's road normal from the same pilot fit's vehicles
         (:mod:`toosicubix.pipeline.road_normal`) and fit that camera's images without a ground block of their own
         upright on it (``toosicubix fit`` does this unless given a ground); not with ``ground`` or ``joint_ground``
@@ -69,6 +73,7 @@ class BatchSettings:
     next_clicks: int = 0
     keypoints: KeypointCatalogue | None = None
     estimate_click_sigma: bool = False
+    estimate_part_sigma: bool = False
     estimate_road_normal: bool = False
     tracks: bool = True
     track_options: TrackOptions = field(default_factory=TrackOptions)

@@ -1,0 +1,156 @@
+"""How far a batch's parts sit from the cuboid model, and its click noise, estimated from its own residuals (what
+``toosicubix fit`` does for a batch of cuboid parts unless given ``--click-sigma`` or ``--part-sigma``;
+benchmarks/decisions.md, rule 33).
+
+A part on the cuboid model (a tyre's contact point, a light pair, an edge) sits, on a real vehicle, some way off where
+the model puts it, and its click carries the click noise on top. Seen from depth ``z`` with focal length ``f``, an
+offset of ``part_sigma`` metres is ``f part_sigma / z`` pixels, while the click noise ``sigma`` is the same at every
+depth; so a batch with vehicles near and far tells the two apart. Each click ``i`` of a fitted vehicle ``v`` has a
+residual ``r_i`` (2,) whose expected square is ``2 c_v (sigma^2 + b_i (f part_sigma / z_v)^2)``, with ``b_i`` 1 for a
+part on the body (0 for an arrow drawn on the ground) and ``c_v`` the share of the vehicle's ``2 N_v`` pixel rows its
+fit leaves as residual degrees of freedom (``dof_v / 2 N_v``, :func:`toosicubix.solver.uncertainty.residual_dof`). The
+estimate maximizes the likelihood of the squared residuals under that model, a scaled chi-square with two degrees of
+freedom each: it minimizes ``sum_i ln v_i + |r_i|^2 / (2 c_v v_i)``, ``v_i = sigma^2 + b_i (f part_sigma / z_v)^2``.
+
+The residuals show less of a part's offset than the pose feels: an offset that is the same in every view of a part
+is partly absorbed by the fit. The sigmas use ``KAPPA`` times the estimate, ``KAPPA`` chosen on the tuning sequences
+(rule 33) so that the simulated person's realistic placement gets the calibration ``part_sigma`` was chosen for.
+
+Only vehicles whose clicks are all cuboid parts or arrows enter (keypoints and plates tell the click noise on top of
+their learned spread: :mod:`toosicubix.pipeline.click_noise`). Fewer than ``MIN_DOF`` degrees of freedom give no
+estimate, and the batch keeps its settings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from toosicubix import vocabulary
+from toosicubix.formats.results import ImageResult
+from toosicubix.model import Image
+from toosicubix.pipeline.click_noise import MIN_DOF, MIN_VEHICLE_DOF, SIGMA_BOUNDS
+
+#: The batch's sigmas use this many times the residuals' estimate of how far parts sit from the model (rule 33).
+KAPPA = 1.0
+#: The estimate of ``part_sigma`` is kept within these bounds (metres): 0.1 mm is a part exactly on the model, half a
+#: metre no part of a vehicle.
+PART_SIGMA_BOUNDS = (1e-4, 0.5)
+
+
+@dataclass(frozen=True)
+class PartPlacement:
+    """What a batch's residuals say about its clicks (:func:`estimate_placement`).
+
+    Attributes
+    ----------
+    sigma_px : the click noise, pixels per coordinate
+    part_sigma_m : how far the batch's parts sit from the cuboid model as its sigmas take it (``KAPPA`` times the
+        residuals' estimate), metres
+    residual_part_sigma_m : the residuals' own estimate, metres
+    dof : the residuals' degrees of freedom the estimate rests on; vehicles : how many vehicles gave them
+    """
+
+    sigma_px: float
+    part_sigma_m: float
+    residual_part_sigma_m: float
+    dof: float
+    vehicles: int
+
+    def to_json(self) -> dict:
+        return {"sigma_px": self.sigma_px, "part_sigma_m": self.part_sigma_m,
+                "residual_part_sigma_m": self.residual_part_sigma_m, "kappa": KAPPA, "dof": self.dof,
+                "vehicles": self.vehicles}
+
+    def describe(self) -> str:
+        """One line for the command's summary."""
+        return (f"click noise and part placement: {self.sigma_px:.2f} px, parts {100 * self.part_sigma_m:.1f} cm off "
+                f"the cuboid model (estimated from the residuals of {self.vehicles} pilot vehicles' cuboid parts, "
+                f"{self.dof:.0f} degrees of freedom; --click-sigma and --part-sigma set them)")
+
+
+@dataclass(frozen=True)
+class _Evidence:
+    squared: np.ndarray  # (N,) |r_i|^2, px^2
+    offset_px: np.ndarray  # (N,) f / z_v for a part on the body, 0 for one on the ground: px per metre of offset
+    share: float  # c_v
+
+
+def evidence(images: Iterable[Image], results: Iterable[ImageResult]) -> list[_Evidence]:
+    """Each fitted vehicle's residuals with what the model expects of them; vehicles with keypoints or plates, with too
+    few redundant clicks, or not fitted are left out."""
+    out = []
+    for image, result in zip(images, results, strict=True):
+        focal = 0.5 * float(image.camera.K[0, 0] + image.camera.K[1, 1])
+        for v in result.vehicles:
+            if not v.ok or v.residuals_px is None or v.solver is None or v.solver.residual_dof is None:
+                continue
+            labels = v.click_labels or ()
+            if not labels or any(vocabulary.soft(label) for label in labels):
+                continue
+            dof = float(v.solver.residual_dof)
+            r = np.asarray(v.residuals_px, dtype=float)
+            if dof < MIN_VEHICLE_DOF or len(r) != len(labels):
+                continue
+            depth = max(float(np.asarray(v.t_cam_vehicle, dtype=float)[2]), 0.5)
+            on_body = np.array([vocabulary.on_body(label) for label in labels], dtype=float)
+            out.append(_Evidence(np.sum(r**2, axis=1), on_body * focal / depth, dof / (2 * len(r))))
+    return out
+
+
+def estimate_placement(items: list[_Evidence]) -> PartPlacement | None:
+    """The maximum-likelihood click noise and part offset of the module's docstring, or None with fewer than
+    ``MIN_DOF`` degrees of freedom. The click noise is solved for each offset (its likelihood equation has one
+    root), the offset by a golden-section search of the profile likelihood over its logarithm."""
+    dof = sum(2 * e.share * len(e.squared) for e in items)
+    if dof < MIN_DOF:
+        return None
+    squared = np.concatenate([e.squared for e in items])
+    offset2 = np.concatenate([e.offset_px for e in items]) ** 2
+    twice_share = 2.0 * np.concatenate([np.full(len(e.squared), e.share) for e in items])
+
+    def nll(log_s2: float, log_p2: float) -> float:
+        v = math.exp(log_s2) + offset2 * math.exp(log_p2)
+        return float(np.sum(np.log(v) + squared / (twice_share * v)))
+
+    def best_sigma(log_p2: float) -> float:
+        """The log sigma^2 where the likelihood's derivative over sigma^2 vanishes, for this offset."""
+        p2 = math.exp(log_p2)
+
+        def slope(log_s2: float) -> float:
+            v = math.exp(log_s2) + offset2 * p2
+            return float(np.sum((1.0 - squared / (twice_share * v)) / v))
+
+        lo, hi = 2 * math.log(SIGMA_BOUNDS[0]), 2 * math.log(SIGMA_BOUNDS[1])
+        if slope(lo) >= 0:
+            return lo
+        if slope(hi) <= 0:
+            return hi
+        while hi - lo > 1e-9:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if slope(mid) < 0 else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    def profile(log_p2: float) -> float:
+        return nll(best_sigma(log_p2), log_p2)
+
+    a, b = 2 * math.log(PART_SIGMA_BOUNDS[0]), 2 * math.log(PART_SIGMA_BOUNDS[1])
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - golden * (b - a), a + golden * (b - a)
+    fc, fd = profile(c), profile(d)
+    while b - a > 1e-6:
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - golden * (b - a)
+            fc = profile(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + golden * (b - a)
+            fd = profile(d)
+    log_p2 = 0.5 * (a + b)
+    sigma = math.exp(0.5 * best_sigma(log_p2))
+    part = math.exp(0.5 * log_p2)
+    return PartPlacement(sigma, KAPPA * part, part, dof, len(items))
