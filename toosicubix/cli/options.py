@@ -361,12 +361,14 @@ def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[flo
 
 
 def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimate_click_sigma: bool,
-                        estimate_road_normal: bool, shown: Path | None = None, ground: Any = None) -> Any:
+                        estimate_road_normal: bool, shown: Path | None = None, ground: Any = None,
+                        estimate_part_sigma: bool | None = None) -> Any:
     """What `fit` would estimate from the vehicles of the annotation file ``path`` before fitting it (the pilot,
     :func:`toosicubix.pipeline.pilot.file_estimates`), saying on stderr what is estimated (from the file named
     ``shown``, default ``path``: annotate estimates from a snapshot of its file) and what was found; None, with a
     line saying so, when nothing is asked. For the commands that fit single vehicles as `fit` fits them (annotate,
-    tune)."""
+    tune). ``estimate_part_sigma``: a batch of cuboid parts estimates how far its parts sit from the model with the
+    click noise (rule 33); None: whenever the click noise is estimated (the commands without ``--part-sigma``)."""
     from toosicubix.pipeline.pilot import file_estimates
 
     wanted = [what for what, asked in (("the click noise", estimate_click_sigma),
@@ -375,7 +377,9 @@ def announced_estimates(path: Path, priors: Any, options: SolverOptions, estimat
         click.echo(f"click noise: {options.click_sigma:g} px (given); no road normal estimated", err=True)
         return None
     click.echo(f"estimating {' and '.join(wanted)} from the vehicles of {shown or path}, as `fit` does ...", err=True)
-    findings = file_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal, ground=ground)
+    findings = file_estimates(path, priors, options, estimate_click_sigma, estimate_road_normal, ground=ground,
+                              estimate_part_sigma=estimate_click_sigma if estimate_part_sigma is None
+                              else estimate_part_sigma)
     for line in findings.describe():
         click.echo(line, err=True)
     return findings

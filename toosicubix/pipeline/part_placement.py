@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from toosicubix import vocabulary
+from toosicubix.camera import Camera
 from toosicubix.formats.results import ImageResult
-from toosicubix.model import Image
 from toosicubix.pipeline.click_noise import MIN_DOF, MIN_VEHICLE_DOF, SIGMA_BOUNDS
 
 #: The batch's sigmas use this many times the residuals' estimate of how far parts sit from the model (rule 33).
@@ -73,18 +73,23 @@ class PartPlacement:
 
 
 @dataclass(frozen=True)
-class _Evidence:
-    squared: np.ndarray  # (N,) |r_i|^2, px^2
-    offset_px: np.ndarray  # (N,) f / z_v for a part on the body, 0 for one on the ground: px per metre of offset
-    share: float  # c_v
+class Evidence:
+    """One fitted vehicle's clicks for :func:`estimate_placement`: ``squared`` (N,) ``|r_i|^2`` (px^2), ``offset_px``
+    (N,) ``f / z_v`` for a part on the body and 0 for one on the ground (pixels per metre of offset), and ``share``
+    ``c_v``, its residual degrees of freedom over its ``2 N`` pixel rows."""
+
+    squared: np.ndarray
+    offset_px: np.ndarray
+    share: float
 
 
-def evidence(images: Iterable[Image], results: Iterable[ImageResult]) -> list[_Evidence]:
-    """Each fitted vehicle's residuals with what the model expects of them; vehicles with keypoints or plates, with too
-    few redundant clicks, or not fitted are left out."""
+def evidence(cameras: Iterable[Camera], results: Iterable[ImageResult]) -> list[Evidence]:
+    """Each fitted vehicle's residuals with what the model expects of them, from image results and their images'
+    cameras (one each); vehicles with keypoints or plates, with too few redundant clicks, or not fitted are left
+    out."""
     out = []
-    for image, result in zip(images, results, strict=True):
-        focal = 0.5 * float(image.camera.K[0, 0] + image.camera.K[1, 1])
+    for camera, result in zip(cameras, results, strict=True):
+        focal = 0.5 * float(camera.K[0, 0] + camera.K[1, 1])
         for v in result.vehicles:
             if not v.ok or v.residuals_px is None or v.solver is None or v.solver.residual_dof is None:
                 continue
@@ -97,11 +102,11 @@ def evidence(images: Iterable[Image], results: Iterable[ImageResult]) -> list[_E
                 continue
             depth = max(float(np.asarray(v.t_cam_vehicle, dtype=float)[2]), 0.5)
             on_body = np.array([vocabulary.on_body(label) for label in labels], dtype=float)
-            out.append(_Evidence(np.sum(r**2, axis=1), on_body * focal / depth, dof / (2 * len(r))))
+            out.append(Evidence(np.sum(r**2, axis=1), on_body * focal / depth, dof / (2 * len(r))))
     return out
 
 
-def estimate_placement(items: list[_Evidence]) -> PartPlacement | None:
+def estimate_placement(items: list[Evidence]) -> PartPlacement | None:
     """The maximum-likelihood click noise and part offset of the module's docstring, or None with fewer than
     ``MIN_DOF`` degrees of freedom. The click noise is solved for each offset (its likelihood equation has one
     root), the offset by a golden-section search of the profile likelihood over its logarithm."""

@@ -141,7 +141,7 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
         noise = estimate_from_pilot(results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
         if estimate_parts and noise.source != "estimated":  # no keypoints tell the noise: the cuboid parts may
-            placement = estimate_placement(evidence(pilot, results))
+            placement = estimate_placement(evidence((im.camera for im in pilot), results))
             if placement is not None:
                 options = replace(options, click_sigma=placement.sigma_px, part_sigma=placement.part_sigma_m)
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
