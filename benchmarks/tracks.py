@@ -183,8 +183,8 @@ def run_row(label: str, keyframes: int, as_tracks: bool, vehicles: list, folder:
     options = AnnotatorOptions(noise_px=NOISE_PX, seed=0)
     simulated = simulate_tracks(vehicles, options, TrackOptions(keyframes, "person"))
     write_simulation(simulated, work / "annotations.json", work / "gt")
-    settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_road_normal=True, tracks=as_tracks,
-                             box_cue=box_cue)
+    settings = BatchSettings(jobs=jobs, estimate_click_sigma=True, estimate_part_sigma=True, estimate_road_normal=True,
+                             tracks=as_tracks, box_cue=box_cue)  # as `fit` fits a file (rule 33: the part placement)
     start = time.perf_counter()
     summary = fit_file(work / "annotations.json", work / "out", settings)
     seconds = time.perf_counter() - start
