@@ -241,6 +241,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     with batch_upright_sigma(row.upright_sigma_deg):
         fit_file(annotations, work / "out", BatchSettings(priors=load_priors(priors), options=options, jobs=jobs,
                                                           estimate_click_sigma=estimate_sigma, ground=ground,
+                                                          estimate_part_sigma=estimate_sigma,  # as `fit` (rule 33)
                                                           estimate_road_normal=row.batch_normal))
     seconds = time.perf_counter() - start
     n_up = np.asarray(normal, dtype=float)
