@@ -249,7 +249,9 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
     result = evaluate(load_predictions(work / "out"), ApolloCar3DGroundTruth(keypoints_path),
                       EvalOptions(classes=("Car",)))
     results = json.loads((work / "out" / "results.json").read_text())
-    noise = results.get("click_noise") or {"sigma_px": options.click_sigma, "source": "given"}
+    noise = results.get("click_noise") or (
+        {**results["part_placement"], "source": "estimated with the parts' placement (rule 33)"}
+        if "part_placement" in results else {"sigma_px": options.click_sigma, "source": "given"})
     fits = {(im["id"], v["id"]): v for im in results["images"] for v in im["vehicles"]}
     objects, few = [], []
     for m in result.matched:
