@@ -67,9 +67,11 @@ class PartPlacement:
 
     def describe(self) -> str:
         """One line for the command's summary."""
+        bounded = (" (the click noise at its lower bound: the parts' offsets explain every residual)"
+                   if self.sigma_px <= SIGMA_BOUNDS[0] * (1 + 1e-9) else "")
         return (f"click noise and part placement: {self.sigma_px:.2f} px, parts {100 * self.part_sigma_m:.1f} cm off "
-                f"the cuboid model (estimated from the residuals of {self.vehicles} pilot vehicles' cuboid parts, "
-                f"{self.dof:.0f} degrees of freedom; --click-sigma and --part-sigma set them)")
+                f"the cuboid model{bounded} (estimated from the residuals of {self.vehicles} pilot vehicles' cuboid "
+                f"parts, {self.dof:.0f} degrees of freedom; --click-sigma and --part-sigma set them)")
 
 
 @dataclass(frozen=True)
