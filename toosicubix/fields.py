@@ -167,15 +167,15 @@ def number(value: Any, file: str | Path | None, where: Where, *, low: float = -m
     FieldError
         Not a number (booleans are none), not finite, too large for a float, or out of bounds.
     """
-    expected = what + _bounds(low, high)
+    # The message is built only for a refusal: a file of a million clicks asks this of every coordinate.
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _fail(file, where, label, expected, shown(value))
+        raise _fail(file, where, label, what + _bounds(low, high), shown(value))
     try:
         result = float(value)
     except OverflowError:
-        raise _fail(file, where, label, expected, shown(value)) from None
+        raise _fail(file, where, label, what + _bounds(low, high), shown(value)) from None
     if not (math.isfinite(result) and low <= result <= high):
-        raise _fail(file, where, label, expected, shown(value))
+        raise _fail(file, where, label, what + _bounds(low, high), shown(value))
     return result
 
 
@@ -189,12 +189,11 @@ def integer(value: Any, file: str | Path | None, where: Where, *, low: int, high
     FieldError
         Not an integer (booleans are none), a float with a fraction, or out of bounds.
     """
-    expected = what + _bounds(low, high)
     found = value
     if isinstance(value, float) and integral_floats and math.isfinite(value) and value == int(value):
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise _fail(file, where, label, expected, shown(found))
+        raise _fail(file, where, label, what + _bounds(low, high), shown(found))
     return value
 
 

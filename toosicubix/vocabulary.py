@@ -323,8 +323,9 @@ def _clicks_by_label() -> dict[str, Click]:
     return out
 
 
+@lru_cache(maxsize=65536)  # a batch asks it some 200 times a vehicle; an open kind's label is a scan of templates
 def click(label: str) -> Click:
-    """What a click label stands for.
+    """What a click label stands for (a frozen :class:`Click`, cached by label).
 
     Raises
     ------

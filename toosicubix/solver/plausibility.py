@@ -45,9 +45,15 @@ def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_ca
     visible = faces_turned_to_camera(R_cam_vehicle, t_cam_vehicle, dimensions)
     if click_faces is None:
         click_faces = tuple(faces_of_click(label) for label in click_labels)
+    seen: dict[tuple[str, ...], bool] = {}  # a vehicle's clicks share a few sets of faces: each judged once
     out = []
     for label, faces in zip(click_labels, click_faces, strict=True):
-        if faces is not None and not any(visible[f] for f in faces):
+        if faces is None:
+            continue
+        shown = seen.get(faces)
+        if shown is None:
+            shown = seen[faces] = any(visible[f] for f in faces)
+        if not shown:
             out.append(label)
     return out
 
