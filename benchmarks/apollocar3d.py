@@ -128,6 +128,7 @@ class Row:
     upright_weight: str = "lambda"  # SolverOptions.upright_weight (rule 23)
     upright_sigma_deg: float | None = None  # the batch normal's upright sigma instead of road_normal's (a diagnostic)
     every_car: bool = False  # fit every car of the half, also those with fewer than 10 keypoints (a diagnostic)
+    mirror_pairs: bool = False  # positions learned with `learn-parts --mirror-pairs` (a diagnostic, rule 32's run)
 
 
 ROWS = (
@@ -135,6 +136,7 @@ ROWS = (
     Row("keypoints, --upright-weight clicks", "apollocar3d-66", batch_normal=True, upright_weight="clicks"),
     Row("keypoints, no upright term", "apollocar3d-66", batch_normal=True, upright_sigma_deg=180.0),
     Row("keypoints, every car fitted", "apollocar3d-66", batch_normal=True, every_car=True),
+    Row("keypoints, mirror pairs' positions averaged", "apollocar3d-66", batch_normal=True, mirror_pairs=True),
     Row("keypoints, car types' own priors", "apollocar3d-66", batch_normal=True, own_priors=True),
     Row("keypoints, --misfit-level 0.99", "apollocar3d-66", batch_normal=True, misfit_level=0.99),
     Row("keypoints, --road-normal none", "apollocar3d-66"),
@@ -714,9 +716,11 @@ def _names_digest(names: list[str]) -> str:
     return hashlib.sha256("\n".join(names).encode()).hexdigest()
 
 
-def learned_on(images: list, cameras, how: str, car_models: dict | None = None) -> MappingFile:
+def learned_on(images: list, cameras, how: str, car_models: dict | None = None,
+               mirror_pairs: bool = False) -> MappingFile:
     """``apollocar3d-66`` with its keypoint positions learned on ``images`` only (:func:`sorted_images`'s); with
-    ``car_models`` each car model's type gets its own prototype (:data:`OWN_PROTOTYPES`, rule 16)."""
+    ``car_models`` each car model's type gets its own prototype (:data:`OWN_PROTOTYPES`, rule 16); with
+    ``mirror_pairs`` as ``learn-parts --mirror-pairs`` learns them."""
     bundled, _ = load_mapping("apollocar3d-66")
     base = bundled.model_dump(mode="json", exclude_none=True)
     of_type = None
@@ -724,7 +728,8 @@ def learned_on(images: list, cameras, how: str, car_models: dict | None = None) 
         of_type = OWN_PROTOTYPES
         base["prototypes"] = {str(k): OWN_PROTOTYPES.get(m.type, "Car") for k, m in sorted(car_models.items())}
     K_of = {im.id: np.array(cameras.camera_for(im.file_name)["K"], dtype=float) for im in images}
-    learned, _ = learned_mapping(base, keypoint_samples(images, bundled.keypoints, K_of, of_type), 5, how, 0.5)
+    learned, _ = learned_mapping(base, keypoint_samples(images, bundled.keypoints, K_of, of_type), 5, how, 0.5,
+                                 mirror_pairs)
     return MappingFile.model_validate(learned)
 
 
@@ -826,10 +831,13 @@ def main() -> int:
         for half in halves:
             learned = None if half.bundled else learned_on(half.learn, cameras, f"{half.name} learning images")
             own = learned_on(half.learn, cameras, f"{half.name} learning images", car_models)
+            mirrored = learned_on(half.learn, cameras, f"{half.name} learning images, mirror pairs", mirror_pairs=True)
             own_priors_path = own_priors(half.learn, keypoints_path, Path(tmp) / f"{half.name}-priors.json")
             for row in rows_of:
                 if row.own_priors:
                     mapping = own
+                elif row.mirror_pairs:
+                    mapping = mirrored
                 elif row.mapping == "apollocar3d-66" and learned is not None:
                     mapping = learned
                 else:

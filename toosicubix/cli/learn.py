@@ -30,10 +30,15 @@ from toosicubix.parts.learned import CONTRADICTION_M
               show_default=True,
               help="Metres: a second pass leaves out cars whose keypoints lie farther than this (RMS) from the "
                    "first pass's positions at their ground-truth pose (poses that contradict the clicks).")
+@click.option("--mirror-pairs", is_flag=True,
+              help="Put each left/right keypoint pair (names with the words left and right swapped) at the mean of "
+                   "its two learned positions, mirrored: cars are mirror-symmetric. Each keeps its own spread. Off by "
+                   "default: on ApolloCar3D it lowered the rotation error but not every other error (benchmarks/"
+                   "decisions.md, rule 32).")
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="The mapping file to write.")
 def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Path, mapping_name: str, which: str,
-                        min_samples: int, max_offset: float, out_path: Path) -> None:
+                        min_samples: int, max_offset: float, mirror_pairs: bool, out_path: Path) -> None:
     """Learn where each keypoint sits on a vehicle, as fractions of its dimensions, with its spread.
 
     Reads an ApolloCar3D keypoint file (COCO with a 6-DoF `pose` per car), moves every labelled keypoint's ray
@@ -73,9 +78,10 @@ def learn_parts_command(keypoints: Path, car_models_path: Path, cameras_path: Pa
         samples = keypoint_samples(images, mapping.keypoints, K_of)
     except InputError as exc:
         raise BadInput(str(exc)) from None
-    document, report = learned_mapping(mapping.model_dump(mode="json", exclude_none=True), samples, min_samples,
-                               f"toosicubix learn-parts {keypoints.name} --images {which} --max-offset {max_offset:g}",
-                               max_offset)
+    how = f"toosicubix learn-parts {keypoints.name} --images {which} --max-offset {max_offset:g}" + (
+        " --mirror-pairs" if mirror_pairs else "")
+    document, report = learned_mapping(mapping.model_dump(mode="json", exclude_none=True), samples, min_samples, how,
+                                       max_offset, mirror_pairs)
     try:
         atomic_write_json(out_path, document)
     except OSError as exc:

@@ -31,6 +31,7 @@ keypoints lie more than ``max_offset`` metres RMS from their rays at the first p
 
 from __future__ import annotations
 
+import re
 from collections import defaultdict
 from dataclasses import dataclass, replace
 
@@ -53,6 +54,37 @@ CONTRADICTION_M = 0.5
 
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
+
+_SIDE_WORD = re.compile(r"(?<![A-Za-z0-9])(left|right)(?![A-Za-z0-9])", re.IGNORECASE)
+#: A position mirrored across the vehicle's midplane: ``at * MIRROR``.
+MIRROR = np.array([1.0, -1.0, 1.0])
+
+
+def mirror_name(name: str) -> str:
+    """``name`` with the words ``left`` and ``right`` swapped, each a whole word between anything but letters and digits
+    (``top_left_c_left_front_car_light`` <-> ``top_right_c_right_front_car_light``; the case of each word kept); the
+    name itself when it has neither."""
+    def swap(match: re.Match) -> str:
+        word = match.group(0)
+        other = "right" if word.lower() == "left" else "left"
+        return other.upper() if word.isupper() else other.capitalize() if word[0].isupper() else other
+
+    return _SIDE_WORD.sub(swap, name)
+
+
+def mirrored_positions(learned: dict[str, LearnedPosition]) -> dict[str, LearnedPosition]:
+    """``learned`` (name -> position) with each keypoint whose mirror partner (:func:`mirror_name`) is learned too put
+    at the mean of its own position and the partner's mirrored (a vehicle is mirror-symmetric about its midplane, on
+    which its ground-truth cuboid is centred); spreads, faces and counts stay each keypoint's own. ``learn-parts
+    --mirror-pairs``: benchmarks/decisions.md, rule 32's run, says why it is an option and not the default."""
+    out = {}
+    for name, position in learned.items():
+        partner = learned.get(mirror_name(name))
+        if partner is None or mirror_name(name) == name:
+            out[name] = position
+        else:
+            out[name] = replace(position, at=0.5 * (position.at + partner.at * MIRROR))
+    return out
 
 
 @dataclass(frozen=True)
@@ -276,18 +308,22 @@ class LearningReport:
     hiding: dict[str, tuple[int, int]]
 
 
-def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_offset: float | None = None
-                    ) -> tuple[dict, LearningReport]:
+def learned_mapping(base: dict, samples: list, min_samples: int, how: str, max_offset: float | None = None,
+                    mirror_pairs: bool = False) -> tuple[dict, LearningReport]:
     """The mapping document ``base`` with every keypoint part's position learned from ``samples``: pooled over
     prototypes in ``position``, per prototype (with at least ``min_samples`` vehicles) in ``by_prototype``; and
     what the pooled learning left out and noticed. Keypoint parts without any sample are dropped (their keypoints
-    are then counted as unused on import)."""
+    are then counted as unused on import). ``mirror_pairs``: each left/right pair's positions averaged, mirrored
+    (:func:`mirrored_positions`)."""
     pooled_samples = [replace(s, prototype="*") for s in samples]
     pooled_all, left_out = _two_passes(pooled_samples, 3, max_offset)
     pooled = pooled_all.get("*", {})
     hiding = {v: c for v, c in hidden_by_ground_truth(pooled_samples, pooled_all).items() if hides_clicks(*c)}
     report = LearningReport(len({s.vehicle for s in samples}), frozenset(left_out), hiding)
     per = learn_positions(samples, min_samples=min_samples, max_offset=max_offset)
+    if mirror_pairs:
+        pooled = mirrored_positions(pooled)
+        per = {prototype: mirrored_positions(d) for prototype, d in per.items()}
 
     def entry(p, pooled: bool = False) -> dict:
         return {"at": [round(float(v), 4) for v in p.at], "spread": [round(float(v), 4) for v in p.spread], "n": p.n,
