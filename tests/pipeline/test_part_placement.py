@@ -143,3 +143,14 @@ def test_fit_estimates_both_for_a_batch_of_cuboid_parts_unless_given(tmp_path):
     header = json.loads((tmp_path / "given" / "results.json").read_text())
     assert "part_placement" not in header and header["settings"]["part_sigma"] == 0.09
     assert header["click_noise"]["source"] == "default"
+    assert "click noise: 1.5 px (default" in out.output  # --part-sigma given: only the click noise was tried
+
+
+def test_a_batch_too_small_to_estimate_says_what_it_keeps(tmp_path):
+    out = CliRunner().invoke(main, ["fit", "samples/annotations.json", "-o", str(tmp_path / "out")])
+    assert out.exit_code == 0, out.output
+    assert ("click noise and part placement: 1.5 px, parts 9 cm off the cuboid model (defaults: the pilot's cuboid "
+            "parts give 19 degrees of freedom, 200 needed to estimate them); --click-sigma and --part-sigma set them"
+            in out.output)
+    header = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert "part_placement" not in header and header["settings"]["part_sigma"] == 0.09

@@ -218,7 +218,10 @@ def test_validate_fits_as_fit_does_with_the_batch_estimates(tmp_path):
 
 def test_validate_cli_says_what_the_pilot_estimated(tmp_path):
     result = CliRunner().invoke(main, ["validate", "samples/annotations.json"])
-    assert "click noise: 1.5 px (default" in result.output and "road normal: not estimated for 2" in result.output
+    # The sample's cuboid parts are too few to estimate the click noise and the parts' placement (rule 33): it says so.
+    assert ("click noise and part placement: 1.5 px, parts 9 cm off the cuboid model (defaults: the pilot's cuboid "
+            "parts give 19 degrees of freedom, 200 needed" in result.output)
+    assert "road normal: not estimated for 2" in result.output
     result = CliRunner().invoke(main, ["validate", "samples/annotations.json", "--road-normal", "none",
                                        "--click-sigma", "1.5"])
     assert "road normal" not in result.output and "click noise: 1.5 px (given)" in result.output

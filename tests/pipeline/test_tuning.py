@@ -169,7 +169,8 @@ def test_cli_tune_says_what_it_estimated(tmp_path):
     args = ["tune", str(annotations), "--kitti", str(gt), "--lambdas", "1", "--lambda-ps", "1", "--no-refine"]
     result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "a.json")])
     assert result.exit_code == 0, result.output
-    assert "click noise: 1.5 px (default" in result.output and "road normal: not estimated for 2" in result.output
+    assert "click noise and part placement: 1.5 px, parts 9 cm off the cuboid model (defaults:" in result.output
+    assert "road normal: not estimated for 2" in result.output
     assert json.loads((tmp_path / "a.json").read_text())["tuned"]["click_sigma"] == 1.5
     result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "b.json"), "--click-sigma", "2",
                                        "--road-normal", "none"])

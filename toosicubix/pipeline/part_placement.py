@@ -108,11 +108,24 @@ def evidence(cameras: Iterable[Camera], results: Iterable[ImageResult]) -> list[
     return out
 
 
+def evidence_dof(items: list[Evidence]) -> float:
+    """The residual degrees of freedom the vehicles ``items`` give an estimate."""
+    return sum(2 * e.share * len(e.squared) for e in items)
+
+
+def too_few(dof: float, part_sigma_m: float, sigma_px: float) -> str:
+    """The summary line of a batch of cuboid parts whose residuals are too few to estimate the click noise and the
+    parts' placement: the settings it keeps."""
+    return (f"click noise and part placement: {sigma_px:g} px, parts {100 * part_sigma_m:g} cm off the cuboid model "
+            f"(defaults: the pilot's cuboid parts give {dof:.0f} degrees of freedom, {MIN_DOF} needed to estimate "
+            f"them); --click-sigma and --part-sigma set them")
+
+
 def estimate_placement(items: list[Evidence]) -> PartPlacement | None:
     """The maximum-likelihood click noise and part offset of the module's docstring, or None with fewer than
     ``MIN_DOF`` degrees of freedom. The click noise is solved for each offset (its likelihood equation has one
     root), the offset by a golden-section search of the profile likelihood over its logarithm."""
-    dof = sum(2 * e.share * len(e.squared) for e in items)
+    dof = evidence_dof(items)
     if dof < MIN_DOF:
         return None
     squared = np.concatenate([e.squared for e in items])

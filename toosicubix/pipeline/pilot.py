@@ -17,7 +17,7 @@ from toosicubix.formats.results import ImageResult
 from toosicubix.model import GroundOverride, Image
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, stream_images
-from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence
+from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence, evidence_dof, too_few
 from toosicubix.pipeline.road_normal import (
     MIN_VEHICLES,
     RoadNormal,
@@ -53,6 +53,8 @@ class PilotFindings:
     next_clicks : how many next clicks per vehicle those results have
     part_placement : the click noise and how far the parts sit from the cuboid model, estimated from the residuals
         of a batch of cuboid parts (:mod:`toosicubix.pipeline.part_placement`), when it was; None otherwise
+    part_placement_dof : the degrees of freedom the pilot's cuboid parts gave when too few for that estimate (the
+        batch keeps its settings); None when it was made or not asked for
     """
 
     options: SolverOptions
@@ -62,6 +64,7 @@ class PilotFindings:
     results: list[ImageResult] | None = None
     next_clicks: int = 0
     part_placement: PartPlacement | None = None
+    part_placement_dof: float | None = None
 
     def header(self) -> dict[str, Any]:
         """What results.json's header (and validate's report) say about the pilot's estimates."""
@@ -79,7 +82,12 @@ class PilotFindings:
     def describe(self) -> list[str]:
         """Summary lines for ``fit`` and ``validate``: the click noise; each camera with a road normal (or one
         refused for scattered up axes), at most five; one line for the cameras with too few pilot vehicles."""
-        lines = [self.click_noise.describe() if self.part_placement is None else self.part_placement.describe()]
+        if self.part_placement is not None:
+            lines = [self.part_placement.describe()]
+        elif self.part_placement_dof is not None and self.click_noise.source == "default":
+            lines = [too_few(self.part_placement_dof, self.options.part_sigma, self.click_noise.sigma_px)]
+        else:
+            lines = [self.click_noise.describe()]
         cameras = list((self.road_normals or {}).values())
         listed = [n for n in cameras if n.spread_deg is not None]
         few = [n for n in cameras if n.spread_deg is None]
@@ -136,14 +144,17 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
                              ground=None)
     results = list(iter_fit_images(iter(pilot), n_pilot, pilot_settings, progress)) if pilot else []
     noise = ClickNoise(options.click_sigma, "given")
-    placement = None
+    placement, placement_dof = None, None
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
         options = replace(options, click_sigma=noise.sigma_px)
         if estimate_parts and noise.source != "estimated":  # no keypoints tell the noise: the cuboid parts may
-            placement = estimate_placement(evidence((im.camera for im in pilot), results))
+            items = evidence((im.camera for im in pilot), results)
+            placement = estimate_placement(items)
             if placement is not None:
                 options = replace(options, click_sigma=placement.sigma_px, part_sigma=placement.part_sigma_m)
+            else:
+                placement_dof = evidence_dof(items)
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
     # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
     # road normal that would give some images a ground block.
@@ -154,9 +165,9 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
         results = add_next_clicks(pilot, results, replace(settings, options=options, next_clicks=next_clicks))
     if normals is None:
         return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next,
-                             part_placement=placement)
+                             part_placement=placement, part_placement_dof=placement_dof)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
-                         pilot_next, placement)
+                         pilot_next, placement, placement_dof)
 
 
 def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: SolverOptions) -> bool:
