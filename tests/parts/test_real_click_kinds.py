@@ -17,11 +17,11 @@ from toosicubix.parts.learned import (
     hidden_by_ground_truth,
     learn_positions,
     learned_mapping,
-    mirror_name,
     mirrored_positions,
     seen_from,
 )
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.parts.mirror import swapped_sides
 from toosicubix.size_priors import SizePrior
 from toosicubix.solver.fit import SolverOptions, fit_vehicle
 
@@ -128,14 +128,14 @@ def test_learned_positions_of_a_synthetic_fleet_come_back():
 
 
 def test_mirror_names_swap_left_and_right_as_whole_words():
-    assert mirror_name("top_left_c_left_front_car_light") == "top_right_c_right_front_car_light"
-    assert mirror_name("top_right_c_front_glass") == "top_left_c_front_glass"
-    assert mirror_name("lamp-rear-left") == "lamp-rear-right"
-    assert mirror_name("Left mirror") == "Right mirror"
-    assert mirror_name("LEFT_DOOR") == "RIGHT_DOOR"
-    assert mirror_name("leftover_badge") == "leftover_badge"  # not a whole word: no partner
-    assert mirror_name("upright_post") == "upright_post"
-    assert mirror_name("roof") == "roof"
+    assert swapped_sides("top_left_c_left_front_car_light") == "top_right_c_right_front_car_light"
+    assert swapped_sides("top_right_c_front_glass") == "top_left_c_front_glass"
+    assert swapped_sides("lamp-rear-left") == "lamp-rear-right"
+    assert swapped_sides("Left mirror") == "Right mirror"
+    assert swapped_sides("LEFT_DOOR") == "RIGHT_DOOR"
+    assert swapped_sides("leftover_badge") == "leftover_badge"  # not a whole word: no partner
+    assert swapped_sides("upright_post") == "upright_post"
+    assert swapped_sides("roof") == "roof"
 
 
 def test_mirror_pairs_put_each_pair_at_its_mean_mirrored():

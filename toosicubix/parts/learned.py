@@ -31,12 +31,12 @@ keypoints lie more than ``max_offset`` metres RMS from their rays at the first p
 
 from __future__ import annotations
 
-import re
 from collections import defaultdict
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from toosicubix.parts.mirror import MIRROR, swapped_sides
 from toosicubix.vocabulary import FACES, faces_seen_from
 
 #: ``seen_from`` covers at least this share of the vehicles a keypoint was labelled on.
@@ -55,35 +55,17 @@ CONTRADICTION_M = 0.5
 #: The smallest spread reported (fractions of a dimension): a keypoint is never known better than this.
 MIN_SPREAD = 0.005
 
-_SIDE_WORD = re.compile(r"(?<![A-Za-z0-9])(left|right)(?![A-Za-z0-9])", re.IGNORECASE)
-#: A position mirrored across the vehicle's midplane: ``at * MIRROR``.
-MIRROR = np.array([1.0, -1.0, 1.0])
-
-
-def mirror_name(name: str) -> str:
-    """``name`` with the words ``left`` and ``right`` swapped, each a whole word between anything but letters and digits
-    (``top_left_c_left_front_car_light`` <-> ``top_right_c_right_front_car_light``; the case of each word kept); the
-    name itself when it has neither."""
-    def swap(match: re.Match) -> str:
-        word = match.group(0)
-        other = "right" if word.lower() == "left" else "left"
-        return other.upper() if word.isupper() else other.capitalize() if word[0].isupper() else other
-
-    return _SIDE_WORD.sub(swap, name)
-
-
 def mirrored_positions(learned: dict[str, LearnedPosition]) -> dict[str, LearnedPosition]:
-    """``learned`` (name -> position) with each keypoint whose mirror partner (:func:`mirror_name`) is learned too put
-    at the mean of its own position and the partner's mirrored (a vehicle is mirror-symmetric about its midplane, on
-    which its ground-truth cuboid is centred); spreads, faces and counts stay each keypoint's own. ``learn-parts
-    --mirror-pairs``: benchmarks/decisions.md, rule 32's run, says why it is an option and not the default."""
+    """``learned`` (name -> position) with each keypoint whose mirror partner is learned too (the name with its left and
+    right swapped, :func:`toosicubix.parts.mirror.swapped_sides`) put at the mean of its own position and the
+    partner's mirrored (a vehicle is mirror-symmetric about its midplane, on which its ground-truth cuboid is centred);
+    spreads, faces and counts stay each keypoint's own. ``learn-parts --mirror-pairs``: benchmarks/decisions.md, rule
+    32's run, says why it is an option and not the default."""
     out = {}
     for name, position in learned.items():
-        partner = learned.get(mirror_name(name))
-        if partner is None or mirror_name(name) == name:
-            out[name] = position
-        else:
-            out[name] = replace(position, at=0.5 * (position.at + partner.at * MIRROR))
+        other = swapped_sides(name)
+        partner = learned.get(other) if other != name else None
+        out[name] = position if partner is None else replace(position, at=0.5 * (position.at + partner.at * MIRROR))
     return out
 
 
