@@ -830,9 +830,14 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for half in halves:
             learned = None if half.bundled else learned_on(half.learn, cameras, f"{half.name} learning images")
-            own = learned_on(half.learn, cameras, f"{half.name} learning images", car_models)
-            mirrored = learned_on(half.learn, cameras, f"{half.name} learning images, mirror pairs", mirror_pairs=True)
-            own_priors_path = own_priors(half.learn, keypoints_path, Path(tmp) / f"{half.name}-priors.json")
+            # Learned only for the rows that take them (the design run has neither).
+            own, own_priors_path, mirrored = None, None, None
+            if any(row.own_priors for row in rows_of):
+                own = learned_on(half.learn, cameras, f"{half.name} learning images", car_models)
+                own_priors_path = own_priors(half.learn, keypoints_path, Path(tmp) / f"{half.name}-priors.json")
+            if any(row.mirror_pairs for row in rows_of):
+                mirrored = learned_on(half.learn, cameras, f"{half.name} learning images, mirror pairs",
+                                      mirror_pairs=True)
             for row in rows_of:
                 if row.own_priors:
                     mapping = own
