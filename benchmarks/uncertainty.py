@@ -290,9 +290,8 @@ def main() -> None:
                 ("exact placement, parts in random order, as fit estimates", shuffled, defaults, True))
             for label, ground in (("size prior only", None), ("KITTI ground block", KITTI_GROUND))]
     with tempfile.TemporaryDirectory() as tmp:
-        for placement, label, ground, simulated, options, estimate in rows:
-            folder = Path(tmp) / f"{placement}-{label}".replace(" ", "-").replace(",", "").replace("(", "").replace(
-                ")", "")
+        for k, (placement, label, ground, simulated, options, estimate) in enumerate(rows):
+            folder = Path(tmp) / f"row-{k}"
             folder.mkdir()
             row = {"placement": placement, "ground": label,
                    **calibration(simulated, ground, folder, options, estimate)}
