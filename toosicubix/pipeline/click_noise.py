@@ -46,9 +46,6 @@ MIN_VEHICLE_DOF = 0.5
 #: An estimate is kept within these bounds (pixels): below, sub-pixel clicks the model's own error hides;
 #: above, clicks that are not on their parts at all.
 SIGMA_BOUNDS = (0.1, 50.0)
-#: The estimate of the scale on the keypoints' learned spreads is kept within these bounds: a hundredth of them (as
-#: good as exact) to ten times (no keypoint at its learned position).
-SPREAD_SCALE_BOUNDS = (0.01, 10.0)
 
 
 @dataclass(frozen=True)
@@ -64,9 +61,6 @@ class ClickNoise:
         the residuals lie beyond what it allows
     dof : the residuals' degrees of freedom it rests on (effective: a sum of fractional ones)
     pilot_vehicles, redundant_vehicles : vehicles fitted by the pilot; those of them whose clicks are redundant
-    sigmas_noise : when estimated, what the sigmas take (:attr:`toosicubix.solver.fit.SolverOptions.soft_noise`):
-        the click noise (pixels) and the scale on the learned spreads of greatest likelihood (the module's
-        docstring); None otherwise
     """
 
     sigma_px: float
@@ -75,15 +69,11 @@ class ClickNoise:
     dof: float = 0.0
     pilot_vehicles: int = 0
     redundant_vehicles: int = 0
-    sigmas_noise: tuple[float, float] | None = None
 
     def to_json(self) -> dict:
-        out = {"sigma_px": self.sigma_px, "source": self.source, "estimate_px": self.estimate_px,
-               "dof": self.dof, "pilot_vehicles": self.pilot_vehicles,
-               "redundant_vehicles": self.redundant_vehicles}
-        if self.sigmas_noise is not None:
-            out["sigmas"] = {"sigma_px": self.sigmas_noise[0], "spread_scale": self.sigmas_noise[1]}
-        return out
+        return {"sigma_px": self.sigma_px, "source": self.source, "estimate_px": self.estimate_px,
+                "dof": self.dof, "pilot_vehicles": self.pilot_vehicles,
+                "redundant_vehicles": self.redundant_vehicles}
 
     def describe(self) -> str:
         """One line for the command's summary."""
@@ -96,13 +86,9 @@ class ClickNoise:
                            "positions learned on these very clicks?)")
             elif self.sigma_px >= SIGMA_BOUNDS[1]:
                 bounded = " (its upper bound: are the clicks on their parts?)"
-            sigmas = "" if self.sigmas_noise is None else (
-                f"; the sigmas take {self.sigmas_noise[0]:.2f} px and {self.sigmas_noise[1]:.2f} x the learned "
-                f"spreads, what the residuals make likeliest")
             return (f"click noise: {self.sigma_px:.2f} px on top of each keypoint's learned spread{bounded}, "
                     f"estimated from the residuals of {self.redundant_vehicles} vehicles with redundant clicks "
-                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}){sigmas}; "
-                    f"--click-sigma sets it")
+                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}); --click-sigma sets it")
         if not self.redundant_vehicles:
             return (f"click noise: {self.sigma_px:g} px (default: no vehicle has redundant clicks that are all "
                     f"keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
@@ -198,67 +184,6 @@ def pooled_sigma(evidence: Iterable[Redundancy]) -> tuple[float | None, float, i
     return float(np.exp(0.5 * (lo + hi))), dof, len(items)
 
 
-def two_scale_ml(squared: np.ndarray, model2: np.ndarray, twice_share: np.ndarray,
-                 theta_bounds: tuple[float, float]) -> tuple[float, float]:
-    """The ``(sigma, theta)`` of greatest likelihood for squared residuals ``squared`` (N,) px^2 whose expectations
-    are ``twice_share (sigma^2 + theta^2 model2)``, each a scaled chi-square with two degrees of freedom: the minimum
-    of ``sum_i ln v_i + squared_i / (twice_share_i v_i)``, ``v_i = sigma^2 + theta^2 model2_i``. ``sigma`` is kept in
-    :data:`SIGMA_BOUNDS`, ``theta`` in ``theta_bounds``. For each ``theta`` the likelihood equation in ``sigma^2``
-    has one root (bisection); ``theta`` is found by a golden-section search of that profile over its logarithm.
-    Rule 33 (``model2`` a part's pixels per metre of offset, squared) and rule 34 (a keypoint's learned spread,
-    pixels, squared) use it."""
-
-    def nll(log_s2: float, log_p2: float) -> float:
-        v = math.exp(log_s2) + model2 * math.exp(log_p2)
-        return float(np.sum(np.log(v) + squared / (twice_share * v)))
-
-    def best_sigma(log_p2: float) -> float:
-        """The log sigma^2 where the likelihood's derivative over sigma^2 vanishes, for this theta."""
-        p2 = math.exp(log_p2)
-
-        def slope(log_s2: float) -> float:
-            v = math.exp(log_s2) + model2 * p2
-            return float(np.sum((1.0 - squared / (twice_share * v)) / v))
-
-        lo, hi = 2 * math.log(SIGMA_BOUNDS[0]), 2 * math.log(SIGMA_BOUNDS[1])
-        if slope(lo) >= 0:
-            return lo
-        if slope(hi) <= 0:
-            return hi
-        while hi - lo > 1e-9:
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if slope(mid) < 0 else (lo, mid)
-        return 0.5 * (lo + hi)
-
-    def profile(log_p2: float) -> float:
-        return nll(best_sigma(log_p2), log_p2)
-
-    a, b = 2 * math.log(theta_bounds[0]), 2 * math.log(theta_bounds[1])
-    golden = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - golden * (b - a), a + golden * (b - a)
-    fc, fd = profile(c), profile(d)
-    while b - a > 1e-6:
-        if fc <= fd:
-            b, d, fd = d, c, fc
-            c = b - golden * (b - a)
-            fc = profile(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + golden * (b - a)
-            fd = profile(d)
-    log_p2 = 0.5 * (a + b)
-    return math.exp(0.5 * best_sigma(log_p2)), math.exp(0.5 * log_p2)
-
-
-def sigmas_noise(evidence: list[Redundancy]) -> tuple[float, float]:
-    """The click noise and the scale on the learned spreads the sigmas take (the module's docstring, rule 34), from
-    the same evidence as :func:`pooled_sigma`."""
-    squared = np.concatenate([e.squared for e in evidence])
-    model2 = np.concatenate([e.model_px2 for e in evidence])
-    twice_share = np.concatenate([np.full(len(e.squared), e.dof / len(e.squared)) for e in evidence])
-    return two_scale_ml(squared, model2, twice_share, SPREAD_SCALE_BOUNDS)
-
-
 def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> ClickNoise:
     """The :class:`ClickNoise` of a pilot fit's image results, fitted with click noise ``pilot_sigma``."""
     evidence, pilot = [], 0
@@ -271,5 +196,4 @@ def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> C
     estimate, dof, redundant = pooled_sigma(evidence)
     if estimate is None or dof < MIN_DOF:
         return ClickNoise(pilot_sigma, "default", estimate, dof, pilot, redundant)
-    return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant,  # pooled_sigma keeps it in bounds
-                      sigmas_noise(evidence))
+    return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant)  # pooled_sigma keeps it in bounds
