@@ -17,10 +17,12 @@ from toosicubix.pipeline.click_noise import (
     MIN_DOF,
     ClickNoise,
     Redundancy,
+    clean,
     estimate_from_pilot,
     pilot_images,
     pooled_sigma,
     redundancy,
+    sigmas_noise,
 )
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.vehicle import fit_one
@@ -101,11 +103,15 @@ def test_pilot_counts_only_vehicles_with_clicks():
     assert chosen == [f"v{j}" for j in range(0, 1000, 15)]  # told of 1,000 clicked: every 3rd clicked one
 
 
-def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int) -> tuple[Vehicle, np.ndarray]:
+def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int,
+                      true_spread: float | None = None) -> tuple[Vehicle, np.ndarray]:
+    """A car of twelve keypoints learned with ``spread`` (fractions of the dimensions), which really sit
+    ``true_spread`` (default: ``spread``) from there, clicked with ``sigma_px`` of noise."""
     d, R, t = scene(rng)
     parts = []
     for n, (name, at) in enumerate(TWELVE.items()):
-        X = (np.array(at) + rng.normal(0.0, spread, 3)) * d  # where this car's keypoint really is
+        offset = rng.normal(0.0, spread if true_spread is None else true_spread, 3)
+        X = (np.array(at) + offset) * d  # where this car's keypoint really is
         uv = project(X[None], R, t) + rng.normal(0.0, sigma_px, 2)
         parts.append(Part("keypoint", name, uv, f"$.images[{k}].vehicles[0].parts[{n}]", None, np.array(at),
                           np.full(3, spread)))
@@ -149,3 +155,49 @@ def test_an_estimate_says_it_is_on_top_of_the_learned_spread():
                            "residuals of 345 vehicles")
     assert "its lower bound" in ClickNoise(0.1, "estimated", 0.1, 10632.0, 345, 345).describe()
     assert ClickNoise(0.7, "given").describe() == "click noise: 0.7 px (given)"
+
+
+def test_the_sigmas_noise_recovers_the_click_noise_and_the_scale_on_the_spreads():
+    """Rule 34: each residual's expected square is ``2 c (sigma^2 + t^2 s^2)``; the maximum-likelihood pair comes
+    back from residuals drawn so."""
+    rng = np.random.default_rng(0)
+    evidence = []
+    for _ in range(1000):
+        s = rng.uniform(0.3, 4.0, 12)  # learned spreads, pixels
+        dof = 15.0
+        coords = rng.normal(0.0, 1.0, (12, 2)) * np.sqrt((0.8**2 + (0.7 * s) ** 2) * dof / 24.0)[:, None]
+        evidence.append(Redundancy(np.sum(coords**2, axis=1), s**2, dof))
+    sigma, scale = sigmas_noise(evidence)
+    # Over 20 seeds of this draw the estimates scatter by 1.3 % (sigma) and 0.5 % (scale) about the truth, with
+    # no bias past 0.1 %: 5 % and 2 % are about four standard errors.
+    assert abs(sigma - 0.8) < 0.05 * 0.8 and abs(scale - 0.7) < 0.02 * 0.7
+
+
+@pytest.mark.parametrize(("learned", "true", "low", "high"), [(0.01, 0.005, 0.25, 0.75), (0.005, 0.01, 1.4, 2.8)])
+def test_the_pilot_tells_keypoints_that_sit_nearer_or_farther_than_learned(learned, true, low, high):
+    """Keypoints half (twice) as far from their learned positions as learned: the sigmas' scale on the spreads is
+    near 0.5 (2). Eighty cars at 12-25 m tell the scale from the click noise only roughly (the spreads' pixels vary
+    by two with the depth): over three seeds 0.36-0.60 and 1.72-2.11."""
+    rng = np.random.default_rng(0)
+    results = []
+    for k in range(80):
+        vehicle, d = _keypoint_vehicle(rng, 1.0, learned, k, true_spread=true)
+        fit = fit_one(vehicle, CAMERA, exact_prior(d), SolverOptions(robust_loss="none"))
+        results.append(ImageResult(id=str(k), K=CAMERA.K, t_cam_rect=np.zeros(3), image_size=None, vehicles=[fit]))
+    noise = estimate_from_pilot(results, 1.5)
+    assert noise.source == "estimated" and noise.sigmas_noise is not None
+    assert low < noise.sigmas_noise[1] < high, noise
+    assert noise.to_json()["sigmas"] == {"sigma_px": noise.sigmas_noise[0], "spread_scale": noise.sigmas_noise[1]}
+    assert f"the sigmas take {noise.sigmas_noise[0]:.2f} px and {noise.sigmas_noise[1]:.2f} x the learned spreads" \
+        in noise.describe()
+
+
+def test_the_sigmas_noise_leaves_out_cars_with_a_click_the_robust_loss_would_down_weight():
+    """Rule 35: at the batch's click noise 1 px, a click of spread 2 px is down-weighted by the robust loss (factor
+    below 0.5) once its squared residual passes 27 (1 + 4) = 135 px^2; its car stays out of the sigmas' estimate, the
+    moment estimate keeps it."""
+    inlier = Redundancy(np.array([130.0, 1.0]), np.array([4.0, 4.0]), 2.0)
+    outlier = Redundancy(np.array([140.0, 1.0]), np.array([4.0, 4.0]), 2.0)
+    kept = clean([inlier, outlier], 1.0)
+    assert len(kept) == 1 and kept[0] is inlier
+    assert sigmas_noise([inlier] * 50) is None  # 100 degrees of freedom: fewer than MIN_DOF

@@ -431,3 +431,35 @@ def test_two_quantities_the_clicks_fix_only_together_get_one_sentence_not_two_po
     assert sentences == ("yaw and length mostly set by the size prior: the clicks that usually fix them are there, "
                          "but they fix the yaw and the length only together (turned and stretched, the cuboid fits "
                          "them alike), and the size prior picks the pair",)
+
+
+def test_keypoints_rows_take_the_batchs_noise_only_when_given_it():
+    """Rule 34: a keypoint's weighted rows have the click noise as the fit weighs them, unless ``soft_noise``
+    ``(sigma', t)`` says its residuals are ``sigma'`` on top of ``t`` times its learned spread; parts on the cuboid
+    keep theirs. The fit's own noise given as the batch's changes nothing, bit for bit."""
+    from tests.parts.test_real_click_kinds import exact_prior, keypoint_parts
+    from tests.parts.test_real_click_kinds import scene as keypoint_scene
+    from toosicubix.solver.problem import Problem
+    from toosicubix.solver.robust import spread_px
+    from toosicubix.solver.uncertainty import analyse, row_sigmas
+
+    rng = np.random.default_rng(0)
+    d, R, t = keypoint_scene(rng)
+    wheel = Part("point", "wheel-rear-left", np.array([[300.0, 250.0]]), "wheel")
+    parts = build_parts_model([*keypoint_parts(d, R, t), wheel])
+    problem = Problem.build(parts, CAMERA, exact_prior(d), 0.1, 10.0)
+    p = np.concatenate([d, np.full(parts.n_aux, 0.3)])  # the wheel's own unknown (where its axle is)
+    same = row_sigmas(problem, R, t, p, 1.5, 0.09, (1.5, 1.0))
+    np.testing.assert_array_equal(same, row_sigmas(problem, R, t, p, 1.5, 0.09))
+    sigmas = row_sigmas(problem, R, t, p, 1.5, 0.09, (0.8, 0.5))
+    before = row_sigmas(problem, R, t, p, 1.5, 0.09)
+    s = spread_px(problem, float(np.linalg.norm(t)))
+    keypoints = np.repeat(s > 0, 2)
+    expected = 1.5 * np.sqrt((0.8**2 + (0.5 * s) ** 2) / (1.5**2 + s**2))
+    np.testing.assert_allclose(sigmas[keypoints], np.repeat(expected, 2)[keypoints], rtol=1e-12)  # algebra tier
+    np.testing.assert_array_equal(sigmas[~keypoints], before[~keypoints])  # the wheel's
+    u_same, _ = analyse(problem, R, t, p, 1.5, part_sigma=0.09, soft_noise=(1.5, 1.0))
+    u_before, _ = analyse(problem, R, t, p, 1.5, part_sigma=0.09)
+    assert u_same.yaw_deg == u_before.yaw_deg
+    u_less, _ = analyse(problem, R, t, p, 1.5, part_sigma=0.09, soft_noise=(0.8, 0.5))
+    assert u_less.yaw_deg < u_before.yaw_deg  # less noise on every keypoint row: a narrower yaw

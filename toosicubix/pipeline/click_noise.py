@@ -23,6 +23,15 @@ cuboid (tyres, light pairs, corners) are dominated by how far real parts sit fro
 which they cannot tell from the click noise: on simulated KITTI clicks with realistic placement they imply
 2.3, 2.4 and 2.9 px for a true noise of 0.5, 1 and 2 px. A batch without such vehicles, or with fewer than
 :data:`MIN_DOF` degrees of freedom, keeps the given default.
+
+The sigmas take more from the same residuals (benchmarks/decisions.md, rules 34 and 35). The moment equation holds
+the learned spreads as they are; whether they describe this batch's keypoints, the residuals tell too, since a batch
+has keypoints near and far and spreads small and large. Each click's expected squared residual is ``2 c_v (sigma'^2
++ t^2 s_i^2)``, ``c_v = dof_v / 2 N_v``, and :func:`two_scale_ml` finds the ``(sigma', t)`` of greatest likelihood
+from the vehicles none of whose clicks the batch's robust loss would down-weight (:func:`clean`: a sigma describes a
+fit whose gross outliers that loss took out, and the pilot fits without it). The fit keeps its weights (``sigma``
+and the spreads as learned); the sigmas, a sandwich covariance that is right for any weights once given the rows'
+noise, take ``(sigma', t)`` (:attr:`toosicubix.solver.fit.SolverOptions.soft_noise`).
 """
 
 from __future__ import annotations
@@ -35,6 +44,7 @@ import numpy as np
 
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.model import Image, Vehicle
+from toosicubix.solver.robust import CAUCHY_SCALE, DOWNWEIGHTED_BELOW
 from toosicubix.vocabulary import KINDS
 
 #: Vehicles the pilot fit takes at most, every k-th of the batch.
@@ -46,6 +56,12 @@ MIN_VEHICLE_DOF = 0.5
 #: An estimate is kept within these bounds (pixels): below, sub-pixel clicks the model's own error hides;
 #: above, clicks that are not on their parts at all.
 SIGMA_BOUNDS = (0.1, 50.0)
+#: The estimate of the scale on the keypoints' learned spreads is kept within these bounds: a hundredth of them (as
+#: good as exact) to ten times (no keypoint at its learned position).
+SPREAD_SCALE_BOUNDS = (0.01, 10.0)
+#: A click whose squared standardized residual passes this, the batch's robust loss would down-weight (its factor
+#: ``1 / sqrt(1 + e^2 / c^2)`` below ``DOWNWEIGHTED_BELOW``): its vehicle stays out of the sigmas' estimate (rule 35).
+DOWNWEIGHTED_E2 = CAUCHY_SCALE**2 * (1.0 / DOWNWEIGHTED_BELOW**2 - 1.0)
 
 
 @dataclass(frozen=True)
@@ -61,6 +77,9 @@ class ClickNoise:
         the residuals lie beyond what it allows
     dof : the residuals' degrees of freedom it rests on (effective: a sum of fractional ones)
     pilot_vehicles, redundant_vehicles : vehicles fitted by the pilot; those of them whose clicks are redundant
+    sigmas_noise : when estimated, what the sigmas take (:attr:`toosicubix.solver.fit.SolverOptions.soft_noise`):
+        the click noise (pixels) and the scale on the learned spreads of greatest likelihood (the module's
+        docstring); None otherwise
     """
 
     sigma_px: float
@@ -69,11 +88,15 @@ class ClickNoise:
     dof: float = 0.0
     pilot_vehicles: int = 0
     redundant_vehicles: int = 0
+    sigmas_noise: tuple[float, float] | None = None
 
     def to_json(self) -> dict:
-        return {"sigma_px": self.sigma_px, "source": self.source, "estimate_px": self.estimate_px,
-                "dof": self.dof, "pilot_vehicles": self.pilot_vehicles,
-                "redundant_vehicles": self.redundant_vehicles}
+        out = {"sigma_px": self.sigma_px, "source": self.source, "estimate_px": self.estimate_px,
+               "dof": self.dof, "pilot_vehicles": self.pilot_vehicles,
+               "redundant_vehicles": self.redundant_vehicles}
+        if self.sigmas_noise is not None:
+            out["sigmas"] = {"sigma_px": self.sigmas_noise[0], "spread_scale": self.sigmas_noise[1]}
+        return out
 
     def describe(self) -> str:
         """One line for the command's summary."""
@@ -86,9 +109,13 @@ class ClickNoise:
                            "positions learned on these very clicks?)")
             elif self.sigma_px >= SIGMA_BOUNDS[1]:
                 bounded = " (its upper bound: are the clicks on their parts?)"
+            sigmas = "" if self.sigmas_noise is None else (
+                f"; the sigmas take {self.sigmas_noise[0]:.2f} px and {self.sigmas_noise[1]:.2f} x the learned "
+                f"spreads, what the residuals make likeliest")
             return (f"click noise: {self.sigma_px:.2f} px on top of each keypoint's learned spread{bounded}, "
                     f"estimated from the residuals of {self.redundant_vehicles} vehicles with redundant clicks "
-                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}); --click-sigma sets it")
+                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}){sigmas}; "
+                    f"--click-sigma sets it")
         if not self.redundant_vehicles:
             return (f"click noise: {self.sigma_px:g} px (default: no vehicle has redundant clicks that are all "
                     f"keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
@@ -184,6 +211,76 @@ def pooled_sigma(evidence: Iterable[Redundancy]) -> tuple[float | None, float, i
     return float(np.exp(0.5 * (lo + hi))), dof, len(items)
 
 
+def two_scale_ml(squared: np.ndarray, model2: np.ndarray, twice_share: np.ndarray,
+                 theta_bounds: tuple[float, float]) -> tuple[float, float]:
+    """The ``(sigma, theta)`` of greatest likelihood for squared residuals ``squared`` (N,) px^2 whose expectations
+    are ``twice_share (sigma^2 + theta^2 model2)``, each a scaled chi-square with two degrees of freedom: the minimum
+    of ``sum_i ln v_i + squared_i / (twice_share_i v_i)``, ``v_i = sigma^2 + theta^2 model2_i``. ``sigma`` is kept in
+    :data:`SIGMA_BOUNDS`, ``theta`` in ``theta_bounds``. For each ``theta`` the likelihood equation in ``sigma^2``
+    has one root (bisection); ``theta`` is found by a golden-section search of that profile over its logarithm.
+    Rule 33 (``model2`` a part's pixels per metre of offset, squared) and rules 34 and 35 (a keypoint's learned spread,
+    pixels, squared) use it."""
+
+    def nll(log_s2: float, log_p2: float) -> float:
+        v = math.exp(log_s2) + model2 * math.exp(log_p2)
+        return float(np.sum(np.log(v) + squared / (twice_share * v)))
+
+    def best_sigma(log_p2: float) -> float:
+        """The log sigma^2 where the likelihood's derivative over sigma^2 vanishes, for this theta."""
+        p2 = math.exp(log_p2)
+
+        def slope(log_s2: float) -> float:
+            v = math.exp(log_s2) + model2 * p2
+            return float(np.sum((1.0 - squared / (twice_share * v)) / v))
+
+        lo, hi = 2 * math.log(SIGMA_BOUNDS[0]), 2 * math.log(SIGMA_BOUNDS[1])
+        if slope(lo) >= 0:
+            return lo
+        if slope(hi) <= 0:
+            return hi
+        while hi - lo > 1e-9:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if slope(mid) < 0 else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    def profile(log_p2: float) -> float:
+        return nll(best_sigma(log_p2), log_p2)
+
+    a, b = 2 * math.log(theta_bounds[0]), 2 * math.log(theta_bounds[1])
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - golden * (b - a), a + golden * (b - a)
+    fc, fd = profile(c), profile(d)
+    while b - a > 1e-6:
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - golden * (b - a)
+            fc = profile(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + golden * (b - a)
+            fd = profile(d)
+    log_p2 = 0.5 * (a + b)
+    return math.exp(0.5 * best_sigma(log_p2)), math.exp(0.5 * log_p2)
+
+
+def clean(evidence: list[Redundancy], sigma: float) -> list[Redundancy]:
+    """The vehicles none of whose clicks the batch's robust loss would down-weight at click noise ``sigma``: each
+    click's standardized residual ``|r_i|^2 / (sigma^2 + s_i^2)`` at most :data:`DOWNWEIGHTED_E2`."""
+    return [e for e in evidence if np.all(e.squared <= DOWNWEIGHTED_E2 * (sigma**2 + e.model_px2))]
+
+
+def sigmas_noise(evidence: list[Redundancy]) -> tuple[float, float] | None:
+    """The click noise and the scale on the learned spreads the sigmas take (the module's docstring, rules 34 and
+    35), from vehicles ``evidence`` (:func:`clean`'s), or None when they have fewer than :data:`MIN_DOF` degrees of
+    freedom."""
+    if sum(e.dof for e in evidence) < MIN_DOF:
+        return None
+    squared = np.concatenate([e.squared for e in evidence])
+    model2 = np.concatenate([e.model_px2 for e in evidence])
+    twice_share = np.concatenate([np.full(len(e.squared), e.dof / len(e.squared)) for e in evidence])
+    return two_scale_ml(squared, model2, twice_share, SPREAD_SCALE_BOUNDS)
+
+
 def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> ClickNoise:
     """The :class:`ClickNoise` of a pilot fit's image results, fitted with click noise ``pilot_sigma``."""
     evidence, pilot = [], 0
@@ -196,4 +293,5 @@ def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> C
     estimate, dof, redundant = pooled_sigma(evidence)
     if estimate is None or dof < MIN_DOF:
         return ClickNoise(pilot_sigma, "default", estimate, dof, pilot, redundant)
-    return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant)  # pooled_sigma keeps it in bounds
+    return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant,  # pooled_sigma keeps it in bounds
+                      sigmas_noise(clean(evidence, estimate)))

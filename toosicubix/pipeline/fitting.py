@@ -232,7 +232,7 @@ def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Prior
                                          plane_fitted, float(np.linalg.norm(t))), jv.problem.click_weights)
         shares = scale_shares(own, R, t, p)
         u, obs = analyse(own, R, t, p, options.click_sigma, max(shares, key=shares.get) if shares else None,
-                         options.part_sigma)
+                         options.part_sigma, soft_noise=options.soft_noise)
         u, test = tested(own, R, t, p, u, options)
         warnings = tuple(w for w in vehicles[k].warnings if not w.startswith(MISFIT_WARNING))
         fit = FitResult(

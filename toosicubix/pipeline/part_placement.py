@@ -23,7 +23,6 @@ estimate, and the batch keeps its settings.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -32,7 +31,7 @@ import numpy as np
 from toosicubix import vocabulary
 from toosicubix.camera import Camera
 from toosicubix.formats.results import ImageResult
-from toosicubix.pipeline.click_noise import MIN_DOF, MIN_VEHICLE_DOF, SIGMA_BOUNDS
+from toosicubix.pipeline.click_noise import MIN_DOF, MIN_VEHICLE_DOF, SIGMA_BOUNDS, two_scale_ml
 
 #: The batch's sigmas use this many times the residuals' estimate of how far parts sit from the model (rule 33).
 KAPPA = 1.0
@@ -122,55 +121,14 @@ def too_few(dof: float, part_sigma_m: float, sigma_px: float) -> str:
 
 
 def estimate_placement(items: list[Evidence]) -> PartPlacement | None:
-    """The maximum-likelihood click noise and part offset of the module's docstring, or None with fewer than
-    ``MIN_DOF`` degrees of freedom. The click noise is solved for each offset (its likelihood equation has one
-    root), the offset by a golden-section search of the profile likelihood over its logarithm."""
+    """The maximum-likelihood click noise and part offset of the module's docstring
+    (:func:`~toosicubix.pipeline.click_noise.two_scale_ml`), or None with fewer than ``MIN_DOF`` degrees of
+    freedom."""
     dof = evidence_dof(items)
     if dof < MIN_DOF:
         return None
     squared = np.concatenate([e.squared for e in items])
     offset2 = np.concatenate([e.offset_px for e in items]) ** 2
     twice_share = 2.0 * np.concatenate([np.full(len(e.squared), e.share) for e in items])
-
-    def nll(log_s2: float, log_p2: float) -> float:
-        v = math.exp(log_s2) + offset2 * math.exp(log_p2)
-        return float(np.sum(np.log(v) + squared / (twice_share * v)))
-
-    def best_sigma(log_p2: float) -> float:
-        """The log sigma^2 where the likelihood's derivative over sigma^2 vanishes, for this offset."""
-        p2 = math.exp(log_p2)
-
-        def slope(log_s2: float) -> float:
-            v = math.exp(log_s2) + offset2 * p2
-            return float(np.sum((1.0 - squared / (twice_share * v)) / v))
-
-        lo, hi = 2 * math.log(SIGMA_BOUNDS[0]), 2 * math.log(SIGMA_BOUNDS[1])
-        if slope(lo) >= 0:
-            return lo
-        if slope(hi) <= 0:
-            return hi
-        while hi - lo > 1e-9:
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if slope(mid) < 0 else (lo, mid)
-        return 0.5 * (lo + hi)
-
-    def profile(log_p2: float) -> float:
-        return nll(best_sigma(log_p2), log_p2)
-
-    a, b = 2 * math.log(PART_SIGMA_BOUNDS[0]), 2 * math.log(PART_SIGMA_BOUNDS[1])
-    golden = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - golden * (b - a), a + golden * (b - a)
-    fc, fd = profile(c), profile(d)
-    while b - a > 1e-6:
-        if fc <= fd:
-            b, d, fd = d, c, fc
-            c = b - golden * (b - a)
-            fc = profile(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + golden * (b - a)
-            fd = profile(d)
-    log_p2 = 0.5 * (a + b)
-    sigma = math.exp(0.5 * best_sigma(log_p2))
-    part = math.exp(0.5 * log_p2)
+    sigma, part = two_scale_ml(squared, offset2, twice_share, PART_SIGMA_BOUNDS)
     return PartPlacement(sigma, KAPPA * part, part, dof, len(items))

@@ -147,7 +147,7 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
     placement, placement_dof = None, None
     if estimate_click_sigma:
         noise = estimate_from_pilot(results, options.click_sigma)
-        options = replace(options, click_sigma=noise.sigma_px)
+        options = replace(options, click_sigma=noise.sigma_px, soft_noise=noise.sigmas_noise)
         if estimate_parts and noise.source != "estimated":  # no keypoints tell the noise: the cuboid parts may
             items = evidence((im.camera for im in pilot), results)
             placement = estimate_placement(items)

@@ -95,6 +95,10 @@ class SolverOptions:
         reported uncertainty includes it. The default 0.09 m makes the yaw sigmas calibrated on simulated
         clicks with realistic part placement (KITTI tracking tuning sequences 0000-0009, 1 px noise);
         0 for parts that sit exactly on a box
+    soft_noise : what the sigmas take keypoints' and plates' residuals to be, ``(sigma, scale)``: click noise
+        ``sigma`` pixels on top of ``scale`` times each one's learned spread; None: ``click_sigma`` on top of the
+        spreads as learned, as the fit weighs them. ``fit`` sets it from the batch's residuals (rules 34 and 35 of
+        benchmarks/decisions.md); only the sigmas take it, not the fit, its weights or its chi-square test
     ambiguity_sigmas : another minimum whose cost is within this many ``click_sigma^2`` of the best one
         makes the fit ambiguous
     robust_loss : 'cauchy' (reweight clicks far off the fit, :mod:`.robust`), 'none', or 'auto': Cauchy for
@@ -128,6 +132,7 @@ class SolverOptions:
     max_tilt_deg: float | None = 45.0
     click_sigma: float = 1.5
     part_sigma: float = 0.09
+    soft_noise: tuple[float, float] | None = None
     ambiguity_sigmas: float = 4.0
     robust_loss: str = "auto"
     robust_rounds: int = 5
@@ -394,7 +399,7 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     shares = scale_shares(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p)
     scale_source = max(shares, key=shares.get) if shares else None
     u, obs = analyse(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, options.click_sigma, scale_source,
-                     options.part_sigma, J_best)
+                     options.part_sigma, J_best, options.soft_noise)
     u, test = tested(problem, best.R_cam_vehicle, best.t_cam_vehicle, best.p, u, options, dof)
     if test is not None and test.misfit:
         common["warnings"] = (*warnings, test.sentence())

@@ -287,7 +287,7 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
     every = [np.arange(*r) for r, (visible, inside) in zip(rows, seen, strict=True) if visible and inside]
     now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks,
                                                  [*rows, np.concatenate(every) if every else np.empty(0, int)],
-                                                 options.click_sigma, options.part_sigma)
+                                                 options.click_sigma, options.part_sigma, options.soft_noise)
     test = fit.residual_test
     if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
         now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]

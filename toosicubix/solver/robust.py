@@ -46,15 +46,23 @@ class CauchyLoss(Loss):
         return 1.0 / (1.0 + np.asarray(s, dtype=float) / self.scale**2)
 
 
-def soft_weights(problem: Problem, depth: float, click_sigma: float) -> np.ndarray | None:
-    """The soft-term weights (N,) of a problem's clicks for a vehicle ``depth`` metres away, or None when no
-    click has a spread (only cuboid parts: their weights stay 1)."""
+def spread_px(problem: Problem, depth: float) -> np.ndarray | None:
+    """Each click's learned spread (N,) in pixels seen from ``depth`` metres (0 for cuboid parts), or None when no
+    click has one."""
     spread = problem.parts.click_spread
     if spread is None:
         return None
     metres = np.sqrt(np.mean((spread * problem.prior.mean) ** 2, axis=1))  # (N,), 0 for cuboid parts
     focal = float(np.sqrt(abs(problem.K[0, 0] * problem.K[1, 1])))
-    pixels = focal * metres / max(depth, 1e-3)
+    return focal * metres / max(depth, 1e-3)
+
+
+def soft_weights(problem: Problem, depth: float, click_sigma: float) -> np.ndarray | None:
+    """The soft-term weights (N,) of a problem's clicks for a vehicle ``depth`` metres away, or None when no
+    click has a spread (only cuboid parts: their weights stay 1)."""
+    pixels = spread_px(problem, depth)
+    if pixels is None:
+        return None
     return click_sigma / np.sqrt(click_sigma**2 + pixels**2)
 
 

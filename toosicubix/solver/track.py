@@ -473,7 +473,8 @@ class _TrackProblem:
                 return False
         return True
 
-    def whitened(self, state: tuple, click_sigma: float, part_sigma: float) -> BlockArrow:
+    def whitened(self, state: tuple, click_sigma: float, part_sigma: float,
+                 soft_noise: tuple[float, float] | None = None) -> BlockArrow:
         """The information matrix: the rows' Jacobians over their noise (pixel rows over
         :func:`.uncertainty.row_sigmas`, every other row standardized)."""
         R, t, shared, own = state
@@ -483,7 +484,7 @@ class _TrackProblem:
             r, J_frame, J_border, N2 = self._frame_rows(f, R[f], t[f], p, True)
             scale = np.full(len(r), 1.0 / self.w)
             if N2:  # weighted pixel rows over their noise (a keypoint's weight already carries its spread)
-                scale[:N2] = 1.0 / row_sigmas(self.problems[f], R[f], t[f], p, click_sigma, part_sigma)
+                scale[:N2] = 1.0 / row_sigmas(self.problems[f], R[f], t[f], p, click_sigma, part_sigma, soft_noise)
             self._add(system, scale * r, [(f, scale[:, None] * J_frame)], scale[:, None] * J_border)
         J_border = np.zeros((3, self.n_shared))
         J_border[:, :3] = self.prior_sqrt_information
@@ -768,7 +769,7 @@ def fit_track(frames: list[TrackFrame], prior: SizePrior, options: SolverOptions
     _, _, shares = problem.evaluate(state, False)
     marginals = None
     try:
-        marginals = problem.whitened(state, options.click_sigma, options.part_sigma).marginals()
+        marginals = problem.whitened(state, options.click_sigma, options.part_sigma, options.soft_noise).marginals()
     except NotPositiveDefinite:
         pass
     out = []

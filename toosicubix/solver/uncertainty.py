@@ -45,6 +45,7 @@ from toosicubix.parts.linear import PartsModel
 from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_clicks
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
+from toosicubix.solver.robust import spread_px
 from toosicubix.vocabulary import KINDS
 
 #: A vehicle's clicks are all on one end when each sits at least this fraction of its length from the middle, all on
@@ -252,20 +253,33 @@ def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
 
 
 def row_sigmas(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-               part_sigma: float = 0.0) -> np.ndarray:
+               part_sigma: float = 0.0, soft_noise: tuple[float, float] | None = None) -> np.ndarray:
     """The noise of each pixel row, (2N,): the click noise and, for a part ``part_sigma`` metres off where
     the cuboid model puts it, that offset seen from the camera, ``f part_sigma / z`` pixels at depth ``z``
     (at least 0.5 m). Arrows get the click noise only: where on the ground one is drawn is an unknown of the
-    fit, not an error."""
+    fit, not an error.
+
+    Keypoints and plates carry their own spread in their weights (:mod:`.robust`): their weighted rows have the
+    click noise alone, as the fit weighs them. ``soft_noise`` ``(sigma', t)`` says their residuals are rather
+    ``sigma'`` pixels on top of ``t`` times the learned spread ``s`` (pixels at the vehicle's distance): their
+    weighted rows then have ``click_sigma sqrt(sigma'^2 + t^2 s^2) / sqrt(click_sigma^2 + s^2)``
+    (:attr:`.fit.SolverOptions.soft_noise`)."""
+    labels = problem.parts.click_labels
     if part_sigma <= 0.0:
-        return np.full(2 * problem.parts.n_clicks, float(click_sigma))
-    z = np.maximum(problem.points_cam(R, t, p)[:, 2], 0.5)
-    f = 0.5 * (problem.K[0, 0] + problem.K[1, 1])
-    # Keypoints and plates carry their own spread in their weights (:mod:`.robust`): their weighted rows have the
-    # click noise alone.
-    on_body = np.array([vocabulary.on_body(label) and not vocabulary.soft(label)
-                        for label in problem.parts.click_labels])
-    return np.repeat(np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2), 2)
+        sigmas = np.full(len(labels), float(click_sigma))
+    else:
+        z = np.maximum(problem.points_cam(R, t, p)[:, 2], 0.5)
+        f = 0.5 * (problem.K[0, 0] + problem.K[1, 1])
+        on_body = np.array([vocabulary.on_body(label) and not vocabulary.soft(label) for label in labels])
+        sigmas = np.sqrt(click_sigma**2 + on_body * (f * part_sigma / z) ** 2)
+    if soft_noise is not None:
+        s = spread_px(problem, float(np.linalg.norm(t)))
+        if s is not None:
+            soft = np.array([vocabulary.soft(label) for label in labels])
+            sigma, scale = soft_noise
+            ratio = np.sqrt((sigma**2 + (scale * s) ** 2) / (click_sigma**2 + s**2))
+            sigmas = np.where(soft, click_sigma * ratio, sigmas)
+    return np.repeat(sigmas, 2)
 
 
 def _sandwich(J_px: np.ndarray, J_cue: np.ndarray, lam: float | np.ndarray, sigmas: np.ndarray) -> np.ndarray:
@@ -320,7 +334,8 @@ def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: f
 def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
                                     base_params: np.ndarray, n_base_clicks: int,
                                     added: list[tuple[int, int] | np.ndarray], click_sigma: float,
-                                    part_sigma: float = 0.0) -> tuple[Uncertainty, list[Uncertainty]]:
+                                    part_sigma: float = 0.0, soft_noise: tuple[float, float] | None = None
+                                    ) -> tuple[Uncertainty, list[Uncertainty]]:
     """The uncertainty of a fit, and of the same fit with each of some candidate annotations added, from one
     Jacobian of a model that holds them all (:mod:`toosicubix.solver.guidance`).
 
@@ -330,14 +345,14 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     R, t, p : the pose (3, 3), (3,) and every parameter (P,) of that model
     base_params : (P0,) indices in ``p`` of the fit's own parameters, in its own order
     added : per candidate, its click indices ``[first, last)``, or an array of them (several candidates at once)
-    click_sigma, part_sigma : as :func:`row_sigmas`
+    click_sigma, part_sigma, soft_noise : as :func:`row_sigmas`
 
     Returns
     -------
     now : the fit's uncertainty; with : per candidate, with it clicked (its own new unknowns included)
     """
     J_px, J_cue = jacobians(problem, R, t, p)
-    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
+    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma, soft_noise)
     G = ypr_gradient(R)
     A = problem.parts.A
     base_rows = np.arange(2 * n_base_clicks)
@@ -411,13 +426,13 @@ def uncertainty_from_covariance(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -
 
 
 def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click_sigma: float,
-            scale_from: str | None = None, part_sigma: float = 0.0,
-            J: np.ndarray | None = None) -> tuple[Uncertainty, Observability]:
+            scale_from: str | None = None, part_sigma: float = 0.0, J: np.ndarray | None = None,
+            soft_noise: tuple[float, float] | None = None) -> tuple[Uncertainty, Observability]:
     """Uncertainty and observability of a fit together (one Jacobian, one yaw-pitch-roll gradient); ``J`` as in
-    :func:`jacobians`."""
+    :func:`jacobians`, the rows' noise as :func:`row_sigmas` gives it."""
     J_px, J_c = jacobians(problem, R, t, p, J)
     C = J_c.T @ J_c
-    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
+    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma, soft_noise)
     G = ypr_gradient(R)
     u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     gradients = _gradients(problem, R, t, p, G)
