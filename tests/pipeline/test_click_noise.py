@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,3 +202,20 @@ def test_the_sigmas_noise_leaves_out_cars_with_a_click_the_robust_loss_would_dow
     kept = clean([inlier, outlier], 1.0)
     assert len(kept) == 1 and kept[0] is inlier
     assert sigmas_noise([inlier] * 50) is None  # 100 degrees of freedom: fewer than MIN_DOF
+
+
+def test_validate_says_what_the_keypoints_sigmas_took():
+    """With rule 35's estimate, validate's summary names the noise the keypoints' sigmas are for; without it, the
+    fit's click noise on top of each learned spread, as before."""
+    from toosicubix.pipeline.validation import Thresholds, ValidationReport, VehicleCheck
+
+    result = VehicleResult(id="v", status="ok", error=None, prototype="Car",
+                           click_labels=("keypoint-lamp-rear-left", "wheel-front-left"))
+    checks = [VehicleCheck("im", "$.images[0].vehicles[0]", result, (), ())]
+    plain = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks)
+    assert plain._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model and on top of "
+                                     "each keypoint's learned spread")
+    estimated = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks, None, (0.686, 0.877))
+    assert estimated._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model, keypoints "
+                                         "and plates 0.686 px off on top of 0.88 x their learned spread (the batch's "
+                                         "residuals)")

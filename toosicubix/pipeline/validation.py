@@ -180,6 +180,7 @@ class ValidationReport:
     thresholds: Thresholds
     vehicles: list[VehicleCheck]
     pilot: PilotFindings | None = None  # what the batch's pilot estimated (click noise, road normals), if run
+    soft_noise: tuple[float, float] | None = None  # what keypoints' and plates' sigmas take (rule 35), if estimated
 
     @property
     def ok(self) -> bool:
@@ -228,9 +229,15 @@ class ValidationReport:
         where = []
         if any(vocabulary.on_body(label) and not vocabulary.soft(label) for label in labels):
             where.append(f"on parts {self.part_sigma:g} m off the cuboid model")
-        if any(vocabulary.soft(label) for label in labels):
+        soft = any(vocabulary.soft(label) for label in labels)
+        if soft and self.soft_noise is None:
             where.append("on top of each keypoint's learned spread")
-        return " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
+        phrase = " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
+        if soft and self.soft_noise is not None:
+            sigma, scale = self.soft_noise
+            phrase += (f"{',' if where else ''} keypoints and plates {sigma:.3g} px off on top of {scale:.2g} x their "
+                       f"learned spread (the batch's residuals)")
+        return phrase
 
 
 def describe(check: VehicleCheck) -> str:
@@ -314,4 +321,5 @@ def validate_file(annotations: str | Path, settings: BatchSettings | None = None
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
-    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot)
+    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot,
+                            options.soft_noise)
