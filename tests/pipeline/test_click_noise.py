@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -188,9 +189,12 @@ def test_the_pilot_tells_keypoints_that_sit_nearer_or_farther_than_learned(learn
     noise = estimate_from_pilot(results, 1.5)
     assert noise.source == "estimated" and noise.sigmas_noise is not None
     assert low < noise.sigmas_noise[1] < high, noise
-    assert noise.to_json()["sigmas"] == {"sigma_px": noise.sigmas_noise[0], "spread_scale": noise.sigmas_noise[1]}
-    assert f"the sigmas take {noise.sigmas_noise[0]:.2f} px and {noise.sigmas_noise[1]:.2f} x the learned spreads" \
-        in noise.describe()
+    assert 0 < noise.clean_vehicles <= 80
+    assert noise.to_json()["sigmas"] == {"sigma_px": noise.sigmas_noise[0], "spread_scale": noise.sigmas_noise[1],
+                                         "vehicles": noise.clean_vehicles}
+    assert (f"the sigmas take {noise.sigmas_noise[0]:.2f} px on top of {noise.sigmas_noise[1]:.2f} x each learned "
+            f"spread, the likeliest for the {noise.clean_vehicles} of them without a click the robust loss would "
+            f"down-weight; --click-sigma sets both") in noise.describe()
 
 
 def test_the_sigmas_noise_leaves_out_cars_with_a_click_the_robust_loss_would_down_weight():
@@ -219,3 +223,8 @@ def test_validate_says_what_the_keypoints_sigmas_took():
     assert estimated._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model, keypoints "
                                          "and plates 0.686 px off on top of 0.88 x their learned spread (the batch's "
                                          "residuals)")
+    keypoints_only = [VehicleCheck("im", "$.images[0].vehicles[0]", replace(result, click_labels=(
+        "keypoint-lamp-rear-left",)), (), ())]
+    alone = ValidationReport(Path("a.json"), 0.39, 0.09, Thresholds(), keypoints_only, None, (0.513, 0.841))
+    assert alone._noise_phrase() == ("for keypoints and plates 0.513 px off on top of 0.84 x their learned spread (the "
+                                     "batch's residuals)")

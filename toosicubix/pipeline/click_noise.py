@@ -77,6 +77,8 @@ class ClickNoise:
         the residuals lie beyond what it allows
     dof : the residuals' degrees of freedom it rests on (effective: a sum of fractional ones)
     pilot_vehicles, redundant_vehicles : vehicles fitted by the pilot; those of them whose clicks are redundant
+    clean_vehicles : how many of the redundant vehicles have no click the robust loss would down-weight
+        (:func:`clean`), which ``sigmas_noise`` is estimated from
     sigmas_noise : when estimated, what the sigmas take (:attr:`toosicubix.solver.fit.SolverOptions.soft_noise`):
         the click noise (pixels) and the scale on the learned spreads of greatest likelihood (the module's
         docstring); None otherwise
@@ -89,13 +91,15 @@ class ClickNoise:
     pilot_vehicles: int = 0
     redundant_vehicles: int = 0
     sigmas_noise: tuple[float, float] | None = None
+    clean_vehicles: int = 0
 
     def to_json(self) -> dict:
         out = {"sigma_px": self.sigma_px, "source": self.source, "estimate_px": self.estimate_px,
                "dof": self.dof, "pilot_vehicles": self.pilot_vehicles,
                "redundant_vehicles": self.redundant_vehicles}
         if self.sigmas_noise is not None:
-            out["sigmas"] = {"sigma_px": self.sigmas_noise[0], "spread_scale": self.sigmas_noise[1]}
+            out["sigmas"] = {"sigma_px": self.sigmas_noise[0], "spread_scale": self.sigmas_noise[1],
+                             "vehicles": self.clean_vehicles}
         return out
 
     def describe(self) -> str:
@@ -110,12 +114,13 @@ class ClickNoise:
             elif self.sigma_px >= SIGMA_BOUNDS[1]:
                 bounded = " (its upper bound: are the clicks on their parts?)"
             sigmas = "" if self.sigmas_noise is None else (
-                f"; the sigmas take {self.sigmas_noise[0]:.2f} px and {self.sigmas_noise[1]:.2f} x the learned "
-                f"spreads, what the residuals make likeliest")
+                f"; the sigmas take {self.sigmas_noise[0]:.2f} px on top of {self.sigmas_noise[1]:.2f} x each "
+                f"learned spread, the likeliest for the {self.clean_vehicles} of them without a click the robust "
+                f"loss would down-weight")
+            given = "--click-sigma sets it" if self.sigmas_noise is None else "--click-sigma sets both"
             return (f"click noise: {self.sigma_px:.2f} px on top of each keypoint's learned spread{bounded}, "
                     f"estimated from the residuals of {self.redundant_vehicles} vehicles with redundant clicks "
-                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}){sigmas}; "
-                    f"--click-sigma sets it")
+                    f"({self.dof:.0f} degrees of freedom; pilot fit of {self.pilot_vehicles}){sigmas}; {given}")
         if not self.redundant_vehicles:
             return (f"click noise: {self.sigma_px:g} px (default: no vehicle has redundant clicks that are all "
                     f"keypoints or plates, the clicks whose residuals tell the noise); --click-sigma sets it")
@@ -293,5 +298,6 @@ def estimate_from_pilot(results: Iterable[ImageResult], pilot_sigma: float) -> C
     estimate, dof, redundant = pooled_sigma(evidence)
     if estimate is None or dof < MIN_DOF:
         return ClickNoise(pilot_sigma, "default", estimate, dof, pilot, redundant)
+    kept = clean(evidence, estimate)
     return ClickNoise(estimate, "estimated", estimate, dof, pilot, redundant,  # pooled_sigma keeps it in bounds
-                      sigmas_noise(clean(evidence, estimate)))
+                      sigmas_noise(kept), len(kept))

@@ -224,20 +224,25 @@ class ValidationReport:
 
     def _noise_phrase(self) -> str:
         """What the sigmas were computed for: the click noise, on cuboid parts ``part_sigma`` off the model, and on
-        keypoints and plates on top of their learned spread (whichever of the two the file's vehicles have)."""
+        keypoints and plates on top of their learned spread, or what the batch's residuals said of those (rule 35)
+        (whichever of the two kinds the file's vehicles have)."""
         labels = {label for v in self.vehicles for label in v.result.click_labels}
-        where = []
-        if any(vocabulary.on_body(label) and not vocabulary.soft(label) for label in labels):
-            where.append(f"on parts {self.part_sigma:g} m off the cuboid model")
+        cuboid = any(vocabulary.on_body(label) and not vocabulary.soft(label) for label in labels)
         soft = any(vocabulary.soft(label) for label in labels)
-        if soft and self.soft_noise is None:
-            where.append("on top of each keypoint's learned spread")
-        phrase = " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
         if soft and self.soft_noise is not None:
             sigma, scale = self.soft_noise
-            phrase += (f"{',' if where else ''} keypoints and plates {sigma:.3g} px off on top of {scale:.2g} x their "
-                       f"learned spread (the batch's residuals)")
-        return phrase
+            keypoints = (f"keypoints and plates {sigma:.3g} px off on top of {scale:.2g} x their learned spread (the "
+                         f"batch's residuals)")
+            if not cuboid:
+                return f"for {keypoints}"
+            return (f"for clicks off by {self.click_sigma:.3g} px on parts {self.part_sigma:g} m off the cuboid model, "
+                    f"{keypoints}")
+        where = []
+        if cuboid:
+            where.append(f"on parts {self.part_sigma:g} m off the cuboid model")
+        if soft:
+            where.append("on top of each keypoint's learned spread")
+        return " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
 
 
 def describe(check: VehicleCheck) -> str:
