@@ -142,3 +142,29 @@ def test_validate_tells_a_car_clicked_on_its_rear_to_click_toward_the_front(tmp_
     assert result.output.count(told) == 3
     firsts = [line for line in result.output.splitlines() if line.startswith("    1. ")]
     assert len(firsts) == 3 and all(line.endswith("[toward the far end: fixes yaw and length]") for line in firsts)
+
+
+def test_the_batchs_keypoint_noise_leaves_the_ranking_and_rescales_the_sigmas(keypoint_file):
+    """Rule 35: the sigmas take the batch's estimate of the keypoints' noise, the guidance ranks as the fit weighs the
+    clicks (the estimate reordered the guided keypoints on ApolloCar3D and left their E_R worse). The suggestions come
+    in the same order, with their sigmas scaled as the fit's own."""
+    from toosicubix.annotations.priors_file import load_priors
+    from toosicubix.annotations.stream import index_annotations
+    from toosicubix.pipeline.fitting import stream_images
+    from toosicubix.pipeline.vehicle import fit_one
+
+    image = next(stream_images(index_annotations(keypoint_file), None))
+    vehicle = image.vehicles[0]
+    priors = load_priors()
+    candidates = _mapping().keypoint_candidates(vehicle.prototype)
+    plain = fit_one(vehicle, image.camera, priors[vehicle.prototype], SolverOptions(), next_clicks=8,
+                    keypoints=candidates)
+    noisy = fit_one(vehicle, image.camera, priors[vehicle.prototype], SolverOptions(soft_noise=(0.5, 0.7)),
+                    next_clicks=8, keypoints=candidates)
+    np.testing.assert_array_equal(noisy.R_cam_vehicle, plain.R_cam_vehicle)  # the same fit
+    assert noisy.sigma.yaw_deg < plain.sigma.yaw_deg  # less noise on its rows
+    assert len(plain.next_clicks) == 8
+    assert [s["name"] for s in noisy.next_clicks] == [s["name"] for s in plain.next_clicks]
+    ratio = noisy.sigma.yaw_deg / plain.sigma.yaw_deg
+    for a, b in zip(noisy.next_clicks, plain.next_clicks, strict=True):
+        assert a["yaw_sigma_deg"] == pytest.approx(ratio * b["yaw_sigma_deg"], rel=1e-9)  # rounding only

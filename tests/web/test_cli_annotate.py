@@ -208,7 +208,8 @@ def test_a_ground_option_gives_the_road_and_nothing_is_said_of_estimating_it(mon
     session, said = _served_session(monkeypatch, str(image), "--cameras", str(cameras), "--kitti-ground", "-o",
                                     str(tmp_path / "a.json"))
     assert "the road as the ground options give it" in said and "no road normal" not in said
-    assert "the page estimates the click noise as `fit` does" in said
+    assert ("the page estimates the click noise (for cuboid parts with how far they sit from the cuboid model) as "
+            "`fit` does") in said
     assert session.image_view(0)["vehicles"] == [] and session.images[0].ground is not None
 
 

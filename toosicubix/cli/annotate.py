@@ -204,8 +204,9 @@ def _batch_settings(out: Path, priors, click_sigma: float | None, estimate_road:
                        estimate_road_normal=estimate_road, shown=out)  # picklable: run in a worker process too
     if not out.is_file():
         source = "given" if click_sigma is not None else "default: no file yet to estimate it from"
+        noise = "the click noise (for cuboid parts with how far they sit from the cuboid model)"
         what = ("the road normal" if click_sigma is not None else
-                "the click noise and the road normal" if estimate_road else "the click noise")
+                f"{noise} and the road normal" if estimate_road else noise)
         road = "no road normal estimated yet; " if estimate_road else "the road as the ground options give it; "
         click.echo(f"click noise: {options.click_sigma:g} px ({source}); {road}the page estimates {what} as `fit` "
                    f"does once the file has {MIN_VEHICLES} vehicles, and again as they double", err=True)

@@ -285,12 +285,17 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
         inside = size is None or bool(np.all((part.uv >= 0) & (part.uv <= np.array(size) - 1)))
         seen.append((visible, inside))
     every = [np.arange(*r) for r, (visible, inside) in zip(rows, seen, strict=True) if visible and inside]
+    # Ranked with the rows' noise as the fit weighs them, not the batch's estimate its sigmas take (rule 35): on
+    # ApolloCar3D's comparison half that estimate reordered the guided keypoints of a quarter of the cars and left
+    # their E_R worse (benchmarks/decisions.md, rule 35's section); the sigmas it reports are rescaled below.
     now, added = uncertainties_with_added_clicks(problem, R, t, p, base_params, base.n_clicks,
                                                  [*rows, np.concatenate(every) if every else np.empty(0, int)],
-                                                 options.click_sigma, options.part_sigma, options.soft_noise)
+                                                 options.click_sigma, options.part_sigma)
     test = fit.residual_test
     if test is not None and test.misfit:  # as the fit's own sigmas: widened by its residuals (:mod:`.misfit`)
         now, added = now.widened(test.ratio), [u.widened(test.ratio) for u in added]
+    if options.soft_noise is not None and not tracked and fit.uncertainty is not None:
+        now, added = fit.uncertainty, [_rescaled(u, now, fit.uncertainty) for u in added]
     if tracked:
         added = [_on_track(u, now, fit.uncertainty) for u in added]
         now = fit.uncertainty
@@ -311,6 +316,18 @@ def guide(parts: tuple[Part, ...], camera: Camera, prior: SizePrior, fit: Fitted
                               now.yaw_deg - u.yaw_deg, now.depth_rel - u.depth_rel, score, share, far))
     out.sort(key=lambda s: (not (s.visible and s.inside), not s.far_end, -s.expected_score))
     return Guidance(out, reachable)
+
+
+def _rescaled(after: Uncertainty, now: Uncertainty, fitted: Uncertainty) -> Uncertainty:
+    """A candidate's sigmas ``after`` computed with the rows' noise as the fit weighs them, as the fit's own sigmas
+    take them: yaw and depth scaled by the fit's sigma (``fitted``, with the batch's estimated noise) over ``now``
+    (the fit's sigma with the weights' noise), each where both are finite and positive, else as they are."""
+    def ratio(a: float, b: float) -> float:
+        return a / b if math.isfinite(a) and math.isfinite(b) and a > 0.0 and b > 0.0 else 1.0
+
+    r_yaw, r_depth = ratio(fitted.yaw_deg, now.yaw_deg), ratio(fitted.depth_rel, now.depth_rel)
+    return replace(after, yaw_deg=after.yaw_deg * r_yaw, depth_rel=after.depth_rel * r_depth,
+                   depth_m=after.depth_m * r_depth)
 
 
 def _on_track(after: Uncertainty, alone: Uncertainty, track: Uncertainty) -> Uncertainty:
