@@ -146,7 +146,7 @@ def test_validate_tells_a_car_clicked_on_its_rear_to_click_toward_the_front(tmp_
 
 def test_the_batchs_keypoint_noise_leaves_the_ranking_and_rescales_the_sigmas(keypoint_file):
     """Rule 35: the sigmas take the batch's estimate of the keypoints' noise, the guidance ranks as the fit weighs the
-    clicks (the estimate reordered the guided keypoints on ApolloCar3D and left their E_R worse). The suggestions come
+    clicks (the estimate changed ApolloCar3D's guided order and left its E_R a little worse). The suggestions come
     in the same order, with their sigmas scaled as the fit's own."""
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.annotations.stream import index_annotations
