@@ -211,6 +211,7 @@ def test_the_sigmas_noise_leaves_out_cars_with_a_click_the_robust_loss_would_dow
 def test_validate_says_what_the_keypoints_sigmas_took():
     """With rule 35's estimate, validate's summary names the noise the keypoints' sigmas are for; without it, the
     fit's click noise on top of each learned spread, as before."""
+    from toosicubix.pipeline.pilot import PilotFindings
     from toosicubix.pipeline.validation import Thresholds, ValidationReport, VehicleCheck
 
     result = VehicleResult(id="v", status="ok", error=None, prototype="Car",
@@ -219,12 +220,15 @@ def test_validate_says_what_the_keypoints_sigmas_took():
     plain = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks)
     assert plain._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model and on top of "
                                      "each keypoint's learned spread")
-    estimated = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks, None, (0.686, 0.877))
+    def pilot(soft_noise):
+        return PilotFindings(SolverOptions(soft_noise=soft_noise), ClickNoise(0.95, "estimated", 0.95, 500.0, 50, 50))
+
+    estimated = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks, pilot((0.686, 0.877)))
     assert estimated._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model, keypoints "
                                          "and plates 0.686 px off on top of 0.88 x their learned spread (the batch's "
                                          "residuals)")
     keypoints_only = [VehicleCheck("im", "$.images[0].vehicles[0]", replace(result, click_labels=(
         "keypoint-lamp-rear-left",)), (), ())]
-    alone = ValidationReport(Path("a.json"), 0.39, 0.09, Thresholds(), keypoints_only, None, (0.513, 0.841))
+    alone = ValidationReport(Path("a.json"), 0.39, 0.09, Thresholds(), keypoints_only, pilot((0.513, 0.841)))
     assert alone._noise_phrase() == ("for keypoints and plates 0.513 px off on top of 0.84 x their learned spread (the "
                                      "batch's residuals)")

@@ -180,7 +180,11 @@ class ValidationReport:
     thresholds: Thresholds
     vehicles: list[VehicleCheck]
     pilot: PilotFindings | None = None  # what the batch's pilot estimated (click noise, road normals), if run
-    soft_noise: tuple[float, float] | None = None  # what keypoints' and plates' sigmas take (rule 35), if estimated
+
+    @property
+    def soft_noise(self) -> tuple[float, float] | None:
+        """What keypoints' and plates' sigmas took (rule 35), when the pilot estimated it."""
+        return None if self.pilot is None else self.pilot.options.soft_noise
 
     @property
     def ok(self) -> bool:
@@ -326,5 +330,4 @@ def validate_file(annotations: str | Path, settings: BatchSettings | None = None
     checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
               for im, res in zip(for_checks, results, strict=True)
               for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
-    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot,
-                            options.soft_noise)
+    return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot)

@@ -334,8 +334,7 @@ def uncertainty_from_jacobians(J_px: np.ndarray, J_cue: np.ndarray, lambda_px: f
 def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
                                     base_params: np.ndarray, n_base_clicks: int,
                                     added: list[tuple[int, int] | np.ndarray], click_sigma: float,
-                                    part_sigma: float = 0.0, soft_noise: tuple[float, float] | None = None
-                                    ) -> tuple[Uncertainty, list[Uncertainty]]:
+                                    part_sigma: float = 0.0) -> tuple[Uncertainty, list[Uncertainty]]:
     """The uncertainty of a fit, and of the same fit with each of some candidate annotations added, from one
     Jacobian of a model that holds them all (:mod:`toosicubix.solver.guidance`).
 
@@ -345,14 +344,14 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
     R, t, p : the pose (3, 3), (3,) and every parameter (P,) of that model
     base_params : (P0,) indices in ``p`` of the fit's own parameters, in its own order
     added : per candidate, its click indices ``[first, last)``, or an array of them (several candidates at once)
-    click_sigma, part_sigma, soft_noise : as :func:`row_sigmas`
+    click_sigma, part_sigma : as :func:`row_sigmas`
 
     Returns
     -------
     now : the fit's uncertainty; with : per candidate, with it clicked (its own new unknowns included)
     """
     J_px, J_cue = jacobians(problem, R, t, p)
-    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma, soft_noise)
+    sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma)
     G = ypr_gradient(R)
     A = problem.parts.A
     base_rows = np.arange(2 * n_base_clicks)
