@@ -29,3 +29,12 @@ def shared_data() -> Path:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(0)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_refinement():
+    """The compiled refinement loaded (compiled once on a fresh checkout) before any test runs, so that no command a
+    test runs says "compiling ..." on stderr or waits for it."""
+    from toosicubix.solver.compiled import warm_up
+
+    warm_up()

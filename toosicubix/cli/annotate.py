@@ -107,6 +107,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     from toosicubix.annotations.priors_file import load_priors
     from toosicubix.errors import InputFileError
     from toosicubix.pipeline.settings import ground_overrides
+    from toosicubix.solver.compiled import warm_up
     from toosicubix.solver.track import TrackOptions
     from toosicubix.web.request_fields import ApiError
     from toosicubix.web.server import serve
@@ -128,6 +129,7 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
         options, road_grounds, estimate = _batch_settings(out, priors, click_sigma, estimate_road)
     except (InputFileError, ApiError) as exc:
         raise BadInput(str(exc)) from None
+    warm_up(lambda text: click.echo(text, err=True))  # before the first refit, which would otherwise wait for it
     # The estimates again as the file grows: in a worker process, not competing with the page's requests.
     with WorkerProcess(estimate) as worker:
         try:

@@ -68,7 +68,9 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
     from dataclasses import replace
 
     from toosicubix.pipeline.batch import fit_file
+    from toosicubix.solver.compiled import warm_up
 
+    warm_up(None if quiet else lambda text: click.echo(text, err=True))  # not in the middle of the progress bar
     bar = ProgressBar(quiet)
     try:
         summary = fit_file(annotations, out_dir, replace(settings, next_clicks=next_clicks, keypoints=mapping),

@@ -68,6 +68,7 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     from toosicubix.pipeline.pilot import on_estimated_roads
     from toosicubix.pipeline.settings import ground_overrides, settings_document, write_settings_file
     from toosicubix.pipeline.tuning import tune
+    from toosicubix.solver.compiled import warm_up
     from toosicubix.solver.fit import SolverOptions
 
     grid_l, grid_p = float_list(lambdas, "--lambdas"), float_list(lambda_ps, "--lambda-ps")
@@ -78,6 +79,7 @@ def tune_command(annotations: Path, ground_truth: GroundTruth, config_out: Path,
     source = open_ground_truth(ground_truth.kind, ground_truth.root)
     n = sum(len(im.vehicles) for im in images)
     base = SolverOptions() if click_sigma is None else replace(SolverOptions(), click_sigma=click_sigma)
+    warm_up(lambda text: click.echo(text, err=True))
     ground = ground_overrides(normal=normal)
     images = with_ground(images, ground)  # every image upright on a given road, as `fit --road-normal x,y,z` fits
     findings = announced_estimates(annotations, priors, base, click_sigma is None, road == "estimate", ground=ground)

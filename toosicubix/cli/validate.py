@@ -70,8 +70,10 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     from dataclasses import replace
 
     from toosicubix.pipeline.validation import validate_file
+    from toosicubix.solver.compiled import warm_up
 
     thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous, reach_factor)
+    warm_up(None if quiet else lambda text: click.echo(text, err=True))  # not in the middle of the progress bar
     bar = ProgressBar(quiet)
     try:
         report = validate_file(annotations, replace(settings, next_clicks=next_clicks, keypoints=mapping), thresholds,

@@ -1,0 +1,158 @@
+"""The refinement's Levenberg-Marquardt (:mod:`.lm` on :class:`.refine.RefineProblem`) compiled with numba, every
+number computed as the numpy path computes it.
+
+The numpy path spends its time in Python around some hundred small array operations an iteration; the arithmetic is
+microseconds. This module runs the same loop as compiled code and reproduces each operation's rounding, so that a
+fit is the same to the last bit whichever path ran it (issue 37 asks for results unchanged):
+
+- elementwise arithmetic in the same order (IEEE operations round the same everywhere; no fused multiply-adds, which
+  numba emits only under ``fastmath``);
+- every matrix product through the very BLAS call numpy makes for it (numpy's own OpenBLAS, with the same
+  transposes, and the same special cases: numpy turns a product with one row into ``gemv`` or ``dot``, ``A^T A`` into
+  ``syrk``, and a product it cannot hand to BLAS into a plain loop);
+- every ``einsum`` as numpy's loops sum: a reduction over two contiguous operands with a scalar output in numpy's
+  two-lane SIMD loop (blocks of eight, the block's vectors last to first, then pairs, then the lanes added), any other
+  in order;
+- the damped solve through the same LAPACK ``dposv`` that ``scipy.linalg.lapack`` calls; the cube in Nielsen's damping
+  through numpy's own ``power`` (its SIMD ``pow`` rounds unlike the C library's);
+- the SO(3) exponential as ``cv2.Rodrigues`` computes it, operation for operation.
+
+Whether a machine's libraries round as this module assumes is checked, not assumed: the first refinement in a process
+runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt_compiled`);
+otherwise, or without numba, or with a numpy not built on OpenBLAS, the numpy path runs and the results are the same.
+Batches of more than :data:`MAX_STARTS` starts take the numpy path.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+from toosicubix.solver import lm
+
+log = logging.getLogger(__name__)
+
+#: Batches up to this many starts (``cv2.Rodrigues`` per start in :func:`toosicubix.geometry.so3_exp`).
+MAX_STARTS = 8
+#: Set to "0" to run the numpy path only (the results are the same; a benchmark's comparison, or a machine whose
+#: numba misbehaves).
+ENVIRONMENT_SWITCH = "TOOSICUBIX_COMPILED"
+
+_kernel = None  # the kernel module once loaded, False when it cannot be
+_off = 0  # nesting depth of numpy_path_only()
+_checked: bool | None = None  # None: not yet compared with the numpy path in this process
+
+
+def available() -> bool:
+    """Whether the compiled path can run here (not switched off; numba, numpy's OpenBLAS and scipy's LAPACK found)."""
+    global _kernel
+    if _kernel is None:
+        _kernel = False
+        if os.environ.get(ENVIRONMENT_SWITCH, "1") != "0":
+            from toosicubix.solver import refine_kernel
+
+            if refine_kernel.LOADED:
+                _kernel = refine_kernel
+    return _kernel is not False
+
+
+#: What :func:`warm_up` says before it compiles (the code is cached afterwards, so once per installation and version).
+COMPILING = ("compiling the solver's refinement for this machine (numba, once per installation: about 20 s; "
+             "the results are the same as without it)")
+
+
+def warm_up(say: Callable[[str], None] | None = None) -> bool:
+    """Load the compiled refinement now, compiling it when no cached copy exists (``say`` is told :data:`COMPILING`
+    first), so that no fit waits for it later: the commands call this before their first fit. Returns whether the
+    compiled path is available."""
+    if not available():
+        return False
+    if say is not None and not _cached(_kernel.lm):
+        say(COMPILING)
+    _kernel.warm_up()
+    return True
+
+
+def _cached(dispatcher) -> bool:
+    """Whether numba has this function compiled on disk (its cache index; True when that cannot be told)."""
+    try:
+        return bool(dispatcher._cache._cache_file._load_index())
+    except Exception:  # numba's cache internals moved: say nothing rather than something wrong
+        return True
+
+
+@contextmanager
+def numpy_path_only() -> Iterator[None]:
+    """Within this block every refinement takes the numpy path (tests and benchmarks compare the two with it)."""
+    global _off
+    _off += 1
+    try:
+        yield
+    finally:
+        _off -= 1
+
+
+def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
+    """:func:`.lm.levenberg_marquardt` of a :class:`.refine.RefineProblem` from ``state`` (after its ``start``),
+    compiled; None when this refinement takes the numpy path (see the module docstring).
+
+    The first refinement in a process runs both paths and compares every number of their results; the compiled path
+    is kept only when they agree bit for bit, and that first comparison's result is the numpy path's either way."""
+    global _checked
+    if _off or _checked is False or len(state[0]) > MAX_STARTS or not available():
+        return None
+    result = _run(refine, state, options)
+    if _checked is None:
+        reference = lm.levenberg_marquardt(refine, state, options)
+        _checked = _same(result, reference)
+        if not _checked:
+            log.warning("the compiled refinement does not reproduce the numpy path's numbers on this machine; the "
+                        "numpy path runs instead (the results are the same, only slower)")
+        return reference
+    return result
+
+
+def _run(refine, state, options):
+    started = time.perf_counter()
+    problem = refine.problem
+    R, t, p, pivot = (np.array(a, dtype=float) for a in state)
+    weights = problem.pixel_row_weights
+    n_up = 0 if problem.upright_sigma is None else 3
+    K = problem.K
+    P = problem.parts.n_params
+    out = _kernel.lm(
+        R, t, p, pivot, _c(problem.A), _c(problem.A_rows), _c(problem.A_mean), _c(problem.uv),
+        np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], dtype=float), float(np.sqrt(problem.lambda_px)),
+        _c(problem.G), _c(problem.b), _c(problem.scale_rows_jacobian), bool(problem.scale_rows_see_t),
+        _c(problem.up), n_up, float(problem.upright_weight) if n_up else 0.0,
+        np.ones(1) if weights is None else _c(weights), weights is not None,
+        _c(problem.arrow_mid).reshape(-1, 3, P), _c(problem.arrow_low), _c(problem.arrow_high),
+        float(refine.min_up), np.ascontiguousarray(refine.may_tilt, dtype=np.bool_), _c(refine.size),
+        int(options.max_iterations), float(options.gradient_tolerance**2), float(options.step_tolerance),
+        float(options.cost_tolerance), float(options.initial_damping),
+        math.nan if options.abandon_factor is None else float(options.abandon_factor), int(options.abandon_after),
+        math.inf if options.abandon_above is None else float(options.abandon_above),
+        options.abandon_factor is not None or options.abandon_above is not None)
+    R, t, p, cost, initial_cost, iterations, status = out
+    return lm.LMResult((R, t, p, pivot), cost, initial_cost, iterations, tuple(lm.STATUS_NAMES[s] for s in status),
+                       time.perf_counter() - started)
+
+
+def _c(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
+
+
+def _same(a, b) -> bool:
+    """Whether two :class:`.lm.LMResult` agree to the last bit (NaNs where the other has NaNs)."""
+    pairs = [*zip(a.state[:3], b.state[:3], strict=True), (a.cost, b.cost), (a.initial_cost, b.initial_cost),
+             (a.iterations, b.iterations)]
+    return a.stopped == b.stopped and all(
+        x.shape == y.shape and np.array_equal(x.view(np.uint8) if x.dtype == float else x,
+                                              y.view(np.uint8) if y.dtype == float else y)
+        for x, y in ((np.ascontiguousarray(x), np.ascontiguousarray(y)) for x, y in pairs))
