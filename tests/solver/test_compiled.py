@@ -168,3 +168,34 @@ def test_warm_up_says_when_it_compiles(monkeypatch):
     monkeypatch.setattr(compiled, "_cached", lambda dispatcher: True)
     assert compiled.warm_up(said.append)
     assert said == []
+
+
+def test_an_error_of_the_compiled_code_turns_it_off(monkeypatch):
+    rng = np.random.default_rng(2)
+    s, problem = _refine_problem(rng, False)
+    refine = RefineProblem(problem, None)
+    state = refine.start(s.R_cam_vehicle[None], s.t_cam_vehicle[None], s.p_true[None])
+
+    def broken(*args):
+        raise RuntimeError("a fault")
+
+    monkeypatch.setattr(compiled, "_run", broken)
+    monkeypatch.setattr(compiled, "_checked", True)
+    assert compiled.levenberg_marquardt(refine, state, lm.LMOptions()) is None
+    assert compiled._checked is False
+
+
+def test_warm_up_that_fails_leaves_the_numpy_path(monkeypatch):
+    available = compiled.available()
+
+    class Broken:
+        lm = None
+
+        @staticmethod
+        def warm_up():
+            raise RuntimeError("no compiler")
+
+    monkeypatch.setattr(compiled, "_kernel", Broken)
+    monkeypatch.setattr(compiled, "_cached", lambda dispatcher: True)
+    assert available and not compiled.warm_up()
+    assert not compiled.available()

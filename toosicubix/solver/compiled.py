@@ -18,7 +18,7 @@ fit is the same to the last bit whichever path ran it (issue 37 asks for results
 - the SO(3) exponential as ``cv2.Rodrigues`` computes it, operation for operation.
 
 Whether a machine's libraries round as this module assumes is checked, not assumed: the first refinement in a process
-runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt_compiled`);
+runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt`);
 otherwise, or without numba, or with a numpy not built on OpenBLAS, the numpy path runs and the results are the same.
 Batches of more than :data:`MAX_STARTS` starts take the numpy path.
 """
@@ -73,9 +73,16 @@ def warm_up(say: Callable[[str], None] | None = None) -> bool:
     compiled path is available."""
     if not available():
         return False
+    global _kernel
     if say is not None and not _cached(_kernel.lm):
         say(COMPILING)
-    _kernel.warm_up()
+    try:
+        _kernel.warm_up()
+    except Exception as exc:  # numba cannot compile it here: the numpy path refines, with the same results
+        log.warning("the compiled refinement could not be loaded (%s: %s); the numpy path runs instead (the same "
+                    "results, only slower)", type(exc).__name__, exc)
+        _kernel = False
+        return False
     return True
 
 
@@ -103,11 +110,18 @@ def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
     compiled; None when this refinement takes the numpy path (see the module docstring).
 
     The first refinement in a process runs both paths and compares every number of their results; the compiled path
-    is kept only when they agree bit for bit, and that first comparison's result is the numpy path's either way."""
+    is kept only when they agree bit for bit, and that first comparison's result is the numpy path's either way. An
+    error of the compiled code turns it off for the process, and the numpy path refines."""
     global _checked
     if _off or _checked is False or len(state[0]) > MAX_STARTS or not available():
         return None
-    result = _run(refine, state, options)
+    try:
+        result = _run(refine, state, options)
+    except Exception as exc:  # a fault of the compiled code must cost speed, never a fit
+        _checked = False
+        log.warning("the compiled refinement failed (%s: %s); the numpy path runs instead (the same results, only "
+                    "slower)", type(exc).__name__, exc)
+        return None
     if _checked is None:
         reference = lm.levenberg_marquardt(refine, state, options)
         _checked = _same(result, reference)
