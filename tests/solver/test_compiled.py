@@ -189,7 +189,7 @@ def test_warm_up_that_fails_leaves_the_numpy_path(monkeypatch):
     available = compiled.available()
 
     class Broken:
-        lm = None
+        lm = solve_shapes = costs_3d = None
 
         @staticmethod
         def warm_up():
@@ -199,3 +199,33 @@ def test_warm_up_that_fails_leaves_the_numpy_path(monkeypatch):
     monkeypatch.setattr(compiled, "_cached", lambda dispatcher: True)
     assert available and not compiled.warm_up()
     assert not compiled.available()
+
+
+@pytest.mark.parametrize("view", sorted(VIEW_YAW))
+def test_the_descents_shape_step_and_3d_cost_are_the_same_to_the_last_bit(view, monkeypatch):
+    # Every call compared (not only the first of the process), on the paper's parts and on 70 keypoints (140 pixel
+    # rows: numpy's pairwise sum splits above 128 numbers).
+    from toosicubix.solver.descent import costs_3d, solve_shapes
+
+    compared = []
+
+    def every_call(name, result, reference):
+        expected = reference()
+        compared.append(name)
+        assert _bits(result) == _bits(expected), name
+        return expected
+
+    monkeypatch.setattr(compiled, "_first_checked", every_call)
+    rng = np.random.default_rng(5)
+    s = random_scene(rng, view)
+    problems = [Problem.build(s.model, CAMERA, CAR, 0.1, 10.0, None, 0.0),
+                Problem.build(s.model, CAMERA, CAR, 0.1, 10.0, GROUND, 20.0)]
+    d, R, t = scene(rng)
+    many = {f"k{i}": (*rng.uniform(-0.5, 0.5, 2), rng.uniform(0.0, 1.0)) for i in range(70)}
+    problems.append(Problem.build(build_parts_model(keypoint_parts(d, R, t, many)), CAMERA, exact_prior(d), 0.1, 10.0))
+    for problem in problems:
+        for starts in (1, 3, 12):
+            rotations = np.array([s.R_cam_vehicle @ _rotation(w) for w in rng.normal(0.0, 0.3, (starts, 3))])
+            p, t_ = solve_shapes(problem, rotations)
+            costs_3d(problem, rotations, t_, p)
+    assert compared.count("shapes") == compared.count("costs") == 9

@@ -74,7 +74,7 @@ def warm_up(say: Callable[[str], None] | None = None) -> bool:
     if not available():
         return False
     global _kernel
-    if say is not None and not _cached(_kernel.lm):
+    if say is not None and not all(_cached(f) for f in (_kernel.lm, _kernel.solve_shapes, _kernel.costs_3d)):
         say(COMPILING)
     try:
         _kernel.warm_up()
@@ -170,3 +170,54 @@ def _same(a, b) -> bool:
         x.shape == y.shape and np.array_equal(x.view(np.uint8) if x.dtype == float else x,
                                               y.view(np.uint8) if y.dtype == float else y)
         for x, y in ((np.ascontiguousarray(x), np.ascontiguousarray(y)) for x, y in pairs))
+
+
+# --- coordinate descent's shape step and 3D cost ----------------------------------------------------------------------
+
+_descent_checked: dict[str, bool] = {}  # per function: whether its first call agreed with numpy's to the last bit
+
+
+def solve_shapes(A: np.ndarray, M: np.ndarray, R_cam_vehicle: np.ndarray, prior_normal: np.ndarray, rhs: np.ndarray,
+                 numpy_shapes: Callable[[], np.ndarray]) -> np.ndarray | None:
+    """:func:`.descent.solve_shapes`' solution ``x`` (S, P + 3), compiled; None when numpy computes it (compiled path
+    off, a singular system, or this function's first call in the process disagreeing with ``numpy_shapes()``)."""
+    if _off or _descent_checked.get("shapes") is False or not available():
+        return None
+    x = _guarded(lambda: _kernel.solve_shapes(_c(R_cam_vehicle), _c(A), _c(M), _c(prior_normal), _c(rhs)))
+    if x is None or not len(x):
+        return None
+    return _first_checked("shapes", x, numpy_shapes)
+
+
+def costs_3d(problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
+             numpy_costs: Callable[[], np.ndarray]) -> np.ndarray | None:
+    """:func:`.descent.costs_3d`, compiled; None when numpy computes it (as :func:`solve_shapes`)."""
+    if _off or _descent_checked.get("costs") is False or not available():
+        return None
+    out = _guarded(lambda: _kernel.costs_3d(_c(R_cam_vehicle), _c(t_cam_vehicle), _c(p), _c(problem.A_rows),
+                                            _c(problem.u), _c(problem.G), _c(problem.b), float(problem.lambda_3d)))
+    return None if out is None else _first_checked("costs", out, numpy_costs)
+
+
+def _guarded(compute):
+    try:
+        return compute()
+    except Exception as exc:  # a fault of the compiled code must cost speed, never a fit
+        log.warning("the compiled descent failed (%s: %s); the numpy path runs instead (the same results, only "
+                    "slower)", type(exc).__name__, exc)
+        _descent_checked["shapes"] = _descent_checked["costs"] = False
+        return None
+
+
+def _first_checked(name: str, result: np.ndarray, reference: Callable[[], np.ndarray]) -> np.ndarray:
+    """``result``, after the first call of ``name`` in the process compared it with ``reference()`` bit for bit (the
+    reference is returned then, and the compiled path is off for ``name`` if they differ)."""
+    if name in _descent_checked:
+        return result
+    expected = reference()
+    _descent_checked[name] = bool(result.shape == expected.shape and np.array_equal(
+        np.ascontiguousarray(result).view(np.uint8), np.ascontiguousarray(expected).view(np.uint8)))
+    if not _descent_checked[name]:
+        log.warning("the compiled descent does not reproduce the numpy path's numbers on this machine; the numpy path "
+                    "runs instead (the results are the same, only slower)")
+    return expected

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from toosicubix.solver import compiled
 from toosicubix.solver.problem import Problem
 
 #: Memory for the normal matrices (and ``M_i R``) of the starts the shape step solves together, bytes.
@@ -56,18 +57,29 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     p : (S, P), t_cam_vehicle : (S, 3)
     """
     A, u = problem.A, problem.u
-    N, _, P = A.shape
-    S = len(R_cam_vehicle)
+    P = A.shape[2]
     # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
     w = np.sqrt(problem.lambda_3d)
     prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
     prior_rhs = w * problem.b
     prior_normal = prior_rows.T @ prior_rows
     M = _translation_block(u)  # (N, 2, 3): M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t
+    rhs = prior_rows.T @ prior_rhs
+    x = compiled.solve_shapes(A, M, R_cam_vehicle, prior_normal, rhs,
+                              lambda: _shapes_numpy(A, M, R_cam_vehicle, prior_normal, rhs))
+    if x is None:
+        x = _shapes_numpy(A, M, R_cam_vehicle, prior_normal, rhs)
+    return x[:, :P], x[:, P:]
+
+
+def _shapes_numpy(A: np.ndarray, M: np.ndarray, R_cam_vehicle: np.ndarray, prior_normal: np.ndarray,
+                  rhs: np.ndarray) -> np.ndarray:
+    """:func:`solve_shapes`' solutions (S, P + 3) in numpy."""
+    N, _, P = A.shape
+    S = len(R_cam_vehicle)
     design = np.empty((N, 2, P + 3))
     design[..., P:] = M
     rows = design.reshape(2 * N, P + 3)  # the design matrix of one start (a view: filled per start below)
-    rhs = prior_rows.T @ prior_rhs
     x = np.empty((S, P + 3))
     # One design matrix at a time: that of every start at once, (S, 2N, P + 3), would grow with the starts
     # times the square of the clicks (each symmetric pair or arrow adds two clicks and two unknowns). Their
@@ -76,7 +88,7 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     for first in range(0, S, chunk):
         x[first:first + chunk] = _solve_normal_equations(
             M @ R_cam_vehicle[first:first + chunk, None], A, design, rows, prior_normal, rhs)
-    return x[:, :P], x[:, P:]
+    return x
 
 
 def _solve_normal_equations(MR: np.ndarray, A: np.ndarray, design: np.ndarray, rows: np.ndarray,
@@ -117,6 +129,13 @@ def solve_shape(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarray
 
 def costs_3d(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
     """The 3D cost of several poses at once: ``R`` (S, 3, 3), ``t`` (S, 3), ``p`` (S, P) -> (S,)."""
+    out = compiled.costs_3d(problem, R_cam_vehicle, t_cam_vehicle, p,
+                            lambda: _costs_numpy(problem, R_cam_vehicle, t_cam_vehicle, p))
+    return _costs_numpy(problem, R_cam_vehicle, t_cam_vehicle, p) if out is None else out
+
+
+def _costs_numpy(problem: Problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """:func:`costs_3d` in numpy."""
     X = problem.points_vehicle_batch(p)  # (S, N, 3) vehicle frame
     Y = np.einsum("sij,snj->sni", R_cam_vehicle, X) + t_cam_vehicle[:, None, :]
     e = Y[..., :2] - problem.u[None, :, :2] * Y[..., 2:3]

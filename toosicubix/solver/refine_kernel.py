@@ -41,6 +41,7 @@ def _load():
         for ours, theirs in _BLAS.items():
             llvm.add_symbol(ours, ctypes.cast(getattr(blas, theirs), ctypes.c_void_p).value)
         llvm.add_symbol("toosicubix_dposv", get_cython_function_address("scipy.linalg.cython_lapack", "dposv"))
+        llvm.add_symbol("toosicubix_dgesv", ctypes.cast(blas.scipy_dgesv_64_, ctypes.c_void_p).value)
     except (OSError, AttributeError, ValueError) as exc:
         log.debug("compiled refinement off: %s", exc)
         return None
@@ -73,6 +74,7 @@ if LOADED:
                                                                    _f64, _ptr, _i64))
     _dot = types.ExternalFunction("toosicubix_ddot", _f64(_i64, _ptr, _i64, _ptr, _i64))
     _posv = types.ExternalFunction("toosicubix_dposv", types.void(_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr))
+    _gesv = types.ExternalFunction("toosicubix_dgesv", types.void(_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr))
     njit = numba.njit(cache=True)
 
     # --- numpy's reductions --------------------------------------------------------------------------------------
@@ -725,9 +727,111 @@ if LOADED:
         return R, t, p, cost, initial_cost, iterations, status
 
 
+if LOADED:
+
+    # --- coordinate descent's shape step and 3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`) ----
+
+    @njit
+    def _pairwise(a, n):
+        """``np.add.reduce`` of ``a[:n]`` (contiguous): numpy's pairwise sum (eight partial sums per block of 128,
+        halves above that)."""
+        if n < 8:
+            res = 0.0
+            for i in range(n):
+                res += a[i]
+            return res
+        if n <= 128:
+            r = a[:8].copy()
+            i = 8
+            while i < n - (n % 8):
+                for j in range(8):
+                    r[j] += a[i + j]
+                i += 8
+            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+            while i < n:
+                res += a[i]
+                i += 1
+            return res
+        half = n // 2
+        half -= half % 8
+        return _pairwise(a, half) + _pairwise(a[half:], n - half)
+
+    @njit
+    def solve_shapes(R, A, M, prior_normal, rhs):
+        """The shape step's ``(p, t)`` (S, P + 3) of S rotations, or an empty array when a system is singular (numpy
+        raises there): ``M_i R`` per click, ``[M_i R A_i, M_i]`` stacked, its normal matrix plus the prior's with
+        numpy's ridge, solved by ``dgesv`` as ``np.linalg.solve`` does."""
+        S = R.shape[0]
+        N, _, P = A.shape
+        n = P + 3
+        design = np.zeros((N, 2, n))
+        for i in range(N):
+            for row in range(2):
+                for j in range(3):
+                    design[i, row, P + j] = M[i, row, j]
+        MR = np.empty((N, 2, 3))
+        normal = np.empty((n, n))
+        diagonal = np.empty(n)
+        x = np.empty((S, n))
+        ipiv = np.empty(n, dtype=np.int64)
+        info = np.zeros(1, dtype=np.int64)
+        sizes = np.array([n, 1], dtype=np.int64)
+        for s in range(S):
+            for i in range(N):
+                _mm(M[i].ctypes.data, 3, R[s].ctypes.data, 3, MR[i].ctypes.data, 3, 2, 3, 3)
+            for i in range(N):
+                _mm(MR[i].ctypes.data, 3, A[i].ctypes.data, P, design[i].ctypes.data, n, 2, P, 3)
+            _syrk(_ROW_MAJOR, _UPPER, _TRANS, n, 2 * N, 1.0, design.ctypes.data, n, 0.0, normal.ctypes.data, n)
+            for i in range(n):
+                for j in range(i + 1, n):
+                    normal[j, i] = normal[i, j]
+            for i in range(n):
+                for j in range(n):
+                    normal[i, j] = normal[i, j] + prior_normal[i, j]
+            for i in range(n):
+                diagonal[i] = normal[i, i]
+            ridge = 1e-12 * _pairwise(diagonal, n) / n
+            for i in range(n):
+                normal[i, i] += ridge
+            x[s] = rhs
+            _gesv(sizes.ctypes.data, sizes.ctypes.data + 8, normal.ctypes.data, sizes.ctypes.data, ipiv.ctypes.data,
+                  x[s].ctypes.data, sizes.ctypes.data, info.ctypes.data)
+            if info[0] != 0:
+                return np.empty((0, n))
+        return x
+
+    @njit
+    def costs_3d(R, t, p, A_rows, u, G, b, lambda_3d):
+        """:func:`.descent.costs_3d`: (S,)."""
+        S, P = p.shape
+        N = A_rows.shape[0] // 3
+        m = G.shape[0]
+        X = np.empty((S, 3 * N))
+        _rows_times_t(p, S, P, A_rows.ctypes.data, P, 3 * N, X)
+        a = np.empty((S, m))
+        _scale_terms(t, p, G, a)
+        ee = np.empty(2 * N)
+        d = np.empty(m)
+        out = np.empty(S)
+        for s in range(S):
+            for i in range(N):
+                y0 = _einsum_pair(R[s, 0], X[s, 3 * i:3 * i + 3], 3) + t[s, 0]
+                y1 = _einsum_pair(R[s, 1], X[s, 3 * i:3 * i + 3], 3) + t[s, 1]
+                y2 = _einsum_pair(R[s, 2], X[s, 3 * i:3 * i + 3], 3) + t[s, 2]
+                e0 = y0 - u[i, 0] * y2
+                e1 = y1 - u[i, 1] * y2
+                ee[2 * i] = e0 * e0
+                ee[2 * i + 1] = e1 * e1
+            for i in range(m):
+                diff = a[s, i] - b[i]
+                d[i] = diff * diff
+            out[s] = _pairwise(ee, 2 * N) + lambda_3d * _pairwise(d, m)
+        return out
+
+
 def warm_up() -> None:
-    """Compile (or load from numba's cache) :func:`lm` for the argument types the refinement passes, on a cuboid's four
-    corners seen from 10 m."""
+    """Compile (or load from numba's cache) :func:`lm`, :func:`solve_shapes` and :func:`costs_3d` for the argument types
+    the solver passes, on a cuboid's four corners seen from 10 m."""
     P = 3
     A = np.zeros((4, 3, P))
     for i, (fx, fy, fz) in enumerate(((0.5, 0.5, 0.0), (-0.5, 0.5, 0.0), (-0.5, -0.5, 1.0), (0.5, -0.5, 1.0))):
@@ -745,3 +849,8 @@ def warm_up() -> None:
        np.array([700.0, 0.0, 300.0, 700.0, 300.0]), 1.0, G, np.array([4.0, 1.8, 1.5]), Gjac, False,
        np.array([0.0, -1.0, 0.0]), 0, 0.0, np.ones(1), False, np.zeros((0, 3, P)), np.zeros((0, P)), np.zeros((0, P)),
        -np.inf, np.ones(1, dtype=np.bool_), np.ones(1), 5, 1e-12, 1e-10, 1e-8, 1e-3, math.nan, 10, math.inf, False)
+    M = np.zeros((4, 2, 3))
+    M[:, 0, 0] = M[:, 1, 1] = 1.0
+    x = solve_shapes(R.copy(), A, M, np.eye(6), np.ones(6))
+    costs_3d(R.copy(), t.copy(), np.ascontiguousarray(x[:, :P]), np.ascontiguousarray(A.reshape(-1, P)),
+             np.zeros((4, 3)), G, np.array([4.0, 1.8, 1.5]), 0.1)
