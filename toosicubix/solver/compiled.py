@@ -1,5 +1,6 @@
-"""The refinement's Levenberg-Marquardt (:mod:`.lm` on :class:`.refine.RefineProblem`) compiled with numba, every
-number computed as the numpy path computes it.
+"""The refinement's Levenberg-Marquardt (:mod:`.lm` on :class:`.refine.RefineProblem`), and coordinate descent's shape
+step and 3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`), compiled with numba, every number
+computed as the numpy path computes it.
 
 The numpy path spends its time in Python around some hundred small array operations an iteration; the arithmetic is
 microseconds. This module runs the same loop as compiled code and reproduces each operation's rounding, so that a
@@ -15,7 +16,9 @@ fit is the same to the last bit whichever path ran it (issue 37 asks for results
   in order;
 - the damped solve through the same LAPACK ``dposv`` that ``scipy.linalg.lapack`` calls; the cube in Nielsen's damping
   through numpy's own ``power`` (its SIMD ``pow`` rounds unlike the C library's);
-- the SO(3) exponential as ``cv2.Rodrigues`` computes it, operation for operation.
+- the SO(3) exponential as ``cv2.Rodrigues`` computes it, operation for operation;
+- sums as ``np.add.reduce`` sums (numpy's pairwise summation), the descent's solve through the ``dgesv`` numpy's
+  ``linalg.solve`` calls.
 
 Whether a machine's libraries round as this module assumes is checked, not assumed: the first refinement in a process
 runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt`);
