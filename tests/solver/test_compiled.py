@@ -125,10 +125,10 @@ def test_the_first_refinement_falls_back_when_the_numbers_differ(monkeypatch):
         return replace(result, cost=np.nextafter(result.cost, np.inf))
 
     monkeypatch.setattr(compiled, "_run", off_by_one_bit)
-    monkeypatch.setattr(compiled, "_checked", None)
+    monkeypatch.setattr(compiled, "_agrees", {})
     first = compiled.levenberg_marquardt(refine, state, options)
     assert first is not None and compiled._same(first, lm.levenberg_marquardt(refine, state, options))
-    assert compiled._checked is False
+    assert compiled._agrees["refine"] is False
     assert compiled.levenberg_marquardt(refine, state, options) is None  # the numpy path from now on
 
 
@@ -137,7 +137,7 @@ def test_numpy_path_only_and_the_environment_switch_turn_it_off(monkeypatch):
     s, problem = _refine_problem(rng, False)
     refine = RefineProblem(problem, None)
     state = refine.start(s.R_cam_vehicle[None], s.t_cam_vehicle[None], s.p_true[None])
-    monkeypatch.setattr(compiled, "_checked", True)
+    monkeypatch.setattr(compiled, "_agrees", {"refine": True})
     assert compiled.levenberg_marquardt(refine, state, lm.LMOptions()) is not None
     with compiled.numpy_path_only():
         assert compiled.levenberg_marquardt(refine, state, lm.LMOptions()) is None
@@ -180,9 +180,9 @@ def test_an_error_of_the_compiled_code_turns_it_off(monkeypatch):
         raise RuntimeError("a fault")
 
     monkeypatch.setattr(compiled, "_run", broken)
-    monkeypatch.setattr(compiled, "_checked", True)
+    monkeypatch.setattr(compiled, "_agrees", {"refine": True})
     assert compiled.levenberg_marquardt(refine, state, lm.LMOptions()) is None
-    assert compiled._checked is False
+    assert compiled._agrees["refine"] is False
 
 
 def test_warm_up_that_fails_leaves_the_numpy_path(monkeypatch):
@@ -209,7 +209,7 @@ def test_the_descents_shape_step_and_3d_cost_are_the_same_to_the_last_bit(view, 
 
     compared = []
 
-    def every_call(name, result, reference):
+    def every_call(name, result, reference, same):
         expected = reference()
         compared.append(name)
         assert _bits(result) == _bits(expected), name

@@ -34,6 +34,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,9 @@ ENVIRONMENT_SWITCH = "TOOSICUBIX_COMPILED"
 
 _kernel = None  # the kernel module once loaded, False when it cannot be
 _off = 0  # nesting depth of numpy_path_only()
-_checked: bool | None = None  # None: not yet compared with the numpy path in this process
+#: Per compiled function ('refine', 'shapes', 'costs'): whether its first call in this process agreed with the numpy
+#: path to the last bit (absent: not called yet). False turns it off for the process, as an error of it does.
+_agrees: dict[str, bool] = {}
 
 
 def available() -> bool:
@@ -115,24 +118,12 @@ def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
     The first refinement in a process runs both paths and compares every number of their results; the compiled path
     is kept only when they agree bit for bit, and that first comparison's result is the numpy path's either way. An
     error of the compiled code turns it off for the process, and the numpy path refines."""
-    global _checked
-    if _off or _checked is False or len(state[0]) > MAX_STARTS or not available():
+    if len(state[0]) > MAX_STARTS or not _on("refine"):
         return None
-    try:
-        result = _run(refine, state, options)
-    except Exception as exc:  # a fault of the compiled code must cost speed, never a fit
-        _checked = False
-        log.warning("the compiled refinement failed (%s: %s); the numpy path runs instead (the same results, only "
-                    "slower)", type(exc).__name__, exc)
+    result = _guarded("refine", lambda: _run(refine, state, options))
+    if result is None:
         return None
-    if _checked is None:
-        reference = lm.levenberg_marquardt(refine, state, options)
-        _checked = _same(result, reference)
-        if not _checked:
-            log.warning("the compiled refinement does not reproduce the numpy path's numbers on this machine; the "
-                        "numpy path runs instead (the results are the same, only slower)")
-        return reference
-    return result
+    return _first_checked("refine", result, lambda: lm.levenberg_marquardt(refine, state, options), _same)
 
 
 def _run(refine, state, options):
@@ -165,62 +156,71 @@ def _c(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float)
 
 
+def _identical(x: np.ndarray, y: np.ndarray) -> bool:
+    """Whether two arrays hold the same bits (NaNs where the other has NaNs, zeros of the same sign)."""
+    x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
+    return x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x.view(np.uint8), y.view(np.uint8))
+
+
 def _same(a, b) -> bool:
-    """Whether two :class:`.lm.LMResult` agree to the last bit (NaNs where the other has NaNs)."""
+    """Whether two :class:`.lm.LMResult` agree to the last bit."""
     pairs = [*zip(a.state[:3], b.state[:3], strict=True), (a.cost, b.cost), (a.initial_cost, b.initial_cost),
              (a.iterations, b.iterations)]
-    return a.stopped == b.stopped and all(
-        x.shape == y.shape and np.array_equal(x.view(np.uint8) if x.dtype == float else x,
-                                              y.view(np.uint8) if y.dtype == float else y)
-        for x, y in ((np.ascontiguousarray(x), np.ascontiguousarray(y)) for x, y in pairs))
+    return a.stopped == b.stopped and all(_identical(x, y) for x, y in pairs)
 
 
 # --- coordinate descent's shape step and 3D cost ----------------------------------------------------------------------
-
-_descent_checked: dict[str, bool] = {}  # per function: whether its first call agreed with numpy's to the last bit
-
 
 def solve_shapes(A: np.ndarray, M: np.ndarray, R_cam_vehicle: np.ndarray, prior_normal: np.ndarray, rhs: np.ndarray,
                  numpy_shapes: Callable[[], np.ndarray]) -> np.ndarray | None:
     """:func:`.descent.solve_shapes`' solution ``x`` (S, P + 3), compiled; None when numpy computes it (compiled path
     off, a singular system, or this function's first call in the process disagreeing with ``numpy_shapes()``)."""
-    if _off or _descent_checked.get("shapes") is False or not available():
+    if not _on("shapes"):
         return None
-    x = _guarded(lambda: _kernel.solve_shapes(_c(R_cam_vehicle), _c(A), _c(M), _c(prior_normal), _c(rhs)))
+    x = _guarded("shapes", lambda: _kernel.solve_shapes(_c(R_cam_vehicle), _c(A), _c(M), _c(prior_normal), _c(rhs)))
     if x is None or not len(x):
         return None
-    return _first_checked("shapes", x, numpy_shapes)
+    return _first_checked("shapes", x, numpy_shapes, _identical)
 
 
 def costs_3d(problem, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray,
              numpy_costs: Callable[[], np.ndarray]) -> np.ndarray | None:
     """:func:`.descent.costs_3d`, compiled; None when numpy computes it (as :func:`solve_shapes`)."""
-    if _off or _descent_checked.get("costs") is False or not available():
+    if not _on("costs"):
         return None
-    out = _guarded(lambda: _kernel.costs_3d(_c(R_cam_vehicle), _c(t_cam_vehicle), _c(p), _c(problem.A_rows),
+    out = _guarded("costs", lambda: _kernel.costs_3d(_c(R_cam_vehicle), _c(t_cam_vehicle), _c(p), _c(problem.A_rows),
                                             _c(problem.u), _c(problem.G), _c(problem.b), float(problem.lambda_3d)))
-    return None if out is None else _first_checked("costs", out, numpy_costs)
+    return None if out is None else _first_checked("costs", out, numpy_costs, _identical)
 
 
-def _guarded(compute):
+def _on(name: str) -> bool:
+    """Whether the compiled ``name`` may run: the path available, not inside :func:`numpy_path_only`, not turned off."""
+    return not _off and _agrees.get(name) is not False and available()
+
+
+def _guarded(name: str, compute: Callable[[], Any]) -> Any:
+    """``compute()``, or None after an error of the compiled ``name``, which turns it off for the process (a fault of
+    the compiled code must cost speed, never a fit)."""
     try:
         return compute()
-    except Exception as exc:  # a fault of the compiled code must cost speed, never a fit
-        log.warning("the compiled descent failed (%s: %s); the numpy path runs instead (the same results, only "
-                    "slower)", type(exc).__name__, exc)
-        _descent_checked["shapes"] = _descent_checked["costs"] = False
+    except Exception as exc:
+        _agrees[name] = False
+        log.warning("the compiled %s failed (%s: %s); the numpy path runs instead (the same results, only slower)",
+                    _WHAT[name], type(exc).__name__, exc)
         return None
 
 
-def _first_checked(name: str, result: np.ndarray, reference: Callable[[], np.ndarray]) -> np.ndarray:
-    """``result``, after the first call of ``name`` in the process compared it with ``reference()`` bit for bit (the
-    reference is returned then, and the compiled path is off for ``name`` if they differ)."""
-    if name in _descent_checked:
+def _first_checked(name: str, result: Any, reference: Callable[[], Any], same: Callable[[Any, Any], bool]) -> Any:
+    """``result``, after the first call of the compiled ``name`` in the process compared it with ``reference()`` (the
+    reference is returned then, and ``name`` is turned off for the process if ``same`` says they differ)."""
+    if name in _agrees:
         return result
     expected = reference()
-    _descent_checked[name] = bool(result.shape == expected.shape and np.array_equal(
-        np.ascontiguousarray(result).view(np.uint8), np.ascontiguousarray(expected).view(np.uint8)))
-    if not _descent_checked[name]:
-        log.warning("the compiled descent does not reproduce the numpy path's numbers on this machine; the numpy path "
-                    "runs instead (the results are the same, only slower)")
+    _agrees[name] = same(result, expected)
+    if not _agrees[name]:
+        log.warning("the compiled %s does not reproduce the numpy path's numbers on this machine; the numpy path runs "
+                    "instead (the results are the same, only slower)", _WHAT[name])
     return expected
+
+
+_WHAT = {"refine": "refinement", "shapes": "descent's shape step", "costs": "descent's 3D cost"}

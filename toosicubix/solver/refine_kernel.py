@@ -118,6 +118,31 @@ if LOADED:
             m += 2
         return 0.0 + (acc0 + acc1)
 
+    @njit
+    def _pairwise(a, n):
+        """``np.add.reduce`` of ``a[:n]`` (contiguous): numpy's pairwise sum (eight partial sums per block of 128,
+        halves above that)."""
+        if n < 8:
+            res = 0.0
+            for i in range(n):
+                res += a[i]
+            return res
+        if n <= 128:
+            r = a[:8].copy()
+            i = 8
+            while i < n - (n % 8):
+                for j in range(8):
+                    r[j] += a[i + j]
+                i += 8
+            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+            while i < n:
+                res += a[i]
+                i += 1
+            return res
+        half = n // 2
+        half -= half % 8
+        return _pairwise(a, half) + _pairwise(a[half:], n - half)
+
     # --- numpy's matrix products ---------------------------------------------------------------------------------
 
     @njit
@@ -468,12 +493,8 @@ if LOADED:
     @njit
     def _rodrigues(wx, wy, wz, out):
         """``cv2.Rodrigues`` of the rotation vector ``(wx, wy, wz)`` into ``out`` (3, 3), operation for operation
-        (the identity for the zero vector, which :func:`toosicubix.geometry.so3_exp` does not pass to it)."""
-        if wx == 0.0 and wy == 0.0 and wz == 0.0:
-            for i in range(3):
-                for j in range(3):
-                    out[i, j] = 1.0 if i == j else 0.0
-            return
+        (the identity below machine epsilon, as it; :func:`toosicubix.geometry.so3_exp` gives the zero vector the
+        identity without calling it)."""
         theta = math.sqrt(wx * wx + wy * wy + wz * wz)
         if theta < 2.220446049250313e-16:
             for i in range(3):
@@ -539,6 +560,81 @@ if LOADED:
             positive = p[k, 0] > 0.0 and p[k, 1] > 0.0 and p[k, 2] > 0.0
             out[k] = (positive and t[k, 2] > MIN_DEPTH and _extreme(depths, False) + t[k, 2] > MIN_DEPTH
                       and (may_tilt[k] or upness >= min_up))
+        return out
+
+
+    # --- coordinate descent's shape step and 3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`) ----
+
+    @njit
+    def solve_shapes(R, A, M, prior_normal, rhs):
+        """The shape step's ``(p, t)`` (S, P + 3) of S rotations, or an empty array when a system is singular (numpy
+        raises there): ``M_i R`` per click, ``[M_i R A_i, M_i]`` stacked, its normal matrix plus the prior's with
+        numpy's ridge, solved by ``dgesv`` as ``np.linalg.solve`` does."""
+        S = R.shape[0]
+        N, _, P = A.shape
+        n = P + 3
+        design = np.zeros((N, 2, n))
+        for i in range(N):
+            for row in range(2):
+                for j in range(3):
+                    design[i, row, P + j] = M[i, row, j]
+        MR = np.empty((N, 2, 3))
+        normal = np.empty((n, n))
+        diagonal = np.empty(n)
+        x = np.empty((S, n))
+        ipiv = np.empty(n, dtype=np.int64)
+        info = np.zeros(1, dtype=np.int64)
+        sizes = np.array([n, 1], dtype=np.int64)
+        for s in range(S):
+            for i in range(N):
+                _mm(M[i].ctypes.data, 3, R[s].ctypes.data, 3, MR[i].ctypes.data, 3, 2, 3, 3)
+            for i in range(N):
+                _mm(MR[i].ctypes.data, 3, A[i].ctypes.data, P, design[i].ctypes.data, n, 2, P, 3)
+            _syrk(_ROW_MAJOR, _UPPER, _TRANS, n, 2 * N, 1.0, design.ctypes.data, n, 0.0, normal.ctypes.data, n)
+            for i in range(n):
+                for j in range(i + 1, n):
+                    normal[j, i] = normal[i, j]
+            for i in range(n):
+                for j in range(n):
+                    normal[i, j] = normal[i, j] + prior_normal[i, j]
+            for i in range(n):
+                diagonal[i] = normal[i, i]
+            ridge = 1e-12 * _pairwise(diagonal, n) / n
+            for i in range(n):
+                normal[i, i] += ridge
+            x[s] = rhs
+            _gesv(sizes.ctypes.data, sizes.ctypes.data + 8, normal.ctypes.data, sizes.ctypes.data, ipiv.ctypes.data,
+                  x[s].ctypes.data, sizes.ctypes.data, info.ctypes.data)
+            if info[0] != 0:
+                return np.empty((0, n))
+        return x
+
+    @njit
+    def costs_3d(R, t, p, A_rows, u, G, b, lambda_3d):
+        """:func:`.descent.costs_3d`: (S,)."""
+        S, P = p.shape
+        N = A_rows.shape[0] // 3
+        m = G.shape[0]
+        X = np.empty((S, 3 * N))
+        _rows_times_t(p, S, P, A_rows.ctypes.data, P, 3 * N, X)
+        a = np.empty((S, m))
+        _scale_terms(t, p, G, a)
+        ee = np.empty(2 * N)
+        d = np.empty(m)
+        out = np.empty(S)
+        for s in range(S):
+            for i in range(N):
+                y0 = _einsum_pair(R[s, 0], X[s, 3 * i:3 * i + 3], 3) + t[s, 0]
+                y1 = _einsum_pair(R[s, 1], X[s, 3 * i:3 * i + 3], 3) + t[s, 1]
+                y2 = _einsum_pair(R[s, 2], X[s, 3 * i:3 * i + 3], 3) + t[s, 2]
+                e0 = y0 - u[i, 0] * y2
+                e1 = y1 - u[i, 1] * y2
+                ee[2 * i] = e0 * e0
+                ee[2 * i + 1] = e1 * e1
+            for i in range(m):
+                diff = a[s, i] - b[i]
+                d[i] = diff * diff
+            out[s] = _pairwise(ee, 2 * N) + lambda_3d * _pairwise(d, m)
         return out
 
     # --- the loop (:func:`.lm.levenberg_marquardt`, trivial loss) ------------------------------------------------
@@ -628,7 +724,6 @@ if LOADED:
             for k in range(B):
                 if running[k]:
                     iterations[k] += 1
-            n_feasible = 0
             solved = np.zeros(B, dtype=np.bool_)
             for k in range(B):
                 if running[k]:
@@ -654,14 +749,10 @@ if LOADED:
             n_feasible = int(feasible.sum())
             rho = np.full(B, -1.0)
             which = np.flatnonzero(feasible)
-            if n_feasible == B:
-                t_try, p_try, pivot_try = _settle(t_try, p_try, G, b, A_mean)
-            elif n_feasible:
+            if 0 < n_feasible < B:  # the feasible trials only, as a batch of their own
                 R_try, t_try, p_try = _gather(R_try, which), _gather(t_try, which), _gather(p_try, which)
-                t_try, p_try, pivot_try = _settle(t_try, p_try, G, b, A_mean)
-            else:
-                pivot_try = np.empty((0, 3))
             if n_feasible:
+                t_try, p_try, pivot_try = _settle(t_try, p_try, G, b, A_mean)
                 r_try, J_try = _residuals(R_try, t_try, p_try, pivot_try, A, A_rows, uv, Kp, w, G, b, Gjac, see_t,
                                           up, n_up, w_up, row_w, weighted, mid, low, high)
                 new_cost = np.empty(n_feasible)
@@ -725,108 +816,6 @@ if LOADED:
             if status[k] == _RUNNING:
                 status[k] = _MAX_ITERATIONS
         return R, t, p, cost, initial_cost, iterations, status
-
-
-if LOADED:
-
-    # --- coordinate descent's shape step and 3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`) ----
-
-    @njit
-    def _pairwise(a, n):
-        """``np.add.reduce`` of ``a[:n]`` (contiguous): numpy's pairwise sum (eight partial sums per block of 128,
-        halves above that)."""
-        if n < 8:
-            res = 0.0
-            for i in range(n):
-                res += a[i]
-            return res
-        if n <= 128:
-            r = a[:8].copy()
-            i = 8
-            while i < n - (n % 8):
-                for j in range(8):
-                    r[j] += a[i + j]
-                i += 8
-            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-            while i < n:
-                res += a[i]
-                i += 1
-            return res
-        half = n // 2
-        half -= half % 8
-        return _pairwise(a, half) + _pairwise(a[half:], n - half)
-
-    @njit
-    def solve_shapes(R, A, M, prior_normal, rhs):
-        """The shape step's ``(p, t)`` (S, P + 3) of S rotations, or an empty array when a system is singular (numpy
-        raises there): ``M_i R`` per click, ``[M_i R A_i, M_i]`` stacked, its normal matrix plus the prior's with
-        numpy's ridge, solved by ``dgesv`` as ``np.linalg.solve`` does."""
-        S = R.shape[0]
-        N, _, P = A.shape
-        n = P + 3
-        design = np.zeros((N, 2, n))
-        for i in range(N):
-            for row in range(2):
-                for j in range(3):
-                    design[i, row, P + j] = M[i, row, j]
-        MR = np.empty((N, 2, 3))
-        normal = np.empty((n, n))
-        diagonal = np.empty(n)
-        x = np.empty((S, n))
-        ipiv = np.empty(n, dtype=np.int64)
-        info = np.zeros(1, dtype=np.int64)
-        sizes = np.array([n, 1], dtype=np.int64)
-        for s in range(S):
-            for i in range(N):
-                _mm(M[i].ctypes.data, 3, R[s].ctypes.data, 3, MR[i].ctypes.data, 3, 2, 3, 3)
-            for i in range(N):
-                _mm(MR[i].ctypes.data, 3, A[i].ctypes.data, P, design[i].ctypes.data, n, 2, P, 3)
-            _syrk(_ROW_MAJOR, _UPPER, _TRANS, n, 2 * N, 1.0, design.ctypes.data, n, 0.0, normal.ctypes.data, n)
-            for i in range(n):
-                for j in range(i + 1, n):
-                    normal[j, i] = normal[i, j]
-            for i in range(n):
-                for j in range(n):
-                    normal[i, j] = normal[i, j] + prior_normal[i, j]
-            for i in range(n):
-                diagonal[i] = normal[i, i]
-            ridge = 1e-12 * _pairwise(diagonal, n) / n
-            for i in range(n):
-                normal[i, i] += ridge
-            x[s] = rhs
-            _gesv(sizes.ctypes.data, sizes.ctypes.data + 8, normal.ctypes.data, sizes.ctypes.data, ipiv.ctypes.data,
-                  x[s].ctypes.data, sizes.ctypes.data, info.ctypes.data)
-            if info[0] != 0:
-                return np.empty((0, n))
-        return x
-
-    @njit
-    def costs_3d(R, t, p, A_rows, u, G, b, lambda_3d):
-        """:func:`.descent.costs_3d`: (S,)."""
-        S, P = p.shape
-        N = A_rows.shape[0] // 3
-        m = G.shape[0]
-        X = np.empty((S, 3 * N))
-        _rows_times_t(p, S, P, A_rows.ctypes.data, P, 3 * N, X)
-        a = np.empty((S, m))
-        _scale_terms(t, p, G, a)
-        ee = np.empty(2 * N)
-        d = np.empty(m)
-        out = np.empty(S)
-        for s in range(S):
-            for i in range(N):
-                y0 = _einsum_pair(R[s, 0], X[s, 3 * i:3 * i + 3], 3) + t[s, 0]
-                y1 = _einsum_pair(R[s, 1], X[s, 3 * i:3 * i + 3], 3) + t[s, 1]
-                y2 = _einsum_pair(R[s, 2], X[s, 3 * i:3 * i + 3], 3) + t[s, 2]
-                e0 = y0 - u[i, 0] * y2
-                e1 = y1 - u[i, 1] * y2
-                ee[2 * i] = e0 * e0
-                ee[2 * i + 1] = e1 * e1
-            for i in range(m):
-                diff = a[s, i] - b[i]
-                d[i] = diff * diff
-            out[s] = _pairwise(ee, 2 * N) + lambda_3d * _pairwise(d, m)
-        return out
 
 
 def warm_up() -> None:
