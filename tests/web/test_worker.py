@@ -80,3 +80,22 @@ def test_a_process_that_died_is_said_and_replaced(deadline_worker):
     with pytest.raises(WorkerDied):
         deadline_worker.call(os.kill, (pid, signal.SIGKILL), timeout=5.0)
     assert deadline_worker.call(os.getpid, (), timeout=5.0) not in (pid, os.getpid())
+
+
+def _kernel_loaded() -> bool:
+    import sys
+
+    return "numba" in sys.modules
+
+
+def test_warm_names_a_function_to_call_before_the_first_call():
+    # The page's fitting process loads the compiled solver before its first refit (issue 37): half a second that
+    # would otherwise come out of the first refit's bound, and of the spare's after every kill.
+    from toosicubix.solver import compiled
+    from toosicubix.web.session import FIT_MODULES
+
+    assert "toosicubix.solver.compiled:warm_up" in FIT_MODULES
+    with DeadlineWorker(("toosicubix.web.session",)) as cold:
+        assert cold.start().call(_kernel_loaded, (), timeout=30.0) is False
+    with DeadlineWorker(FIT_MODULES) as warm:
+        assert warm.start().call(_kernel_loaded, (), timeout=30.0) is compiled.available()

@@ -101,7 +101,7 @@ class DeadlineWorker:
     """``function(*args)`` computed in a worker process, answered within ``timeout`` seconds or not at all.
 
     One process computes, one spare waits, both started by ``spawn`` (fresh interpreters) and warmed by importing
-    ``warm`` (module names). A call that does not answer in time has its process killed (SIGKILL): the spare
+    ``warm`` (module names; ``module:function`` also calls that function of it, without arguments). A call that does not answer in time has its process killed (SIGKILL): the spare
     takes its place at once and a new spare starts. Calls are answered one at a time. ``function`` and its
     arguments and answer must be picklable (module-level functions); an exception raised there is raised here.
     :meth:`close` ends both processes; a later call starts new ones.
@@ -183,13 +183,16 @@ class DeadlineWorker:
 
 
 def _serve(connection: Connection, warm: tuple[str, ...]) -> None:
-    """A :class:`DeadlineWorker`'s process: import ``warm``, say so, then answer ``(function, args)`` with
-    ``(True, answer)`` or ``(False, exception)`` until the pipe closes."""
+    """A :class:`DeadlineWorker`'s process: import ``warm`` (and call the functions it names), say so, then answer
+    ``(function, args)`` with ``(True, answer)`` or ``(False, exception)`` until the pipe closes."""
     import importlib
 
     _ignore_interrupts()
     for name in warm:
-        importlib.import_module(name)
+        module, _, function = name.partition(":")
+        imported = importlib.import_module(module)
+        if function:
+            getattr(imported, function)()
     connection.send("ready")
     while True:
         try:
