@@ -7,6 +7,7 @@ from toosicubix.geometry import (
     box2d_iou,
     box2d_of_points,
     clip_cuboid_to_near_plane,
+    cross3,
     cuboid_corners_cam,
     cuboid_corners_vehicle,
     depth_reversed_twin,
@@ -165,3 +166,17 @@ def test_depth_reversed_twin():
     assert np.max(np.linalg.norm(apart, axis=1)) < 5.0  # the depth offsets are a few % of 60 m: a few px
     R_none, t_none = depth_reversed_twin(np.eye(3), np.array([0.0, 0.0, -0.75]), d)  # the box centre at the camera
     assert np.isnan(R_none).all() and np.isnan(t_none).all()
+
+
+def test_cross3_is_numpy_cross_to_the_bit():
+    """cross3 stands in for np.cross on the solver's hot path: every component must be the same double, across
+    magnitudes, signs, zeros and non-finite values."""
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(4000, 3)) * 10.0 ** rng.integers(-12, 12, size=(4000, 3))
+    b = rng.normal(size=(4000, 3)) * 10.0 ** rng.integers(-12, 12, size=(4000, 3))
+    a[::97] = 0.0
+    b[::89, 1] = np.inf
+    a[::83, 2] = np.nan
+    with np.errstate(invalid="ignore"):
+        for x, y in zip(a, b, strict=True):
+            assert np.cross(x, y).tobytes() == cross3(x, y).tobytes()

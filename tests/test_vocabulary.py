@@ -106,3 +106,24 @@ def test_an_open_kind_takes_any_name_and_its_labels_read_back():
     model = build_parts_model([Part("keypoint", "lamp", np.zeros((1, 2)), "$", None, np.array([-0.45, 0.4, 0.6]),
                                     np.full(3, 0.05))])
     assert model.click_faces == (("rear", "left"),)
+
+
+def test_faces_seen_from_answers_as_the_array_form_did():
+    """faces_seen_from sums in numpy einsum's order in plain floats; its answers must be the array form's for
+    cameras anywhere, on a face's plane too, and for every grazing angle the solver and the page use."""
+    from toosicubix.vocabulary import _FACE_CENTRES, _FACE_NORMALS
+
+    def array_form(camera_vehicle, dimensions, grazing_deg):
+        to_camera = camera_vehicle - _FACE_CENTRES * dimensions
+        along = np.einsum("fi,fi->f", _FACE_NORMALS, to_camera)
+        distance = np.sqrt(np.einsum("fi,fi->f", to_camera, to_camera))
+        return dict(zip(vocabulary.FACES, (along > -np.sin(np.deg2rad(grazing_deg)) * distance).tolist(), strict=True))
+
+    rng = np.random.default_rng(11)
+    for i in range(20000):
+        camera = rng.normal(size=3) * 10.0 ** rng.integers(-2, 3, size=3)
+        dimensions = np.abs(rng.normal(size=3)) * 3.0
+        if i % 10 == 0:  # on the plane of a face
+            camera[i % 3] = 0.5 * dimensions[i % 3]
+        grazing = (0.0, 15.0, -5.0, 2.0)[i % 4]
+        assert vocabulary.faces_seen_from(camera, dimensions, grazing) == array_form(camera, dimensions, grazing)

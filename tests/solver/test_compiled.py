@@ -100,9 +100,15 @@ def test_a_batch_of_starts_ends_where_the_numpy_loop_ends(starts):
         state = refine.start(R, t, p)
         options = lm.LMOptions(abandon_factor=4.0, abandon_after=5)
         mine = compiled._run(refine, state, options)
-        theirs = lm.levenberg_marquardt(refine, state, options)
+        theirs = _numpy_lm(refine, state, options)
         assert compiled._same(mine, theirs), (mine.stopped, theirs.stopped, mine.iterations, theirs.iterations)
         assert set(theirs.stopped) <= set(lm.STATUS_NAMES[1:])
+
+
+def _numpy_lm(refine, state, options):
+    """The numpy loop with numpy's residuals (the compiled residuals, the same numbers, would run inside it)."""
+    with compiled.numpy_path_only():
+        return lm.levenberg_marquardt(refine, state, options)
 
 
 def _rotation(w):
@@ -127,7 +133,7 @@ def test_the_first_refinement_falls_back_when_the_numbers_differ(monkeypatch):
     monkeypatch.setattr(compiled, "_run", off_by_one_bit)
     monkeypatch.setattr(compiled, "_agrees", {})
     first = compiled.levenberg_marquardt(refine, state, options)
-    assert first is not None and compiled._same(first, lm.levenberg_marquardt(refine, state, options))
+    assert first is not None and compiled._same(first, _numpy_lm(refine, state, options))
     assert compiled._agrees["refine"] is False
     assert compiled.levenberg_marquardt(refine, state, options) is None  # the numpy path from now on
 
@@ -156,7 +162,7 @@ def test_keypoint_weights_from_the_soft_term_are_the_same_to_the_last_bit():
     refine = RefineProblem(problem, None)
     state = refine.start(R[None], (t + 0.3)[None], (d * 1.1)[None])
     mine = compiled._run(refine, state, lm.LMOptions())
-    assert compiled._same(mine, lm.levenberg_marquardt(refine, state, lm.LMOptions()))
+    assert compiled._same(mine, _numpy_lm(refine, state, lm.LMOptions()))
 
 
 def test_warm_up_says_when_it_compiles(monkeypatch):
@@ -189,7 +195,7 @@ def test_warm_up_that_fails_leaves_the_numpy_path(monkeypatch):
     available = compiled.available()
 
     class Broken:
-        lm = solve_shapes = costs_3d = None
+        lm = residuals = solve_shapes = costs_3d = None
 
         @staticmethod
         def warm_up():
@@ -229,3 +235,63 @@ def test_the_descents_shape_step_and_3d_cost_are_the_same_to_the_last_bit(view, 
             p, t_ = solve_shapes(problem, rotations)
             costs_3d(problem, rotations, t_, p)
     assert compared.count("shapes") == compared.count("costs") == 9
+
+
+@pytest.mark.parametrize("starts", [1, 2, 5, 36])
+@pytest.mark.parametrize("ground", [None, GROUND], ids=["no ground", "ground"])
+def test_residuals_and_their_jacobian_are_the_same_to_the_last_bit(starts, ground, monkeypatch):
+    # Every variant residuals_batch is called with (the refinement's: Jacobian, pivot, profiled scale; the fit's
+    # checks: none of them; the joint ground's: pivot, no profile), weighted and not, arrows in and out of their zones
+    # (starts off the answer), batches of one (numpy's gemv) to a sweep's 36.
+    from toosicubix.solver.refine import _residuals_numpy
+
+    monkeypatch.setattr(compiled, "_first_checked", lambda name, result, reference, same: result)  # every call: below
+    rng = np.random.default_rng(starts)
+    for view in sorted(VIEW_YAW):
+        s = random_scene(rng, view)
+        problem = Problem.build(s.model, CAMERA, CAR, 0.1, 10.0, ground, 20.0)
+        for weighted in (False, True):
+            if weighted:
+                problem = with_weights(problem, rng.uniform(0.2, 1.0, s.model.n_clicks))
+            R = np.array([s.R_cam_vehicle @ _rotation(w) for w in rng.normal(0.0, 0.3, (starts, 3))])
+            t = s.t_cam_vehicle + rng.normal(0.0, 1.0, (starts, 3))
+            p = s.p_true * rng.uniform(0.7, 1.3, (starts, len(s.p_true)))
+            pivot = rng.normal(0.0, 1.0, (starts, 3))
+            for with_jacobian, about, profile in [(True, True, True), (False, False, False), (True, False, False),
+                                                  (True, True, False), (False, True, True)]:
+                args = (problem, R, t, p, with_jacobian, pivot if about else None, profile)
+                found = compiled.residuals(*args, numpy_residuals=lambda: None)
+                assert found is not None
+                expected = _residuals_numpy(*args)
+                assert _bits(found[0]) == _bits(expected[0]), (view, weighted, with_jacobian, about, profile)
+                assert (found[1] is None) == (expected[1] is None)
+                if with_jacobian:
+                    assert _bits(found[1]) == _bits(expected[1]), (view, weighted, with_jacobian, about, profile)
+
+
+def test_a_residuals_variant_that_differs_falls_back_alone(monkeypatch):
+    # The first call of each variant is compared; one off by a bit turns that variant off, not the others.
+    from toosicubix.solver.refine import residuals_batch
+
+    rng = np.random.default_rng(4)
+    s, problem = _refine_problem(rng, False)
+    R, t, p = s.R_cam_vehicle[None], s.t_cam_vehicle[None], s.p_true[None]
+    real = compiled._kernel.residuals
+
+    def off_by_one_bit(*args):
+        r, J = real(*args)
+        r = r.copy()
+        r[0, 0] = np.nextafter(r[0, 0], np.inf)
+        return r, J
+
+    monkeypatch.setattr(compiled, "_agrees", {})
+    monkeypatch.setattr(compiled._kernel, "residuals", off_by_one_bit)
+    first = residuals_batch(problem, R, t, p, False, None, False)
+    assert compiled._agrees == {"residuals": False}
+    with compiled.numpy_path_only():
+        assert _bits(first[0]) == _bits(residuals_batch(problem, R, t, p, False, None, False)[0])
+    assert compiled.residuals(problem, R, t, p, False, None, False, lambda: None) is None
+    monkeypatch.setattr(compiled._kernel, "residuals", real)
+    assert compiled.residuals(problem, R, t, p, True, None, False, lambda: residuals_batch(
+        problem, R, t, p, True, None, False)) is not None
+    assert compiled._agrees == {"residuals": False, "residuals+J": True}

@@ -33,6 +33,7 @@ from toosicubix.pipeline.vehicle import (
     with_next_clicks,
 )
 from toosicubix.size_priors import Priors, SizePrior
+from toosicubix.solver import compiled
 from toosicubix.solver.fit import FitResult, SolverOptions, scale_shares, tested
 from toosicubix.solver.joint import JointVehicle, fit_jointly
 from toosicubix.solver.misfit import MISFIT_WARNING
@@ -187,6 +188,9 @@ def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
             yield from work([task])
         return
     in_flight: deque[Future[list[VehicleResult]]] = deque()
+    # The compiled solver loaded here, before the workers start, is theirs without loading it again (where they are
+    # forked: Linux); each would otherwise spend half a second on it, every pool.
+    compiled.warm_up()
     with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
         while True:
             while len(in_flight) < 4 * jobs:

@@ -1,6 +1,7 @@
-"""The refinement's Levenberg-Marquardt (:mod:`.lm` on :class:`.refine.RefineProblem`), and coordinate descent's shape
-step and 3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`), compiled with numba, every number
-computed as the numpy path computes it.
+"""The refinement's Levenberg-Marquardt (:mod:`.lm` on :class:`.refine.RefineProblem`), the residuals and their
+Jacobian wherever the solver evaluates them (:func:`.refine.residuals_batch`), and coordinate descent's shape step and
+3D cost (:func:`.descent.solve_shapes`, :func:`.descent.costs_3d`), compiled with numba, every number computed as the
+numpy path computes it.
 
 The numpy path spends its time in Python around some hundred small array operations an iteration; the arithmetic is
 microseconds. This module runs the same loop as compiled code and reproduces each operation's rounding, so that a
@@ -21,9 +22,10 @@ fit is the same to the last bit whichever path ran it (issue 37 asks for results
   ``linalg.solve`` calls.
 
 Whether a machine's libraries round as this module assumes is checked, not assumed: the first refinement in a process
-runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt`);
-otherwise, or without numba, or with a numpy not built on OpenBLAS, the numpy path runs and the results are the same.
-Batches of more than :data:`MAX_STARTS` starts take the numpy path.
+runs both paths and keeps the compiled one only when every number agrees (:func:`levenberg_marquardt`; the
+first call of each other function, and of each variant of the residuals, likewise); otherwise, or without numba, or
+with a numpy not built on OpenBLAS, the numpy path runs and the results are the same. A refinement of more than
+:data:`MAX_STARTS` starts takes the numpy loop (with the compiled residuals).
 """
 
 from __future__ import annotations
@@ -80,7 +82,8 @@ def warm_up(say: Callable[[str], None] | None = None) -> bool:
     if not available():
         return False
     global _kernel
-    if say is not None and not all(_cached(f) for f in (_kernel.lm, _kernel.solve_shapes, _kernel.costs_3d)):
+    if say is not None and not all(_cached(f) for f in (_kernel.lm, _kernel.residuals, _kernel.solve_shapes,
+                                                          _kernel.costs_3d)):
         say(COMPILING)
     try:
         _kernel.warm_up()
@@ -126,21 +129,34 @@ def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
     return _first_checked("refine", result, lambda: lm.levenberg_marquardt(refine, state, options), _same)
 
 
+def _problem_arrays(problem) -> tuple:
+    """What the kernel takes of a :class:`.problem.Problem`, in its order (``A`` to ``high`` of its functions), made
+    once per problem and kept on it as ``functools.cached_property`` keeps its values (a problem never changes;
+    ``dataclasses.replace`` makes a new one)."""
+    found = problem.__dict__.get("_kernel_arrays")
+    if found is None:
+        weights = problem.pixel_row_weights
+        n_up = 0 if problem.upright_sigma is None else 3
+        K = problem.K
+        P = problem.parts.n_params
+        found = (_c(problem.A), _c(problem.A_rows), _c(problem.uv),
+                 np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], dtype=float),
+                 float(np.sqrt(problem.lambda_px)),
+                 _c(problem.G), _c(problem.b), _c(problem.scale_rows_jacobian), bool(problem.scale_rows_see_t),
+                 _c(problem.up), n_up, float(problem.upright_weight) if n_up else 0.0,
+                 np.ones(1) if weights is None else _c(weights), weights is not None,
+                 _c(problem.arrow_mid).reshape(-1, 3, P), _c(problem.arrow_low), _c(problem.arrow_high))
+        problem.__dict__["_kernel_arrays"] = found
+    return found
+
+
 def _run(refine, state, options):
     started = time.perf_counter()
     problem = refine.problem
     R, t, p, pivot = (np.array(a, dtype=float) for a in state)
-    weights = problem.pixel_row_weights
-    n_up = 0 if problem.upright_sigma is None else 3
-    K = problem.K
-    P = problem.parts.n_params
+    A, A_rows, *rest = _problem_arrays(problem)
     out = _kernel.lm(
-        R, t, p, pivot, _c(problem.A), _c(problem.A_rows), _c(problem.A_mean), _c(problem.uv),
-        np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], dtype=float), float(np.sqrt(problem.lambda_px)),
-        _c(problem.G), _c(problem.b), _c(problem.scale_rows_jacobian), bool(problem.scale_rows_see_t),
-        _c(problem.up), n_up, float(problem.upright_weight) if n_up else 0.0,
-        np.ones(1) if weights is None else _c(weights), weights is not None,
-        _c(problem.arrow_mid).reshape(-1, 3, P), _c(problem.arrow_low), _c(problem.arrow_high),
+        R, t, p, pivot, A, A_rows, _c(problem.A_mean), *rest,
         float(refine.min_up), np.ascontiguousarray(refine.may_tilt, dtype=np.bool_), _c(refine.size),
         int(options.max_iterations), float(options.gradient_tolerance**2), float(options.step_tolerance),
         float(options.cost_tolerance), float(options.initial_damping),
@@ -167,6 +183,32 @@ def _same(a, b) -> bool:
     pairs = [*zip(a.state[:3], b.state[:3], strict=True), (a.cost, b.cost), (a.initial_cost, b.initial_cost),
              (a.iterations, b.iterations)]
     return a.stopped == b.stopped and all(_identical(x, y) for x, y in pairs)
+
+
+# --- the residuals and their Jacobian ---------------------------------------------------------------------------------
+
+def residuals(problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, with_jacobian: bool, pivot: np.ndarray | None,
+              profile_scale: bool, numpy_residuals: Callable[[], tuple[np.ndarray, np.ndarray | None]]
+              ) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """:func:`.refine.residuals_batch` (its arguments), compiled; None when numpy computes it (compiled path off, no
+    pose, or this variant's first call in the process disagreeing with ``numpy_residuals()``: each combination of
+    ``with_jacobian``, ``pivot`` and ``profile_scale`` is checked on its own first call)."""
+    name = f"residuals{'+J' if with_jacobian else ''}{'+pivot' if pivot is not None else ''}" \
+           f"{'+profile' if profile_scale else ''}"
+    if not len(R) or not _on(name):
+        return None
+    B = len(R)
+    out = _guarded(name, lambda: _kernel.residuals(
+        _c(R), _c(t), _c(p), np.zeros((B, 3)) if pivot is None else _c(pivot), *_problem_arrays(problem),
+        bool(profile_scale), pivot is not None, bool(with_jacobian)))
+    if out is None:
+        return None
+    result = (out[0], out[1] if with_jacobian else None)
+    return _first_checked(name, result, numpy_residuals, _same_residuals)
+
+
+def _same_residuals(a, b) -> bool:
+    return _identical(a[0], b[0]) and (a[1] is None) == (b[1] is None) and (a[1] is None or _identical(a[1], b[1]))
 
 
 # --- coordinate descent's shape step and 3D cost ----------------------------------------------------------------------
@@ -206,7 +248,7 @@ def _guarded(name: str, compute: Callable[[], Any]) -> Any:
     except Exception as exc:
         _agrees[name] = False
         log.warning("the compiled %s failed (%s: %s); the numpy path runs instead (the same results, only slower)",
-                    _WHAT[name], type(exc).__name__, exc)
+                    _what(name), type(exc).__name__, exc)
         return None
 
 
@@ -215,12 +257,18 @@ def _first_checked(name: str, result: Any, reference: Callable[[], Any], same: C
     reference is returned then, and ``name`` is turned off for the process if ``same`` says they differ)."""
     if name in _agrees:
         return result
-    expected = reference()
+    with numpy_path_only():  # the reference is numpy's alone, whatever else is compiled
+        expected = reference()
     _agrees[name] = same(result, expected)
     if not _agrees[name]:
         log.warning("the compiled %s does not reproduce the numpy path's numbers on this machine; the numpy path runs "
-                    "instead (the results are the same, only slower)", _WHAT[name])
+                    "instead (the results are the same, only slower)", _what(name))
     return expected
 
 
-_WHAT = {"refine": "refinement", "shapes": "descent's shape step", "costs": "descent's 3D cost"}
+def _what(name: str) -> str:
+    """The compiled function ``name`` in words (its variant after a '+', as :func:`residuals` names them)."""
+    base, _, variant = name.partition("+")
+    words = {"refine": "refinement", "shapes": "descent's shape step", "costs": "descent's 3D cost",
+             "residuals": "residuals"}[base]
+    return f"{words} ({variant.replace('+', ', ')})" if variant else words

@@ -23,6 +23,8 @@ from toosicubix.solver.problem import Problem
 
 #: Memory for the normal matrices (and ``M_i R``) of the starts the shape step solves together, bytes.
 _SHAPE_CHUNK_BYTES = 65536
+#: The camera matrix of normalized coordinates, as SQPnP takes it (never written to).
+_IDENTITY = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -56,20 +58,29 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
     -------
     p : (S, P), t_cam_vehicle : (S, 3)
     """
-    A, u = problem.A, problem.u
+    A = problem.A
     P = A.shape[2]
-    # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
-    w = np.sqrt(problem.lambda_3d)
-    prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
-    prior_rhs = w * problem.b
-    prior_normal = prior_rows.T @ prior_rows
-    M = _translation_block(u)  # (N, 2, 3): M_i = [[1, 0, -x], [0, 1, -y]] applied to R A_i p + t
-    rhs = prior_rows.T @ prior_rhs
+    M, prior_normal, rhs = _shape_terms(problem)
     x = compiled.solve_shapes(A, M, R_cam_vehicle, prior_normal, rhs,
                               lambda: _shapes_numpy(A, M, R_cam_vehicle, prior_normal, rhs))
     if x is None:
         x = _shapes_numpy(A, M, R_cam_vehicle, prior_normal, rhs)
     return x[:, :P], x[:, P:]
+
+
+def _shape_terms(problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What every shape step of ``problem`` shares, made once per problem (kept on it as ``functools.cached_property``
+    keeps its values: a problem never changes): ``M`` (N, 2, 3), ``M_i = [[1, 0, -x], [0, 1, -y]]`` applied to
+    ``R A_i p + t``; the scale rows' normal matrix (P + 3, P + 3) and right-hand side (P + 3,) on ``(p, t)``."""
+    found = problem.__dict__.get("_shape_terms")
+    if found is None:
+        # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
+        w = np.sqrt(problem.lambda_3d)
+        prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
+        prior_rhs = w * problem.b
+        found = (_translation_block(problem.u), prior_rows.T @ prior_rows, prior_rows.T @ prior_rhs)
+        problem.__dict__["_shape_terms"] = found
+    return found
 
 
 def _shapes_numpy(A: np.ndarray, M: np.ndarray, R_cam_vehicle: np.ndarray, prior_normal: np.ndarray,
@@ -151,15 +162,14 @@ def solve_pose(problem: Problem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     R_cam_vehicle : (3, 3), t_cam_vehicle : (3,), or None
     """
     X = np.ascontiguousarray(problem.A @ p, dtype=np.float64).reshape(-1, 1, 3)
-    x = np.ascontiguousarray(problem.u[:, :2], dtype=np.float64).reshape(-1, 1, 2)
-    try:
-        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(X, x, np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
+    try:  # solvePnP takes SQPnP's first solution as solvePnPGeneric does, without the reprojection errors
+        found, rvec, tvec = cv2.solvePnP(X, problem.u_image_points, _IDENTITY, None, flags=cv2.SOLVEPNP_SQPNP)
     except cv2.error:
         return None
-    if n < 1:
+    if not found:
         return None
-    R, _ = cv2.Rodrigues(rvecs[0])
-    return R, np.asarray(tvecs[0], dtype=float).ravel()
+    R, _ = cv2.Rodrigues(rvec)
+    return R, tvec.ravel()
 
 
 def descend_all(problem: Problem, R_start: np.ndarray, max_iterations: int = 30, rel_tolerance: float = 1e-8,

@@ -39,7 +39,7 @@ from toosicubix.solver.degenerate import (
     too_far,
     too_few,
 )
-from toosicubix.solver.descent import DescentResult, descend_all, solve_shapes
+from toosicubix.solver.descent import descend_all, solve_shapes
 from toosicubix.solver.fallback import typical_starts
 from toosicubix.solver.init import rotations_from_yaws, yaw_candidates
 from toosicubix.solver.misfit import ResidualTest, residual_test
@@ -316,11 +316,8 @@ def fit_vehicle(parts: PartsModel, camera: Camera, prior: SizePrior,
     t_init = time.perf_counter()
 
     R_starts = R_align @ rotations_from_yaws(yaws)
-    descents = _descend(problem, R_starts, options)
-    descent_iterations = sum(d.iterations for d in descents)
-    R_d = np.array([d.R_cam_vehicle for d in descents])
-    t_d, p_d = _at_signed_prior_scale(problem, np.array([d.t_cam_vehicle for d in descents]),
-                                      np.array([d.p for d in descents]))
+    R_d, t_d, p_d, descent_iterations = _descend(problem, R_starts, options)
+    t_d, p_d = _at_signed_prior_scale(problem, t_d, p_d)
     candidates = _feasible(problem, R_d, t_d, p_d)
     collapsed = not candidates
     if collapsed:  # every start collapsed onto the camera: start from typical part positions instead
@@ -543,11 +540,13 @@ def _alternatives(best: RefineResult, converged: list[tuple[RefineResult, str | 
     return tuple(kept)
 
 
-def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions) -> list[DescentResult]:
-    """Stage (b) from every start. Every start takes the first step (shape and translation for its
-    rotation); the ``descent_starts`` best of them by the pixel cost at their prior scale go on with
-    SQPnP rounds, the others stop there (a stopping rule: a start that fits the clicks far worse than
-    others rarely wins, and each SQPnP call costs as much as the rest of a round)."""
+def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Stage (b) from every start (S, 3, 3): where each ended, ``R`` (S, 3, 3), ``t`` (S, 3), ``p`` (S, P), and the
+    rounds the descents took. Every start takes the first step (shape and translation for its rotation); the
+    ``descent_starts`` best of them by the pixel cost at their prior scale go on with SQPnP rounds, the others stop
+    there (a stopping rule: a start that fits the clicks far worse than others rarely wins, and each SQPnP call costs
+    as much as the rest of a round)."""
     p0, t0 = solve_shapes(problem, R_starts)
     keep = np.arange(len(R_starts))
     if options.descent_starts is not None and len(R_starts) > options.descent_starts:
@@ -555,12 +554,13 @@ def _descend(problem: Problem, R_starts: np.ndarray, options: SolverOptions) -> 
         r, _ = residuals_batch(problem, R_starts, t_s, p_s, False, None, False)
         score = np.where(np.all(np.isfinite(r), axis=1), np.einsum("km,km->k", r, r), np.inf)
         keep = np.sort(np.argsort(score)[: options.descent_starts])
-    results = [DescentResult(R_starts[k], t0[k], p0[k], float("nan"), 0, "not continued")
-               for k in range(len(R_starts))]
+    R, t, p = np.array(R_starts, dtype=float), t0.copy(), p0.copy()
+    iterations = 0
     for k, d in zip(keep, descend_all(problem, R_starts[keep], options.descent_iterations,
                                       options.descent_tolerance, (p0[keep], t0[keep])), strict=True):
-        results[k] = d
-    return results
+        R[k], t[k], p[k] = d.R_cam_vehicle, d.t_cam_vehicle, d.p
+        iterations += d.iterations
+    return R, t, p, iterations
 
 
 def _at_signed_prior_scale(problem: Problem, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

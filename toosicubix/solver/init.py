@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from toosicubix.geometry import R_LEVEL_VEHICLE
+from toosicubix.geometry import R_LEVEL_VEHICLE, cross3
 from toosicubix.parts.linear import PartsModel
 
 #: Offsets tried around each line-based yaw, radians.
@@ -40,7 +40,7 @@ def line_rows(parts: PartsModel, u: np.ndarray) -> np.ndarray:
     """
     rows = []
     for line in parts.lines:
-        l = np.cross(u[line.i], u[line.j])
+        l = cross3(u[line.i], u[line.j])
         norm = np.linalg.norm(l)
         if norm < 1e-12:
             continue

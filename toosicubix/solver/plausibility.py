@@ -14,6 +14,8 @@ the clicks as well as the true one. Two facts rule most of them out:
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from toosicubix.size_priors import axle_prior
@@ -21,13 +23,15 @@ from toosicubix.vocabulary import faces_of_click, faces_seen_from
 
 #: A face this close to edge-on (degrees) still counts as turned to the camera.
 GRAZING_DEG = 15.0
+#: The camera's up direction (-y), the default ``up``.
+_CAMERA_UP = np.array([0.0, -1.0, 0.0])
 
 
 
 def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
     """Angle (radians) between the vehicle's up axis and ``up`` (3,), by default the camera's up (-y)."""
-    up = np.array([0.0, -1.0, 0.0]) if up is None else up
-    return float(np.arccos(np.clip(R_cam_vehicle[:, 2] @ up, -1.0, 1.0)))
+    cosine = float(R_cam_vehicle[:, 2] @ (_CAMERA_UP if up is None else up))
+    return float(np.arccos(min(max(cosine, -1.0), 1.0)))  # np.clip's answer (a NaN stays one), for less
 
 
 def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray,
@@ -40,22 +44,32 @@ def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
 
 def unseen_clicks(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,
                   dimensions: np.ndarray, click_faces: tuple[tuple[str, ...] | None, ...] | None = None) -> list[str]:
-    """The clicked parts that would lie on faces turned away from the camera. ``click_faces``: the faces of each
-    click (:attr:`PartsModel.click_faces`, which places keypoints by their position); default the vocabulary's."""
+    """The clicked parts that would lie on faces turned away from the camera, in click order. ``click_faces``: the
+    faces of each click (:attr:`PartsModel.click_faces`, which places keypoints by their position); default the
+    vocabulary's."""
     visible = faces_turned_to_camera(R_cam_vehicle, t_cam_vehicle, dimensions)
     if click_faces is None:
         click_faces = tuple(faces_of_click(label) for label in click_labels)
-    seen: dict[tuple[str, ...], bool] = {}  # a vehicle's clicks share a few sets of faces: each judged once
-    out = []
-    for label, faces in zip(click_labels, click_faces, strict=True):
-        if faces is None:
-            continue
-        shown = seen.get(faces)
-        if shown is None:
-            shown = seen[faces] = any(visible[f] for f in faces)
-        if not shown:
-            out.append(label)
-    return out
+    unseen: list[int] = []
+    for faces, clicks in _by_faces(click_faces):
+        for face in faces:
+            if visible[face]:
+                break
+        else:
+            unseen += clicks
+    return [click_labels[i] for i in sorted(unseen)]
+
+
+@lru_cache(maxsize=1024)
+def _by_faces(click_faces: tuple[tuple[str, ...] | None, ...]) -> tuple[tuple[tuple[str, ...], tuple[int, ...]], ...]:
+    """The clicks grouped by their faces (a vehicle's clicks share a few sets, each judged once): each set with its
+    clicks' indices; clicks without faces (arrows) left out. Kept per set of faces: the refinement judges a vehicle's
+    clicks at every answer it reaches."""
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for i, faces in enumerate(click_faces):
+        if faces is not None:
+            groups.setdefault(faces, []).append(i)
+    return tuple((faces, tuple(clicks)) for faces, clicks in groups.items())
 
 
 def implausibility(click_labels: tuple[str, ...], R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray,

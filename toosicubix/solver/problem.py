@@ -223,6 +223,11 @@ class Problem:
         return bool(self.G[:, :3].any())
 
     @cached_property
+    def u_image_points(self) -> np.ndarray:
+        """(N, 1, 2) the normalized clicks as OpenCV's PnP solvers take image points (contiguous float64)."""
+        return np.ascontiguousarray(self.u[:, :2], dtype=np.float64).reshape(-1, 1, 2)
+
+    @cached_property
     def pixel_row_weights(self) -> np.ndarray | None:
         """(2N,) the click weights repeated for each click's two pixel rows, or None for all ones."""
         return None if self.click_weights is None else np.repeat(self.click_weights, 2)
@@ -384,10 +389,12 @@ class Problem:
 
 def _arrow_zone(parts: PartsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each arrow's midpoint coordinates and the zone's low and high bounds on them: 3 rows (P,) per arrow."""
+    tails = parts.arrow_tails
+    if not tails:  # most vehicles
+        return np.zeros((0, parts.n_params)), np.zeros((0, parts.n_params)), np.zeros((0, parts.n_params))
     unit = np.eye(parts.n_params)[:3]  # rows picking dx, dy, dz out of p
     low = np.array([lo for lo, _ in _ARROW_ZONE])[:, None] * unit  # (3, P)
     high = np.array([hi for _, hi in _ARROW_ZONE])[:, None] * unit
-    tails = parts.arrow_tails
     mid = [0.5 * (parts.A[i] + parts.A[i + 1]) for i in tails]  # (3, P) each: tail and head, vehicle frame
     shape = (3 * len(tails), parts.n_params)
     return np.reshape(mid, shape), np.tile(low, (len(tails), 1)), np.tile(high, (len(tails), 1))

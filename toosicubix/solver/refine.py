@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from toosicubix.geometry import hat, so3_exp
-from toosicubix.solver import lm
+from toosicubix.solver import compiled, lm
 from toosicubix.solver.compiled import levenberg_marquardt as compiled_levenberg_marquardt
 from toosicubix.solver.problem import Problem
 
@@ -59,7 +59,17 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
     ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
     problem has a ground plane, then 3 arrow rows per arrow (:meth:`Problem.arrow_rows`); the cue rows are
     multiplied by ``sqrt(lambda_px)`` (the upright rows by :attr:`.problem.Problem.upright_weight` times
-    ``sigma_up``)."""
+    ``sigma_up``). Compiled where it can be (:func:`.compiled.residuals`: the same numbers), else numpy's."""
+    found = compiled.residuals(problem, R, t, p, with_jacobian, pivot, profile_scale,
+                               lambda: _residuals_numpy(problem, R, t, p, with_jacobian, pivot, profile_scale))
+    if found is not None:
+        return found
+    return _residuals_numpy(problem, R, t, p, with_jacobian, pivot, profile_scale)
+
+
+def _residuals_numpy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, with_jacobian: bool,
+                     pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`residuals_batch` in numpy."""
     K_ = problem.K
     N, _, P = problem.A.shape
     B = len(R)

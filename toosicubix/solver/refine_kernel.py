@@ -211,10 +211,11 @@ if LOADED:
 
     @njit
     def _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
-                   mid, low, high):
-        """:func:`.refine.residuals_batch` with the Jacobian, the scale profiled and rotations about ``pivot``: ``r``
-        (B, M) and ``J`` (B, M, 6 + P); the arrows' midpoints ``mid`` (n, 3, P) and their zones' bounds ``low``,
-        ``high`` (3 n, P) (:meth:`.problem.Problem.arrow_rows`)."""
+                   mid, low, high, profile, about_pivot, with_jacobian):
+        """:func:`.refine.residuals_batch`: ``r`` (B, M) and, ``with_jacobian``, ``J`` (B, M, 6 + P) (else an empty
+        array), with the scale rows profiled when ``profile``; rotations about ``pivot`` (B, 3) when ``about_pivot``,
+        else about the origin (``pivot`` then zeros, as the arrows' rows take it); the arrows' midpoints ``mid``
+        (n, 3, P) and their zones' bounds ``low``, ``high`` (3 n, P) (:meth:`.problem.Problem.arrow_rows`)."""
         B, P = p.shape
         N = A.shape[0]
         m = G.shape[0]
@@ -254,21 +255,30 @@ if LOADED:
                 r[k, 2 * i + 1] = v + cy - uv[i, 1]
         a = np.empty((B, m))
         _scale_terms(t, p, G, a)
-        ab = np.empty(B)
-        _rows_dot(a, b, ab)
         aa = np.empty(B)
         s_best = np.empty(B)
+        if profile:
+            ab = np.empty(B)
+            _rows_dot(a, b, ab)
         for k in range(B):
-            aa[k] = _einsum_pair(a[k], a[k], m)
-            s_best[k] = ab[k] / aa[k]
-            for i in range(m):
-                r[k, 2 * N + i] = w * (s_best[k] * a[k, i] - b[i])
+            if profile:
+                aa[k] = _einsum_pair(a[k], a[k], m)
+                s_best[k] = ab[k] / aa[k]
+                for i in range(m):
+                    r[k, 2 * N + i] = w * (s_best[k] * a[k, i] - b[i])
+            else:
+                for i in range(m):
+                    r[k, 2 * N + i] = w * (a[k, i] - b[i])
             for i in range(n_up):
                 r[k, 2 * N + m + i] = w_up * (R[k, i, 2] - up[i])
         if weighted:
             for k in range(B):
                 for i in range(2 * N):
                     r[k, i] *= row_w[i]
+        if not with_jacobian:
+            if n_arrows:
+                _arrow_rows(R, t, p, pivot, mid, low, high, w, r, np.empty((0, 0, 0)), 2 * N + m + n_up, False)
+            return r, np.empty((0, 0, 0))
         J = np.zeros((B, M, n))
         DR = np.empty((B, N, 2, 3))
         for k in range(B):
@@ -307,7 +317,7 @@ if LOADED:
         Ga = np.empty((B, m, n))
         for k in range(B):
             Ga[k] = Gjac
-        if see_t:
+        if see_t and about_pivot:
             W = np.zeros((3, 3))
             RW = np.empty((3, 3))
             GRW = np.empty((m, 3))
@@ -322,21 +332,26 @@ if LOADED:
                         Ga[k, i, j] = GRW[i, j]
         v = np.empty(m)
         for k in range(B):
-            two_s = 2.0 * s_best[k]
-            for i in range(m):
-                v[i] = b[i] - two_s * a[k, i]
-            for j in range(n):
-                ds = 0.0
+            if profile:
+                two_s = 2.0 * s_best[k]
                 for i in range(m):
-                    ds = ds + Ga[k, i, j] * v[i]
-                ds = ds / aa[k]
-                for i in range(m):
-                    J[k, 2 * N + i, j] = w * (s_best[k] * Ga[k, i, j] + a[k, i] * ds)
+                    v[i] = b[i] - two_s * a[k, i]
+                for j in range(n):
+                    ds = 0.0
+                    for i in range(m):
+                        ds = ds + Ga[k, i, j] * v[i]
+                    ds = ds / aa[k]
+                    for i in range(m):
+                        J[k, 2 * N + i, j] = w * (s_best[k] * Ga[k, i, j] + a[k, i] * ds)
+            else:
+                for j in range(n):
+                    for i in range(m):
+                        J[k, 2 * N + i, j] = w * Ga[k, i, j]
             for i in range(n_up):
                 J[k, 2 * N + m + i, 0] = -w_up * R[k, i, 1]
                 J[k, 2 * N + m + i, 1] = w_up * R[k, i, 0]
         if n_arrows:
-            _arrow_rows(R, t, p, pivot, mid, low, high, w, r, J, 2 * N + m + n_up)
+            _arrow_rows(R, t, p, pivot, mid, low, high, w, r, J, 2 * N + m + n_up, True)
         return r, J
 
     @njit
@@ -363,7 +378,7 @@ if LOADED:
                 out[i, 3 + kk] = 1.0 if kk == i else 0.0
 
     @njit
-    def _arrow_rows(R, t, p, pivot, mid, low, high, w, r, J, row0):
+    def _arrow_rows(R, t, p, pivot, mid, low, high, w, r, J, row0, with_jacobian):
         """:meth:`.problem.Problem.arrow_rows` times ``w`` into ``r`` and ``J`` from row ``row0``: each arrow's
         midpoint, moved along its ray to the distance of the vehicle's centre, outside its zone (metres over
         :data:`.problem.ARROW_ZONE_SIGMA`)."""
@@ -422,7 +437,7 @@ if LOADED:
                 for i in range(3):
                     if side[q, i] == 0:
                         r[k, row0 + 3 * q + i] = w * (0.0 / sigma)
-            if not any_out:
+            if not any_out or not with_jacobian:
                 continue
             # The Jacobian of the rows outside (the others stay zero, as numpy's zone gradient leaves them).
             H = np.empty((3, 3))
@@ -637,6 +652,13 @@ if LOADED:
             out[s] = _pairwise(ee, 2 * N) + lambda_3d * _pairwise(d, m)
         return out
 
+    @njit
+    def residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted, mid, low,
+                  high, profile, about_pivot, with_jacobian):
+        """:func:`.refine.residuals_batch` for every caller (see :func:`_residuals`)."""
+        return _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
+                          mid, low, high, profile, about_pivot, with_jacobian)
+
     # --- the loop (:func:`.lm.levenberg_marquardt`, trivial loss) ------------------------------------------------
 
     @njit
@@ -650,7 +672,7 @@ if LOADED:
         B, P = p.shape
         n = 6 + P
         r, J = _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
-                         mid, low, high)
+                         mid, low, high, True, True, True)
         M = r.shape[1]
         cost = np.empty(B)
         for k in range(B):
@@ -754,7 +776,7 @@ if LOADED:
             if n_feasible:
                 t_try, p_try, pivot_try = _settle(t_try, p_try, G, b, A_mean)
                 r_try, J_try = _residuals(R_try, t_try, p_try, pivot_try, A, A_rows, uv, Kp, w, G, b, Gjac, see_t,
-                                          up, n_up, w_up, row_w, weighted, mid, low, high)
+                                          up, n_up, w_up, row_w, weighted, mid, low, high, True, True, True)
                 new_cost = np.empty(n_feasible)
                 for q in range(n_feasible):
                     new_cost[q] = _einsum_pair(r_try[q], r_try[q], M)
@@ -819,8 +841,8 @@ if LOADED:
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) :func:`lm`, :func:`solve_shapes` and :func:`costs_3d` for the argument types
-    the solver passes, on a cuboid's four corners seen from 10 m."""
+    """Compile (or load from numba's cache) :func:`lm`, :func:`residuals`, :func:`solve_shapes` and :func:`costs_3d` for
+    the argument types the solver passes, on a cuboid's four corners seen from 10 m."""
     P = 3
     A = np.zeros((4, 3, P))
     for i, (fx, fy, fz) in enumerate(((0.5, 0.5, 0.0), (-0.5, 0.5, 0.0), (-0.5, -0.5, 1.0), (0.5, -0.5, 1.0))):
@@ -838,6 +860,11 @@ def warm_up() -> None:
        np.array([700.0, 0.0, 300.0, 700.0, 300.0]), 1.0, G, np.array([4.0, 1.8, 1.5]), Gjac, False,
        np.array([0.0, -1.0, 0.0]), 0, 0.0, np.ones(1), False, np.zeros((0, 3, P)), np.zeros((0, P)), np.zeros((0, P)),
        -np.inf, np.ones(1, dtype=np.bool_), np.ones(1), 5, 1e-12, 1e-10, 1e-8, 1e-3, math.nan, 10, math.inf, False)
+    for with_jacobian in (True, False):
+        residuals(R.copy(), t.copy(), p.copy(), np.zeros((1, 3)), A, np.ascontiguousarray(A.reshape(-1, P)), uv,
+                  np.array([700.0, 0.0, 300.0, 700.0, 300.0]), 1.0, G, np.array([4.0, 1.8, 1.5]), Gjac, False,
+                  np.array([0.0, -1.0, 0.0]), 0, 0.0, np.ones(1), False, np.zeros((0, 3, P)), np.zeros((0, P)),
+                  np.zeros((0, P)), False, False, with_jacobian)
     M = np.zeros((4, 2, 3))
     M[:, 0, 0] = M[:, 1, 1] = 1.0
     x = solve_shapes(R.copy(), A, M, np.eye(6), np.ones(6))
