@@ -399,10 +399,11 @@ def clip_cuboid_to_near_plane(corners_cam: np.ndarray, z_near: float = Z_NEAR) -
     """
     z = corners_cam[:, 2]
     points = [corners_cam[z >= z_near]]
+    depths = z.tolist()  # the same numbers as plain floats: twelve edges' tests without numpy's per-scalar cost
     for i, j in CUBOID_EDGES:
-        if (z[i] - z_near) * (z[j] - z_near) < 0.0:  # the edge crosses the plane: where (its clipped end)
+        if (depths[i] - z_near) * (depths[j] - z_near) < 0.0:  # the edge crosses the plane: where (its clipped end)
             a, b = clip_segment_to_near_plane(corners_cam[i], corners_cam[j], z_near)  # type: ignore[misc]
-            points.append((b if z[i] >= z_near else a)[None, :])
+            points.append((b if depths[i] >= z_near else a)[None, :])
     return np.concatenate(points, axis=0)
 
 
