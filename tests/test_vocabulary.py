@@ -127,3 +127,37 @@ def test_faces_seen_from_answers_as_the_array_form_did():
             camera[i % 3] = 0.5 * dimensions[i % 3]
         grazing = (0.0, 15.0, -5.0, 2.0)[i % 4]
         assert vocabulary.faces_seen_from(camera, dimensions, grazing) == array_form(camera, dimensions, grazing)
+
+
+def test_click_faces_are_the_first_forms_on_real_keypoints_and_every_part():
+    # click_faces keeps each (label, position)'s answer (issue 37); it must give what the per-click reading gave, on
+    # ApolloCar3D's 66 keypoints at their typical positions, keypoints anywhere, and every part of the vocabulary.
+    from toosicubix.annotations.mapping import load_mapping
+    from toosicubix.parts.linear import KINDS as kinds
+    from toosicubix.parts.linear import class_keypoint_faces, keypoint_faces
+
+    def first_form(model):
+        out = []
+        for i, label in enumerate(model.click_labels):
+            c = vocabulary.click(label)
+            if not kinds[c.kind].open_names:
+                out.append(vocabulary.faces_of_click(label))
+                continue
+            named, faces = class_keypoint_faces(c.name)
+            out.append(faces if named else keypoint_faces((model.A[i, 0, 0], model.A[i, 1, 1], model.A[i, 2, 2])))
+        return tuple(out)
+
+    rng = np.random.default_rng(5)
+    typical = load_mapping("apollocar3d-66")[0].keypoint_candidates("Car")
+    parts = [Part("keypoint", name, rng.normal(300.0, 50.0, (1, 2)), "$", None, np.asarray(k.at), np.asarray(k.spread))
+             for name, k in typical.items()]
+    parts += [Part("keypoint", f"anywhere{i}", rng.normal(300.0, 50.0, (1, 2)), "$", None,
+                   rng.uniform(-0.6, 1.1, 3), np.full(3, 0.05)) for i in range(40)]
+    model = build_parts_model(parts)
+    assert model.click_faces == first_form(model) and len(model.click_faces) == len(parts)
+    assert any(f is None for f in model.click_faces) and any(f for f in model.click_faces)
+    from tests.scenes import VIEW_YAW, random_scene
+
+    for view in sorted(VIEW_YAW):  # the paper's parts, arrows included
+        model = random_scene(rng, view).model
+        assert model.click_faces == first_form(model)

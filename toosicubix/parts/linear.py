@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -144,15 +145,8 @@ class PartsModel:
         (an open kind's name) the faces its typical position ``at`` sits near: beyond 0.3 of the length or width
         from the centre, or above 0.85 of the height; None (no check) when near none, and for arrows. A keypoint
         of a road-user class's own vocabulary (a pedestrian's shoulder) has the faces the class gives it: any."""
-        out: list[tuple[str, ...] | None] = []
-        for i, label in enumerate(self.click_labels):
-            c = click(label)
-            if not KINDS[c.kind].open_names:
-                out.append(faces_of_click(label))
-                continue
-            named, faces = class_keypoint_faces(c.name)
-            out.append(faces if named else keypoint_faces((self.A[i, 0, DX], self.A[i, 1, DY], self.A[i, 2, DZ])))
-        return tuple(out)
+        at = self.A[:, (0, 1, 2), (DX, DY, DZ)].tolist()  # (N, 3): a keypoint's typical position, fractions
+        return tuple(_click_faces(label, *xyz) for label, xyz in zip(self.click_labels, at, strict=True))
 
     def points_vehicle(self, p: np.ndarray) -> np.ndarray:
         """The clicked points in the vehicle frame for parameters ``p`` (P,): (N, 3)."""
@@ -174,6 +168,17 @@ class TypicalKeypoint(NamedTuple):
     def faces(self) -> tuple[str, ...] | None:
         """The faces one of which must be turned to the camera for it to be seen (None: no such face)."""
         return tuple(self.seen_from) or keypoint_faces(self.at)
+
+
+@lru_cache(maxsize=8192)
+def _click_faces(label: str, x: float, y: float, z: float) -> tuple[str, ...] | None:
+    """:attr:`PartsModel.click_faces` of one click, at ``(x, y, z)`` when it is a keypoint; kept, as a batch's keypoints
+    sit at the few typical positions of its mapping (reading a label costs more than the check)."""
+    c = click(label)
+    if not KINDS[c.kind].open_names:
+        return faces_of_click(label)
+    named, faces = class_keypoint_faces(c.name)
+    return faces if named else keypoint_faces((x, y, z))
 
 
 def keypoint_faces(at) -> tuple[str, ...] | None:

@@ -101,10 +101,11 @@ class DeadlineWorker:
     """``function(*args)`` computed in a worker process, answered within ``timeout`` seconds or not at all.
 
     One process computes, one spare waits, both started by ``spawn`` (fresh interpreters) and warmed by importing
-    ``warm`` (module names; ``module:function`` also calls that function of it, without arguments). A call that does not answer in time has its process killed (SIGKILL): the spare
-    takes its place at once and a new spare starts. Calls are answered one at a time. ``function`` and its
-    arguments and answer must be picklable (module-level functions); an exception raised there is raised here.
-    :meth:`close` ends both processes; a later call starts new ones.
+    ``warm`` (module names; ``module:function`` also calls that function of it, without arguments). A call that does
+    not answer in time has its process killed (SIGKILL): the spare takes its place at once and a new spare starts.
+    Calls are answered one at a time. ``function`` and its arguments and answer must be picklable (module-level
+    functions); an exception raised there is raised here. :meth:`close` ends both processes; a later call starts new
+    ones.
     """
 
     def __init__(self, warm: tuple[str, ...] = ()):
