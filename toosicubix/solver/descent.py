@@ -69,18 +69,18 @@ def solve_shapes(problem: Problem, R_cam_vehicle: np.ndarray) -> tuple[np.ndarra
 
 
 def _shape_terms(problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """What every shape step of ``problem`` shares, made once per problem (kept on it as ``functools.cached_property``
-    keeps its values: a problem never changes): ``M`` (N, 2, 3), ``M_i = [[1, 0, -x], [0, 1, -y]]`` applied to
-    ``R A_i p + t``; the scale rows' normal matrix (P + 3, P + 3) and right-hand side (P + 3,) on ``(p, t)``."""
-    found = problem.__dict__.get("_shape_terms")
-    if found is None:
-        # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
-        w = np.sqrt(problem.lambda_3d)
-        prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
-        prior_rhs = w * problem.b
-        found = (_translation_block(problem.u), prior_rows.T @ prior_rows, prior_rows.T @ prior_rhs)
-        problem.__dict__["_shape_terms"] = found
-    return found
+    """What every shape step of ``problem`` shares (made once per problem: :meth:`.problem.Problem.kept`): ``M``
+    (N, 2, 3), ``M_i = [[1, 0, -x], [0, 1, -y]]`` applied to ``R A_i p + t``; the scale rows' normal matrix
+    (P + 3, P + 3) and right-hand side (P + 3,) on ``(p, t)``."""
+    return problem.kept("descent shape terms", _make_shape_terms)
+
+
+def _make_shape_terms(problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # The scale rows (size prior, known sizes, ground contact) act on (t, p); here the unknowns are (p, t).
+    w = np.sqrt(problem.lambda_3d)
+    prior_rows = w * np.hstack([problem.G[:, 3:], problem.G[:, :3]])
+    prior_rhs = w * problem.b
+    return _translation_block(problem.u), prior_rows.T @ prior_rows, prior_rows.T @ prior_rhs
 
 
 def _shapes_numpy(A: np.ndarray, M: np.ndarray, R_cam_vehicle: np.ndarray, prior_normal: np.ndarray,

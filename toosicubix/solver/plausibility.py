@@ -31,7 +31,7 @@ _CAMERA_UP = np.array([0.0, -1.0, 0.0])
 def tilt(R_cam_vehicle: np.ndarray, up: np.ndarray | None = None) -> float:
     """Angle (radians) between the vehicle's up axis and ``up`` (3,), by default the camera's up (-y)."""
     cosine = float(R_cam_vehicle[:, 2] @ (_CAMERA_UP if up is None else up))
-    return float(np.arccos(min(max(cosine, -1.0), 1.0)))  # np.clip's answer (a NaN stays one), for less
+    return float(np.arccos(min(max(cosine, -1.0), 1.0)))  # np.clip's answer (a NaN stays one) without its cost
 
 
 def faces_turned_to_camera(R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, dimensions: np.ndarray,

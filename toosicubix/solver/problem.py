@@ -39,8 +39,10 @@ whenever an arrow is drawn shorter or longer than the vehicle (rule 22 of benchm
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import TypeVar
 
 import numpy as np
 
@@ -48,6 +50,8 @@ from toosicubix.camera import Camera
 from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
 from toosicubix.size_priors import SizePrior, axle_prior
+
+T = TypeVar("T")
 
 #: Metres: how fast the arrow-zone cost grows outside the zone (a standard deviation, weighed like a cue).
 ARROW_ZONE_SIGMA = 0.5
@@ -221,6 +225,15 @@ class Problem:
     def scale_rows_see_t(self) -> bool:
         """Whether any scale row depends on ``t`` (the ground contact)."""
         return bool(self.G[:, :3].any())
+
+    def kept(self, key: str, make: Callable[[Problem], T]) -> T:
+        """``make(self)``, made once per problem and kept on it under ``key``, as ``functools.cached_property`` keeps
+        its values (a problem never changes; ``dataclasses.replace`` makes a new one): for what a stage derives from a
+        problem on every call (the descent's shape-step terms, the compiled kernel's arrays)."""
+        found = self.__dict__.get(key)
+        if found is None:
+            found = self.__dict__[key] = make(self)
+        return found
 
     @cached_property
     def u_image_points(self) -> np.ndarray:

@@ -23,7 +23,6 @@ import numpy as np
 
 from toosicubix.geometry import hat, so3_exp
 from toosicubix.solver import compiled, lm
-from toosicubix.solver.compiled import levenberg_marquardt as compiled_levenberg_marquardt
 from toosicubix.solver.problem import Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
@@ -259,7 +258,7 @@ def levenberg_marquardt_batch(problem: Problem, R_cam_vehicle: np.ndarray, t_cam
     options = lm.LMOptions(max_iterations=max_iterations, gradient_tolerance=gradient_tolerance,
                         step_tolerance=step_tolerance, cost_tolerance=cost_tolerance, abandon_factor=abandon_factor,
                         abandon_after=abandon_after, abandon_above=abandon_above)
-    result = compiled_levenberg_marquardt(refine, state, options)  # the same numbers, compiled; None: numpy's
+    result = compiled.levenberg_marquardt(refine, state, options)  # the same numbers, compiled; None: numpy's
     if result is None:
         result = lm.levenberg_marquardt(refine, state, options)
     R, t, p, _ = result.state

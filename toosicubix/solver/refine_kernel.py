@@ -210,8 +210,8 @@ if LOADED:
         return t_out, p_out, pivot
 
     @njit
-    def _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
-                   mid, low, high, profile, about_pivot, with_jacobian):
+    def residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
+                  mid, low, high, profile, about_pivot, with_jacobian):
         """:func:`.refine.residuals_batch`: ``r`` (B, M) and, ``with_jacobian``, ``J`` (B, M, 6 + P) (else an empty
         array), with the scale rows profiled when ``profile``; rotations about ``pivot`` (B, 3) when ``about_pivot``,
         else about the origin (``pivot`` then zeros, as the arrows' rows take it); the arrows' midpoints ``mid``
@@ -652,13 +652,6 @@ if LOADED:
             out[s] = _pairwise(ee, 2 * N) + lambda_3d * _pairwise(d, m)
         return out
 
-    @njit
-    def residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted, mid, low,
-                  high, profile, about_pivot, with_jacobian):
-        """:func:`.refine.residuals_batch` for every caller (see :func:`_residuals`)."""
-        return _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
-                          mid, low, high, profile, about_pivot, with_jacobian)
-
     # --- the loop (:func:`.lm.levenberg_marquardt`, trivial loss) ------------------------------------------------
 
     @njit
@@ -671,7 +664,7 @@ if LOADED:
            cost_tolerance, initial_damping, abandon_factor, abandon_after, abandon_above, abandon):
         B, P = p.shape
         n = 6 + P
-        r, J = _residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
+        r, J = residuals(R, t, p, pivot, A, A_rows, uv, Kp, w, G, b, Gjac, see_t, up, n_up, w_up, row_w, weighted,
                          mid, low, high, True, True, True)
         M = r.shape[1]
         cost = np.empty(B)
@@ -775,7 +768,7 @@ if LOADED:
                 R_try, t_try, p_try = _gather(R_try, which), _gather(t_try, which), _gather(p_try, which)
             if n_feasible:
                 t_try, p_try, pivot_try = _settle(t_try, p_try, G, b, A_mean)
-                r_try, J_try = _residuals(R_try, t_try, p_try, pivot_try, A, A_rows, uv, Kp, w, G, b, Gjac, see_t,
+                r_try, J_try = residuals(R_try, t_try, p_try, pivot_try, A, A_rows, uv, Kp, w, G, b, Gjac, see_t,
                                           up, n_up, w_up, row_w, weighted, mid, low, high, True, True, True)
                 new_cost = np.empty(n_feasible)
                 for q in range(n_feasible):
