@@ -800,28 +800,117 @@ function dot(p, colour, radius = 4, outline = "#000") {
 }
 
 // Boxes [x, y, w, h] taken this frame: the labels drawn, and the selected vehicle's click dots and target circles
-// (obstacles). A label goes above right of its point, else below right, above left or below left, wherever it
-// overlaps nothing taken; where none is free it is left out (zoom in to see it), unless it is the selected click's.
+// (obstacles), whose centres are `labelMarks`. A label goes beside its point (above right, below right, above left,
+// below left) where it overlaps nothing taken and no other mark is nearer to it than its own; else farther out,
+// away from the vehicle's middle, joined to its point by a thin line; where nothing is free it is left out (zoom in
+// to see it), unless it is the selected click's.
 let placedLabels = [];
+let labelMarks = [];
 const overlapping = (a, b) => a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3];
+const LABEL_HEIGHT = 15;
+const LEADER_RINGS = [22, 36, 54, 78, 110];  // screen pixels from the point to a far label's nearest side
+const LEADER_DIRECTIONS = 16;
 
 function obstacle(p, radius) {
   const [x, y] = toScreen(p);
   placedLabels.push([x - radius, y - radius, 2 * radius, 2 * radius]);
+  labelMarks.push([x, y]);
 }
 
-// `gap`: screen pixels between the point and its label's side (beyond the point's own dot or circle).
-function label(p, text, colour, always = false, gap = 7) {
+// Screen distance from (x, y) to box b, 0 inside it.
+function boxDistance(b, x, y) {
+  return Math.hypot(Math.max(b[0] - x, 0, x - b[0] - b[2]), Math.max(b[1] - y, 0, y - b[1] - b[3]));
+}
+
+// The point of box b nearest to (x, y).
+const nearestOnBox = (b, x, y) => [Math.min(Math.max(x, b[0]), b[0] + b[2]), Math.min(Math.max(y, b[1]), b[1] + b[3])];
+
+// Whether the segment from a to c crosses box b (Liang-Barsky clipping).
+function segmentCrosses(a, c, b) {
+  let t0 = 0;
+  let t1 = 1;
+  const d = [c[0] - a[0], c[1] - a[1]];
+  for (const [p, q] of [[-d[0], a[0] - b[0]], [d[0], b[0] + b[2] - a[0]], [-d[1], a[1] - b[1]],
+    [d[1], b[1] + b[3] - a[1]]]) {
+    if (p === 0) {
+      if (q < 0) return false;
+    } else if (p < 0) {
+      t0 = Math.max(t0, q / p);
+    } else {
+      t1 = Math.min(t1, q / p);
+    }
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+// Far places for a label w wide around (x, y): ring by ring, the directions nearest to `away` (a unit vector, or
+// null) first; each box's side nearest to the point is the ring's distance from it.
+function farPlaces(x, y, w, away) {
+  const places = [];
+  for (const r of LEADER_RINGS) {
+    const ring = [];
+    for (let k = 0; k < LEADER_DIRECTIONS; k++) {
+      const a = (2 * Math.PI * k) / LEADER_DIRECTIONS;
+      const [c, s] = [Math.cos(a), Math.sin(a)];
+      const [ax, ay] = [x + r * c, y + r * s];
+      const bx = c > 0.38 ? ax : c < -0.38 ? ax - w : ax - w / 2;
+      const by = s > 0.38 ? ay : s < -0.38 ? ay - LABEL_HEIGHT : ay - LABEL_HEIGHT / 2;
+      ring.push({ box: [bx, by, w, LABEL_HEIGHT], score: away ? -(c * away[0] + s * away[1]) : k });
+    }
+    ring.sort((a, b) => a.score - b.score);
+    places.push(...ring.map((place) => place.box));
+  }
+  return places;
+}
+
+// `options.always`: drawn even where nothing is free (the selected click's); `options.gap`: screen pixels between
+// the point and a label beside it (beyond the point's own dot or circle); `options.own`: screen points that are the
+// label's own besides `p` (a pair's other click); `options.middle`: the screen point far labels go away from.
+function label(p, text, colour, options = {}) {
+  const { always = false, gap = 7, own = [], middle = null } = options;
   const [x, y] = toScreen(p);
   ctx.font = "12px system-ui, sans-serif";
   const w = ctx.measureText(text).width;
-  const places = [[x + gap, y - 19], [x + gap, y + 5], [x - gap - w, y - 19], [x - gap - w, y + 5]].map(
-    ([bx, by]) => [bx, by, w, 15]);
-  let box = places.find((b) => !placedLabels.some((taken) => overlapping(b, taken)));
+  const free = (b) => !placedLabels.some((taken) => overlapping(b, taken));
+  const mine = [[x, y], ...own];
+  const isMine = ([mx, my]) => mine.some(([ox, oy]) => Math.abs(mx - ox) < 0.5 && Math.abs(my - oy) < 0.5);
+  const nearestIsOwn = (b) => {
+    const distance = boxDistance(b, x, y);
+    return labelMarks.every((m) => isMine(m) || boxDistance(b, m[0], m[1]) > distance);
+  };
+  const beside = [[x + gap, y - 19], [x + gap, y + 5], [x - gap - w, y - 19], [x - gap - w, y + 5]].map(
+    ([bx, by]) => [bx, by, w, LABEL_HEIGHT]);
+  let box = beside.find((b) => free(b) && nearestIsOwn(b));
+  let leader = null;
+  if (!box) {
+    const rect = canvas.getBoundingClientRect();
+    const onScreen = (b) => b[0] >= 0 && b[1] >= 0 && b[0] + b[2] <= rect.width && b[1] + b[3] <= rect.height;
+    const length = middle ? Math.hypot(x - middle[0], y - middle[1]) : 0;
+    const away = length > 1 ? [(x - middle[0]) / length, (y - middle[1]) / length] : null;
+    for (const b of farPlaces(x, y, w, away)) {
+      if (!onScreen(b) || !free(b)) continue;
+      const end = nearestOnBox(b, x, y);
+      if (placedLabels.some((taken) => !overlapping(taken, [x - 6, y - 6, 12, 12]) && segmentCrosses([x, y], end,
+        taken))) continue;  // the line would cross another label or mark (its own dot aside)
+      box = b;
+      leader = end;
+      break;
+    }
+  }
   if (!box && !always) return;
-  box = box || places[0];
+  box = box || beside[0];
   placedLabels.push(box);
-  state.labels.push({ text, box });
+  state.labels.push({ text, box, point: [x, y], leader });
+  if (leader) {
+    const d = Math.hypot(leader[0] - x, leader[1] - y);
+    ctx.strokeStyle = colour;
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    ctx.moveTo(x + ((leader[0] - x) * 5) / d, y + ((leader[1] - y) * 5) / d);  // from the dot's rim
+    ctx.lineTo(...leader);
+    ctx.stroke();
+  }
   ctx.lineWidth = 3;
   ctx.strokeStyle = "rgba(0,0,0,0.7)";
   ctx.strokeText(text, box[0], box[1] + 12);
@@ -841,6 +930,7 @@ function render() {
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, rect.width, rect.height);
   placedLabels = [];
+  labelMarks = [];
   state.labels = [];
   if (state.image.complete && state.image.naturalWidth) {
     ctx.imageSmoothingEnabled = state.zoom < 2;
@@ -880,7 +970,8 @@ function drawVehicle(v, selected) {
     drawCuboid(f, "rgba(255, 80, 80, 0.25)", "#ff5050", vehicleColour(v), (front) => (front ? 2.5 : 1.5), []);
     state.drawn.push({ track: v.track, vehicle: v.id, style: "solid" });
     if (v.track) {
-      label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), vehicleColour(v), selected);
+      label(topCorner(c), `${v.track}` + (f.pose_from ? ` (${f.pose_from})` : ""), vehicleColour(v),
+        { always: selected });
     }
   }
   if (selected) {
@@ -911,13 +1002,18 @@ function drawVehicle(v, selected) {
   if (selected) {  // labels last, around what is drawn: the clicks' names first, then the targets'
     for (const p of v.parts) p.uv.forEach((uv) => obstacle(uv, 5));
     for (const t of v.targets) t.uv.forEach((uv) => obstacle(uv, 9));
+    const marks = [...v.parts.flatMap((p) => p.uv), ...v.targets.flatMap((t) => t.uv)].map(toScreen);
+    const middle = [marks.reduce((sum, m) => sum + m[0], 0) / marks.length,
+      marks.reduce((sum, m) => sum + m[1], 0) / marks.length];
     const order = [...v.parts].sort((a, b) => (b.index === state.selectedPart) - (a.index === state.selectedPart));
     for (const p of order) {
       const text = p.name ? (oneClick(p.kind) ? p.name : `${p.name} ${p.kind}`) : "?";
-      label(p.uv[0], text, p.name ? "#fff" : "#ff9800", p.index === state.selectedPart);
+      label(p.uv[0], text, p.name ? "#fff" : "#ff9800",
+        { always: p.index === state.selectedPart, own: p.uv.slice(1).map(toScreen), middle });
     }
     // Targets are ranked with circled numbers, so that they are not read as click numbers (click 1, click 2, ...).
-    v.targets.forEach((t, k) => label(t.uv[0], `${TARGET_RANKS[k] ?? k + 1} ${t.name}`, "#ffd479", false, 11));
+    v.targets.forEach((t, k) => label(t.uv[0], `${TARGET_RANKS[k] ?? k + 1} ${t.name}`, "#ffd479",
+      { gap: 11, own: t.uv.slice(1).map(toScreen), middle }));
   }
   ctx.globalAlpha = 1;
 }
@@ -954,7 +1050,8 @@ function drawPrediction(p, selected) {
   ctx.globalAlpha = selected ? 1 : 0.75;
   drawCuboid(f, selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)", "#ff8a80", colour,
     () => (selected ? 2.5 : 1.5), [7, 5]);
-  label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour, selected);
+  label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour,
+    { always: selected });
   ctx.globalAlpha = 1;
   state.drawn.push({ track: p.track, vehicle: null, style: "dashed" });
 }
