@@ -26,6 +26,7 @@ from toosicubix import fields as field_rules
 from toosicubix.annotations.schema import MAX_CAMERA_OFFSET, check_intrinsics
 from toosicubix.errors import FormatError
 from toosicubix.fields import shown
+from toosicubix.formats.json_text import dumps_indented
 from toosicubix.jsonfile import json_field, json_numbers, read_json
 from toosicubix.solver.fit import Alternative
 from toosicubix.solver.misfit import ResidualTest  # the solver's type: results.json's ``residual_test``
@@ -528,7 +529,7 @@ def write_results_stream(handle: IO[str], images: Iterable[ImageResult], header:
     handle.write(head[:-2] + ',\n "images": [')
     summary = {"images": 0, "vehicles": 0, "ok": 0, "failed": 0}
     for im in images:
-        text = json.dumps(image_to_json(im), indent=1, allow_nan=False)  # strings hold no raw newline
+        text = dumps_indented(image_to_json(im))  # json.dumps(..., indent=1, allow_nan=False); no raw newline
         handle.write(("\n  " if summary["images"] == 0 else ",\n  ") + text.replace("\n", "\n  "))
         summary["images"] += 1
         summary["vehicles"] += len(im.vehicles)
@@ -554,7 +555,7 @@ def dumps(doc: dict[str, Any]) -> str:
     bad = non_finite_path(doc)
     if bad is not None:
         raise ValueError(f"refusing to write a NaN or infinity (not JSON) at {bad}")
-    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    return dumps_indented(doc) + "\n"
 
 
 def non_finite_path(value: Any, path: str = "$") -> str | None:
