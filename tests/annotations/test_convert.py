@@ -124,3 +124,30 @@ def test_importing_the_solver_does_not_load_pydantic():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
                          env={**os.environ, "PYTHONPATH": str(REPO)}, check=True)
     assert out.stdout.strip() == "False", out.stderr
+
+
+def test_parts_pickle_to_the_same_arrays():
+    """Part.__reduce__ sends float arrays as lists (a batch's workers get every part); they come back the same."""
+    import pickle
+
+    from toosicubix.model import Part
+
+    parts = [
+        Part("keypoint", "wheel", np.array([[2298.5, 2034.25]]), "$.p", at=np.array([0.387, 0.4265, 0.5408]),
+             spread=np.array([0.0077, 0.0571, 1e-300]), visible=False),
+        Part("length", "plate-rear", np.array([[1.0, 2.0], [3.0, 4.0]]), "$.q", known=(0.52, 0.01)),
+        Part("keypoint", "empty", np.empty((0, 2)), "$", at=np.array([1, 2, 3])),  # int64: numpy pickles it
+        Part("point", "fortran", np.asfortranarray(np.arange(6.0).reshape(3, 2)), "$"),  # not C order: numpy's
+        Part("point", "float32", np.array([[0.1, 0.2]], dtype=np.float32), "$"),
+    ]
+    for part in parts:
+        back = pickle.loads(pickle.dumps(part))
+        for name in ("uv", "at", "spread"):
+            a, b = getattr(part, name), getattr(back, name)
+            if a is None:
+                assert b is None
+                continue
+            assert (a.dtype, a.shape, a.flags.c_contiguous, a.tobytes("A")) == (
+                b.dtype, b.shape, b.flags.c_contiguous, b.tobytes("A")), (part.name, name)
+        assert (back.kind, back.name, back.json_path, back.known, back.visible) == (
+            part.kind, part.name, part.json_path, part.known, part.visible)
