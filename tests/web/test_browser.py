@@ -520,7 +520,8 @@ def test_a_crowded_rear_view_labels_every_click_beside_its_own_dot_or_joined_to_
                 assert distance(box, *entry["leader"]) < 1e-6, entry
                 continue
             mine = distance(box, *own[0])
-            others = [distance(box, x, y) for x, y in marks_all if min(np.hypot(x - ox, y - oy) for ox, oy in own) > 0.5]
+            others = [distance(box, x, y) for x, y in marks_all
+                      if min(np.hypot(x - ox, y - oy) for ox, oy in own) > 0.5]
             assert mine < min(others), (text, mine, min(others))
         boxes = [entry["box"] for entry in labels.values()]
         assert not any(overlap(a, b) for k, a in enumerate(boxes) for b in boxes[k + 1:]), labels
