@@ -225,7 +225,20 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:
     """Each image of an indexed file, validated, with its position in the file."""
-    decoder = json.JSONDecoder()
-    for i, (start, end) in enumerate(index.spans):
-        raw, _ = decoder.raw_decode(index.text[start:end])
-        yield i, ImageAnnotation.model_validate(raw)
+    for i, text in enumerate(image_texts(index)):
+        yield i, image_annotation(text)
+
+
+def image_texts(index: AnnotationIndex) -> Iterator[str]:
+    """Each image's JSON text, as the file has it (what :func:`image_annotation` reads)."""
+    for start, end in index.spans:
+        yield index.text[start:end]
+
+
+def image_annotation(text: str) -> ImageAnnotation:
+    """One image of an indexed file from its text (:func:`image_texts`), validated (again: the index did)."""
+    raw, _ = _DECODER.raw_decode(text)
+    return ImageAnnotation.model_validate(raw)
+
+
+_DECODER = json.JSONDecoder()

@@ -28,7 +28,7 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
-from toosicubix.pipeline.fitting import iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import iter_fit_file, iter_fit_images, stream_images
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     TRACKING_LABEL_DIR,
@@ -37,7 +37,7 @@ from toosicubix.pipeline.output_folder import (
     pause_after_file,
     staged_output,
 )
-from toosicubix.pipeline.pilot import PilotFindings, on_estimated_roads, run_pilot
+from toosicubix.pipeline.pilot import PilotFindings, estimated_grounds, on_estimated_roads, run_pilot
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.tracks import fit_tracks
 
@@ -72,8 +72,12 @@ class BatchSummary:
         return self.vehicles - self.ok
 
 
-def kitti_objects(image_result: ImageResult, camera: Camera) -> list[tuple[VehicleResult, kitti.KittiObject]]:
-    """The KITTI label objects of an image's successful fits (pitch and roll dropped), each with its fit."""
+def kitti_objects(image_result: ImageResult, camera: Camera | None = None
+                  ) -> list[tuple[VehicleResult, kitti.KittiObject]]:
+    """The KITTI label objects of an image's successful fits (pitch and roll dropped), each with its fit.
+    ``camera``: the image's (its ``t_cam_rect`` moves the locations to camera 0); default: the result's own."""
+    if camera is None:
+        camera = Camera(K=image_result.K, t_cam_rect=image_result.t_cam_rect, image_size=image_result.image_size)
     return [(v, kitti.object_from_pose(
         v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
         truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
@@ -81,7 +85,7 @@ def kitti_objects(image_result: ImageResult, camera: Camera) -> list[tuple[Vehic
         for v in image_result.vehicles if v.ok]
 
 
-def kitti_lines(image_result: ImageResult, camera: Camera) -> list[str]:
+def kitti_lines(image_result: ImageResult, camera: Camera | None = None) -> list[str]:
     """The KITTI label lines of an image's successful fits (pitch and roll dropped)."""
     return [kitti.format_label_line(obj) for _, obj in kitti_objects(image_result, camera)]
 
@@ -98,11 +102,10 @@ def prepare_output_dir(out_dir: Path) -> None:
     check_output_dir(out_dir)
 
 
-def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[ImageResult],
-                  header: dict[str, Any], on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
+def write_outputs(out_dir: Path, results: Iterable[ImageResult], header: dict[str, Any],
+                  on_image: Callable[[ImageResult], None] | None = None) -> dict[str, int]:
     """Write the KITTI label files and results.json into a staging folder, one image at a time as the
     results come, then swap it in for ``out_dir`` as a whole (:mod:`.output_folder`); return the summary.
-    ``images`` and ``results`` are consumed together, in step.
 
     Frames of sequences also give KITTI tracking labels, ``label_02/<sequence>.txt``, of their tracked vehicles
     (sorted by frame): each track gets an integer id per sequence in the order the file first names it, and
@@ -121,10 +124,10 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
             tracking: dict[str, list[tuple[int, int, str]]] = {}  # per sequence, (frame, id, line)
 
             def labelled() -> Iterator[ImageResult]:
-                for im, res in zip(images, results, strict=True):
-                    objects = kitti_objects(res, im.camera)
-                    write_label(label_dir / f"{im.id}.txt", "".join(f"{kitti.format_label_line(o)}\n"
-                                                                    for _, o in objects))
+                for res in results:
+                    objects = kitti_objects(res)
+                    write_label(label_dir / f"{res.id}.txt", "".join(f"{kitti.format_label_line(o)}\n"
+                                                                     for _, o in objects))
                     if res.sequence is not None:
                         ids, frame = track_ids.setdefault(res.sequence, {}), int(res.frame or 0)
                         for v, obj in objects:
@@ -155,16 +158,24 @@ def write_outputs(out_dir: Path, images: Iterable[Image], results: Iterable[Imag
 
 def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettings, pilot: PilotFindings,
                  progress: Callable[[int], None] | None = None,
-                 tracked: Iterator[tuple[Image, list[VehicleResult]]] | None = None) -> Iterator[ImageResult]:
+                 tracked: Iterator[tuple[Image, list[VehicleResult]]] | None = None,
+                 index: AnnotationIndex | None = None) -> Iterator[ImageResult]:
     """The batch's results, image by image in file order
     (:func:`~toosicubix.pipeline.fitting.iter_fit_images` with the pilot's solver settings; ``tracked`` the
     tracked vehicles' results, :func:`~toosicubix.pipeline.tracks.fit_tracks`), reusing the pilot's own fits when
     they are the batch's (:attr:`~toosicubix.pipeline.pilot.PilotFindings.results`) and the batch asks nothing the
-    pilot did not do (no joint ground, as many next clicks, no tracks): a small batch is then fitted once."""
+    pilot did not do (no joint ground, as many next clicks, no tracks): a small batch is then fitted once.
+
+    ``index``: the file ``images`` are read from, when nothing else reads them: with several processes, no tracks
+    and no joint ground, the workers then read the images themselves
+    (:func:`~toosicubix.pipeline.fitting.iter_fit_file`, the same results)."""
     settings = replace(settings, options=pilot.options)
     if (pilot.results is None or settings.joint_ground or settings.next_clicks != pilot.next_clicks
             or tracked is not None or settings.box_cue):
-        yield from iter_fit_images(images, n_vehicles, settings, progress, tracked)
+        if index is not None and tracked is None and not settings.joint_ground and settings.jobs > 1:
+            yield from iter_fit_file(index, settings, estimated_grounds(pilot.road_normals), progress)
+        else:
+            yield from iter_fit_images(images, n_vehicles, settings, progress, tracked)
         return
     done = iter(pilot.results)  # the images with vehicles, in file order
     for im in images:
@@ -179,20 +190,24 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettin
 
 
 def pilot_and_fits(index: AnnotationIndex, settings: BatchSettings, progress: Callable[[int], None] | None = None,
-                   on_start: Callable[[int], None] | None = None
-                   ) -> tuple[PilotFindings, Iterator[Image], Iterator[ImageResult]]:
+                   on_start: Callable[[int], None] | None = None, with_images: bool = True
+                   ) -> tuple[PilotFindings, Iterator[Image] | None, Iterator[ImageResult]]:
     """A batch as ``fit`` fits it (``fit`` and ``validate``): the pilot
     (:func:`~toosicubix.pipeline.pilot.run_pilot`), then, lazily, every image of the file on its camera's
-    estimated road (a second reader of the stream, for the labels or the checks) and its fit
+    estimated road (a second reader of the stream, for the checks; None without ``with_images``) and its fit
     (:func:`fitted_batch`), in file order."""
     pilot = run_pilot(index, settings, progress, on_start)
-    images, second = itertools.tee(on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals))
+
+    def on_roads() -> Iterator[Image]:
+        return on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals)
+
+    images, second = itertools.tee(on_roads()) if with_images else (on_roads(), None)
     tracked = None
-    if settings.tracks and index.tracked:  # a third reader: the tracks, fitted a sequence at a time
+    if settings.tracks and index.tracked:  # another reader: the tracks, fitted a sequence at a time
         last_of_sequence = {where[0]: i for i, where in enumerate(index.sequences) if where is not None}
-        tracked = fit_tracks(on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals),
-                             last_of_sequence, replace(settings, options=pilot.options), progress)
-    return pilot, second, fitted_batch(images, index.vehicles, settings, pilot, progress, tracked)
+        tracked = fit_tracks(on_roads(), last_of_sequence, replace(settings, options=pilot.options), progress)
+    return pilot, second, fitted_batch(images, index.vehicles, settings, pilot, progress, tracked,
+                                       None if with_images else index)
 
 
 def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettings | None = None,
@@ -222,7 +237,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
     # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
-    pilot, for_labels, results = pilot_and_fits(index, settings, progress, on_start)
+    pilot, _, results = pilot_and_fits(index, settings, progress, on_start, with_images=False)
     options = pilot.options
     ground = settings.ground
     header = {
@@ -264,7 +279,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
                     scale_from[v.scale_from] = scale_from.get(v.scale_from, 0) + 1
                 misfits[0] += bool(v.residual_test is not None and v.residual_test.misfit)
 
-    summary = write_outputs(out_dir, for_labels, results, header, tally)
+    summary = write_outputs(out_dir, results, header, tally)
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,
                         misfits=misfits[0] if options.misfit_level is not None else None, tracks=len(tracks),

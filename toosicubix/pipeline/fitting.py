@@ -4,9 +4,10 @@ ground plane (:func:`fit_image_jointly`)."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -15,12 +16,13 @@ import cv2
 import numpy as np
 
 from toosicubix.annotations.convert import image_from_schema, with_ground
-from toosicubix.annotations.stream import AnnotationIndex, iter_image_annotations
+from toosicubix.annotations.stream import AnnotationIndex, image_annotation, image_texts, iter_image_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import InputFileError
 from toosicubix.formats.results import ImageResult, RoadPlane, VehicleResult
 from toosicubix.model import GroundOverride, GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings, KeypointCatalogue
 from toosicubix.pipeline.vehicle import (
     Keypoints,
@@ -41,8 +43,8 @@ from toosicubix.solver.problem import Problem
 from toosicubix.solver.robust import with_weights
 from toosicubix.solver.uncertainty import analyse
 
-__all__ = ["FitTask", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images",
-           "iter_fit_images", "stream_images"]
+__all__ = ["FitTask", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images", "iter_fit_file",
+           "iter_fit_images", "on_road", "stream_images"]
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -264,6 +266,46 @@ def stream_images(index: AnnotationIndex, ground: GroundOverride | None) -> Iter
     at a time, with the ground override set on each."""
     for i, annotation in iter_image_annotations(index):
         yield from with_ground([image_from_schema(annotation, i)], ground)
+
+
+def on_road(image: Image, blocks: Mapping[tuple, GroundOverride]) -> Image:
+    """``image`` on its camera's estimated road: without a ground block of its own, it takes the one ``blocks``
+    give its camera (:func:`~toosicubix.pipeline.road_normal.camera_key`), marked as the batch's; else as it is."""
+    block = blocks.get(camera_key(image.camera)) if image.ground is None and blocks else None
+    if block is None:
+        return image
+    image = with_ground([image], block)[0]
+    return replace(image, ground=replace(image.ground, from_batch=True))  # type: ignore[arg-type]
+
+
+def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mapping[tuple, GroundOverride],
+                  progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
+    """:func:`iter_fit_images` of every image of an indexed file (with the settings' ground override, each on its
+    camera's estimated road, ``blocks`` as :func:`on_road` takes them), in ``settings.jobs`` processes, each image
+    read by the process that fits it. The results are the same as :func:`iter_fit_images` of
+    :func:`stream_images`' images; the main process only hands out each image's text and takes its results, so
+    that it does not limit how many processes a large batch can keep busy (reading an image and sending its
+    vehicles to a worker cost the main process about a quarter of what fitting them costs the worker).
+
+    Not for tracks or ``joint_ground`` (they need the images in the main process): :func:`iter_fit_images`."""
+    assert not settings.joint_ground
+    images = max(1, len(index.spans))
+    per_chunk = max(1, round(_chunk(index.vehicles, settings.jobs) * images / max(index.vehicles, 1)))
+    work = functools.partial(_fit_file_chunk, (replace(settings, jobs=1), dict(blocks)))
+    for result in ordered_map(enumerate(image_texts(index)), settings.jobs if index.vehicles > 1 else 1, per_chunk,
+                              work):
+        if progress is not None and result.vehicles:
+            progress(len(result.vehicles))
+        yield result
+
+
+def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride]], items: list[tuple[int, str]]
+                    ) -> list[ImageResult]:
+    """A worker's part of :func:`iter_fit_file`: read, place and fit these images (``(position, text)`` each)."""
+    settings, blocks = context
+    images = [on_road(image, blocks) for i, text in items
+              for image in with_ground([image_from_schema(image_annotation(text), i)], settings.ground)]
+    return list(iter_fit_images(images, sum(len(im.vehicles) for im in images), settings))
 
 
 def add_next_clicks(images: list[Image], results: list[ImageResult], settings: BatchSettings) -> list[ImageResult]:

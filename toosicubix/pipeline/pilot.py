@@ -11,12 +11,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from toosicubix.annotations.convert import with_ground
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
 from toosicubix.model import GroundOverride, Image
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
-from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, on_road, stream_images
 from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence, evidence_dof, too_few
 from toosicubix.pipeline.road_normal import (
     MIN_VEHICLES,
@@ -210,9 +209,4 @@ def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal]
     (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
     blocks = estimated_grounds(normals)
     for im in images:
-        block = blocks.get(camera_key(im.camera)) if im.ground is None and blocks else None
-        if block is None:
-            yield im
-        else:
-            im = with_ground([im], block)[0]
-            yield replace(im, ground=replace(im.ground, from_batch=True))  # type: ignore[arg-type]
+        yield on_road(im, blocks)

@@ -1,0 +1,85 @@
+"""With several processes, ``fit`` has its workers read the images they fit (iter_fit_file): the same results, byte
+for byte, as the images read in the main process and fitted one by one."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.conftest import REPO
+from toosicubix.annotations import stream
+from toosicubix.annotations.stream import index_annotations
+from toosicubix.formats.results import image_to_json
+from toosicubix.model import GroundOverride
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.fitting import iter_fit_file, iter_fit_images, on_road, stream_images
+from toosicubix.pipeline.road_normal import camera_key
+from toosicubix.pipeline.settings import BatchSettings
+
+SAMPLE = REPO / "samples" / "annotations.json"
+
+
+def _file(tmp_path: Path) -> Path:
+    """The sample's images three times over with new ids, an image without vehicles among them, and one image with a
+    ground block of its own."""
+    doc = json.loads(SAMPLE.read_text())
+    images = []
+    for copy in range(3):
+        for im in doc["images"]:
+            images.append({**im, "id": f"{im['id']}-{copy}"})
+    images.insert(4, {**doc["images"][0], "id": "empty", "vehicles": []})
+    images[1] = {**images[1], "ground": {"camera_height": 1.65}}
+    path = tmp_path / "annotations.json"
+    path.write_text(json.dumps({**doc, "images": images}))
+    return path
+
+
+@pytest.mark.parametrize("ground", [None, GroundOverride(camera_height=1.7)])
+def test_workers_reading_their_images_give_the_same_results(tmp_path: Path, ground):
+    path = _file(tmp_path)
+    index = index_annotations(path)
+    first = next(stream_images(index, None))
+    blocks = {camera_key(first.camera): GroundOverride(normal=(0.0, -0.9995, 0.0316), normal_sigma_deg=2.0,
+                                                       upright_sigma_deg=2.0)}
+    settings = BatchSettings(ground=ground, jobs=2)
+    counted: list[int] = []
+    by_workers = list(iter_fit_file(index, settings, blocks, counted.append))
+    in_main = list(iter_fit_images((on_road(im, blocks) for im in stream_images(index, ground)), index.vehicles,
+                                   BatchSettings(ground=ground, jobs=1)))
+    assert [json.dumps(image_to_json(r)) for r in by_workers] == [json.dumps(image_to_json(r)) for r in in_main]
+    assert [r.id for r in by_workers][4] == "empty" and not by_workers[4].vehicles
+    assert sum(counted) == index.vehicles == sum(len(r.vehicles) for r in by_workers)
+    on_estimated_road = [r for r in by_workers if r.ground is not None and r.ground.estimated]
+    if ground is None:  # with an override every image has a block of its own, and keeps it
+        assert on_estimated_road and np.allclose(on_estimated_road[0].ground.normal, (0.0, -0.9995, 0.0316),
+                                                 atol=1e-3)
+
+
+@pytest.mark.parametrize("estimate", [True, False])
+def test_fit_writes_the_same_folder_with_one_process_or_two(tmp_path: Path, monkeypatch, estimate: bool):
+    path = _file(tmp_path)
+    read_in_main: list[str] = []
+    parse = stream.image_annotation
+
+    def counted(text: str):
+        read_in_main.append(text)
+        return parse(text)
+
+    monkeypatch.setattr(stream, "image_annotation", counted)  # the main process's reads (the workers' are their own)
+    settings = BatchSettings(estimate_click_sigma=estimate, estimate_road_normal=estimate)
+    one = fit_file(path, tmp_path / "one", replace(settings, jobs=1))
+    read_one = len(read_in_main)
+    read_in_main.clear()
+    two = fit_file(path, tmp_path / "two", replace(settings, jobs=2))
+    assert (one.vehicles, one.ok) == (two.vehicles, two.ok)
+    if not estimate:  # no pilot: every image read once by the main process with one process, by none with two
+        assert (read_one, len(read_in_main)) == (len(index_annotations(path).spans), 0)
+    for name in ["results.json", *sorted(p.name for p in (tmp_path / "one" / "label_2").iterdir())]:
+        where = "" if name == "results.json" else "label_2"
+        a = (tmp_path / "one" / where / name).read_bytes()
+        b = (tmp_path / "two" / where / name).read_bytes()
+        assert a == b, name
