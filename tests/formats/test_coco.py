@@ -415,3 +415,14 @@ def test_any_value_anywhere_imports_or_is_named(files, data):
         assert str(exc).startswith(f"{coco}") and ": $" in str(exc)
         return
     parse_annotations(document)
+
+
+def test_the_quick_pixel_check_refuses_what_the_field_rule_refuses():
+    """_is_pixel tells plain numbers at once and hands anything else to fields.pixel: the same verdict for each."""
+    from toosicubix import fields
+    from toosicubix.formats.coco import _is_pixel
+
+    values = [0, 1, -1, 1e6, -1e6, 10 ** 6, 10 ** 6 + 1, -(10 ** 6) - 1, 1e6 + 1e-9, 999999.9999, 10 ** 400, 0.5,
+              float("nan"), float("inf"), -float("inf"), True, False, None, "1", [1.0], 5e-324]
+    for value in values:
+        assert _is_pixel(value) == fields.passes(fields.pixel, value), value

@@ -164,7 +164,8 @@ class CocoImport:
         self.path = coco_path
         self.mapping = mapping
         self.summary = ImportSummary()
-        self._enabled = [p for p in mapping.parts if p.option is None or p.option in options]
+        # Each enabled part with the keypoints it takes (asked of every part of every annotation).
+        self._enabled = [(p, keypoints_of(p)) for p in mapping.parts if p.option is None or p.option in options]
         try:
             self._text = read_json_text(coco_path)
         except FormatError as exc:
@@ -467,8 +468,7 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
     out = {}
     for j, name in enumerate(names):
         x, y, v = kp[3 * j: 3 * j + 3]
-        if not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2)) \
-                or isinstance(v, bool):
+        if not (_is_pixel(x) and _is_pixel(y) and v in (0, 1, 2)) or isinstance(v, bool):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
                         f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
                         f"v in 0, 1, 2, got {shown([x, y, v])}")
@@ -482,13 +482,22 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
     return out
 
 
-def _make_parts(parts: list[Any], labelled: dict[str, tuple[float, float, bool]],
+def _is_pixel(value: Any) -> bool:
+    """:func:`toosicubix.fields.pixel` passes it (a COCO file has some hundred thousand keypoint coordinates: the plain
+    numbers are told here at once)."""
+    kind = type(value)
+    if kind is float or kind is int:
+        return -fields.MAX_PIXEL <= value <= fields.MAX_PIXEL  # False for NaN, infinities and huge integers
+    return fields.passes(fields.pixel, value)
+
+
+def _make_parts(parts: list[tuple[Any, tuple[str, ...]]], labelled: dict[str, tuple[float, float, bool]],
                 prototype: str) -> tuple[list[dict[str, Any]], set[str]]:
-    """The annotation parts a vehicle's labelled keypoints make, and the keypoints they took."""
+    """The annotation parts a vehicle's labelled keypoints make (``parts``: each with the keypoints it takes), and
+    the keypoints they took."""
     out: list[dict[str, Any]] = []
     taken: set[str] = set()
-    for part in parts:
-        names = keypoints_of(part)
+    for part, names in parts:
         if any(n not in labelled or n in taken for n in names):
             continue
         if isinstance(part, MappingLength) and part.metres is None:
