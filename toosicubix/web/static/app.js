@@ -799,21 +799,23 @@ function dot(p, colour, radius = 4, outline = "#000") {
   ctx.stroke();
 }
 
-// Boxes [x, y, w, h] taken this frame: the labels drawn, and the selected vehicle's click dots and target circles
-// (obstacles), whose centres are `labelMarks`. A label goes beside its point (above right, below right, above left,
-// below left) where it overlaps nothing taken and no other mark is nearer to it than its own; else farther out,
-// away from the vehicle's middle, joined to its point by a thin line; where nothing is free it is left out (zoom in
-// to see it), unless it is the selected click's.
+// Boxes [x, y, w, h] taken this frame: the labels drawn (`placedLabels`), and the selected vehicle's click dots and
+// target circles (`markBoxes`, obstacles), whose centres are `labelMarks`. A label goes beside its point (above
+// right, below right, above left, below left) where it overlaps nothing taken and no other mark is nearer to it than
+// its own; else farther out, away from the vehicle's middle, joined to its point by a thin line that crosses no other
+// label (nor, where it can, a mark); where nothing is free it is left out (zoom in to see it), unless it is the
+// selected click's.
 let placedLabels = [];
+let markBoxes = [];
 let labelMarks = [];
 const overlapping = (a, b) => a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3];
 const LABEL_HEIGHT = 15;
-const LEADER_RINGS = [22, 36, 54, 78, 110];  // screen pixels from the point to a far label's nearest side
+const LEADER_RINGS = [22, 36, 54, 78, 110, 150, 200];  // screen pixels from the point to a far label's nearest side
 const LEADER_DIRECTIONS = 16;
 
 function obstacle(p, radius) {
   const [x, y] = toScreen(p);
-  placedLabels.push([x - radius, y - radius, 2 * radius, 2 * radius]);
+  markBoxes.push([x - radius, y - radius, 2 * radius, 2 * radius]);
   labelMarks.push([x, y]);
 }
 
@@ -872,7 +874,8 @@ function label(p, text, colour, options = {}) {
   const [x, y] = toScreen(p);
   ctx.font = "12px system-ui, sans-serif";
   const w = ctx.measureText(text).width;
-  const free = (b) => !placedLabels.some((taken) => overlapping(b, taken));
+  const free = (b) => !placedLabels.some((taken) => overlapping(b, taken)) &&
+    !markBoxes.some((taken) => overlapping(b, taken));
   const mine = [[x, y], ...own];
   const isMine = ([mx, my]) => mine.some(([ox, oy]) => Math.abs(mx - ox) < 0.5 && Math.abs(my - oy) < 0.5);
   const nearestIsOwn = (b) => {
@@ -888,15 +891,23 @@ function label(p, text, colour, options = {}) {
     const onScreen = (b) => b[0] >= 0 && b[1] >= 0 && b[0] + b[2] <= rect.width && b[1] + b[3] <= rect.height;
     const length = middle ? Math.hypot(x - middle[0], y - middle[1]) : 0;
     const away = length > 1 ? [(x - middle[0]) / length, (y - middle[1]) / length] : null;
+    // A line crossing no other label or mark if there is one, else one crossing marks only (a dense cluster's
+    // middle dot has marks all round); never one across another label.
+    const crosses = (end, boxes) => boxes.some((taken) => !overlapping(taken, [x - 6, y - 6, 12, 12]) &&
+      segmentCrosses([x, y], end, taken));  // its own dot aside
+    let acrossMarks = null;
     for (const b of farPlaces(x, y, w, away)) {
       if (!onScreen(b) || !free(b)) continue;
       const end = nearestOnBox(b, x, y);
-      if (placedLabels.some((taken) => !overlapping(taken, [x - 6, y - 6, 12, 12]) && segmentCrosses([x, y], end,
-        taken))) continue;  // the line would cross another label or mark (its own dot aside)
-      box = b;
-      leader = end;
-      break;
+      if (crosses(end, placedLabels)) continue;
+      if (!crosses(end, markBoxes)) {
+        box = b;
+        leader = end;
+        break;
+      }
+      acrossMarks = acrossMarks || [b, end];
     }
+    if (!box && acrossMarks) [box, leader] = acrossMarks;
   }
   if (!box && !always) return;
   box = box || beside[0];
@@ -930,6 +941,7 @@ function render() {
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, rect.width, rect.height);
   placedLabels = [];
+  markBoxes = [];
   labelMarks = [];
   state.labels = [];
   if (state.image.complete && state.image.naturalWidth) {
