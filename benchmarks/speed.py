@@ -8,7 +8,9 @@ Parts (``--parts``, comma-separated; the first three by default):
 2. ``apollocar3d``: vehicles per second on ApolloCar3D's cars (``apollocar3d_val_dev.json``, 1,034 cars) with
    ``--jobs 2``: the keypoints imported (``import coco --mapping apollocar3d-66``), then
    ``toosicubix.pipeline.batch.fit_file`` with ``fit``'s defaults (the pilot estimates the click noise and the road
-   normals) and two processes, output written; timed from the import's start to the written folder.
+   normals) and two processes, output written; timed from the import's start to the written folder. Also the CPU
+   time ``fit_file`` costs a car in the main process and in the workers (pilot and batch): the main process's share
+   is what caps how many workers help on a machine with more cores.
 3. ``refit``: the annotation page's refit (``toosicubix.web.session.Session._fit``: ``fit_one`` with every
    suggestion of what to click next, ``next_clicks=NEXT_CLICKS``) on the first ``--refit-vehicles`` vehicles of
    part 1: median and p90.
@@ -132,9 +134,21 @@ def apollocar3d_rate(data: Path, jobs: int) -> dict:
         annotations = Path(tmp) / "annotations.json"
         annotations.write_text(json.dumps(document))
         imported = time.perf_counter()
+        main_before, workers_before = _cpu_seconds()
         summary = fit_file(annotations, Path(tmp) / "out", settings)
         done = time.perf_counter()
-    return {"vehicles": summary.vehicles, "ok": summary.ok, "seconds": done - start, "import_seconds": imported - start}
+        main_after, workers_after = _cpu_seconds()
+    return {"vehicles": summary.vehicles, "ok": summary.ok, "seconds": done - start, "import_seconds": imported - start,
+            "main_cpu_seconds": main_after - main_before, "workers_cpu_seconds": workers_after - workers_before}
+
+
+def _cpu_seconds() -> tuple[float, float]:
+    """CPU seconds (user and system) of this process and of its finished child processes (a batch's workers, once
+    their pools are shut down)."""
+    import resource  # Unix only, as this part's fork is
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
 
 
 def _stats(seconds: list[float]) -> dict:
@@ -184,6 +198,11 @@ def interleaved(args: argparse.Namespace, report: dict) -> None:
                 out[name] = {"vehicles": rs[0]["vehicles"], "ok": rs[0]["ok"], "jobs": args.jobs,
                              "vehicles_per_second": float(np.median(rates)), "per_round": rates,
                              "import_seconds": [r["import_seconds"] for r in rs]}
+                if "main_cpu_seconds" in rs[0]:  # fit_file's CPU per car: the main process's share caps the workers
+                    out[name]["main_cpu_ms_per_vehicle"] = float(np.median(
+                        [1e3 * r["main_cpu_seconds"] / r["vehicles"] for r in rs]))
+                    out[name]["workers_cpu_ms_per_vehicle"] = float(np.median(
+                        [1e3 * r["workers_cpu_seconds"] / r["vehicles"] for r in rs]))
             elif part == "per-vehicle":
                 pooled = [t for r in rs for t in r["seconds"]]
                 fitted = [t for r in rs for t, ok in zip(r["seconds"], r["ok"], strict=True) if ok]
@@ -209,6 +228,9 @@ def interleaved(args: argparse.Namespace, report: dict) -> None:
             if part == "apollocar3d":
                 line = (f"{o['vehicles_per_second']:.0f} vehicles/s with --jobs {o['jobs']} ({o['vehicles']} cars, "
                         f"{o['ok']} fitted; rounds {', '.join(f'{v:.0f}' for v in o['per_round'])})")
+                if "main_cpu_ms_per_vehicle" in o:
+                    line += (f"; fit_file's CPU a car: main process {o['main_cpu_ms_per_vehicle']:.2f} ms, workers "
+                             f"{o['workers_cpu_ms_per_vehicle']:.2f} ms")
             else:
                 o = o["all"] if part == "per-vehicle" else o
                 rounds = ", ".join(f"{v:.2f}" for v in out[name]["per_round_median_ms"])
