@@ -236,7 +236,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     settings = settings or BatchSettings()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    # Two readers of the same stream: the fitter and the label writer (which needs each image's camera).
+    # One reader of the images: the fitter (the label writer takes each camera's offset from the results).
     pilot, _, results = pilot_and_fits(index, settings, progress, on_start, with_images=False)
     options = pilot.options
     ground = settings.ground
