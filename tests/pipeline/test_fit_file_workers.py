@@ -83,3 +83,28 @@ def test_fit_writes_the_same_folder_with_one_process_or_two(tmp_path: Path, monk
         a = (tmp_path / "one" / where / name).read_bytes()
         b = (tmp_path / "two" / where / name).read_bytes()
         assert a == b, name
+
+
+def test_workers_started_by_spawn_read_and_fit_the_same(tmp_path: Path):
+    """macOS and Windows start workers by spawn, not fork: nothing of the main process is inherited, so what a worker
+    needs to read and fit its images (the settings, the estimated roads) must travel with its tasks."""
+    import subprocess
+    import sys
+
+    path = _file(tmp_path)
+    script = tmp_path / "spawned.py"
+    script.write_text(
+        "import multiprocessing, sys\n"
+        "if __name__ == '__main__':\n"
+        "    multiprocessing.set_start_method('spawn', force=True)\n"
+        "    from toosicubix.pipeline.batch import fit_file\n"
+        "    from toosicubix.pipeline.settings import BatchSettings\n"
+        "    settings = BatchSettings(estimate_click_sigma=False, estimate_road_normal=False, jobs=int(sys.argv[3]))\n"
+        "    fit_file(sys.argv[1], sys.argv[2], settings)\n")
+    for jobs in (1, 2):
+        subprocess.run([sys.executable, str(script), str(path), str(tmp_path / f"out{jobs}"), str(jobs)], check=True,
+                       timeout=300)
+    assert (tmp_path / "out1" / "results.json").read_bytes() == (tmp_path / "out2" / "results.json").read_bytes()
+    labels = sorted(p.name for p in (tmp_path / "out1" / "label_2").iterdir())
+    assert labels and all((tmp_path / "out1" / "label_2" / n).read_bytes() ==
+                          (tmp_path / "out2" / "label_2" / n).read_bytes() for n in labels)
