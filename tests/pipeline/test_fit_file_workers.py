@@ -108,3 +108,56 @@ def test_workers_started_by_spawn_read_and_fit_the_same(tmp_path: Path):
     labels = sorted(p.name for p in (tmp_path / "out1" / "label_2").iterdir())
     assert labels and all((tmp_path / "out1" / "label_2" / n).read_bytes() ==
                           (tmp_path / "out2" / "label_2" / n).read_bytes() for n in labels)
+
+
+_SMALL_OR_LARGE = """
+import sys
+from toosicubix.pipeline import fitting
+from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.settings import BatchSettings
+if sys.argv[3] == "compiled":
+    fitting.COMPILED_FROM_VEHICLES = 0  # the sample counts as a large batch
+said = []
+fit_file(sys.argv[1], sys.argv[2], BatchSettings(jobs=int(sys.argv[4])), say=said.append)
+print("numba" in sys.modules)
+"""
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_small_batch_takes_the_numpy_path_with_the_same_bytes(tmp_path: Path, jobs: int):
+    """A batch below COMPILED_FROM_VEHICLES does not load the compiled solver (numba is not even imported: half a
+    second, twenty the first time after installing); its folder is byte for byte the compiled path's."""
+    import subprocess
+    import sys
+
+    from toosicubix.pipeline.fitting import COMPILED_FROM_VEHICLES
+
+    path = _file(tmp_path)
+    assert index_annotations(path).vehicles < COMPILED_FROM_VEHICLES
+    script = tmp_path / "small_or_large.py"
+    script.write_text(_SMALL_OR_LARGE)
+    loaded = {}
+    for mode in ("numpy", "compiled"):
+        run = subprocess.run([sys.executable, str(script), str(path), str(tmp_path / mode), mode, str(jobs)],
+                             check=True, capture_output=True, text=True, timeout=300)
+        loaded[mode] = run.stdout.strip().splitlines()[-1]
+    assert loaded == {"numpy": "False", "compiled": "True"}
+    assert (tmp_path / "numpy" / "results.json").read_bytes() == (tmp_path / "compiled" / "results.json").read_bytes()
+    for label in (tmp_path / "numpy" / "label_2").iterdir():
+        assert label.read_bytes() == (tmp_path / "compiled" / "label_2" / label.name).read_bytes()
+
+
+def test_fit_says_it_compiles_only_for_a_batch_that_loads_the_compiled_solver(tmp_path: Path, monkeypatch):
+    from toosicubix.pipeline import fitting
+    from toosicubix.solver import compiled
+
+    if not compiled.available():
+        pytest.skip("no compiled path here (numba absent or switched off)")
+    monkeypatch.setattr(compiled, "_cached", lambda dispatcher: False)  # as on the first run after installing
+    path = _file(tmp_path)
+    said: list[str] = []
+    fit_file(path, tmp_path / "small", BatchSettings(), say=said.append)
+    assert said == []  # 18 vehicles: the numpy path, nothing to compile
+    monkeypatch.setattr(fitting, "COMPILED_FROM_VEHICLES", 10)
+    fit_file(path, tmp_path / "large", BatchSettings(), say=said.append)
+    assert said == [compiled.COMPILING]

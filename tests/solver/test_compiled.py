@@ -295,3 +295,11 @@ def test_a_residuals_variant_that_differs_falls_back_alone(monkeypatch):
     assert compiled.residuals(problem, R, t, p, True, None, False, lambda: residuals_batch(
         problem, R, t, p, True, None, False)) is not None
     assert compiled._agrees == {"residuals": False, "residuals+J": True}
+
+
+def test_warm_up_inside_the_numpy_path_loads_nothing(monkeypatch):
+    loaded = []
+    monkeypatch.setattr(compiled, "available", lambda: loaded.append(True) or True)
+    with compiled.numpy_path_only():
+        assert not compiled.warm_up(loaded.append)
+    assert loaded == []  # neither asked whether numba is there nor told anything

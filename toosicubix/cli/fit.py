@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -68,13 +69,12 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
     from dataclasses import replace
 
     from toosicubix.pipeline.batch import fit_file
-    from toosicubix.solver.compiled import warm_up
 
-    warm_up(None if quiet else lambda text: click.echo(text, err=True))  # not in the middle of the progress bar
     bar = ProgressBar(quiet)
     try:
         summary = fit_file(annotations, out_dir, replace(settings, next_clicks=next_clicks, keypoints=mapping),
-                           progress=bar.update, on_start=bar.start)
+                           progress=bar.update, on_start=bar.start,
+                           say=None if quiet else functools.partial(click.echo, err=True))  # before the bar
     except InputError:
         foreign_file(annotations)
         raise

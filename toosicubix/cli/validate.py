@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -70,14 +71,13 @@ def validate_command(annotations: Path, max_yaw_sigma_deg: float, max_depth_sigm
     from dataclasses import replace
 
     from toosicubix.pipeline.validation import validate_file
-    from toosicubix.solver.compiled import warm_up
 
     thresholds = Thresholds(max_yaw_sigma_deg, max_depth_sigma_rel, allow_ambiguous, reach_factor)
-    warm_up(None if quiet else lambda text: click.echo(text, err=True))  # not in the middle of the progress bar
     bar = ProgressBar(quiet)
     try:
         report = validate_file(annotations, replace(settings, next_clicks=next_clicks, keypoints=mapping), thresholds,
-                               progress=bar.update, on_start=bar.start)
+                               progress=bar.update, on_start=bar.start,
+                               say=None if quiet else functools.partial(click.echo, err=True))  # before the bar
     except InputError:
         foreign_file(annotations)
         raise

@@ -28,7 +28,7 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
-from toosicubix.pipeline.fitting import iter_fit_file, iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import batch_solver, iter_fit_file, iter_fit_images, stream_images
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     TRACKING_LABEL_DIR,
@@ -212,7 +212,8 @@ def pilot_and_fits(index: AnnotationIndex, settings: BatchSettings, progress: Ca
 
 def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettings | None = None,
              progress: Callable[[int], None] | None = None,
-             on_start: Callable[[int], None] | None = None) -> BatchSummary:
+             on_start: Callable[[int], None] | None = None,
+             say: Callable[[str], None] | None = None) -> BatchSummary:
     """Read an annotation file, fit every vehicle, write ``label_2/`` and ``results.json``.
 
     Parameters
@@ -224,6 +225,8 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
         normals first); its defaults when None
     progress : called with the number of vehicles just finished
     on_start : called once with the number of vehicles to fit
+    say : told, before the first fit, when the compiled solver is being compiled (the first large batch after
+        installing; a small batch takes the numpy path: :func:`~toosicubix.pipeline.fitting.batch_solver`)
 
     Raises
     ------
@@ -236,6 +239,13 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     settings = settings or BatchSettings()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
+    with batch_solver(index.vehicles, say):
+        return _fit_indexed(annotations, index, out_dir, settings, progress, on_start)
+
+
+def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, settings: BatchSettings,
+                 progress: Callable[[int], None] | None, on_start: Callable[[int], None] | None) -> BatchSummary:
+    """:func:`fit_file` once the file is indexed and the output folder checked."""
     # One reader of the images: the fitter (the label writer takes each camera's offset from the results).
     pilot, _, results = pilot_and_fits(index, settings, progress, on_start, with_images=False)
     options = pilot.options

@@ -9,6 +9,7 @@ import itertools
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -43,8 +44,8 @@ from toosicubix.solver.problem import Problem
 from toosicubix.solver.robust import with_weights
 from toosicubix.solver.uncertainty import analyse
 
-__all__ = ["FitTask", "add_next_clicks", "check_prototypes", "fit_image_jointly", "fit_images", "iter_fit_file",
-           "iter_fit_images", "on_road", "stream_images"]
+__all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_solver", "check_prototypes",
+           "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "stream_images"]
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -167,6 +168,27 @@ def iter_fit_images(images: Iterable[Image], n_vehicles: int, settings: BatchSet
     yield from finished_images()  # images without vehicles at the end
 
 
+#: A batch of fewer vehicles than this is fitted by the numpy path, the compiled solver not loaded: loading it costs
+#: about 0.5 s (some 20 s the first time after installing, when numba compiles it), more than it saves on them. It
+#: saves 2.3 ms a fit on the KITTI simulated set and 3.2 ms on ApolloCar3D's keypoint cars, and a batch fits each
+#: vehicle up to twice (the pilot, then the batch): break-even at about 100 and 80 vehicles in one process, later
+#: with more. The results are the same either way (:mod:`toosicubix.solver.compiled`).
+COMPILED_FROM_VEHICLES = 64
+
+
+@contextmanager
+def batch_solver(n_vehicles: int, say: Callable[[str], None] | None = None) -> Iterator[None]:
+    """The solver path for a batch of ``n_vehicles`` within the block: below :data:`COMPILED_FROM_VEHICLES` the numpy
+    path alone (nothing loaded), else the compiled one, loaded now (``say`` is told when numba compiles it first,
+    :func:`toosicubix.solver.compiled.warm_up`)."""
+    if n_vehicles < COMPILED_FROM_VEHICLES:
+        with compiled.numpy_path_only():
+            yield
+        return
+    compiled.warm_up(say)
+    yield
+
+
 def _chunk(n_vehicles: int, jobs: int) -> int:
     """How many vehicles go to a worker at once: about four chunks per worker, at most 64 vehicles each."""
     return max(1, min(64, n_vehicles // (4 * jobs)))
@@ -191,7 +213,8 @@ def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
         return
     in_flight: deque[Future[list[VehicleResult]]] = deque()
     # The compiled solver loaded here, before the workers start, is theirs without loading it again (where they are
-    # forked: Linux); each would otherwise spend half a second on it, every pool.
+    # forked: Linux); each would otherwise spend half a second on it, every pool. (Nothing is loaded inside
+    # batch_solver's numpy path, which forked workers inherit.)
     compiled.warm_up()
     with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
         while True:

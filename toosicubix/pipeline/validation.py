@@ -20,6 +20,7 @@ from toosicubix import vocabulary
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
 from toosicubix.pipeline.batch import pilot_and_fits
+from toosicubix.pipeline.fitting import batch_solver
 from toosicubix.pipeline.pilot import PilotFindings
 from toosicubix.pipeline.settings import BatchSettings
 
@@ -304,12 +305,13 @@ def describe(check: VehicleCheck) -> str:
 
 def validate_file(annotations: str | Path, settings: BatchSettings | None = None, thresholds: Thresholds | None = None,
                   progress: Callable[[int], None] | None = None,
-                  on_start: Callable[[int], None] | None = None) -> ValidationReport:
+                  on_start: Callable[[int], None] | None = None,
+                  say: Callable[[str], None] | None = None) -> ValidationReport:
     """Fit every vehicle of a file as ``fit`` would, write nothing, judge each (see the module docstring).
 
     Parameters
     ----------
-    annotations, progress, on_start : as :func:`toosicubix.pipeline.batch.fit_file` takes them
+    annotations, progress, on_start, say : as :func:`toosicubix.pipeline.batch.fit_file` takes them
     settings : as :func:`~toosicubix.pipeline.batch.fit_file` takes them (``toosicubix validate``, like ``fit``,
         estimates the click noise and the road normals unless given them); default: its defaults with 3 next clicks
         per vehicle (the parts to suggest)
@@ -324,10 +326,11 @@ def validate_file(annotations: str | Path, settings: BatchSettings | None = None
     settings = settings or BatchSettings(next_clicks=3)
     thresholds = thresholds or Thresholds()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
-    # Read image by image, as fit does: the fitter and the checks read the same stream.
-    pilot, for_checks, results = pilot_and_fits(index, settings, progress, on_start)
+    with batch_solver(index.vehicles, say):
+        # Read image by image, as fit does: the fitter and the checks read the same stream.
+        pilot, for_checks, results = pilot_and_fits(index, settings, progress, on_start)
+        checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
+                  for im, res in zip(for_checks, results, strict=True)
+                  for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
     options = pilot.options
-    checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
-              for im, res in zip(for_checks, results, strict=True)
-              for vehicle, r in zip(im.vehicles, res.vehicles, strict=True)]
     return ValidationReport(annotations, options.click_sigma, options.part_sigma, thresholds, checks, pilot)

@@ -78,8 +78,8 @@ COMPILING = ("compiling the solver's refinement for this machine (numba, once pe
 def warm_up(say: Callable[[str], None] | None = None) -> bool:
     """Load the compiled refinement now, compiling it when no cached copy exists (``say`` is told :data:`COMPILING`
     first), so that no fit waits for it later: the commands call this before their first fit. Returns whether the
-    compiled path is available."""
-    if not available():
+    compiled path is available. Inside :func:`numpy_path_only` it loads nothing (numba is not even imported)."""
+    if _off or not available():
         return False
     global _kernel
     if say is not None and not all(_cached(f) for f in (_kernel.lm, _kernel.residuals, _kernel.solve_shapes,
