@@ -161,3 +161,29 @@ def test_fit_says_it_compiles_only_for_a_batch_that_loads_the_compiled_solver(tm
     monkeypatch.setattr(fitting, "COMPILED_FROM_VEHICLES", 10)
     fit_file(path, tmp_path / "large", BatchSettings(), say=said.append)
     assert said == [compiled.COMPILING]
+
+
+def test_a_file_of_few_crowded_images_is_read_in_the_main_process(tmp_path: Path):
+    """The workers get whole images: one image of 45 vehicles would keep one worker busy while the other waits,
+    where the main process's reading hands out its vehicles a few at a time. Such a file keeps that path."""
+    from toosicubix.pipeline.fitting import _chunk, _image_groups, reads_in_workers
+
+    doc = json.loads(SAMPLE.read_text())
+    first = doc["images"][0]
+    crowded = {**first, "vehicles": [{**v, "id": f"{k}-{v['id']}"} for k in range(15) for v in first["vehicles"]]}
+    path = tmp_path / "crowded.json"
+    path.write_text(json.dumps({**doc, "images": [crowded]}))
+    index = index_annotations(path)
+    n = len(crowded["vehicles"])
+    assert index.image_vehicles == (n,) and not reads_in_workers(index, 2)
+    spread = index_annotations(_file(tmp_path))
+    assert reads_in_workers(spread, 2) and not reads_in_workers(spread, 1)
+    groups = list(_image_groups(spread, _chunk(spread.vehicles, 2)))
+    assert [i for group in groups for i, _ in group] == list(range(len(spread.spans)))  # every image once, in order
+    assert all(sum(spread.image_vehicles[i] for i, _ in group) >= 2 for group in groups[:-1])
+    two = fit_file(path, tmp_path / "two", BatchSettings(jobs=2, estimate_click_sigma=False,
+                                                        estimate_road_normal=False))
+    one = fit_file(path, tmp_path / "one", BatchSettings(jobs=1, estimate_click_sigma=False,
+                                                        estimate_road_normal=False))
+    assert (one.ok, one.vehicles) == (two.ok, two.vehicles) == (n, n)
+    assert (tmp_path / "one" / "results.json").read_bytes() == (tmp_path / "two" / "results.json").read_bytes()

@@ -45,6 +45,7 @@ class AnnotationIndex:
     sequences : per image, its ``(sequence, frame)``, or None for an image of no sequence
     tracked : how many vehicles carry a ``track``
     clicked : how many vehicles carry clicks (the ones a pilot can fit alone; a tracked vehicle may have only a box)
+    image_vehicles : per image, how many vehicles it has (what a batch's workers are handed by)
     """
 
     path: Path
@@ -55,6 +56,7 @@ class AnnotationIndex:
     sequences: tuple[tuple[str, int] | None, ...] = ()
     tracked: int = 0
     clicked: int = 0
+    image_vehicles: tuple[int, ...] = ()
 
 
 class _Scanner:
@@ -168,6 +170,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     first_lower: dict[str, int] = {}
     vehicles = tracked = clicked = 0
     sequences: list[tuple[str, int] | None] = []
+    image_vehicles: list[int] = []
     tracks = TrackBook()
     images_seen = False
     for key, value, _, _ in _top_level(scanner):
@@ -183,6 +186,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
         for i, (raw, start, end) in enumerate(_image_spans(scanner)):
             spans.append((start, end))
             sequences.append(None)
+            image_vehicles.append(0)
             if len(problems) >= MAX_PROBLEMS:
                 continue
             try:
@@ -206,6 +210,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
             first_index.setdefault(image.id, i)
             first_lower.setdefault(lower, i)
             vehicles += len(image.vehicles)
+            image_vehicles[-1] = len(image.vehicles)
             clicked += sum(bool(v.parts) for v in image.vehicles)
             prototypes.update(v.prototype for v in image.vehicles)
             if known is not None:
@@ -220,7 +225,7 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     if problems:
         raise InputFileError(path, problems[:MAX_PROBLEMS])
     return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes), tuple(sequences), tracked,
-                           clicked)
+                           clicked, tuple(image_vehicles))
 
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:

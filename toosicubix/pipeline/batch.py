@@ -28,7 +28,13 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
-from toosicubix.pipeline.fitting import batch_solver, iter_fit_file, iter_fit_images, stream_images
+from toosicubix.pipeline.fitting import (
+    batch_solver,
+    iter_fit_file,
+    iter_fit_images,
+    reads_in_workers,
+    stream_images,
+)
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     TRACKING_LABEL_DIR,
@@ -166,13 +172,15 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettin
     they are the batch's (:attr:`~toosicubix.pipeline.pilot.PilotFindings.results`) and the batch asks nothing the
     pilot did not do (no joint ground, as many next clicks, no tracks): a small batch is then fitted once.
 
-    ``index``: the file ``images`` are read from, when nothing else reads them: with several processes, no tracks
-    and no joint ground, the workers then read the images themselves
+    ``index``: the file ``images`` are read from, when nothing else reads them: with several processes, no tracks,
+    no joint ground and no image crowded enough to keep a worker alone busy
+    (:func:`~toosicubix.pipeline.fitting.reads_in_workers`), the workers then read the images themselves
     (:func:`~toosicubix.pipeline.fitting.iter_fit_file`, the same results)."""
     settings = replace(settings, options=pilot.options)
     if (pilot.results is None or settings.joint_ground or settings.next_clicks != pilot.next_clicks
             or tracked is not None or settings.box_cue):
-        if index is not None and tracked is None and not settings.joint_ground and settings.jobs > 1:
+        if index is not None and tracked is None and not settings.joint_ground and reads_in_workers(index,
+                                                                                                   settings.jobs):
             yield from iter_fit_file(index, settings, estimated_grounds(pilot.road_normals), progress)
         else:
             yield from iter_fit_images(images, n_vehicles, settings, progress, tracked)

@@ -45,7 +45,8 @@ from toosicubix.solver.robust import with_weights
 from toosicubix.solver.uncertainty import analyse
 
 __all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_solver", "check_prototypes",
-           "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "stream_images"]
+           "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "reads_in_workers",
+           "stream_images"]
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -310,23 +311,43 @@ def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mappi
     that it does not limit how many processes a large batch can keep busy (reading an image and sending its
     vehicles to a worker cost the main process about a quarter of what fitting them costs the worker).
 
+    The workers get whole images, consecutive ones up to :func:`_chunk`'s number of vehicles at a time: for a file
+    whose images are few and crowded, :func:`reads_in_workers` says to read them in the main process instead.
     Not for tracks or ``joint_ground`` (they need the images in the main process): :func:`iter_fit_images`."""
     assert not settings.joint_ground
-    images = max(1, len(index.spans))
-    per_chunk = max(1, round(_chunk(index.vehicles, settings.jobs) * images / max(index.vehicles, 1)))
+    jobs = settings.jobs if index.vehicles > 1 else 1
     work = functools.partial(_fit_file_chunk, (replace(settings, jobs=1), dict(blocks)))
-    for result in ordered_map(enumerate(image_texts(index)), settings.jobs if index.vehicles > 1 else 1, per_chunk,
-                              work):
+    for result in ordered_map(_image_groups(index, _chunk(index.vehicles, jobs)), jobs, 1, work):
         if progress is not None and result.vehicles:
             progress(len(result.vehicles))
         yield result
 
 
-def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride]], items: list[tuple[int, str]]
-                    ) -> list[ImageResult]:
+def reads_in_workers(index: AnnotationIndex, jobs: int) -> bool:
+    """Whether :func:`iter_fit_file` keeps ``jobs`` processes about as busy as :func:`iter_fit_images` would: no image
+    holds more than two workers' chunks of vehicles (:func:`_chunk`; it hands out vehicles, not images)."""
+    return jobs > 1 and max(index.image_vehicles, default=0) <= 2 * _chunk(index.vehicles, jobs)
+
+
+def _image_groups(index: AnnotationIndex, chunk: int) -> Iterator[list[tuple[int, str]]]:
+    """Consecutive images, ``(position, text)`` each, in groups of about ``chunk`` vehicles (at least one image)."""
+    group: list[tuple[int, str]] = []
+    vehicles = 0
+    for i, (text, n) in enumerate(zip(image_texts(index), index.image_vehicles, strict=True)):
+        group.append((i, text))
+        vehicles += n
+        if vehicles >= chunk:
+            yield group
+            group, vehicles = [], 0
+    if group:
+        yield group
+
+
+def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride]],
+                    groups: list[list[tuple[int, str]]]) -> list[ImageResult]:
     """A worker's part of :func:`iter_fit_file`: read, place and fit these images (``(position, text)`` each)."""
     settings, blocks = context
-    images = [on_road(image, blocks) for i, text in items
+    images = [on_road(image, blocks) for group in groups for i, text in group
               for image in with_ground([image_from_schema(image_annotation(text), i)], settings.ground)]
     return list(iter_fit_images(images, sum(len(im.vehicles) for im in images), settings))
 
