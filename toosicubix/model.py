@@ -50,30 +50,30 @@ class Part:
     def __reduce__(self) -> tuple[Any, tuple]:
         """Pickled with its float arrays as lists: a batch sends every part to a worker process, and numpy's
         pickling of three small arrays cost more than the part's numbers. They come back the same: float64, the
-        same shape, C order (any other array is pickled by numpy as before)."""
-        return _part, (self.kind, self.name, _as_lists(self.uv), self.json_path, self.known, _as_lists(self.at),
-                       _as_lists(self.spread), self.visible)
+        same shape, C order (any other value, an array of another kind included, is pickled as it is)."""
+        return _part, (self.kind, self.name, *_as_rows(self.uv), self.json_path, self.known, *_as_rows(self.at),
+                       *_as_rows(self.spread), self.visible)
 
 
-def _as_lists(a: np.ndarray | None) -> Any:
-    """``(nested lists, shape)`` of a C-ordered float64 array, for :meth:`Part.__reduce__`; anything else as it is."""
+def _as_rows(a: Any) -> tuple[Any, tuple[int, ...] | None]:
+    """``(nested lists, shape)`` of a C-ordered float64 array, for :meth:`Part.__reduce__`; anything else
+    ``(itself, None)``."""
     if type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous:
         return a.tolist(), a.shape
-    return a
+    return a, None
 
 
-def _from_lists(value: Any) -> Any:
-    """The array :func:`_as_lists` took apart; anything else as it is."""
-    if type(value) is tuple:
-        rows, shape = value
-        return np.array(rows, dtype=np.float64).reshape(shape)
-    return value
+def _from_rows(value: Any, shape: tuple[int, ...] | None) -> Any:
+    """The array :func:`_as_rows` took apart (``shape`` not None); else the value as it was."""
+    return value if shape is None else np.array(value, dtype=np.float64).reshape(shape)
 
 
-def _part(kind: str, name: str, uv: Any, json_path: str, known: tuple[float, float] | None, at: Any, spread: Any,
-          visible: bool) -> Part:
+def _part(kind: str, name: str, uv: Any, uv_shape: tuple[int, ...] | None, json_path: str,
+          known: tuple[float, float] | None, at: Any, at_shape: tuple[int, ...] | None, spread: Any,
+          spread_shape: tuple[int, ...] | None, visible: bool) -> Part:
     """A :class:`Part` from its pickled fields (:meth:`Part.__reduce__`)."""
-    return Part(kind, name, _from_lists(uv), json_path, known, _from_lists(at), _from_lists(spread), visible)
+    return Part(kind, name, _from_rows(uv, uv_shape), json_path, known, _from_rows(at, at_shape),
+                _from_rows(spread, spread_shape), visible)
 
 
 @dataclass(frozen=True)

@@ -151,3 +151,15 @@ def test_parts_pickle_to_the_same_arrays():
                 b.dtype, b.shape, b.flags.c_contiguous, b.tobytes("A")), (part.name, name)
         assert (back.kind, back.name, back.json_path, back.known, back.visible) == (
             part.kind, part.name, part.json_path, part.known, part.visible)
+
+
+def test_a_part_whose_fields_are_not_arrays_pickles_as_it_is():
+    """A value of another type where an array is expected (a tuple of numbers, say) comes back as it was given, never
+    read as an array's rows."""
+    import pickle
+
+    from toosicubix.model import Part
+
+    part = Part("keypoint", "odd", np.zeros((1, 2)), "$", at=(0.1, 0.2, 0.3), spread=([1.0], (2,)))
+    back = pickle.loads(pickle.dumps(part))
+    assert back.at == (0.1, 0.2, 0.3) and back.spread == ([1.0], (2,))
