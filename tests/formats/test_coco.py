@@ -417,12 +417,18 @@ def test_any_value_anywhere_imports_or_is_named(files, data):
     parse_annotations(document)
 
 
-def test_the_quick_pixel_check_refuses_what_the_field_rule_refuses():
-    """_is_pixel tells plain numbers at once and hands anything else to fields.pixel: the same verdict for each."""
-    from toosicubix import fields
-    from toosicubix.formats.coco import _is_pixel
+def test_the_pixel_rule_s_quick_path_refuses_what_its_general_rule_refuses():
+    """fields.pixel tells plain numbers at once (a COCO file's hundreds of thousands of coordinates) and hands anything
+    else to fields.number with the pixel bounds: the same verdict and value for each."""
+    import functools
 
+    from toosicubix import fields
+
+    general = functools.partial(fields.number, low=-fields.MAX_PIXEL, high=fields.MAX_PIXEL, what="a pixel coordinate")
     values = [0, 1, -1, 1e6, -1e6, 10 ** 6, 10 ** 6 + 1, -(10 ** 6) - 1, 1e6 + 1e-9, 999999.9999, 10 ** 400, 0.5,
               float("nan"), float("inf"), -float("inf"), True, False, None, "1", [1.0], 5e-324]
     for value in values:
-        assert _is_pixel(value) == fields.passes(fields.pixel, value), value
+        assert fields.passes(fields.pixel, value) == fields.passes(general, value), value
+        if fields.passes(general, value):
+            quick, slow = fields.pixel(value, None, None), general(value, None, None)
+            assert type(quick) is float and quick == slow, value

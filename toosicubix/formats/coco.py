@@ -468,7 +468,8 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
     out = {}
     for j, name in enumerate(names):
         x, y, v = kp[3 * j: 3 * j + 3]
-        if not (_is_pixel(x) and _is_pixel(y) and v in (0, 1, 2)) or isinstance(v, bool):
+        if not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2)) \
+                or isinstance(v, bool):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
                         f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
                         f"v in 0, 1, 2, got {shown([x, y, v])}")
@@ -480,15 +481,6 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
             summary.hidden_kept += v == 1
         out[name] = (float(x), float(y), v == 2)
     return out
-
-
-def _is_pixel(value: Any) -> bool:
-    """:func:`toosicubix.fields.pixel` passes it (a COCO file has some hundred thousand keypoint coordinates: the plain
-    numbers are told here at once)."""
-    kind = type(value)
-    if kind is float or kind is int:
-        return -fields.MAX_PIXEL <= value <= fields.MAX_PIXEL  # False for NaN, infinities and huge integers
-    return fields.passes(fields.pixel, value)
 
 
 def _make_parts(parts: list[tuple[Any, tuple[str, ...]]], labelled: dict[str, tuple[float, float, bool]],
