@@ -800,14 +800,13 @@ function dot(p, colour, radius = 4, outline = "#000") {
 }
 
 // Boxes [x, y, w, h] taken this frame: the labels drawn (`placedLabels`), and the selected vehicle's click dots and
-// target circles (`markBoxes`, obstacles), whose centres are `labelMarks`. A label goes beside its point (above
+// target circles (`markBoxes`, obstacles, each with its centre). A label goes beside its point (above
 // right, below right, above left, below left) where it overlaps nothing taken and no other mark is nearer to it than
 // its own; else farther out, away from the vehicle's middle, joined to its point by a thin line that crosses no other
 // label (nor, where it can, a mark); where nothing is free it is left out (zoom in to see it), unless it is the
 // selected click's.
 let placedLabels = [];
-let markBoxes = [];
-let labelMarks = [];
+let markBoxes = [];  // [x, y, w, h, centre x, centre y]: overlapping() reads the box, the rest the centre
 const overlapping = (a, b) => a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3];
 const LABEL_HEIGHT = 15;
 const LEADER_RINGS = [22, 36, 54, 78, 110, 150, 200];  // screen pixels from the point to a far label's nearest side
@@ -815,8 +814,7 @@ const LEADER_DIRECTIONS = 16;
 
 function obstacle(p, radius) {
   const [x, y] = toScreen(p);
-  markBoxes.push([x - radius, y - radius, 2 * radius, 2 * radius]);
-  labelMarks.push([x, y]);
+  markBoxes.push([x - radius, y - radius, 2 * radius, 2 * radius, x, y]);
 }
 
 // Screen distance from (x, y) to box b, 0 inside it.
@@ -877,10 +875,10 @@ function label(p, text, colour, options = {}) {
   const free = (b) => !placedLabels.some((taken) => overlapping(b, taken)) &&
     !markBoxes.some((taken) => overlapping(b, taken));
   const mine = [[x, y], ...own];
-  const isMine = ([mx, my]) => mine.some(([ox, oy]) => Math.abs(mx - ox) < 0.5 && Math.abs(my - oy) < 0.5);
+  const isMine = (mx, my) => mine.some(([ox, oy]) => Math.abs(mx - ox) < 0.5 && Math.abs(my - oy) < 0.5);
   const nearestIsOwn = (b) => {
     const distance = boxDistance(b, x, y);
-    return labelMarks.every((m) => isMine(m) || boxDistance(b, m[0], m[1]) > distance);
+    return markBoxes.every((m) => isMine(m[4], m[5]) || boxDistance(b, m[4], m[5]) > distance);
   };
   const beside = [[x + gap, y - 19], [x + gap, y + 5], [x - gap - w, y - 19], [x - gap - w, y + 5]].map(
     ([bx, by]) => [bx, by, w, LABEL_HEIGHT]);
@@ -942,7 +940,6 @@ function render() {
   ctx.clearRect(0, 0, rect.width, rect.height);
   placedLabels = [];
   markBoxes = [];
-  labelMarks = [];
   state.labels = [];
   if (state.image.complete && state.image.naturalWidth) {
     ctx.imageSmoothingEnabled = state.zoom < 2;
