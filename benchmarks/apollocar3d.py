@@ -176,11 +176,30 @@ def road_normal(images: list) -> tuple[float, float, float]:
 def up_axis_scatter(images: list, normal: tuple[float, float, float], scored: set[str]) -> dict[str, float]:
     """Degrees between each scored car's ground-truth up axis and the camera's road ``normal`` (:func:`road_normal`),
     mean, median and 90th percentile: what a fit that stood every car upright on that road would leave of E_R's
-    up-axis part. A diagnostic of the data that looks at no fit."""
-    up = np.array([c.R_cam_vehicle[:, 2] for im in images for c in im.cars if str(c.id) in scored])
-    angles = np.degrees(np.arccos(np.clip(up @ np.asarray(normal), -1.0, 1.0)))
+    up-axis part. Beside it, the mean angle to the mean ground-truth up axis of the other cars of the car's image
+    (``image_others_mean_deg``; the camera's normal for a car alone in its image), what a road normal per image known
+    perfectly from its other cars would leave, and to the mean of all the image's cars, itself included
+    (``image_all_mean_deg``: that normal is partly the car's own answer). A diagnostic of the data that looks at no
+    fit."""
+    n = np.asarray(normal, dtype=float)
+    angles, others, everyone = [], [], []
+    for im in images:
+        ups = np.array([c.R_cam_vehicle[:, 2] for c in im.cars])
+        for i, car in enumerate(im.cars):
+            if str(car.id) not in scored:
+                continue
+            rest = np.delete(ups, i, axis=0)
+            angles.append(_angle_deg(ups[i], n))
+            others.append(_angle_deg(ups[i], rest.mean(axis=0)) if len(rest) else angles[-1])
+            everyone.append(_angle_deg(ups[i], ups.mean(axis=0)))
     return {"cars": len(angles), "mean_deg": float(np.mean(angles)), "median_deg": float(np.median(angles)),
-            "p90_deg": float(np.percentile(angles, 90))}
+            "p90_deg": float(np.percentile(angles, 90)), "image_others_mean_deg": float(np.mean(others)),
+            "image_all_mean_deg": float(np.mean(everyone))}
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Degrees between two directions (3,), neither necessarily of unit length."""
+    return float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
 
 
 def labelled_counts(coco: dict) -> dict[str, int]:
@@ -809,8 +828,9 @@ def main() -> int:
     scatter_of = {h.name: up_axis_scatter(h.score, normal_of[h.name], scored) for h in halves}
     for half, scatter in scatter_of.items():
         print(f"{half:<6} scored cars' ground-truth up axes from the camera's road normal (a diagnostic of the data): "
-              f"mean {scatter['mean_deg']:.2f} deg, median {scatter['median_deg']:.2f}, 90 % {scatter['p90_deg']:.2f}",
-              flush=True)
+              f"mean {scatter['mean_deg']:.2f} deg, median {scatter['median_deg']:.2f}, 90 % {scatter['p90_deg']:.2f}; "
+              f"from the mean up axis of their image's other cars {scatter['image_others_mean_deg']:.2f} (of all its "
+              f"cars, their own included, {scatter['image_all_mean_deg']:.2f})", flush=True)
     hiding_of = {h.name: hiding_cars(*data_of[h.name]) for h in halves}
     for half, found in hiding_of.items():
         flagged = set(found) & scored
