@@ -15,8 +15,16 @@ from toosicubix.annotations import stream
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import image_to_json
 from toosicubix.model import GroundOverride
+from toosicubix.pipeline import fitting
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.pipeline.fitting import iter_fit_file, iter_fit_images, on_road, stream_images
+from toosicubix.pipeline.fitting import (
+    iter_fit_file,
+    iter_fit_images,
+    on_road,
+    ordered_map,
+    shared_workers,
+    stream_images,
+)
 from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings
 
@@ -99,7 +107,7 @@ def test_workers_started_by_spawn_read_and_fit_the_same(tmp_path: Path):
         "    multiprocessing.set_start_method('spawn', force=True)\n"
         "    from toosicubix.pipeline.batch import fit_file\n"
         "    from toosicubix.pipeline.settings import BatchSettings\n"
-        "    settings = BatchSettings(estimate_click_sigma=False, estimate_road_normal=False, jobs=int(sys.argv[3]))\n"
+        "    settings = BatchSettings(jobs=int(sys.argv[3]))  # with a pilot: its workers fit the batch too\n"
         "    fit_file(sys.argv[1], sys.argv[2], settings)\n")
     for jobs in (1, 2):
         subprocess.run([sys.executable, str(script), str(path), str(tmp_path / f"out{jobs}"), str(jobs)], check=True,
@@ -108,6 +116,36 @@ def test_workers_started_by_spawn_read_and_fit_the_same(tmp_path: Path):
     labels = sorted(p.name for p in (tmp_path / "out1" / "label_2").iterdir())
     assert labels and all((tmp_path / "out1" / "label_2" / n).read_bytes() ==
                           (tmp_path / "out2" / "label_2" / n).read_bytes() for n in labels)
+
+
+def _pids(tasks: list) -> list:
+    """A chunk's tasks, each with the worker that took it."""
+    import os
+
+    return [(task, os.getpid()) for task in tasks]
+
+
+def test_one_pool_serves_every_map_of_a_shared_workers_block():
+    """A batch's pilot, fits and next clicks start their workers once (spawned workers each load the package and the
+    compiled solver again): within ``shared_workers`` every map of the same number of processes takes one pool, shut
+    down when the block ends; outside it each map has its own."""
+    tasks = [(k,) for k in range(40)]
+    with shared_workers():
+        first = list(ordered_map(iter(tasks), 2, 3, _pids))
+        second = list(ordered_map(iter(tasks), 2, 3, _pids))
+        (pool,) = fitting._shared_pools.values()
+        left_early = ordered_map(iter(tasks), 2, 1, _pids)
+        assert next(left_early)[0] == (0,)
+        left_early.close()  # the reader stops: the map's queued chunks are cancelled, the pool stays
+        third = list(ordered_map(iter(tasks), 2, 5, _pids))
+    assert [t for t, _ in first] == [t for t, _ in second] == [t for t, _ in third] == tasks  # in order
+    workers = {pid for _, pid in first + second + third}
+    assert 1 <= len(workers) <= 2
+    assert fitting._shared_pools is None
+    with pytest.raises(RuntimeError):  # shut down with the block
+        pool.submit(_pids, [(0,)])
+    alone = {pid for _, pid in ordered_map(iter(tasks), 2, 3, _pids)}
+    assert not alone & workers
 
 
 _SMALL_OR_LARGE = """

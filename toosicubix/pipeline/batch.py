@@ -33,6 +33,7 @@ from toosicubix.pipeline.fitting import (
     iter_fit_file,
     iter_fit_images,
     reads_in_workers,
+    shared_workers,
     stream_images,
 )
 from toosicubix.pipeline.output_folder import (
@@ -247,7 +248,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     settings = settings or BatchSettings()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    with batch_solver(index.vehicles, say):
+    with batch_solver(index.vehicles, say), shared_workers():
         return _fit_indexed(annotations, index, out_dir, settings, progress, on_start)
 
 

@@ -46,7 +46,7 @@ from toosicubix.solver.uncertainty import analyse
 
 __all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_solver", "check_prototypes",
            "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "reads_in_workers",
-           "stream_images"]
+           "shared_workers", "stream_images"]
 
 
 def check_prototypes(images: list[Image], priors: Priors, source: str | Path) -> None:
@@ -203,21 +203,53 @@ def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
     return [with_next_clicks(*task) for task in tasks]
 
 
+#: The worker pools of the innermost :func:`shared_workers` block, by number of workers; None outside any.
+_shared_pools: dict[int, ProcessPoolExecutor] | None = None
+
+
+@contextmanager
+def shared_workers() -> Iterator[None]:
+    """Within it, every :func:`ordered_map` of the same number of processes takes one pool of workers, started by the
+    first of them and shut down when the block ends: a batch's pilot, its fits, its tracks and its next clicks start
+    their workers once. Where workers are spawned rather than forked (macOS, Windows, and Linux from Python 3.14),
+    each worker imports the package and loads the compiled solver again, about a second a pool."""
+    global _shared_pools
+    outer, _shared_pools = _shared_pools, {}
+    try:
+        yield
+    finally:
+        pools, _shared_pools = _shared_pools, outer
+        for pool in pools.values():
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _pool(jobs: int) -> tuple[ProcessPoolExecutor, bool]:
+    """A pool of ``jobs`` workers and whether the caller owns it (shuts it down) or a :func:`shared_workers` block
+    does."""
+    # The compiled solver loaded here, before the workers start, is theirs without loading it again (where they are
+    # forked: Linux); each would otherwise spend half a second on it, every pool. (Nothing is loaded inside
+    # batch_solver's numpy path, which forked workers inherit.)
+    if _shared_pools is None:
+        compiled.warm_up()
+        return ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init), True
+    if jobs not in _shared_pools:
+        compiled.warm_up()
+        _shared_pools[jobs] = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init)
+    return _shared_pools[jobs], False
+
+
 def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
-                 work: Callable[[list], list[VehicleResult]] = _fit_chunk) -> Iterator[VehicleResult]:
+                work: Callable[[list], list[VehicleResult]] = _fit_chunk) -> Iterator[VehicleResult]:
     """``work`` (:func:`~toosicubix.pipeline.vehicle.fit_one` over a chunk, by default) over ``tasks`` in order,
-    in ``jobs`` processes, with a bounded number of chunks of ``chunk`` tasks in flight (the pool's own ``map``
-    would take every task at once)."""
+    in ``jobs`` processes (a :func:`shared_workers` block's, within one), with a bounded number of chunks of ``chunk``
+    tasks in flight (the pool's own ``map`` would take every task at once)."""
     if jobs <= 1:
         for task in tasks:
             yield from work([task])
         return
     in_flight: deque[Future[list[VehicleResult]]] = deque()
-    # The compiled solver loaded here, before the workers start, is theirs without loading it again (where they are
-    # forked: Linux); each would otherwise spend half a second on it, every pool. (Nothing is loaded inside
-    # batch_solver's numpy path, which forked workers inherit.)
-    compiled.warm_up()
-    with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+    pool, owned = _pool(jobs)
+    try:
         while True:
             while len(in_flight) < 4 * jobs:
                 batch = list(itertools.islice(tasks, chunk))
@@ -227,6 +259,11 @@ def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
             if not in_flight:
                 return
             yield from in_flight.popleft().result()
+    finally:  # left early (an error, or the reader stopped): nothing of this map keeps running
+        for future in in_flight:
+            future.cancel()
+        if owned:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def fit_image_jointly(image: Image, vehicles: list[VehicleResult], priors: Priors, options: SolverOptions,
