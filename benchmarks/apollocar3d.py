@@ -129,13 +129,11 @@ class Row:
     upright_sigma_deg: float | None = None  # the batch normal's upright sigma instead of road_normal's (a diagnostic)
     every_car: bool = False  # fit every car of the half, also those with fewer than 10 keypoints (a diagnostic)
     mirror_pairs: bool = False  # positions learned with `learn-parts --mirror-pairs` (a diagnostic, rule 32's run)
-    heading: bool = False  # `--heading-prior estimate`: the traffic's heading from the pilot (rule 36)
 
 
 ROWS = (
     Row("keypoints, default settings", "apollocar3d-66", batch_normal=True),
     Row("keypoints, --upright-weight clicks", "apollocar3d-66", batch_normal=True, upright_weight="clicks"),
-    Row("keypoints, --heading-prior estimate", "apollocar3d-66", batch_normal=True, heading=True),
     Row("keypoints, no upright term", "apollocar3d-66", batch_normal=True, upright_sigma_deg=180.0),
     Row("keypoints, every car fitted", "apollocar3d-66", batch_normal=True, every_car=True),
     Row("keypoints, mirror pairs' positions averaged", "apollocar3d-66", batch_normal=True, mirror_pairs=True),
@@ -265,8 +263,7 @@ def run_row(row: Row, half: str, keypoints_path: Path, folder: Path, mapping: Ma
         fit_file(annotations, work / "out", BatchSettings(priors=load_priors(priors), options=options, jobs=jobs,
                                                           estimate_click_sigma=estimate_sigma, ground=ground,
                                                           estimate_part_sigma=estimate_sigma,  # as `fit` (rule 33)
-                                                          estimate_road_normal=row.batch_normal,
-                                                          estimate_heading=row.heading))
+                                                          estimate_road_normal=row.batch_normal))
     seconds = time.perf_counter() - start
     n_up = np.asarray(normal, dtype=float)
     ends = clicked_ends(document, image_ids, fitted_cars)
@@ -441,7 +438,7 @@ def upright_cost(rows: list[dict]) -> dict:
     fixed = {o["id"] for o in default if o["consistent"] and o["tilt_by_clicks"]}
     rest = {o["id"] for o in default if o["consistent"]} - fixed
     out = {}
-    for label in (ROWS[0].label, ROWS[1].label, "keypoints, no upright term"):
+    for label in (ROWS[0].label, ROWS[1].label, ROWS[2].label):
         objects = by_label[label]["_objects"]
         out[label] = {"pitch and roll fixed by the clicks": _group([o for o in objects if o["id"] in fixed]),
                       "pitch or roll left to the road": _group([o for o in objects if o["id"] in rest])}
@@ -811,7 +808,7 @@ def main() -> int:
     names = load_mapping("apollocar3d-66")[0].keypoints
     if args.design:
         halves = [Half("design", images[0::4], images[2::4], bundled=False)]
-        rows_of = [row for row in ROWS if row.label in (ROWS[0].label, ROWS[1].label) or row.heading]
+        rows_of = [row for row in ROWS if row.label in (ROWS[0].label, ROWS[1].label)]
         print("design rows: positions and priors learned on images 0, 4, 8, ..., cars of images 2, 6, 10, ... "
               "scored (rule 16's design run; decides nothing)", flush=True)
     else:

@@ -6,7 +6,6 @@ annotation file into them and back.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -99,36 +98,6 @@ class Vehicle:
 
 
 @dataclass(frozen=True)
-class HeadingPrior:
-    """The traffic's heading on one camera's road (:mod:`toosicubix.solver.heading` states the prior it is).
-
-    Attributes
-    ----------
-    direction : radians, ``mu``: the traffic's axis from the camera's forward axis on the road (in (-pi/2, pi/2])
-    sigma : radians, the spread of the vehicles heading along it
-    others : the share of vehicles heading elsewhere (any heading alike)
-    noise_px : the pixel noise its row is weighed against (the batch's click noise): the prior it states, as the
-        clicks' rows are weighed
-    vehicles : how many well-determined pilot vehicles it rests on
-    """
-
-    direction: float
-    sigma: float
-    others: float
-    noise_px: float
-    vehicles: int = 0
-
-    def to_json(self) -> dict[str, Any]:
-        return {"direction_deg": math.degrees(self.direction), "sigma_deg": math.degrees(self.sigma),
-                "others": self.others, "noise_px": self.noise_px, "vehicles": self.vehicles}
-
-    def describe(self) -> str:
-        return (f"traffic heading {math.degrees(self.direction):+.1f} deg from the camera's axis on the road, either "
-                f"way, within {math.degrees(self.sigma):.1f} deg for {100 * (1 - self.others):.0f} % of "
-                f"{self.vehicles} well-determined pilot vehicles")
-
-
-@dataclass(frozen=True)
 class GroundPlane:
     """The road in camera coordinates: ``{X : normal . X = -camera_height}``.
 
@@ -141,7 +110,6 @@ class GroundPlane:
     upright_sigma : how far vehicles lean from the normal (their pitch and roll on the road), radians
     from_batch : the normal was estimated from the batch's own fits (:mod:`toosicubix.pipeline.road_normal`),
         not given
-    heading : where the batch's traffic heads on this road (``fit --heading-prior estimate``), or None
     """
 
     normal: np.ndarray
@@ -150,7 +118,6 @@ class GroundPlane:
     camera_height_sigma: float
     upright_sigma: float
     from_batch: bool = False
-    heading: HeadingPrior | None = None
 
 
 @dataclass(frozen=True)

@@ -334,18 +334,12 @@ _FITTING_OPTIONS = [
     click.option("--box-cue", is_flag=True,
                  help="A vehicle fitted alone with a box2d takes the box as a cue too: the projected cuboid's extremes "
                       "touch its sides (sides on the image border left out). Tracked frames always do."),
-    click.option("--heading-prior", type=click.Choice(["estimate", "none"]), default="none", show_default=True,
-                 help="estimate: where each camera's traffic heads (either way along the road), from the pilot's "
-                      "vehicles whose yaw is well determined; a vehicle on that camera's estimated road whose clicks "
-                      "leave its heading loose (a car clicked on one end only) is then turned toward it, within the "
-                      "spread the batch shows. Needs the estimated road normal (no ground options)."),
     jobs_option,
 ]
 _FITTING_NAMES = ("priors_path", "lambda_3d", "lambda_px", "config_path", "click_sigma", "part_sigma", "robust_loss",
                   "upright_weight", "misfit_level", "kitti_ground",
                   "camera_height", "camera_height_sigma", "road_normal", "camera_pitch_deg", "camera_roll_deg",
-                  "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "tracks", "frame_rate", "box_cue",
-                  "heading_prior", "jobs")
+                  "normal_sigma_deg", "upright_sigma_deg", "joint_ground", "tracks", "frame_rate", "box_cue", "jobs")
 
 
 def parse_normal(value: str, expected: str = "three numbers x,y,z") -> tuple[float, float, float]:
@@ -419,9 +413,6 @@ def _settings(values: dict[str, Any]) -> Any:
 
         ground_with(None, ground)  # a zero normal or an impossible block: refused here, naming the options
     estimate = road == "estimate" and not ground and not values["joint_ground"]
-    if values["heading_prior"] == "estimate" and not estimate:
-        raise click.UsageError("--heading-prior estimate needs the road normal estimated from the batch (the default "
-                               "without ground options, --joint-ground or --road-normal x,y,z / none)")
     from toosicubix.solver.track import TrackOptions
 
     return BatchSettings(priors=load_priors(values["priors_path"]), options=options, ground=ground,
@@ -430,7 +421,7 @@ def _settings(values: dict[str, Any]) -> Any:
                          estimate_part_sigma=given_sigma is None and ctx.get_parameter_source(
                              "part_sigma") is click.core.ParameterSource.DEFAULT,
                          tracks=values["tracks"] == "on", track_options=TrackOptions(frame_rate=values["frame_rate"]),
-                         box_cue=values["box_cue"], estimate_heading=values["heading_prior"] == "estimate")
+                         box_cue=values["box_cue"])
 
 
 def fitting_options(command: Callable) -> Callable:

@@ -182,8 +182,7 @@ def fitted_batch(images: Iterable[Image], n_vehicles: int, settings: BatchSettin
             or tracked is not None or settings.box_cue):
         if index is not None and tracked is None and not settings.joint_ground and reads_in_workers(index,
                                                                                                    settings.jobs):
-            yield from iter_fit_file(index, settings, estimated_grounds(pilot.road_normals), progress,
-                                     pilot.heading_priors)
+            yield from iter_fit_file(index, settings, estimated_grounds(pilot.road_normals), progress)
         else:
             yield from iter_fit_images(images, n_vehicles, settings, progress, tracked)
         return
@@ -209,7 +208,7 @@ def pilot_and_fits(index: AnnotationIndex, settings: BatchSettings, progress: Ca
     pilot = run_pilot(index, settings, progress, on_start)
 
     def on_roads() -> Iterator[Image]:
-        return on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals, pilot.heading_priors)
+        return on_estimated_roads(stream_images(index, settings.ground), pilot.road_normals)
 
     images, second = itertools.tee(on_roads()) if with_images else (on_roads(), None)
     tracked = None

@@ -21,7 +21,7 @@ from toosicubix.annotations.stream import AnnotationIndex, image_annotation, ima
 from toosicubix.camera import Camera
 from toosicubix.errors import InputFileError
 from toosicubix.formats.results import ImageResult, RoadPlane, VehicleResult
-from toosicubix.model import GroundOverride, GroundPlane, HeadingPrior, Image, Vehicle
+from toosicubix.model import GroundOverride, GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings, KeypointCatalogue
@@ -329,23 +329,18 @@ def stream_images(index: AnnotationIndex, ground: GroundOverride | None) -> Iter
         yield from with_ground([image_from_schema(annotation, i)], ground)
 
 
-def on_road(image: Image, blocks: Mapping[tuple, GroundOverride],
-            headings: Mapping[tuple, HeadingPrior] | None = None) -> Image:
+def on_road(image: Image, blocks: Mapping[tuple, GroundOverride]) -> Image:
     """``image`` on its camera's estimated road: without a ground block of its own, it takes the one ``blocks``
-    give its camera (:func:`~toosicubix.pipeline.road_normal.camera_key`), marked as the batch's, with the heading
-    prior ``headings`` give the camera (:mod:`toosicubix.pipeline.traffic`) when they do; else as it is."""
-    key = camera_key(image.camera) if image.ground is None and blocks else None
-    block = None if key is None else blocks.get(key)
+    give its camera (:func:`~toosicubix.pipeline.road_normal.camera_key`), marked as the batch's; else as it is."""
+    block = blocks.get(camera_key(image.camera)) if image.ground is None and blocks else None
     if block is None:
         return image
     image = with_ground([image], block)[0]
-    prior = None if headings is None else headings.get(key)  # type: ignore[arg-type]
-    return replace(image, ground=replace(image.ground, from_batch=True, heading=prior))  # type: ignore[arg-type]
+    return replace(image, ground=replace(image.ground, from_batch=True))  # type: ignore[arg-type]
 
 
 def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mapping[tuple, GroundOverride],
-                  progress: Callable[[int], None] | None = None,
-                  headings: Mapping[tuple, HeadingPrior] | None = None) -> Iterator[ImageResult]:
+                  progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
     """:func:`iter_fit_images` of every image of an indexed file (with the settings' ground override, each on its
     camera's estimated road, ``blocks`` as :func:`on_road` takes them), in ``settings.jobs`` processes, each image
     read by the process that fits it. The results are the same as :func:`iter_fit_images` of
@@ -358,7 +353,7 @@ def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mappi
     Not for tracks or ``joint_ground`` (they need the images in the main process): :func:`iter_fit_images`."""
     assert not settings.joint_ground
     jobs = settings.jobs if index.vehicles > 1 else 1
-    work = functools.partial(_fit_file_chunk, (replace(settings, jobs=1), dict(blocks), dict(headings or {})))
+    work = functools.partial(_fit_file_chunk, (replace(settings, jobs=1), dict(blocks)))
     for result in ordered_map(_image_groups(index, _chunk(index.vehicles, jobs)), jobs, 1, work):
         if progress is not None and result.vehicles:
             progress(len(result.vehicles))
@@ -385,11 +380,11 @@ def _image_groups(index: AnnotationIndex, chunk: int) -> Iterator[list[tuple[int
         yield group
 
 
-def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride], dict[tuple, HeadingPrior]],
+def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride]],
                     groups: list[list[tuple[int, str]]]) -> list[ImageResult]:
     """A worker's part of :func:`iter_fit_file`: read, place and fit these images (``(position, text)`` each)."""
-    settings, blocks, headings = context
-    images = [on_road(image, blocks, headings) for group in groups for i, text in group
+    settings, blocks = context
+    images = [on_road(image, blocks) for group in groups for i, text in group
               for image in with_ground([image_from_schema(image_annotation(text), i)], settings.ground)]
     return list(iter_fit_images(images, sum(len(im.vehicles) for im in images), settings))
 

@@ -13,7 +13,7 @@ from typing import Any
 
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
-from toosicubix.model import GroundOverride, HeadingPrior, Image
+from toosicubix.model import GroundOverride, Image
 from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
 from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, on_road, stream_images
 from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence, evidence_dof, too_few
@@ -27,7 +27,6 @@ from toosicubix.pipeline.road_normal import (
     without_pilot,
 )
 from toosicubix.pipeline.settings import BatchSettings
-from toosicubix.pipeline.traffic import TrafficHeading, estimate_traffic, priors_of
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
 from toosicubix.vocabulary import KINDS
@@ -55,8 +54,6 @@ class PilotFindings:
         of a batch of cuboid parts (:mod:`toosicubix.pipeline.part_placement`), when it was; None otherwise
     part_placement_dof : the degrees of freedom the pilot's cuboid parts gave when too few for that estimate (the
         batch keeps its settings); None when it was made or not asked for
-    headings : per camera with an estimated road normal, where its traffic heads (or why that is not estimated),
-        when asked (``BatchSettings.estimate_heading``); None otherwise
     """
 
     options: SolverOptions
@@ -67,12 +64,6 @@ class PilotFindings:
     next_clicks: int = 0
     part_placement: PartPlacement | None = None
     part_placement_dof: float | None = None
-    headings: dict[tuple, TrafficHeading] | None = None
-
-    @property
-    def heading_priors(self) -> dict[tuple, HeadingPrior]:
-        """Per camera, the heading prior its images on the estimated road carry (:func:`on_estimated_roads`)."""
-        return priors_of(self.headings)
 
     def header(self) -> dict[str, Any]:
         """What results.json's header (and validate's report) say about the pilot's estimates."""
@@ -85,8 +76,6 @@ class PilotFindings:
             out["road_normal"] = [n.to_json() for n in self.road_normals.values()]
         if self.without_pilot.get("cameras"):
             out["road_normal_without_pilot"] = self.without_pilot
-        if self.headings is not None:
-            out["heading_prior"] = [h.to_json() for h in self.headings.values()]
         return out
 
     def describe(self) -> list[str]:
@@ -111,7 +100,6 @@ class PilotFindings:
                          "sets it)")
         if self.without_pilot:
             lines.append(describe_without_pilot(self.without_pilot))
-        lines += [h.describe() for h in (self.headings or {}).values()][:5]
         return [line for line in lines if line]
 
 
@@ -167,8 +155,6 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
             else:
                 placement_dof = evidence_dof(items)
     normals = estimate_road_normals(pilot, results, cameras) if estimate_road_normal else None
-    headings = (estimate_traffic(pilot, results, normals, options.click_sigma)
-                if settings.estimate_heading and normals is not None else None)
     # The pilot's fits are the batch's when it fitted every vehicle as the batch will: same settings, and no
     # road normal that would give some images a ground block.
     own = bool(pilot and every and _fitted_alike(pilot, options, pilot_options)
@@ -180,7 +166,7 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
         return PilotFindings(options, noise, results=results if own else None, next_clicks=pilot_next,
                              part_placement=placement, part_placement_dof=placement_dof)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
-                         pilot_next, placement, placement_dof, headings)
+                         pilot_next, placement, placement_dof)
 
 
 def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: SolverOptions) -> bool:
@@ -218,11 +204,9 @@ def estimated_grounds(normals: dict[tuple, RoadNormal] | None) -> dict[tuple, Gr
     return {key: ground_block(n) for key, n in (normals or {}).items() if n.normal is not None}
 
 
-def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal] | None,
-                       headings: dict[tuple, HeadingPrior] | None = None) -> Iterator[Image]:
+def on_estimated_roads(images: Iterable[Image], normals: dict[tuple, RoadNormal] | None) -> Iterator[Image]:
     """The images, each without a ground block of its own given its camera's estimated road normal
-    (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one, and the camera's heading prior
-    (``headings``, :attr:`PilotFindings.heading_priors`) when it has one."""
+    (:func:`toosicubix.pipeline.road_normal.ground_block`) when there is one."""
     blocks = estimated_grounds(normals)
     for im in images:
-        yield on_road(im, blocks, headings)
+        yield on_road(im, blocks)

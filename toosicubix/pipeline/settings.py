@@ -63,9 +63,6 @@ class BatchSettings:
     track_options : the tracks' motion model and box cue (:class:`toosicubix.solver.track.TrackOptions`)
     box_cue : a vehicle fitted alone with a ``box2d`` takes the box as a cue too (``fit --box-cue``): the projected
         cuboid's extremes touch its sides (the sides the image border cuts left out)
-    estimate_heading : with ``estimate_road_normal``, estimate where each camera's traffic heads from the same pilot
-        fit's well-determined vehicles (:mod:`toosicubix.pipeline.traffic`) and give the vehicles on its estimated
-        road that heading prior (``fit --heading-prior estimate``)
     """
 
     priors: Priors = field(default_factory=load_priors)
@@ -81,7 +78,6 @@ class BatchSettings:
     tracks: bool = True
     track_options: TrackOptions = field(default_factory=TrackOptions)
     box_cue: bool = False
-    estimate_heading: bool = False
 
     def __post_init__(self) -> None:
         if self.estimate_road_normal and (self.ground or self.joint_ground):

@@ -121,8 +121,8 @@ def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
     The first refinement in a process runs both paths and compares every number of their results; the compiled path
     is kept only when they agree bit for bit, and that first comparison's result is the numpy path's either way. An
     error of the compiled code turns it off for the process, and the numpy path refines."""
-    if len(state[0]) > MAX_STARTS or refine.problem.n_heading_rows or not _on("refine"):
-        return None  # (the kernel has no heading row: a road with a heading prior refines in numpy)
+    if len(state[0]) > MAX_STARTS or not _on("refine"):
+        return None
     result = _guarded("refine", lambda: _run(refine, state, options))
     if result is None:
         return None
@@ -193,7 +193,7 @@ def residuals(problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, with_jacobia
     ``with_jacobian``, ``pivot`` and ``profile_scale`` is checked on its own first call)."""
     name = f"residuals{'+J' if with_jacobian else ''}{'+pivot' if pivot is not None else ''}" \
            f"{'+profile' if profile_scale else ''}"
-    if not len(R) or problem.n_heading_rows or not _on(name):
+    if not len(R) or not _on(name):
         return None
     B = len(R)
     out = _guarded(name, lambda: _kernel.residuals(

@@ -24,9 +24,6 @@ The upright term of a vehicle whose clicks carry their own noise (keypoints and 
 'clicks'; rule 23 of benchmarks/decisions.md): weighed by ``lambda_px`` (10 px^2) against ApolloCar3D's 0.95 px
 clicks it stands vehicles upright within about 1 degree where the ground block says 3.6.
 
-The heading row (a road with a heading prior, ``fit --heading-prior estimate``: :mod:`.heading`): where the batch's
-traffic heads on this road, weighed against the batch's click noise; between the upright rows and the arrow rows.
-
 Arrow rows: a direction arrow's two points are a gauge (the paper moves them along their rays until the segment is
 as long as the dimension it runs along), so only the rays say where the arrow was drawn. The arrow is drawn on the
 vehicle or on the ground beside it, so the midpoint's ray, taken at the distance of the vehicle's centre, passes
@@ -50,10 +47,9 @@ from typing import TypeVar
 import numpy as np
 
 from toosicubix.camera import Camera
-from toosicubix.model import GroundPlane, HeadingPrior
+from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import PartsModel
 from toosicubix.size_priors import SizePrior, axle_prior
-from toosicubix.solver import heading as traffic
 
 T = TypeVar("T")
 
@@ -186,32 +182,14 @@ class Problem:
         return noise / self.upright_sigma
 
     @property
-    def heading(self) -> HeadingPrior | None:
-        """Where the traffic on the vehicle's road heads (:mod:`.heading`), or None."""
-        return None if self.ground is None else self.ground.heading
-
-    @property
-    def n_heading_rows(self) -> int:
-        return 0 if self.ground is None or self.ground.heading is None else 1
-
-    @property
-    def cue_rows_uniform(self) -> bool:
-        """Whether every cue row is weighed by ``lambda_px`` (:attr:`cue_row_lambdas` all alike)."""
-        return self.upright_noise_px is None and not self.n_heading_rows
-
-    @property
     def cue_row_lambdas(self) -> np.ndarray:
         """(m,) the weight, px^2, of each cue row's squared standardized residual in the pixel cost, in the order
-        of :func:`.refine.residuals_batch`'s cue rows (scale rows, upright rows, the heading row, arrow rows):
-        ``lambda_px``, but ``upright_noise_px^2`` for the upright rows when set and the heading prior's noise
-        squared for its row."""
+        of :func:`.refine.residuals_batch`'s cue rows (scale rows, upright rows, arrow rows): ``lambda_px``, but
+        ``upright_noise_px^2`` for the upright rows when set."""
         n_up = 0 if self.upright_sigma is None else 3
-        n_heading = self.n_heading_rows
-        out = np.full(len(self.b) + n_up + n_heading + self.n_arrow_rows, float(self.lambda_px))
+        out = np.full(len(self.b) + n_up + self.n_arrow_rows, float(self.lambda_px))
         if n_up and self.upright_noise_px is not None:
             out[len(self.b):len(self.b) + n_up] = self.upright_noise_px**2
-        if n_heading:
-            out[len(self.b) + n_up] = self.ground.heading.noise_px ** 2  # type: ignore[union-attr]
         return out
 
     def upright_against_clicks(self, click_sigma: float) -> Problem:
@@ -403,11 +381,7 @@ class Problem:
         if self.n_arrow_rows:
             arrows, _ = self.arrow_rows(R_cam_vehicle[None], t_cam_vehicle[None], p[None], None, False)
             cues += float(np.sum(arrows[0] ** 2))
-        heading_cost = 0.0
-        if self.n_heading_rows:
-            prior = self.ground.heading  # type: ignore[union-attr]
-            heading_cost = prior.noise_px**2 * traffic.cost(prior, R_cam_vehicle, self.up)
-        return float(np.sum(e * e) + self.lambda_px * cues + upright + heading_cost)
+        return float(np.sum(e * e) + self.lambda_px * cues + upright)
 
     def min_depth(self, R_cam_vehicle: np.ndarray, t_cam_vehicle: np.ndarray, p: np.ndarray) -> float:
         """Smallest depth (camera z) of the clicked points and the cuboid's bottom centre, metres."""

@@ -23,7 +23,6 @@ import numpy as np
 
 from toosicubix.geometry import hat, so3_exp
 from toosicubix.solver import compiled, lm
-from toosicubix.solver import heading as traffic
 from toosicubix.solver.problem import Problem
 
 #: Points closer than this (metres) to the camera plane count as behind it.
@@ -57,8 +56,7 @@ def residuals_batch(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarra
                     pivot: np.ndarray | None, profile_scale: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """Residuals (B, M) and Jacobians (B, M, 6 + P) of B poses: ``R`` (B, 3, 3), ``t`` (B, 3), ``p`` (B, P),
     ``pivot`` (B, 3) or None. Rows: 2 per click (pixels), then the scale rows, then 3 upright rows when the
-    problem has a ground plane, then the heading row on a road with a heading prior (:mod:`.heading`), then 3 arrow
-    rows per arrow (:meth:`Problem.arrow_rows`); the cue rows are
+    problem has a ground plane, then 3 arrow rows per arrow (:meth:`Problem.arrow_rows`); the cue rows are
     multiplied by ``sqrt(lambda_px)`` (the upright rows by :attr:`.problem.Problem.upright_weight` times
     ``sigma_up``). Compiled where it can be (:func:`.compiled.residuals`: the same numbers), else numpy's."""
     found = compiled.residuals(problem, R, t, p, with_jacobian, pivot, profile_scale,
@@ -76,7 +74,6 @@ def _residuals_numpy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarr
     B = len(R)
     m = len(problem.b)
     n_up = 0 if problem.upright_sigma is None else 3
-    n_up += problem.n_heading_rows  # the heading row follows the upright rows (their columns are the rotation's)
     n_arrow = problem.n_arrow_rows
     X = problem.points_vehicle_batch(p)  # (B, N, 3) vehicle frame
     Y = X @ R.transpose(0, 2, 1) + t[:, None, :]  # (B, N, 3) camera frame
@@ -96,15 +93,9 @@ def _residuals_numpy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarr
         r[:, 2 * N:2 * N + m] = w * (s_best[:, None] * a - b)
     else:
         r[:, 2 * N:2 * N + m] = w * (a - b)
-    up_rows = 0 if problem.upright_sigma is None else 3
-    if up_rows:
+    if n_up:
         w_up = problem.upright_weight  # sqrt(lambda_px) / sigma_up, or the clicks' noise over it (keypoints)
-        r[:, 2 * N + m:2 * N + m + up_rows] = w_up * (R[:, :, 2] - problem.up)
-    heading_J = None
-    if problem.n_heading_rows:
-        prior = problem.heading
-        heading_r, heading_J = traffic.rows(prior, R, problem.up, with_jacobian)
-        r[:, 2 * N + m + up_rows] = prior.noise_px * heading_r
+        r[:, 2 * N + m:2 * N + m + n_up] = w_up * (R[:, :, 2] - problem.up)
     if n_arrow:
         arrow_r, arrow_gradient = problem.arrow_rows(R, t, p, pivot, with_jacobian)
         r[:, 2 * N + m + n_up:] = w * arrow_r
@@ -145,12 +136,10 @@ def _residuals_numpy(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarr
         J[:, 2 * N:2 * N + m] = w * (s_best[:, None, None] * Ga + a[:, :, None] * ds[:, None, :])
     else:
         J[:, 2 * N:2 * N + m] = w * Ga
-    if up_rows:
+    if n_up:
         # R exp([delta]x) e_z ~ R (e_z + delta x e_z) = R e_z + delta_y R e_x - delta_x R e_y.
-        J[:, 2 * N + m:2 * N + m + up_rows, 0] = -w_up * R[:, :, 1]
-        J[:, 2 * N + m:2 * N + m + up_rows, 1] = w_up * R[:, :, 0]
-    if heading_J is not None:
-        J[:, 2 * N + m + up_rows, 0:3] = problem.heading.noise_px * heading_J
+        J[:, 2 * N + m:2 * N + m + n_up, 0] = -w_up * R[:, :, 1]
+        J[:, 2 * N + m:2 * N + m + n_up, 1] = w_up * R[:, :, 0]
     if n_arrow:
         J[:, 2 * N + m + n_up:] = w * arrow_gradient
     return r, J

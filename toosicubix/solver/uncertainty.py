@@ -42,7 +42,6 @@ import numpy as np
 from toosicubix import vocabulary
 from toosicubix.geometry import rot_x, ypr_from_R_cam_vehicle
 from toosicubix.parts.linear import PartsModel
-from toosicubix.solver import heading as traffic
 from toosicubix.solver.clicked import ALREADY_CLICKED_SIGMAS, named_as_clicked, near_clicks
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.refine import residuals_and_jacobian
@@ -68,8 +67,8 @@ HIGH_FRACTION, LOW_FRACTION = 0.7, 0.35
 
 #: The cue rows' groups as a person knows them (:func:`_cue_groups`), in the order sentences name them.
 _CUE_NAMES = {"size prior": "the size prior", "axles": "where cars have their axles", "road": "the road",
-              "traffic": "where the batch's traffic heads", "camera height": "the camera height",
-              "known sizes": "the known sizes", "arrows": "where its arrows are drawn"}
+              "camera height": "the camera height", "known sizes": "the known sizes",
+              "arrows": "where its arrows are drawn"}
 
 # What fixes each quantity, as requirements on the clicks: a fact about where clicks sit (:func:`_clicked`), or
 # alternatives of annotations (kind, name) any one of which, all clicked, meets it. A quantity's advice names the
@@ -248,7 +247,7 @@ def jacobians(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray,
     if J is None:
         _, J = residuals_and_jacobian(problem, R, t, p)
     n_px = 2 * problem.parts.n_clicks
-    if problem.cue_rows_uniform:  # every cue row weighed by lambda_px
+    if problem.upright_noise_px is None:  # every cue row weighed by lambda_px
         return J[:n_px], J[n_px:] / math.sqrt(problem.lambda_px)
     return J[:n_px], J[n_px:] / np.sqrt(problem.cue_row_lambdas)[:, None]
 
@@ -400,32 +399,7 @@ def uncertainties_with_added_clicks(problem: Problem, R: np.ndarray, t: np.ndarr
 
 def _cue_lambdas(problem: Problem) -> float | np.ndarray:
     """The cue rows' weights for :func:`_sandwich`: ``lambda_px`` when every row has it, else per row."""
-    return problem.lambda_px if problem.cue_rows_uniform else problem.cue_row_lambdas
-
-
-def _heading_mixture(problem: Problem, R: np.ndarray, J_px: np.ndarray, J_c: np.ndarray, sigmas: np.ndarray,
-                     cov: np.ndarray) -> np.ndarray:
-    """The covariance (6 + P, 6 + P) of a fit on a road with a heading prior as its mixture says
-    (:func:`.heading.mixture_variance`): ``rho cov + (1 - rho) cov_0 + rho (1 - rho) D D^T``, ``cov`` the sandwich
-    with the heading row (the prior's peak, where the fit sits), ``cov_0`` without it (the clicks and the other cues),
-    ``D`` the shift between the two posteriors carried from the heading to every unknown by ``cov_0``. ``cov`` as it
-    is where the clicks and the other cues leave the heading undetermined."""
-    row = len(problem.b) + (3 if problem.upright_sigma is not None else 0)
-    rest = np.ones(len(J_c), dtype=bool)
-    rest[row] = False
-    lambdas = problem.cue_row_lambdas[rest]
-    without = _sandwich(J_px, J_c[rest], float(lambdas[0]) if np.all(lambdas == lambdas[0]) else lambdas, sigmas)
-    g = np.zeros(len(cov))
-    g[:3] = traffic.gradient(R[None], problem.up)[0]
-    v_with, v_without = float(g @ cov @ g), float(g @ without @ g)
-    if not (np.all(np.isfinite(without)) and math.isfinite(v_with) and v_without > 0.0):
-        return cov
-    prior = problem.heading
-    assert prior is not None
-    deviation = float(traffic.axial(traffic.headings(R[None], problem.up) - prior.direction)[0])
-    rho, shift, _ = traffic.mixture_variance(prior, deviation, v_with, v_without)
-    D = without @ g * (shift / v_without)
-    return rho * cov + (1.0 - rho) * without + rho * (1.0 - rho) * np.outer(D, D)
+    return problem.lambda_px if problem.upright_noise_px is None else problem.cue_row_lambdas
 
 
 def uncertainty_from_covariance(cov: np.ndarray, G: np.ndarray, t: np.ndarray) -> Uncertainty:
@@ -459,10 +433,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     C = J_c.T @ J_c
     sigmas = row_sigmas(problem, R, t, p, click_sigma, part_sigma, soft_noise)
     G = ypr_gradient(R)
-    cov = _sandwich(J_px, J_c, _cue_lambdas(problem), sigmas)
-    if problem.n_heading_rows:
-        cov = _heading_mixture(problem, R, J_px, J_c, sigmas, cov)
-    u = uncertainty_from_covariance(cov, G, t)
+    u = uncertainty_from_covariance(_sandwich(J_px, J_c, _cue_lambdas(problem), sigmas), G, t)
     gradients = _gradients(problem, R, t, p, G)
     whitened = J_px / sigmas[:, None]
     data = whitened.T @ whitened  # the clicks' information
@@ -588,7 +559,6 @@ def _cue_groups(problem: Problem, n_rows: int) -> dict[str, np.ndarray]:
     group = {"ground contact": "camera height", "size prior": "size prior", "axle prior": "axles"}
     labels = [group.get(cue, "known sizes") for cue in problem.row_cues]
     labels += ["road"] * (3 if problem.upright_sigma is not None else 0)
-    labels += ["traffic"] * problem.n_heading_rows
     labels += ["arrows"] * (n_rows - len(labels))
     return {g: np.flatnonzero([label == g for label in labels]) for g in _CUE_NAMES if g in labels}
 
