@@ -82,7 +82,8 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
         bar.finish()
     if not quiet:
         click.echo(
-            f"fitted {summary.ok} of {summary.vehicles} vehicles in {summary.images} images -> "
+            f"fitted {summary.ok} of {summary.vehicles} vehicles in {summary.images} images"
+            f"{f' ({summary.jobs} processes)' if summary.jobs > 1 else ''} -> "
             f"{summary.out_dir / 'label_2'} (KITTI: yaw only, pitch and roll dropped) and "
             f"{summary.out_dir / 'results.json'} (full rotations)",
             err=True,

@@ -247,9 +247,35 @@ road_normal_option = click.option(
          "estimated for this camera in results.json); 'estimate': per camera from a pilot fit of the file's vehicles "
          "(the default when no ground is given); 'none': no road, vehicles only within 45 deg of the camera's up. "
          "With other ground options and no normal: 0,-1,0.")
-#: ``-j/--jobs N`` (fit, validate, tune): the command receives ``jobs``.
-jobs_option = click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
-                           help="Worker processes; the output is the same for any number.")
+class Jobs(click.ParamType):
+    """``--jobs``: a number of processes (at least 1) or ``auto`` (received as
+    :data:`toosicubix.pipeline.workers.AUTO`)."""
+
+    name = "N|auto"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            return value
+        text = str(value).strip().lower()
+        if text == "auto":
+            from toosicubix.pipeline.workers import AUTO
+
+            return AUTO
+        try:
+            jobs = int(text)
+        except ValueError:
+            jobs = 0
+        if jobs < 1:
+            self.fail(f"expected a number of processes (1 or more) or 'auto', got {value!r}", param, ctx)
+        return jobs
+
+
+#: ``-j/--jobs N|auto`` (fit, validate, tune): the command receives ``jobs`` (0 for auto).
+jobs_option = click.option(
+    "-j", "--jobs", type=Jobs(), default="auto", show_default=True,
+    help="Worker processes; the output is the same for any number. auto: one per usable core, but at most one per "
+         "100 vehicles where workers are forked (Linux up to Python 3.13) and per 1,000 where each starts afresh "
+         "(macOS, Windows, Python 3.14), and at most 16; a small batch runs in one process.")
 
 
 def out_option(help_text: str, parameter: str = "out", **kwargs: Any) -> Callable:

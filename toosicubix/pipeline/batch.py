@@ -28,6 +28,7 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
+from toosicubix.pipeline import workers
 from toosicubix.pipeline.fitting import (
     batch_solver,
     iter_fit_file,
@@ -71,6 +72,7 @@ class BatchSummary:
     implausible: list[tuple[str, str, str]] = field(default_factory=list)  # (image, vehicle, why), first FAILED_KEPT
     tracks: int = 0  # tracks fitted as tracks
     pose_from: dict[str, int] = field(default_factory=dict)  # tracked frames fitted, by what their pose came from
+    jobs: int = 1  # the processes it was fitted in (``--jobs auto`` resolved)
 
     @property
     def n_failed(self) -> int:
@@ -248,6 +250,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     settings = settings or BatchSettings()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
+    settings = replace(settings, jobs=workers.resolved(settings.jobs, index.vehicles))
     with batch_solver(index.vehicles, say), shared_workers():
         return _fit_indexed(annotations, index, out_dir, settings, progress, on_start)
 
@@ -302,7 +305,7 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,
                         misfits=misfits[0] if options.misfit_level is not None else None, tracks=len(tracks),
-                        pose_from=pose_from, implausible=implausible)
+                        pose_from=pose_from, implausible=implausible, jobs=settings.jobs)
 
 
 def _sha256(path: Path) -> str:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -43,6 +44,8 @@ from toosicubix.solver.misfit import MISFIT_WARNING
 from toosicubix.solver.problem import Problem
 from toosicubix.solver.robust import with_weights
 from toosicubix.solver.uncertainty import analyse
+
+log = logging.getLogger(__name__)
 
 __all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_solver", "check_prototypes",
            "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "reads_in_workers",
@@ -243,12 +246,18 @@ def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
     """``work`` (:func:`~toosicubix.pipeline.vehicle.fit_one` over a chunk, by default) over ``tasks`` in order,
     in ``jobs`` processes (a :func:`shared_workers` block's, within one), with a bounded number of chunks of ``chunk``
     tasks in flight (the pool's own ``map`` would take every task at once)."""
-    if jobs <= 1:
+    pool = None
+    if jobs > 1:
+        try:
+            pool, owned = _pool(jobs)
+        except (OSError, NotImplementedError, ImportError) as exc:  # no process pools here (no semaphores, ...)
+            log.warning("cannot start %d worker processes (%s: %s); fitting in this one, with the same results",
+                        jobs, type(exc).__name__, exc)
+    if pool is None:
         for task in tasks:
             yield from work([task])
         return
     in_flight: deque[Future[list[VehicleResult]]] = deque()
-    pool, owned = _pool(jobs)
     try:
         while True:
             while len(in_flight) < 4 * jobs:

@@ -44,7 +44,8 @@ class BatchSettings:
     options : the solver settings
     ground : ground-block fields set on every image over its own block, or None
     joint_ground : refine each image's vehicles together with its ground plane
-    jobs : worker processes (the output does not depend on it)
+    jobs : worker processes (the output does not depend on it); 0 (:data:`toosicubix.pipeline.workers.AUTO`): as
+        many as the batch repays, :func:`toosicubix.pipeline.workers.workers_for` its vehicles (``--jobs auto``)
     next_clicks : per vehicle, how many suggestions of what to click next the results get (0: none)
     keypoints : suggest a keypoint mapping's keypoints instead of the vocabulary's parts, or None
     estimate_click_sigma : first estimate the click noise from a pilot fit's residuals

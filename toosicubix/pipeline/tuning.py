@@ -19,7 +19,8 @@ import numpy as np
 from toosicubix.evaluation import EvalOptions, evaluate, predictions_from_results, summarize
 from toosicubix.formats.ground_truth import GroundTruthSource
 from toosicubix.model import Image
-from toosicubix.pipeline.fitting import fit_images
+from toosicubix.pipeline import workers
+from toosicubix.pipeline.fitting import fit_images, shared_workers
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.size_priors import Priors
 from toosicubix.solver.fit import SolverOptions
@@ -166,10 +167,14 @@ def tune(images: list[Image], priors: Priors, ground_truth: GroundTruthSource,
     ----------
     images : annotated images whose ids the ground truth knows
     base : the other solver settings (defaults when None)
+    jobs : worker processes for each grid point's fits, one pool for them all; 0 (``--jobs auto``): as many as
+        the vehicles repay (:func:`toosicubix.pipeline.workers.workers_for`)
     """
     base = base or SolverOptions()
+    jobs = workers.resolved(jobs, sum(len(im.vehicles) for im in images))
 
     def evaluate_point(lam: float, lp: float) -> GridPoint:
         return score(images, priors, ground_truth, replace(base, lambda_3d=lam, lambda_px=lp), eval_options, jobs)
 
-    return grid_search(evaluate_point, lambdas, lambda_ps, refine, progress)
+    with shared_workers():  # every grid point's fits on the same workers
+        return grid_search(evaluate_point, lambdas, lambda_ps, refine, progress)
