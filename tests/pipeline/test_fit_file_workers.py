@@ -13,7 +13,7 @@ import pytest
 from tests.conftest import REPO
 from toosicubix.annotations import stream
 from toosicubix.annotations.stream import index_annotations
-from toosicubix.formats.results import image_to_json
+from toosicubix.formats.results import RenderedImage, image_text, image_to_json
 from toosicubix.model import GroundOverride
 from toosicubix.pipeline import fitting
 from toosicubix.pipeline.batch import fit_file
@@ -59,6 +59,11 @@ def test_workers_reading_their_images_give_the_same_results(tmp_path: Path, grou
     in_main = list(iter_fit_images((on_road(im, blocks) for im in stream_images(index, ground)), index.vehicles,
                                    BatchSettings(ground=ground, jobs=1)))
     assert [json.dumps(image_to_json(r)) for r in by_workers] == [json.dumps(image_to_json(r)) for r in in_main]
+    # Each entry written by its worker, as the main process would write it (json's own indented text).
+    assert all(isinstance(r, RenderedImage) for r in by_workers) and not any(isinstance(r, RenderedImage)
+                                                                             for r in in_main)
+    assert [r.text for r in by_workers] == [json.dumps(image_to_json(r), indent=1, allow_nan=False) for r in in_main]
+    assert [image_text(r) for r in by_workers] == [image_text(r) for r in in_main]
     assert [r.id for r in by_workers][4] == "empty" and not by_workers[4].vehicles
     assert sum(counted) == index.vehicles == sum(len(r.vehicles) for r in by_workers)
     on_estimated_road = [r for r in by_workers if r.ground is not None and r.ground.estimated]

@@ -481,6 +481,34 @@ class ImageResult:
     frame: int | None = None
 
 
+@dataclass(frozen=True)
+class RenderedImage(ImageResult):
+    """An image's results with its results.json entry already written (``text``, as :func:`image_text` writes it), by
+    the worker process that fitted it: the main process of ``fit --jobs N`` then copies the text instead of encoding
+    every vehicle itself, and so keeps up with more workers. A changed copy would keep the old text, so nothing
+    changes a rendered image: the workers' results go straight to the writer
+    (:func:`toosicubix.pipeline.fitting.iter_fit_file`)."""
+
+    text: str = ""
+
+    @classmethod
+    def of(cls, im: ImageResult) -> RenderedImage:
+        """``im`` with its entry written."""
+        return cls(**{f.name: getattr(im, f.name) for f in fields(ImageResult)}, text=image_text(im))
+
+
+def image_text(im: ImageResult) -> str:
+    """The results.json entry of an image, ``json.dumps(image_to_json(im), indent=1, allow_nan=False)`` (before it
+    is indented to its place): a rendered image's own text, else encoded now.
+
+    Raises
+    ------
+    ValueError
+        A NaN or an infinity (not JSON).
+    """
+    return im.text if isinstance(im, RenderedImage) else dumps_indented(image_to_json(im))
+
+
 def _array(value: np.ndarray | None) -> Any:
     return None if value is None else np.asarray(value, dtype=float).tolist()
 
@@ -529,7 +557,7 @@ def write_results_stream(handle: IO[str], images: Iterable[ImageResult], header:
     handle.write(head[:-2] + ',\n "images": [')
     summary = {"images": 0, "vehicles": 0, "ok": 0, "failed": 0}
     for im in images:
-        text = dumps_indented(image_to_json(im))  # json.dumps(..., indent=1, allow_nan=False); no raw newline
+        text = image_text(im)  # json.dumps(..., indent=1, allow_nan=False); no raw newline
         handle.write(("\n  " if summary["images"] == 0 else ",\n  ") + text.replace("\n", "\n  "))
         summary["images"] += 1
         summary["vehicles"] += len(im.vehicles)
