@@ -86,3 +86,20 @@ def test_without_process_pools_the_batch_runs_in_one_process(monkeypatch, caplog
         done = list(fitting.ordered_map(iter(tasks), 2, 3, _pids))
     assert [t for t, _ in done] == tasks and len({pid for _, pid in done}) == 1
     assert "cannot start 2 worker processes (OSError" in caplog.text and "same results" in caplog.text
+
+
+def _interrupt_handler(tasks: list) -> list:
+    """A chunk's tasks, each with what its worker does on Ctrl-C (SIGINT)."""
+    import signal
+
+    return [(task, signal.getsignal(signal.SIGINT) is signal.SIG_IGN) for task in tasks]
+
+
+def test_workers_leave_ctrl_c_to_the_main_process():
+    """Ctrl-C reaches the terminal's whole process group. The main process stops the batch; a worker interrupted
+    inside the compiled solver would report it broken (and fall back to numpy) before being shut down."""
+    import signal
+
+    done = list(fitting.ordered_map(iter([(k,) for k in range(6)]), 2, 2, _interrupt_handler))
+    assert [ignored for _, ignored in done] == [True] * 6
+    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN  # the main process still takes it

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import itertools
 import logging
+import signal
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -90,6 +91,10 @@ def _candidates_of(keypoints: KeypointCatalogue | None
 
 def _worker_init() -> None:
     cv2.setNumThreads(1)  # one process per core; no threads on top
+    # Ctrl-C reaches the terminal's whole process group: the main process stops the batch (its running chunks end,
+    # the queued ones are cancelled); a worker interrupted inside the compiled solver would otherwise report that
+    # solver as broken before it is shut down.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def fit_images(images: list[Image], settings: BatchSettings | None = None,
