@@ -52,7 +52,17 @@ def test_a_containers_cpu_quota_bounds_the_cores(tmp_path, monkeypatch, text, qu
     if quota is not None:
         assert workers.usable_cpus() <= quota
     monkeypatch.setattr(workers, "_CPU_MAX", tmp_path / "absent")
+    monkeypatch.setattr(workers, "_CFS", tmp_path / "absent-too")
     assert workers._quota() is None and workers.usable_cpus() >= 1
+
+
+@pytest.mark.parametrize(("quota_us", "expected"), [("-1", None), ("250000", 3), ("100000", 1)])
+def test_a_cgroup_v1_quota_counts_too(tmp_path, monkeypatch, quota_us, expected):
+    (tmp_path / "cpu.cfs_quota_us").write_text(quota_us + "\n")
+    (tmp_path / "cpu.cfs_period_us").write_text("100000\n")
+    monkeypatch.setattr(workers, "_CPU_MAX", tmp_path / "no-v2")
+    monkeypatch.setattr(workers, "_CFS", tmp_path)
+    assert workers._quota() == expected
 
 
 def test_the_default_fits_in_several_processes_with_the_bytes_of_one(tmp_path, machine, monkeypatch):

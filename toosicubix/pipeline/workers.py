@@ -25,6 +25,8 @@ VEHICLES_PER_WORKER = {"fork": 100, "spawn": 1000, "forkserver": 1000}
 MAX_AUTO = 16
 #: Linux control groups v2: a container's CPU quota, "max" or "<quota> <period>" in microseconds.
 _CPU_MAX = Path("/sys/fs/cgroup/cpu.max")
+#: Control groups v1 (older Docker hosts): the quota (-1: none) and the period, microseconds, one file each.
+_CFS = Path("/sys/fs/cgroup/cpu")
 
 
 def usable_cpus() -> int:
@@ -39,10 +41,14 @@ def usable_cpus() -> int:
 
 
 def _quota() -> int | None:
+    """The cores a Linux container's CPU quota allows (rounded up), or None where none is stated."""
     try:
         fields = _CPU_MAX.read_text().split()
     except OSError:
-        return None
+        try:
+            fields = [(_CFS / name).read_text().strip() for name in ("cpu.cfs_quota_us", "cpu.cfs_period_us")]
+        except OSError:
+            return None
     if len(fields) != 2 or fields[0] == "max":
         return None
     try:
