@@ -28,13 +28,11 @@ from toosicubix.camera import Camera
 from toosicubix.formats import kitti
 from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
 from toosicubix.model import Image
-from toosicubix.pipeline import workers
 from toosicubix.pipeline.fitting import (
-    batch_solver,
+    batch_run,
     iter_fit_file,
     iter_fit_images,
     reads_in_workers,
-    shared_workers,
     stream_images,
 )
 from toosicubix.pipeline.output_folder import (
@@ -250,8 +248,7 @@ def fit_file(annotations: str | Path, out_dir: str | Path, settings: BatchSettin
     settings = settings or BatchSettings()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
     prepare_output_dir(out_dir)  # fail before the work, not after
-    settings = replace(settings, jobs=workers.resolved(settings.jobs, index.vehicles))
-    with batch_solver(index.vehicles, say), shared_workers():
+    with batch_run(index.vehicles, settings, say) as settings:
         return _fit_indexed(annotations, index, out_dir, settings, progress, on_start)
 
 

@@ -25,6 +25,7 @@ from toosicubix.errors import InputFileError
 from toosicubix.formats.results import ImageResult, RenderedImage, RoadPlane, VehicleResult
 from toosicubix.model import GroundOverride, GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import build_parts_model
+from toosicubix.pipeline import workers
 from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings, KeypointCatalogue
 from toosicubix.pipeline.vehicle import (
@@ -48,7 +49,7 @@ from toosicubix.solver.uncertainty import analyse
 
 log = logging.getLogger(__name__)
 
-__all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_solver", "check_prototypes",
+__all__ = ["COMPILED_FROM_VEHICLES", "FitTask", "add_next_clicks", "batch_run", "batch_solver", "check_prototypes",
            "fit_image_jointly", "fit_images", "iter_fit_file", "iter_fit_images", "on_road", "reads_in_workers",
            "shared_workers", "stream_images"]
 
@@ -198,6 +199,16 @@ def batch_solver(n_vehicles: int, say: Callable[[str], None] | None = None) -> I
     yield
 
 
+@contextmanager
+def batch_run(n_vehicles: int, settings: BatchSettings, say: Callable[[str], None] | None = None
+              ) -> Iterator[BatchSettings]:
+    """What a whole file's batch (``fit``, ``validate``) runs in: the solver path its size takes
+    (:func:`batch_solver`) and one pool of workers for its passes (:func:`shared_workers`); yields ``settings`` with
+    ``--jobs auto`` resolved for its ``n_vehicles`` (:func:`toosicubix.pipeline.workers.resolved`)."""
+    with batch_solver(n_vehicles, say), shared_workers():
+        yield replace(settings, jobs=workers.resolved(settings.jobs, n_vehicles))
+
+
 def _chunk(n_vehicles: int, jobs: int) -> int:
     """How many vehicles go to a worker at once: about four chunks per worker, at most 64 vehicles each."""
     return max(1, min(64, n_vehicles // (4 * jobs)))
@@ -234,16 +245,19 @@ def shared_workers() -> Iterator[None]:
 def _pool(jobs: int) -> tuple[ProcessPoolExecutor, bool]:
     """A pool of ``jobs`` workers and whether the caller owns it (shuts it down) or a :func:`shared_workers` block
     does."""
+    if _shared_pools is None:
+        return _new_pool(jobs), True
+    if jobs not in _shared_pools:
+        _shared_pools[jobs] = _new_pool(jobs)
+    return _shared_pools[jobs], False
+
+
+def _new_pool(jobs: int) -> ProcessPoolExecutor:
     # The compiled solver loaded here, before the workers start, is theirs without loading it again (where they are
     # forked: Linux); each would otherwise spend half a second on it, every pool. (Nothing is loaded inside
     # batch_solver's numpy path, which forked workers inherit.)
-    if _shared_pools is None:
-        compiled.warm_up()
-        return ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init), True
-    if jobs not in _shared_pools:
-        compiled.warm_up()
-        _shared_pools[jobs] = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init)
-    return _shared_pools[jobs], False
+    compiled.warm_up()
+    return ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init)
 
 
 def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,

@@ -12,16 +12,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from toosicubix import vocabulary
 from toosicubix.annotations.stream import index_annotations
 from toosicubix.formats.results import Alternative, VehicleResult
-from toosicubix.pipeline import workers
 from toosicubix.pipeline.batch import pilot_and_fits
-from toosicubix.pipeline.fitting import batch_solver, shared_workers
+from toosicubix.pipeline.fitting import batch_run
 from toosicubix.pipeline.pilot import PilotFindings
 from toosicubix.pipeline.settings import BatchSettings
 
@@ -327,8 +326,7 @@ def validate_file(annotations: str | Path, settings: BatchSettings | None = None
     settings = settings or BatchSettings(next_clicks=3)
     thresholds = thresholds or Thresholds()
     index = index_annotations(annotations, known_prototypes=list(settings.priors))
-    settings = replace(settings, jobs=workers.resolved(settings.jobs, index.vehicles))
-    with batch_solver(index.vehicles, say), shared_workers():
+    with batch_run(index.vehicles, settings, say) as settings:
         # Read image by image, as fit does: the fitter and the checks read the same stream.
         pilot, for_checks, results = pilot_and_fits(index, settings, progress, on_start)
         checks = [VehicleCheck(im.id, vehicle.json_path, r, judge(r, thresholds), limited_by_distance(r, thresholds))
