@@ -7,6 +7,7 @@ import copy
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
@@ -129,6 +130,44 @@ def test_bad_triplets_are_named(files, keypoints, where):
     mapping, _ = load_mapping(mapping_path)
     with pytest.raises(InputFileError, match=where):
         coco_to_annotations(write(tmp_path, "coco.json", coco), mapping, read_cameras(cameras_path))
+
+
+#: Values a keypoint triplet's x, y or v may come as (JSON's, and a caller's numpy floats).
+TRIPLET_VALUES = [0, 1, 2, 3, -1, 2.0, 1.0, 0.5, -0.0, True, False, 1e6, -1e6, 1e6 + 0.5, 10**6, 10**6 + 1, 10**400,
+                  float("nan"), float("inf"), "3", None, [1], np.float64(2.0), np.float64(1e7)]
+
+
+def _triplet_reference(x, y, v):
+    """What a triplet is, as the field rules say it one value at a time: None (refused) or (x, y, visible), with
+    ``False`` standing for an unlabelled keypoint (v 0)."""
+    from toosicubix import fields
+
+    if not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2)) \
+            or isinstance(v, bool):
+        return None
+    return False if v == 0 else (float(x), float(y), v == 2)
+
+
+@given(st.lists(st.tuples(*[st.sampled_from(TRIPLET_VALUES)] * 3), min_size=4, max_size=4))
+@settings(max_examples=300, deadline=None)
+def test_triplets_take_what_the_field_rules_take(triplets):
+    """The importer's quick test of plain numbers accepts and refuses exactly what the field rules do, and keeps
+    the same values."""
+    from toosicubix.formats.coco import ImportSummary, _triplets
+
+    names = ["a", "b", "c", "d"]
+    expected = [_triplet_reference(*t) for t in triplets]
+    summary = ImportSummary()
+    ann = {"keypoints": [value for t in triplets for value in t]}
+    if any(e is None for e in expected):
+        first = next(j for j, e in enumerate(expected) if e is None)
+        with pytest.raises(InputFileError, match=rf"keypoints\[{3 * first}:{3 * first + 3}\]: keypoint {first} "):
+            _triplets(ann, names, "coco.json", "$.annotations[0]", summary)
+        return
+    got = _triplets(ann, names, "coco.json", "$.annotations[0]", summary)
+    assert got == {n: e for n, e in zip(names, expected, strict=True) if e is not False}
+    assert summary.unlabelled == sum(e is False for e in expected)
+    assert summary.hidden_kept == sum(e is not False and not e[2] for e in expected)
 
 
 def test_cli_import_exit_codes_and_summary(files):

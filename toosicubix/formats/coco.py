@@ -166,6 +166,12 @@ class CocoImport:
         self.summary = ImportSummary()
         # Each enabled part with the keypoints it takes (asked of every part of every annotation).
         self._enabled = [(p, keypoints_of(p)) for p in mapping.parts if p.option is None or p.option in options]
+        # Per keypoint, the enabled parts (their places in that list) that take it: a vehicle labels a few keypoints
+        # of the mapping's many, and only parts whose keypoints are all labelled can be made.
+        self._takers: dict[str, list[int]] = {}
+        for k, (_, names) in enumerate(self._enabled):
+            for name in names:
+                self._takers.setdefault(name, []).append(k)
         try:
             self._text = read_json_text(coco_path)
         except FormatError as exc:
@@ -282,7 +288,8 @@ class CocoImport:
                                                           f"nor does the mapping {mapping.name!r}")
             labelled = _triplets(ann, names, path, where, summary)
         prototype = mapping.prototypes.get(str(category), mapping.prototypes.get(cat_name, mapping.prototype))
-        parts, taken = _make_parts(self._enabled, labelled, prototype)
+        candidates = sorted({k for name in labelled for k in self._takers.get(name, ())})
+        parts, taken = _make_parts([self._enabled[k] for k in candidates], labelled, prototype)
         vehicle: dict[str, Any] = {"id": str(ann_id), "prototype": prototype}
         if track is not None:
             vehicle["track"] = track
@@ -458,6 +465,10 @@ def _camera_of(im: dict[str, Any], file_name: str, cameras: CameraTable | None, 
     raise _fail(path, where, f"image {shown(file_name)} has no camera: no 'K' in the image and {how}")
 
 
+#: The types of a plain JSON number (booleans are not numbers here).
+_PLAIN = (int, float)
+
+
 def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: str,
               summary: ImportSummary | None) -> dict[str, tuple[float, float, bool]]:
     """The labelled keypoints of an annotation: name -> (x, y, visible); counted in ``summary`` when given."""
@@ -466,36 +477,43 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
         raise _fail(path, f"{where}.keypoints",
                     f"expected {3 * len(names)} numbers (x, y, v for {len(names)} keypoints), got {len(kp)}")
     out = {}
-    for j, name in enumerate(names):
-        x, y, v = kp[3 * j: 3 * j + 3]
-        if not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2)) \
-                or isinstance(v, bool):
+    bound, unlabelled, hidden = fields.MAX_PIXEL, 0, 0
+    for j, (name, x, y, v) in enumerate(zip(names, kp[0::3], kp[1::3], kp[2::3], strict=True)):
+        # Plain JSON numbers at once (a COCO file has some hundred thousand); anything else as the fields rule it.
+        if not (type(x) in _PLAIN and type(y) in _PLAIN and type(v) in _PLAIN and -bound <= x <= bound
+                and -bound <= y <= bound and v in (0, 1, 2)) and (
+                not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2))
+                or isinstance(v, bool)):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
                         f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
                         f"v in 0, 1, 2, got {shown([x, y, v])}")
         if v == 0:
-            if summary is not None:
-                summary.unlabelled += 1
+            unlabelled += 1
             continue
-        if summary is not None:
-            summary.hidden_kept += v == 1
+        hidden += v == 1
         out[name] = (float(x), float(y), v == 2)
+    if summary is not None:
+        summary.unlabelled += unlabelled
+        summary.hidden_kept += hidden
     return out
 
 
 def _make_parts(parts: list[tuple[Any, tuple[str, ...]]], labelled: dict[str, tuple[float, float, bool]],
                 prototype: str) -> tuple[list[dict[str, Any]], set[str]]:
-    """The annotation parts a vehicle's labelled keypoints make (``parts``: each with the keypoints it takes), and
-    the keypoints they took."""
+    """The annotation parts a vehicle's labelled keypoints make (``parts``: each with the keypoints it takes, in the
+    mapping's order; a part listed before takes a keypoint first), and the keypoints they took."""
     out: list[dict[str, Any]] = []
     taken: set[str] = set()
     for part, names in parts:
-        if any(n not in labelled or n in taken for n in names):
+        if len(names) == 1:  # most parts take one keypoint
+            if names[0] not in labelled or names[0] in taken:
+                continue
+        elif any(n not in labelled or n in taken for n in names):
             continue
         if isinstance(part, MappingLength) and part.metres is None:
             continue  # no size to give it (the toosicubix mapping's wheelbases and tyres)
-        taken |= set(names)
-        xy = [list(labelled[n][:2]) for n in names]
+        taken.update(names)
+        xy = [[labelled[n][0], labelled[n][1]] for n in names]
         if isinstance(part, MappingKeypoint):
             pos = part.position_for(prototype)
             entry: dict[str, Any] = {"kind": "keypoint", "name": part.keypoint, "xy": xy[0], "at": list(pos.at),
