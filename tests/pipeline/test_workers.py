@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 
 import pytest
 from click.testing import CliRunner
@@ -86,16 +87,29 @@ def test_jobs_takes_a_number_or_auto(tmp_path, given):
     assert "expected a number of processes (1 or more) or 'auto'" in result.output
 
 
-def test_without_process_pools_the_batch_runs_in_one_process(monkeypatch, caplog):
-    def no_pools(jobs):
-        raise OSError(38, "Function not implemented")  # what a platform without POSIX semaphores says
+def _no_pools(jobs):
+    raise OSError(38, "Function not implemented")  # what a platform without POSIX semaphores says
 
-    monkeypatch.setattr(fitting, "_pool", no_pools)
+
+def test_without_process_pools_the_batch_runs_in_one_process(monkeypatch, caplog):
+    monkeypatch.setattr(fitting, "_new_pool", _no_pools)
     tasks = [(k,) for k in range(7)]
     with caplog.at_level(logging.WARNING, logger="toosicubix.pipeline.fitting"):
         done = list(fitting.ordered_map(iter(tasks), 2, 3, _pids))
-    assert [t for t, _ in done] == tasks and len({pid for _, pid in done}) == 1
+    assert [t for t, _ in done] == tasks and len({pid for _, pid in done}) == 1 and done[0][1] == os.getpid()
     assert "cannot start 2 worker processes (OSError" in caplog.text and "same results" in caplog.text
+
+
+def test_without_process_pools_a_batch_says_so_once(monkeypatch, caplog):
+    """A batch's passes (its pilot, then its fits) share the block: the first finds that pools cannot start, the
+    others run in this process without trying again."""
+    tries = []
+    monkeypatch.setattr(fitting, "_new_pool", lambda jobs: tries.append(jobs) or _no_pools(jobs))
+    tasks = [(k,) for k in range(5)]
+    with caplog.at_level(logging.WARNING, logger="toosicubix.pipeline.fitting"), fitting.shared_workers():
+        passes = [list(fitting.ordered_map(iter(tasks), 2, 2, _pids)) for _ in range(3)]
+    assert all([t for t, _ in done] == tasks for done in passes)
+    assert tries == [2] and caplog.text.count("cannot start 2 worker processes") == 1
 
 
 def _interrupt_handler(tasks: list) -> list:

@@ -222,8 +222,9 @@ def _suggest_chunk(tasks: list[SuggestTask]) -> list[VehicleResult]:
     return [with_next_clicks(*task) for task in tasks]
 
 
-#: The worker pools of the innermost :func:`shared_workers` block, by number of workers; None outside any.
-_shared_pools: dict[int, ProcessPoolExecutor] | None = None
+#: The worker pools of the innermost :func:`shared_workers` block, by number of workers (None: they could not start
+#: here, which was said once); None outside any block.
+_shared_pools: dict[int, ProcessPoolExecutor | None] | None = None
 
 
 @contextmanager
@@ -239,17 +240,26 @@ def shared_workers() -> Iterator[None]:
     finally:
         pools, _shared_pools = _shared_pools, outer
         for pool in pools.values():
-            pool.shutdown(wait=True, cancel_futures=True)
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _pool(jobs: int) -> tuple[ProcessPoolExecutor, bool]:
+def _pool(jobs: int) -> tuple[ProcessPoolExecutor | None, bool]:
     """A pool of ``jobs`` workers and whether the caller owns it (shuts it down) or a :func:`shared_workers` block
-    does."""
+    does; None where process pools cannot start (no POSIX semaphores, ...), with a warning: once per block, whose
+    later passes (a batch's fits after its pilot) then run in this process without trying again."""
+    if _shared_pools is not None and jobs in _shared_pools:
+        return _shared_pools[jobs], False
+    try:
+        pool = _new_pool(jobs)
+    except (OSError, NotImplementedError, ImportError) as exc:
+        log.warning("cannot start %d worker processes (%s: %s); fitting in this one, with the same results",
+                    jobs, type(exc).__name__, exc)
+        pool = None
     if _shared_pools is None:
-        return _new_pool(jobs), True
-    if jobs not in _shared_pools:
-        _shared_pools[jobs] = _new_pool(jobs)
-    return _shared_pools[jobs], False
+        return pool, True
+    _shared_pools[jobs] = pool
+    return pool, False
 
 
 def _new_pool(jobs: int) -> ProcessPoolExecutor:
@@ -265,13 +275,7 @@ def ordered_map(tasks: Iterator[tuple], jobs: int, chunk: int,
     """``work`` (:func:`~toosicubix.pipeline.vehicle.fit_one` over a chunk, by default) over ``tasks`` in order,
     in ``jobs`` processes (a :func:`shared_workers` block's, within one), with a bounded number of chunks of ``chunk``
     tasks in flight (the pool's own ``map`` would take every task at once)."""
-    pool = None
-    if jobs > 1:
-        try:
-            pool, owned = _pool(jobs)
-        except (OSError, NotImplementedError, ImportError) as exc:  # no process pools here (no semaphores, ...)
-            log.warning("cannot start %d worker processes (%s: %s); fitting in this one, with the same results",
-                        jobs, type(exc).__name__, exc)
+    pool, owned = _pool(jobs) if jobs > 1 else (None, False)
     if pool is None:
         for task in tasks:
             yield from work([task])
