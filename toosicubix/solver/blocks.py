@@ -20,7 +20,6 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
 
 
 class NotPositiveDefinite(np.linalg.LinAlgError):
@@ -76,9 +75,9 @@ class BlockArrow:
         for k, D in enumerate(self.D):
             S = D + np.diag(damping * np.maximum(np.diag(D), floor))
             if previous is not None:
-                S = S - self.B[k - 1].T @ cho_solve(previous, self.B[k - 1])
+                S = S - self.B[k - 1].T @ _cho_solve(previous, self.B[k - 1])
             try:
-                previous = cho_factor(S)
+                previous = _cho_factor(S)
             except np.linalg.LinAlgError:
                 raise NotPositiveDefinite(f"block {k} is not positive definite") from None
             factors.append(previous)
@@ -88,11 +87,11 @@ class BlockArrow:
         """``A^-1`` on a right-hand side given per block (each (n_k,) or (n_k, c))."""
         w = [rhs[0]]
         for k in range(1, len(rhs)):
-            w.append(rhs[k] - self.B[k - 1].T @ cho_solve(factors[k - 1], w[k - 1]))
+            w.append(rhs[k] - self.B[k - 1].T @ _cho_solve(factors[k - 1], w[k - 1]))
         x = [None] * len(rhs)
-        x[-1] = cho_solve(factors[-1], w[-1])
+        x[-1] = _cho_solve(factors[-1], w[-1])
         for k in range(len(rhs) - 2, -1, -1):
-            x[k] = cho_solve(factors[k], w[k] - self.B[k] @ x[k + 1])
+            x[k] = _cho_solve(factors[k], w[k] - self.B[k] @ x[k + 1])
         return x  # type: ignore[return-value]
 
     def _border_schur(self, factors: list, damping: float, floor: float) -> tuple[list[np.ndarray], tuple]:
@@ -102,7 +101,7 @@ class BlockArrow:
         for E_k, X_k in zip(self.E, X, strict=True):
             P = P - E_k.T @ X_k
         try:
-            return X, cho_factor(P)
+            return X, _cho_factor(P)
         except np.linalg.LinAlgError:
             raise NotPositiveDefinite("the border's Schur complement is not positive definite") from None
 
@@ -120,7 +119,7 @@ class BlockArrow:
         X, P = self._border_schur(factors, damping, floor)
         y_chain = self._solve_chain(factors, self.g)
         rhs = self.g_border - sum((E_k.T @ y_k for E_k, y_k in zip(self.E, y_chain, strict=True)), np.zeros(self.s))
-        border = cho_solve(P, rhs)
+        border = _cho_solve(P, rhs)
         chain = [y_k - X_k @ border for y_k, X_k in zip(y_chain, X, strict=True)]
         return [-x for x in chain], -border
 
@@ -135,15 +134,28 @@ class BlockArrow:
         """
         factors = self._factor(ridge, 1e-300)
         Sigma = [np.zeros(0)] * len(self.sizes)
-        Sigma[-1] = cho_solve(factors[-1], np.eye(self.sizes[-1]))
+        Sigma[-1] = _cho_solve(factors[-1], np.eye(self.sizes[-1]))
         for k in range(len(self.sizes) - 2, -1, -1):
-            S_inv = cho_solve(factors[k], np.eye(self.sizes[k]))
+            S_inv = _cho_solve(factors[k], np.eye(self.sizes[k]))
             G = S_inv @ self.B[k]
             Sigma[k] = S_inv + G @ Sigma[k + 1] @ G.T
         if self.s == 0:
             return Sigma, [np.zeros((n, 0)) for n in self.sizes], np.zeros((0, 0))
         X, P = self._border_schur(factors, ridge, 1e-300)
-        P_inv = cho_solve(P, np.eye(self.s))
+        P_inv = _cho_solve(P, np.eye(self.s))
         cross = [-(X_k @ P_inv) for X_k in X]
         chain = [S + X_k @ P_inv @ X_k.T for S, X_k in zip(Sigma, X, strict=True)]
         return chain, cross, P_inv
+
+
+# scipy's Cholesky, imported on a track's first solve: a batch of single vehicles never loads scipy.
+def _cho_factor(a: np.ndarray):
+    from scipy.linalg import cho_factor
+
+    return cho_factor(a)
+
+
+def _cho_solve(factor, b: np.ndarray) -> np.ndarray:
+    from scipy.linalg import cho_solve
+
+    return cho_solve(factor, b)

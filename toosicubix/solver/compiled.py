@@ -15,8 +15,9 @@ fit is the same to the last bit whichever path ran it (issue 37 asks for results
 - every ``einsum`` as numpy's loops sum: a reduction over two contiguous operands with a scalar output in numpy's
   two-lane SIMD loop (blocks of eight, the block's vectors last to first, then pairs, then the lanes added), any other
   in order;
-- the damped solve through the same LAPACK ``dposv`` that ``scipy.linalg.lapack`` calls; the cube in Nielsen's damping
-  through numpy's own ``power`` (its SIMD ``pow`` rounds unlike the C library's);
+- the damped solve through the same LAPACK ``dposv`` of numpy's OpenBLAS that the numpy path calls
+  (:mod:`.openblas`); the cube in Nielsen's damping through numpy's own ``power`` (its SIMD ``pow`` rounds unlike the
+  C library's);
 - the SO(3) exponential as ``cv2.Rodrigues`` computes it, operation for operation;
 - sums as ``np.add.reduce`` sums (numpy's pairwise summation), the descent's solve through the ``dgesv`` numpy's
   ``linalg.solve`` calls.

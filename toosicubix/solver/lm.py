@@ -43,7 +43,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.linalg import lapack
+
+from toosicubix.solver import openblas
 
 State = tuple[np.ndarray, ...]
 
@@ -318,7 +319,7 @@ def _solve_batch(H: np.ndarray, b: np.ndarray, which: np.ndarray) -> np.ndarray:
     asked for or not positive definite come back NaN."""
     out = np.full(b.shape, np.nan)
     for k in which.nonzero()[0]:
-        _, x, info = lapack.dposv(H[k], b[k])
+        x, info = openblas.dposv(H[k], b[k])
         if info == 0:
             out[k] = x
     return out

@@ -5,13 +5,12 @@ compiled code's loading cost nothing to commands that fit no vehicle.
 
 from __future__ import annotations
 
-import ctypes
-import glob
 import logging
 import math
-import os
 
 import numpy as np
+
+from toosicubix.solver import openblas
 
 log = logging.getLogger(__name__)
 
@@ -23,25 +22,20 @@ _ROW_MAJOR, _COL_MAJOR, _NO_TRANS, _TRANS, _UPPER = 101, 102, 111, 112, 121
 
 
 def _load():
-    """numba, with numpy's BLAS functions and scipy's ``dposv`` registered under this module's symbol names (so that
-    the compiled code refers to them by name and can be cached), or None (the reason logged)."""
+    """numba, with the BLAS and LAPACK functions of numpy's OpenBLAS (:mod:`.openblas`) registered under this
+    module's symbol names (so that the compiled code refers to them by name and can be cached), or None (the reason
+    logged)."""
     try:
         import llvmlite.binding as llvm
         import numba
-        from numba.extending import get_cython_function_address
     except ImportError:
         return None
-    folder = os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs")
-    found = sorted(glob.glob(os.path.join(folder, "libscipy_openblas64_*")))
-    if not found:
-        log.debug("compiled refinement off: numpy's OpenBLAS (scipy_openblas64) not found in %s", folder)
+    if openblas.library() is None:
+        log.debug("compiled refinement off: numpy's OpenBLAS not found")
         return None
     try:
-        blas = ctypes.CDLL(found[0])
         for ours, theirs in _BLAS.items():
-            llvm.add_symbol(ours, ctypes.cast(getattr(blas, theirs), ctypes.c_void_p).value)
-        llvm.add_symbol("toosicubix_dposv", get_cython_function_address("scipy.linalg.cython_lapack", "dposv"))
-        llvm.add_symbol("toosicubix_dgesv", ctypes.cast(blas.scipy_dgesv_64_, ctypes.c_void_p).value)
+            llvm.add_symbol(ours, openblas.address(theirs))
     except (OSError, AttributeError, ValueError) as exc:
         log.debug("compiled refinement off: %s", exc)
         return None
@@ -50,7 +44,8 @@ def _load():
 
 #: Our symbol names for the functions of numpy's OpenBLAS (ILP64: 64-bit integers, numpy's own symbol names).
 _BLAS = {"toosicubix_dgemm": "scipy_cblas_dgemm64_", "toosicubix_dgemv": "scipy_cblas_dgemv64_",
-         "toosicubix_dsyrk": "scipy_cblas_dsyrk64_", "toosicubix_ddot": "scipy_cblas_ddot64_"}
+         "toosicubix_dsyrk": "scipy_cblas_dsyrk64_", "toosicubix_ddot": "scipy_cblas_ddot64_",
+         "toosicubix_dposv": "scipy_dposv_64_", "toosicubix_dgesv": "scipy_dgesv_64_"}
 
 
 LOADED = _load() is not None
@@ -73,7 +68,9 @@ if LOADED:
     _syrk = types.ExternalFunction("toosicubix_dsyrk", types.void(_i32, _i32, _i32, _i64, _i64, _f64, _ptr, _i64,
                                                                    _f64, _ptr, _i64))
     _dot = types.ExternalFunction("toosicubix_ddot", _f64(_i64, _ptr, _i64, _ptr, _i64))
-    _posv = types.ExternalFunction("toosicubix_dposv", types.void(_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr))
+    # Fortran's LAPACK: every argument by reference, and the character argument's length last (gfortran's hidden one).
+    _posv = types.ExternalFunction("toosicubix_dposv", types.void(_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr,
+                                                                   _i64))
     _gesv = types.ExternalFunction("toosicubix_dgesv", types.void(_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr))
     njit = numba.njit(cache=True)
 
@@ -684,9 +681,9 @@ if LOADED:
         H = np.empty((n, n))
         step = np.empty((B, n))
         running = np.empty(B, dtype=np.bool_)
-        n_arr = np.array([n], dtype=np.int32)
-        one_arr = np.array([1], dtype=np.int32)
-        info = np.zeros(1, dtype=np.int32)
+        n_arr = np.array([n], dtype=np.int64)
+        one_arr = np.array([1], dtype=np.int64)
+        info = np.zeros(1, dtype=np.int64)
         uplo = np.array([ord("U")], dtype=np.uint8)
         for iteration in range(max_iterations):
             for k in range(B):
@@ -749,7 +746,7 @@ if LOADED:
                     for i in range(n):
                         step[k, i] = minus_g[k, i]
                     _posv(uplo.ctypes.data, n_arr.ctypes.data, one_arr.ctypes.data, H.ctypes.data, n_arr.ctypes.data,
-                          step[k].ctypes.data, n_arr.ctypes.data, info.ctypes.data)
+                          step[k].ctypes.data, n_arr.ctypes.data, info.ctypes.data, 1)
                     ok = info[0] == 0
                     if ok:
                         for i in range(n):
