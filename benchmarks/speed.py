@@ -14,14 +14,19 @@ Parts (``--parts``, comma-separated; the first three by default):
 3. ``refit``: the annotation page's refit (``toosicubix.web.session.Session._fit``: ``fit_one`` with every
    suggestion of what to click next, ``next_clicks=NEXT_CLICKS``) on the first ``--refit-vehicles`` vehicles of
    part 1: median and p90.
-4. ``throughput``: the command line with ``--jobs 1`` and ``--jobs 2`` on ``--throughput-vehicles`` vehicles
+4. ``whole``: whole ``toosicubix`` processes, as a user times them (Python's start, the imports, loading the
+   compiled solver where the batch is large enough, the pilot, the fits, the output): ``toosicubix --help``,
+   ``toosicubix fit`` on the bundled sample (6 vehicles) and on the first ``--whole-vehicles`` (306) vehicles of part
+   1's test split at 1 px, at ``fit``'s defaults (``--jobs auto``); median seconds over ``--rounds`` rounds, each
+   checkout in turn with ``--against``.
+5. ``throughput``: the command line with ``--jobs 1`` and ``--jobs 2`` on ``--throughput-vehicles`` vehicles
    (wall time, process start included), whether the outputs are byte-identical, and the peak memory of
    ``--jobs 1`` on 1,000 and 10,000 vehicles.
-5. ``memory``: peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
+6. ``memory``: peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
    1,000, 10,000 and 100,000; about 40 minutes at 100,000): the main process and the largest worker, each run in
    a fresh process, on annotation files made by replicating 1,000 simulated vehicles (images copied under new ids).
 
-Parts 1-3 run in fresh worker processes (``--worker``), ``--rounds`` rounds each; with ``--against PATH`` (another
+Parts 1-4 run in fresh worker processes (``--worker``), ``--rounds`` rounds each; with ``--against PATH`` (another
 checkout, e.g. ``git worktree add /tmp/base f35ec77``) every round runs this checkout and the other one in turn,
 alternating which goes first, with this file's code over either checkout's package: both see the same load, and
 the report gives each one's figures over all rounds and the ratio (other / this).
@@ -242,6 +247,63 @@ def interleaved(args: argparse.Namespace, report: dict) -> None:
                   f"{', '.join(f'{v:.2f}' for v in out['ratio_per_round'])}); > 1: this checkout is faster", flush=True)
 
 
+def test_split_file(data: Path, n: int, folder: Path) -> Path:
+    """An annotation file of the first ``n`` vehicles of part 1's test split, 1 px click noise."""
+    from toosicubix.simulate.annotator import (
+        AnnotatorOptions,
+        SelectionOptions,
+        select_kitti_tracking,
+        simulate,
+        write_simulation,
+    )
+
+    vehicles = select_kitti_tracking(data / "kitti_tracking", SelectionOptions(sequences=SPLITS["test"]))[:n]
+    path = folder / f"test-{n}.json"
+    write_simulation(simulate(vehicles, AnnotatorOptions(noise_px=1.0)), path, folder / f"test-gt-{n}")
+    return path
+
+
+def whole(args: argparse.Namespace, report: dict) -> None:
+    """Part 4 of the module docstring: each case's command in a fresh process over each checkout's package, the
+    checkouts in turn (which goes first alternates by round); run from an empty folder, so that neither checkout's
+    root is on the path."""
+    trees = {"this": REPO} | ({"against": args.against.resolve()} if args.against else {})
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        cases = {
+            "--help": ["--help"],
+            "fit, the bundled sample (6 vehicles)": ["fit", str(REPO / "samples" / "annotations.json"), "-q"],
+            f"fit, {args.whole_vehicles} simulated KITTI vehicles": [
+                "fit", str(test_split_file(args.data, args.whole_vehicles, folder)), "-q"],
+        }
+        runs = {case: {name: [] for name in trees} for case in cases}
+        for k in range(args.rounds):
+            for case, command in cases.items():
+                for name in (list(trees) if k % 2 == 0 else list(trees)[::-1]):
+                    extra = ["-o", str(folder / f"out-{name}")] if command[0] == "fit" else []
+                    start = time.perf_counter()
+                    subprocess.run([sys.executable, "-m", "toosicubix", *command, *extra], cwd=folder,
+                                   env={**os.environ, "PYTHONPATH": str(trees[name])}, stdout=subprocess.DEVNULL,
+                                   stderr=subprocess.DEVNULL, check=False)
+                    runs[case][name].append(time.perf_counter() - start)
+        same = all(filecmp.cmp(a, folder / "out-against" / a.relative_to(folder / "out-this"), shallow=False)
+                   for a in (folder / "out-this").rglob("*") if a.is_file()) if "against" in trees else None
+    out: dict = {"trees": {name: str(tree) for name, tree in trees.items()}, "cases": {},
+                 "last_outputs_identical": same}
+    for case, by_tree in runs.items():
+        entry = {name: {"median_s": float(np.median(v)), "seconds": v} for name, v in by_tree.items()}
+        if "against" in entry:
+            entry["ratio"] = entry["against"]["median_s"] / entry["this"]["median_s"]
+        out["cases"][case] = entry
+        print(f"whole, {case}: " + "; ".join(f"{name} {e['median_s']:.3f} s" for name, e in entry.items()
+                                               if name != "ratio")
+              + (f"; ratio {entry['ratio']:.3f} (> 1: this checkout is faster)" if "ratio" in entry else ""),
+              flush=True)
+    if same is not None:
+        print(f"whole: the last fit's folders identical: {same}", flush=True)
+    report["whole"] = out
+
+
 def annotation_file(data: Path, n: int, folder: Path) -> Path:
     """An annotation file of the first ``n`` vehicles of all tracking sequences, every frame, 1 px noise."""
     from toosicubix.simulate.annotator import (
@@ -354,7 +416,7 @@ def memory(args: argparse.Namespace, report: dict) -> None:
                   flush=True)
 
 
-PARTS = ("per-vehicle", "apollocar3d", "refit", "throughput", "memory")
+PARTS = ("per-vehicle", "apollocar3d", "refit", "whole", "throughput", "memory")
 
 
 def main() -> None:
@@ -363,10 +425,11 @@ def main() -> None:
     parser.add_argument("--parts", default="per-vehicle,apollocar3d,refit",
                         help=f"comma-separated, of {', '.join(PARTS)}")
     parser.add_argument("--against", type=Path, default=None,
-                        help="another checkout (its repository root) to run parts 1-3 against, round by round")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of parts 1-3 (each checkout once a round)")
+                        help="another checkout (its repository root) to run parts 1-4 against, round by round")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of parts 1-4 (each checkout once a round)")
     parser.add_argument("--jobs", type=int, default=2, help="processes of the apollocar3d part")
     parser.add_argument("--refit-vehicles", type=int, default=100, help="vehicles of the refit part")
+    parser.add_argument("--whole-vehicles", type=int, default=306, help="vehicles of the whole part's batch")
     parser.add_argument("--throughput-vehicles", type=int, default=3000)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--memory-vehicles", default="1000,10000,100000",
@@ -394,6 +457,8 @@ def main() -> None:
                     "load_average": list(os.getloadavg())}
     print(f"machine: {report['machine']}; load average {report['load_average']}", flush=True)
     interleaved(args, report)
+    if "whole" in args.parts:
+        whole(args, report)
     if "throughput" in args.parts:
         throughput(args, report)
     if "memory" in args.parts:
