@@ -196,3 +196,26 @@ def test_clicks_per_vehicle_are_limited():
     assert path == "$.images[0].vehicles[0].parts"
     assert f"at most {MAX_CLICKS_PER_VEHICLE} clicked points" in message
     assert f"found {MAX_CLICKS_PER_VEHICLE + 1}" in message
+
+
+def test_a_camera_shared_by_many_images_is_checked_once_and_a_bad_one_refused_each_time(monkeypatch):
+    """The camera checks (a determinant, a condition number) run once per distinct K or P of a file; a camera they
+    refuse is refused at every image that has it, each named with its own path."""
+    from toosicubix.annotations import schema
+
+    schema._checked_camera.cache_clear()
+    calls = []
+    real = schema.check_intrinsics
+    monkeypatch.setattr(schema, "check_intrinsics", lambda K: calls.append(K.tolist()) or real(K))
+    doc = copy.deepcopy(DESIGN_EXAMPLE)
+    image = doc["images"][0]
+    doc["images"] = [{**copy.deepcopy(image), "id": f"im{i}", "camera": {"K": [[700.0 + i % 3, 0, 600],
+                                                                           [0, 700, 180], [0, 0, 1]]}}
+                     for i in range(30)]
+    parse_annotations(doc, "good.json")
+    assert len(calls) == 3  # three distinct cameras among 30 images
+    bad = {"K": [[700, 0, 600], [1400, 0, 1200], [0, 0, 1]]}
+    for i in (4, 17):
+        doc["images"][i]["camera"] = bad
+    problems = problems_of(doc)
+    assert [p for p, m in problems if "invertible K" in m] == ["$.images[4].camera.K", "$.images[17].camera.K"]

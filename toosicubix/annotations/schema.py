@@ -6,6 +6,7 @@ numpy dataclasses of :mod:`toosicubix.model`; nothing past that boundary imports
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from pathlib import Path
@@ -197,6 +198,17 @@ class GroundModel(_Model):
         return self
 
 
+@functools.lru_cache(maxsize=1024)
+def _checked_camera(matrix: tuple[tuple[float, ...], ...]) -> None:
+    """:func:`check_intrinsics` of a K (3 rows of 3), :func:`check_projection` of a P (3 rows of 4), once per distinct
+    matrix: a file's images share a few cameras, and the checks (a determinant, a condition number) cost more than
+    the rest of an image's validation. A refused matrix is not kept: each image with it is refused again."""
+    if len(matrix[0]) == 3:
+        check_intrinsics(np.array(matrix))
+    else:
+        check_projection(np.array(matrix))
+
+
 class CameraModel(_Model):
     """Intrinsics as ``K`` (3x3, optional OpenCV ``distortion``) or a KITTI-style ``P`` (3x4)."""
 
@@ -213,14 +225,14 @@ class CameraModel(_Model):
     @classmethod
     def _ensure_invertible_K(cls, K: tuple[Row3, Row3, Row3] | None) -> tuple[Row3, Row3, Row3] | None:
         if K is not None:
-            check_intrinsics(np.array(K))
+            _checked_camera(K)
         return K
 
     @field_validator("P")
     @classmethod
     def _ensure_invertible_P(cls, P: tuple[Row4, Row4, Row4] | None) -> tuple[Row4, Row4, Row4] | None:
         if P is not None:
-            check_projection(np.array(P))
+            _checked_camera(P)
         return P
 
     @field_validator("distortion")
