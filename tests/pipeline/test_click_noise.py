@@ -14,6 +14,7 @@ from tests.scenes import CAMERA
 from tests.solver.test_robust import TWELVE
 from toosicubix.formats.results import ImageResult, SolverStats, VehicleResult
 from toosicubix.model import Image, Part, Vehicle
+from toosicubix.pipeline import click_noise
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.click_noise import (
     MIN_DOF,
@@ -103,6 +104,32 @@ def test_pilot_counts_only_vehicles_with_clicks():
     assert chosen == [f"v{j}" for j in range(0, 1000, 5)]
     chosen = [v.id for im in pilot_images(images, 1000, keep=None) for v in im.vehicles]
     assert chosen == [f"v{j}" for j in range(0, 1000, 15)]  # told of 1,000 clicked: every 3rd clicked one
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_pilot_reads_only_the_images_that_hold_its_vehicles(seed):
+    """pilot_positions names the images every k-th clicked vehicle falls in, and pilot_images over those alone (told
+    how many clicked vehicles come before each) chooses what it chooses over the whole file."""
+    rng = np.random.default_rng(seed)
+    keypoint = Part("keypoint", "lamp-rear-left", np.zeros((1, 2)), "", None, np.zeros(3), np.full(3, 0.02))
+    wheel = Part("point", "wheel-front-left", np.zeros((1, 2)), "")
+    images = []
+    for i in range(int(rng.integers(20, 200))):
+        vehicles = tuple(Vehicle(id=f"{i}-{j}", prototype="Car", box2d=np.zeros(4), json_path="",
+                                 parts=[(), (wheel,), (keypoint,)][int(rng.integers(0, 3))])
+                         for j in range(int(rng.integers(0, 9))))
+        images.append(Image(id=f"im{i}", file=None, camera=CAMERA, json_path=f"$.images[{i}]", vehicles=vehicles))
+    clicked = [sum(bool(v.parts) for v in im.vehicles) for im in images]
+    for n_clicked in (sum(clicked), 7 * sum(clicked), 10**6):  # every one, every k-th, every 2,500th
+        positions = click_noise.pilot_positions(clicked, n_clicked)
+        for keep in (None, click_noise.telling):
+            whole = [(im.id, [v.id for v in im.vehicles]) for im in pilot_images(images, n_clicked, keep=keep)]
+            some = pilot_images([images[i] for i, _ in positions], n_clicked, keep=keep,
+                                clicked_before=[before for _, before in positions])
+            assert [(im.id, [v.id for v in im.vehicles]) for im in some] == whole
+        # Exactly the images with a pilot vehicle are read (keep=None takes every k-th clicked one).
+        assert [images[i].id for i, _ in positions] == [im.id for im in pilot_images(images, n_clicked, keep=None)]
+    assert len(click_noise.pilot_positions(clicked, 10**9)) == 1  # a stride past the file: its first clicked one
 
 
 def _keypoint_vehicle(rng, sigma_px: float, spread: float, k: int,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from toosicubix.camera import Camera
 from toosicubix.cli import main
 from toosicubix.formats.results import ImageResult, VehicleResult
 from toosicubix.geometry import R_cam_vehicle_from_ypr
-from toosicubix.model import GroundPlane, Image, Part, Vehicle
+from toosicubix.model import GroundBlock, GroundPlane, Image, Part, Vehicle
 from toosicubix.pipeline.batch import fit_file
 from toosicubix.pipeline.pilot import on_estimated_roads
 from toosicubix.pipeline.road_normal import (
@@ -225,3 +226,40 @@ def test_validate_cli_says_what_the_pilot_estimated(tmp_path):
     result = CliRunner().invoke(main, ["validate", "samples/annotations.json", "--road-normal", "none",
                                        "--click-sigma", "1.5"])
     assert "road normal" not in result.output and "click noise: 1.5 px (given)" in result.output
+
+
+def test_the_pilot_counts_each_cameras_images_from_the_index_and_reads_only_its_own(tmp_path, monkeypatch):
+    """The cameras and their images without a ground block come from the index (K, P and distortion told apart as
+    the images' own cameras are), and the pilot reads only the images that hold its vehicles: the same findings as
+    reading every image."""
+    from collections import Counter
+
+    from toosicubix.annotations import stream
+    from toosicubix.annotations.stream import index_annotations
+    from toosicubix.model import GroundOverride
+    from toosicubix.pipeline import click_noise, pilot
+    from toosicubix.pipeline.fitting import stream_images
+
+    rng = np.random.default_rng(9)
+    images = _pitched_batch(60, rng)
+    P = np.hstack([CAMERA.K, np.array([[40.0], [0.0], [0.0]])])
+    cameras = [CAMERA, Camera(K=CAMERA.K, distortion=np.array([0.01, 0.0, 0.0, 0.0])), Camera.from_P(P)]
+    block = GroundBlock(normal=(0.0, -1.0, 0.0))
+    images = [replace(im, camera=cameras[i % 3], ground_block=block if i % 4 == 0 else None)
+              for i, im in enumerate(images)]
+    path = tmp_path / "mixed.json"
+    path.write_text(json.dumps(document_json(images)))
+    index = index_annotations(path)
+    for override in (None, GroundOverride(camera_height=1.65)):
+        every = Counter(camera_key(im.camera) for im in stream_images(index, override) if im.ground is None)
+        assert pilot._without_ground(index, override) == every
+    # Three camera blocks, two cameras: a P whose K is another block's K is that camera.
+    assert len(index.cameras) == 3 and len(pilot._without_ground(index, None)) == 2
+
+    monkeypatch.setattr(click_noise, "PILOT_VEHICLES", 12)  # every 5th of the 60 vehicles
+    read = []
+    real = stream.image_annotation
+    monkeypatch.setattr("toosicubix.pipeline.fitting.image_annotation", lambda text: read.append(text) or real(text))
+    findings = pilot.run_pilot(index, BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
+    assert len(read) == 12
+    assert findings.road_normals is not None and sum(n.images for n in findings.road_normals.values()) == 45

@@ -21,6 +21,7 @@ from pydantic import ValidationError
 from toosicubix.annotations.schema import (
     IMAGE_IDS_IGNORING_CASE,
     AnnotationFile,
+    CameraModel,
     ImageAnnotation,
     TrackBook,
     _describe,
@@ -46,6 +47,11 @@ class AnnotationIndex:
     tracked : how many vehicles carry a ``track``
     clicked : how many vehicles carry clicks (the ones a pilot can fit alone; a tracked vehicle may have only a box)
     image_vehicles : per image, how many vehicles it has (what a batch's workers are handed by)
+    image_clicked : per image, how many of its vehicles carry clicks
+    image_cameras : per image, which of ``cameras`` it was taken with
+    cameras : the distinct camera blocks of the file, as validated (a batch's pilot tells them apart without reading
+        every image again)
+    image_grounded : per image, whether it has a ground block of its own
     """
 
     path: Path
@@ -57,6 +63,10 @@ class AnnotationIndex:
     tracked: int = 0
     clicked: int = 0
     image_vehicles: tuple[int, ...] = ()
+    image_clicked: tuple[int, ...] = ()
+    image_cameras: tuple[int, ...] = ()
+    cameras: tuple[CameraModel, ...] = ()
+    image_grounded: tuple[bool, ...] = ()
 
 
 class _Scanner:
@@ -171,6 +181,10 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     vehicles = tracked = clicked = 0
     sequences: list[tuple[str, int] | None] = []
     image_vehicles: list[int] = []
+    image_clicked: list[int] = []
+    image_cameras: list[int] = []
+    image_grounded: list[bool] = []
+    cameras: dict[tuple, tuple[int, CameraModel]] = {}  # a camera block's values -> its place, the block
     tracks = TrackBook()
     images_seen = False
     for key, value, _, _ in _top_level(scanner):
@@ -187,6 +201,9 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
             spans.append((start, end))
             sequences.append(None)
             image_vehicles.append(0)
+            image_clicked.append(0)
+            image_cameras.append(-1)
+            image_grounded.append(False)
             if len(problems) >= MAX_PROBLEMS:
                 continue
             try:
@@ -211,7 +228,12 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
             first_lower.setdefault(lower, i)
             vehicles += len(image.vehicles)
             image_vehicles[-1] = len(image.vehicles)
-            clicked += sum(bool(v.parts) for v in image.vehicles)
+            image_clicked[-1] = sum(bool(v.parts) for v in image.vehicles)
+            clicked += image_clicked[-1]
+            camera = image.camera
+            values = (camera.K, camera.P, None if camera.distortion is None else tuple(camera.distortion))
+            image_cameras[-1] = cameras.setdefault(values, (len(cameras), camera))[0]
+            image_grounded[-1] = image.ground is not None
             prototypes.update(v.prototype for v in image.vehicles)
             if known is not None:
                 problems += [(f"$.images[{i}].vehicles[{j}].prototype",
@@ -225,7 +247,8 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
     if problems:
         raise InputFileError(path, problems[:MAX_PROBLEMS])
     return AnnotationIndex(path, text, tuple(spans), vehicles, frozenset(prototypes), tuple(sequences), tracked,
-                           clicked, tuple(image_vehicles))
+                           clicked, tuple(image_vehicles), tuple(image_clicked), tuple(image_cameras),
+                           tuple(camera for _, camera in cameras.values()), tuple(image_grounded))
 
 
 def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:

@@ -37,7 +37,7 @@ noise, take ``(sigma', t)`` (:attr:`toosicubix.solver.fit.SolverOptions.soft_noi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -140,21 +140,41 @@ def telling(vehicle: Vehicle) -> bool:
 
 
 def pilot_images(images: Iterable[Image], n_clicked: int,
-                 keep: Callable[[Vehicle], bool] | None = telling) -> Iterator[Image]:
+                 keep: Callable[[Vehicle], bool] | None = telling,
+                 clicked_before: Iterable[int] | None = None) -> Iterator[Image]:
     """The images of a batch with ``n_clicked`` vehicles that carry clicks, with only the pilot's vehicles: every k-th
     vehicle with clicks (counted in file order) that ``keep`` keeps (default: those whose residuals can tell the
     noise, :func:`telling`, so that a batch of parts on the cuboid has no pilot; None: every k-th, as the road
     normal's estimate wants); images left without one are skipped. Vehicles without clicks (a track's frames with
     only a box, or none) are not counted: the pilot cannot fit them alone, and counting them would leave it few
-    vehicles, or none of one camera, when a track is clicked on one frame in k."""
+    vehicles, or none of one camera, when a track is clicked on one frame in k.
+
+    ``clicked_before``: for each of ``images``, how many vehicles with clicks the file has before it, when
+    ``images`` are only some of the file's (those :func:`pilot_positions` names); None: they are all of them."""
     k = pilot_stride(n_clicked)
     seen = 0
+    before = iter(clicked_before) if clicked_before is not None else None
     for im in images:
+        if before is not None:
+            seen = next(before)
         clicked = [v for v in im.vehicles if v.parts]
         chosen = tuple(v for i, v in enumerate(clicked, start=seen) if i % k == 0 and (keep is None or keep(v)))
         seen += len(clicked)
         if chosen:
             yield replace(im, vehicles=chosen)
+
+
+def pilot_positions(image_clicked: Sequence[int], n_clicked: int) -> list[tuple[int, int]]:
+    """Which images hold a vehicle the pilot may take (:func:`pilot_images`), from how many vehicles with clicks each
+    image has (``image_clicked``, in file order): each such image's place in the file and how many vehicles with
+    clicks come before it. A batch reads only these images for its pilot."""
+    k = pilot_stride(n_clicked)
+    out, seen = [], 0
+    for i, n in enumerate(image_clicked):
+        if -seen % k < n:  # the first multiple of k from ``seen`` on falls among this image's vehicles
+            out.append((i, seen))
+        seen += n
+    return out
 
 
 @dataclass(frozen=True)

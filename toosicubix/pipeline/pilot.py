@@ -11,10 +11,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from toosicubix.annotations.convert import camera_from_schema
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
 from toosicubix.formats.results import ImageResult
 from toosicubix.model import GroundOverride, Image
-from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, telling
+from toosicubix.pipeline.click_noise import ClickNoise, estimate_from_pilot, pilot_images, pilot_positions, telling
 from toosicubix.pipeline.fitting import add_next_clicks, iter_fit_images, on_road, stream_images
 from toosicubix.pipeline.part_placement import PartPlacement, estimate_placement, evidence, evidence_dof, too_few
 from toosicubix.pipeline.road_normal import (
@@ -121,18 +122,16 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
     estimate_click_sigma, estimate_road_normal = settings.estimate_click_sigma, settings.estimate_road_normal
     next_clicks = 0 if settings.joint_ground else settings.next_clicks
     cameras: Counter = Counter()  # images without their own ground block, per camera
-
-    def counted(images: Iterable[Image]) -> Iterator[Image]:
-        for im in images:
-            if im.ground is None:
-                cameras[camera_key(im.camera)] += 1
-            yield im
-
     estimate_parts = estimate_click_sigma and settings.estimate_part_sigma
     pilot: list[Image] = []
     if estimate_click_sigma or estimate_road_normal:
-        pilot = list(pilot_images(counted(stream_images(index, settings.ground)), index.clicked,
-                                  keep=None if estimate_road_normal or estimate_parts else telling))
+        cameras = _without_ground(index, settings.ground)
+        # Only the images that hold a pilot vehicle are read: a batch of 100,000 vehicles read them all here,
+        # some 9 s in the main process before its first fit, for the pilot's 400.
+        positions = pilot_positions(index.image_clicked, index.clicked)
+        pilot = list(pilot_images(stream_images(index, settings.ground, [i for i, _ in positions]), index.clicked,
+                                  keep=None if estimate_road_normal or estimate_parts else telling,
+                                  clicked_before=[before for _, before in positions]))
     n_pilot = sum(len(im.vehicles) for im in pilot)
     if on_start is not None:
         on_start(index.vehicles + n_pilot)
@@ -167,6 +166,16 @@ def run_pilot(index: AnnotationIndex, settings: BatchSettings, progress: Callabl
                              part_placement=placement, part_placement_dof=placement_dof)
     return PilotFindings(options, noise, normals, without_pilot(cameras, normals), results if own else None,
                          pilot_next, placement, placement_dof)
+
+
+def _without_ground(index: AnnotationIndex, ground: GroundOverride | None) -> Counter:
+    """Per camera (:func:`~toosicubix.pipeline.road_normal.camera_key`), how many images of an indexed file are
+    without a ground block once ``ground`` is set on them (none when it is: it gives every image one)."""
+    if ground:
+        return Counter()
+    keys = [camera_key(camera_from_schema(camera, None)) for camera in index.cameras]
+    return Counter(keys[c] for c, grounded in zip(index.image_cameras, index.image_grounded, strict=True)
+                   if not grounded)
 
 
 def _fitted_alike(pilot: list[Image], options: SolverOptions, pilot_options: SolverOptions) -> bool:
