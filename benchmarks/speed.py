@@ -26,10 +26,10 @@ Parts (``--parts``, comma-separated; the first three by default):
    1,000, 10,000 and 100,000; about 40 minutes at 100,000): the main process and the largest worker, each run in
    a fresh process, on annotation files made by replicating 1,000 simulated vehicles (images copied under new ids).
 
-Parts 1-4 run in fresh worker processes (``--worker``), ``--rounds`` rounds each; with ``--against PATH`` (another
-checkout, e.g. ``git worktree add /tmp/base f35ec77``) every round runs this checkout and the other one in turn,
-alternating which goes first, with this file's code over either checkout's package: both see the same load, and
-the report gives each one's figures over all rounds and the ratio (other / this).
+Parts 1-3 run in fresh worker processes (``--worker``, this file's code over either checkout's package), part 4 in
+fresh ``toosicubix`` processes, ``--rounds`` rounds each; with ``--against PATH`` (another checkout, e.g. ``git
+worktree add /tmp/base f35ec77``) every round runs this checkout and the other one in turn, alternating which goes
+first: both see the same load, and the report gives each one's figures over all rounds and the ratio (other / this).
 
 Run from the repository root (parts 1-3, 3 rounds, against another checkout: about 12 minutes on 2 cores):
 
