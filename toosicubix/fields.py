@@ -199,12 +199,22 @@ def integer(value: Any, file: str | Path | None, where: Where, *, low: int, high
 
 def pixel(value: Any, file: str | Path | None, where: Where, label: str | None = None) -> float:
     """A pixel coordinate: a finite number within +-:data:`MAX_PIXEL` (the annotation file's bound)."""
-    kind = type(value)
-    # A plain number within the bound, at once: an importer asks this of every coordinate of a file (some hundred
-    # thousand in a COCO keypoint file). NaN, infinities and huge integers fail the comparison and get number's message.
-    if (kind is float or kind is int) and -MAX_PIXEL <= value <= MAX_PIXEL:
+    if _plain_pixel(value):
         return float(value)
     return number(value, file, where, low=-MAX_PIXEL, high=MAX_PIXEL, what="a pixel coordinate", label=label)
+
+
+def is_pixel(value: Any) -> bool:
+    """Whether :func:`pixel` takes ``value`` (for a reader that tells a value's form by it)."""
+    return _plain_pixel(value) or passes(pixel, value)
+
+
+def _plain_pixel(value: Any) -> bool:
+    """A plain number within the bound, told at once: an importer asks this of every coordinate of a file (some
+    hundred thousand in a COCO keypoint file). NaN, infinities and huge integers fail the comparison and are left to
+    :func:`number`, which says why."""
+    kind = type(value)
+    return (kind is float or kind is int) and -MAX_PIXEL <= value <= MAX_PIXEL
 
 
 def image_side(value: Any, file: str | Path | None, where: Where, label: str | None = None) -> int:

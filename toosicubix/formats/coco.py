@@ -465,10 +465,6 @@ def _camera_of(im: dict[str, Any], file_name: str, cameras: CameraTable | None, 
     raise _fail(path, where, f"image {shown(file_name)} has no camera: no 'K' in the image and {how}")
 
 
-#: The types of a plain JSON number (booleans are not numbers here).
-_PLAIN = (int, float)
-
-
 def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: str,
               summary: ImportSummary | None) -> dict[str, tuple[float, float, bool]]:
     """The labelled keypoints of an annotation: name -> (x, y, visible); counted in ``summary`` when given."""
@@ -477,13 +473,9 @@ def _triplets(ann: dict[str, Any], names: list[str], path: str | Path, where: st
         raise _fail(path, f"{where}.keypoints",
                     f"expected {3 * len(names)} numbers (x, y, v for {len(names)} keypoints), got {len(kp)}")
     out = {}
-    bound, unlabelled, hidden = fields.MAX_PIXEL, 0, 0
+    unlabelled, hidden = 0, 0
     for j, (name, x, y, v) in enumerate(zip(names, kp[0::3], kp[1::3], kp[2::3], strict=True)):
-        # Plain JSON numbers at once (a COCO file has some hundred thousand); anything else as the fields rule it.
-        if not (type(x) in _PLAIN and type(y) in _PLAIN and type(v) in _PLAIN and -bound <= x <= bound
-                and -bound <= y <= bound and v in (0, 1, 2)) and (
-                not (fields.passes(fields.pixel, x) and fields.passes(fields.pixel, y) and v in (0, 1, 2))
-                or isinstance(v, bool)):
+        if not (fields.is_pixel(x) and fields.is_pixel(y) and v in (0, 1, 2)) or isinstance(v, bool):
             raise _fail(path, f"{where}.keypoints[{3 * j}:{3 * j + 3}]",
                         f"keypoint {j} ({name}): expected x, y pixel coordinates within +-{fields.MAX_PIXEL:.0f} and "
                         f"v in 0, 1, 2, got {shown([x, y, v])}")
