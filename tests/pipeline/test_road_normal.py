@@ -259,7 +259,7 @@ def test_the_pilot_counts_each_cameras_images_from_the_index_and_reads_only_its_
     monkeypatch.setattr(click_noise, "PILOT_VEHICLES", 12)  # every 5th of the 60 vehicles
     read = []
     real = stream.image_annotation
-    monkeypatch.setattr("toosicubix.pipeline.fitting.image_annotation", lambda text: read.append(text) or real(text))
+    monkeypatch.setattr(stream, "image_annotation", lambda text: read.append(text) or real(text))
     findings = pilot.run_pilot(index, BatchSettings(estimate_click_sigma=True, estimate_road_normal=True))
     assert len(read) == 12
     assert findings.road_normals is not None and sum(n.images for n in findings.road_normals.values()) == 45

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -251,10 +251,13 @@ def index_annotations(path: str | Path, known_prototypes: Collection[str] | None
                            tuple(camera for _, camera in cameras.values()), tuple(image_grounded))
 
 
-def iter_image_annotations(index: AnnotationIndex) -> Iterator[tuple[int, ImageAnnotation]]:
-    """Each image of an indexed file, validated, with its position in the file."""
-    for i, text in enumerate(image_texts(index)):
-        yield i, image_annotation(text)
+def iter_image_annotations(index: AnnotationIndex, which: Iterable[int] | None = None
+                           ) -> Iterator[tuple[int, ImageAnnotation]]:
+    """Each image of an indexed file (``which``: only these, by their positions in the file), validated, with its
+    position in the file."""
+    for i in range(len(index.spans)) if which is None else which:
+        start, end = index.spans[i]
+        yield i, image_annotation(index.text[start:end])
 
 
 def image_texts(index: AnnotationIndex) -> Iterator[str]:

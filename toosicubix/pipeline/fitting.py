@@ -358,13 +358,8 @@ def stream_images(index: AnnotationIndex, ground: GroundOverride | None,
                   which: Iterable[int] | None = None) -> Iterator[Image]:
     """The images of an indexed annotation file (:func:`toosicubix.annotations.stream.index_annotations`), one
     at a time, with the ground override set on each; ``which``: only these (their places in the file, in order)."""
-    if which is None:
-        for i, annotation in iter_image_annotations(index):
-            yield from with_ground([image_from_schema(annotation, i)], ground)
-        return
-    for i in which:
-        start, end = index.spans[i]
-        yield from with_ground([image_from_schema(image_annotation(index.text[start:end]), i)], ground)
+    for i, annotation in iter_image_annotations(index, which):
+        yield from with_ground([image_from_schema(annotation, i)], ground)
 
 
 def on_road(image: Image, blocks: Mapping[tuple, GroundOverride]) -> Image:
