@@ -184,9 +184,14 @@ def _worker(part: str, args: argparse.Namespace) -> None:
     print(json.dumps(result))
 
 
+def _trees(args: argparse.Namespace) -> dict[str, Path]:
+    """The checkouts a run compares: this one, and ``--against``'s when given."""
+    return {"this": REPO} | ({"against": args.against.resolve()} if args.against else {})
+
+
 def interleaved(args: argparse.Namespace, report: dict) -> None:
     """Parts 1-3, ``args.rounds`` rounds, this checkout and ``args.against`` in turn."""
-    trees = {"this": REPO} | ({"against": args.against.resolve()} if args.against else {})
+    trees = _trees(args)
     report["trees"] = {name: str(tree) for name, tree in trees.items()}
     for part in [p for p in ("per-vehicle", "apollocar3d", "refit") if p in args.parts]:
         runs: dict[str, list[dict]] = {name: [] for name in trees}
@@ -267,7 +272,7 @@ def whole(args: argparse.Namespace, report: dict) -> None:
     """Part 4 of the module docstring: each case's command in a fresh process over each checkout's package, the
     checkouts in turn (which goes first alternates by round); run from an empty folder, so that neither checkout's
     root is on the path."""
-    trees = {"this": REPO} | ({"against": args.against.resolve()} if args.against else {})
+    trees = _trees(args)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         cases = {
