@@ -25,6 +25,7 @@ from toosicubix.pipeline.fitting import (
     shared_workers,
     stream_images,
 )
+from toosicubix.pipeline.labels import kitti_lines
 from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings
 
@@ -58,12 +59,20 @@ def test_workers_reading_their_images_give_the_same_results(tmp_path: Path, grou
     by_workers = list(iter_fit_file(index, settings, blocks, counted.append))
     in_main = list(iter_fit_images((on_road(im, blocks) for im in stream_images(index, ground)), index.vehicles,
                                    BatchSettings(ground=ground, jobs=1)))
-    assert [json.dumps(image_to_json(r)) for r in by_workers] == [json.dumps(image_to_json(r)) for r in in_main]
-    # Each entry written by its worker, as the main process would write it (json's own indented text).
+    # Each entry written by its worker, as the main process would write it (json's own indented text), and each
+    # image's KITTI label lines; the vehicles come back as their summaries.
     assert all(isinstance(r, RenderedImage) for r in by_workers) and not any(isinstance(r, RenderedImage)
                                                                              for r in in_main)
     assert [r.text for r in by_workers] == [json.dumps(image_to_json(r), indent=1, allow_nan=False) for r in in_main]
     assert [image_text(r) for r in by_workers] == [image_text(r) for r in in_main]
+    assert [list(r.label_lines) for r in by_workers] == [kitti_lines(r) for r in in_main]
+    assert sum(len(r.label_lines) for r in by_workers) > 0
+    assert [[v.summary() for v in r.vehicles] for r in by_workers] == [[v.summary() for v in r.vehicles]
+                                                                       for r in in_main]
+    assert [(r.id, r.sequence, r.frame, r.image_size) for r in by_workers] == [
+        (r.id, r.sequence, r.frame, r.image_size) for r in in_main]
+    assert all(v.R_cam_vehicle is None and v.residuals_px is None and v.sigma is None
+               for r in by_workers for v in r.vehicles)
     assert [r.id for r in by_workers][4] == "empty" and not by_workers[4].vehicles
     assert sum(counted) == index.vehicles == sum(len(r.vehicles) for r in by_workers)
     on_estimated_road = [r for r in by_workers if r.ground is not None and r.ground.estimated]
@@ -157,6 +166,7 @@ _SMALL_OR_LARGE = """
 import sys
 from toosicubix.pipeline import fitting
 from toosicubix.pipeline.batch import fit_file
+from toosicubix.pipeline.labels import kitti_lines
 from toosicubix.pipeline.settings import BatchSettings
 if sys.argv[3] == "compiled":
     fitting.COMPILED_FROM_VEHICLES = 0  # the sample counts as a large batch

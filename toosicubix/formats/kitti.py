@@ -147,7 +147,12 @@ def format_label_line(obj: KittiObject) -> str:
 
 def format_tracking_line(frame: int, track_id: int, obj: KittiObject) -> str:
     """One KITTI tracking label line: the frame, the track id, then :func:`format_label_line`'s fields."""
-    return f"{int(frame)} {int(track_id)} {format_label_line(obj)}"
+    return tracking_line(frame, track_id, format_label_line(obj))
+
+
+def tracking_line(frame: int, track_id: int, label_line: str) -> str:
+    """The KITTI tracking label line of an object whose label line (:func:`format_label_line`) is ``label_line``."""
+    return f"{int(frame)} {int(track_id)} {label_line}"
 
 
 def parse_label_line(text: str, file: str | Path = "<label>", line: int | None = None,

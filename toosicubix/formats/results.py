@@ -193,6 +193,15 @@ class VehicleResult:
     def ok(self) -> bool:
         return self.status == "ok"
 
+    def summary(self) -> VehicleResult:
+        """The vehicle as a batch's writer reads it once its results.json entry and KITTI label lines are written
+        (:class:`RenderedImage`): its status and reason, prototype and KITTI type, confidence, track and pose source,
+        implausibility, warnings, scale source and residual test; no pose, residuals, sigmas or diagnostics."""
+        return VehicleResult(id=self.id, status=self.status, error=self.error, prototype=self.prototype,
+                             kitti_type=self.kitti_type, confidence=self.confidence, track=self.track,
+                             pose_from=self.pose_from, implausible=self.implausible, warnings=self.warnings,
+                             scale_from=self.scale_from, residual_test=self.residual_test)
+
     def to_json(self) -> dict[str, Any]:
         """The JSON object of one vehicle, keys in results.json's order."""
         out: dict[str, Any] = {
@@ -483,18 +492,23 @@ class ImageResult:
 
 @dataclass(frozen=True)
 class RenderedImage(ImageResult):
-    """An image's results with its results.json entry already written (``text``, as :func:`image_text` writes it), by
-    the worker process that fitted it: the main process of ``fit --jobs N`` then copies the text instead of encoding
-    every vehicle itself, and so keeps up with more workers. A changed copy would keep the old text, so nothing
-    changes a rendered image: the workers' results go straight to the writer
+    """An image's results written by the worker process that fitted it: its results.json entry (``text``, as
+    :func:`image_text` writes it) and its KITTI label lines (``label_lines``, those of its successful fits in order:
+    :func:`toosicubix.pipeline.labels.kitti_lines`), its vehicles only as their summaries
+    (:meth:`VehicleResult.summary`). The main process of ``fit --jobs N`` then copies the text and lines instead of
+    taking back every vehicle's numbers and encoding them itself, and so keeps up with more workers. A changed copy
+    would keep the old text, so nothing changes a rendered image: the workers' results go straight to the writer
     (:func:`toosicubix.pipeline.fitting.iter_fit_file`)."""
 
     text: str = ""
+    label_lines: tuple[str, ...] | None = None
 
     @classmethod
-    def of(cls, im: ImageResult) -> RenderedImage:
-        """``im`` with its entry written."""
-        return cls(**{f.name: getattr(im, f.name) for f in fields(ImageResult)}, text=image_text(im))
+    def of(cls, im: ImageResult, label_lines: list[str] | tuple[str, ...]) -> RenderedImage:
+        """``im`` with its entry written, its label lines ``label_lines``, and its vehicles summarized."""
+        kept = {f.name: getattr(im, f.name) for f in fields(ImageResult) if f.name != "vehicles"}
+        return cls(**kept, vehicles=[v.summary() for v in im.vehicles], text=image_text(im),
+                   label_lines=tuple(label_lines))
 
 
 def image_text(im: ImageResult) -> str:

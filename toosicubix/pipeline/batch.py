@@ -24,9 +24,14 @@ from typing import Any
 
 from toosicubix import __version__
 from toosicubix.annotations.stream import AnnotationIndex, index_annotations
-from toosicubix.camera import Camera
 from toosicubix.formats import kitti
-from toosicubix.formats.results import RESULTS_FILENAME, ImageResult, VehicleResult, write_results_stream
+from toosicubix.formats.results import (
+    RESULTS_FILENAME,
+    ImageResult,
+    RenderedImage,
+    VehicleResult,
+    write_results_stream,
+)
 from toosicubix.model import Image
 from toosicubix.pipeline.fitting import (
     batch_run,
@@ -35,6 +40,7 @@ from toosicubix.pipeline.fitting import (
     reads_in_workers,
     stream_images,
 )
+from toosicubix.pipeline.labels import kitti_lines
 from toosicubix.pipeline.output_folder import (
     LABEL_DIR,
     TRACKING_LABEL_DIR,
@@ -79,24 +85,6 @@ class BatchSummary:
         return self.vehicles - self.ok
 
 
-def kitti_objects(image_result: ImageResult, camera: Camera | None = None
-                  ) -> list[tuple[VehicleResult, kitti.KittiObject]]:
-    """The KITTI label objects of an image's successful fits (pitch and roll dropped), each with its fit.
-    ``camera``: the image's (its ``t_cam_rect`` moves the locations to camera 0); default: the result's own."""
-    if camera is None:
-        camera = Camera(K=image_result.K, t_cam_rect=image_result.t_cam_rect, image_size=image_result.image_size)
-    return [(v, kitti.object_from_pose(
-        v.kitti_type, v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions, camera, v.box2d,
-        truncated=0.0 if v.truncated is None else v.truncated, occluded=kitti.OCCLUSION_UNKNOWN,
-        score=1.0 if v.confidence is None else v.confidence, heading=v.heading or "directed"))
-        for v in image_result.vehicles if v.ok]
-
-
-def kitti_lines(image_result: ImageResult, camera: Camera | None = None) -> list[str]:
-    """The KITTI label lines of an image's successful fits (pitch and roll dropped)."""
-    return [kitti.format_label_line(obj) for _, obj in kitti_objects(image_result, camera)]
-
-
 def prepare_output_dir(out_dir: Path) -> None:
     """Check that ``out_dir`` may be replaced by this run's output; write nothing.
 
@@ -132,16 +120,17 @@ def write_outputs(out_dir: Path, results: Iterable[ImageResult], header: dict[st
 
             def labelled() -> Iterator[ImageResult]:
                 for res in results:
-                    objects = kitti_objects(res)
-                    write_label(label_dir / f"{res.id}.txt", "".join(f"{kitti.format_label_line(o)}\n"
-                                                                     for _, o in objects))
+                    # A worker's image comes with its lines (iter_fit_file); the others' are made here.
+                    lines = res.label_lines if isinstance(res, RenderedImage) and res.label_lines is not None \
+                        else kitti_lines(res)
+                    write_label(label_dir / f"{res.id}.txt", "".join(f"{line}\n" for line in lines))
                     if res.sequence is not None:
                         ids, frame = track_ids.setdefault(res.sequence, {}), int(res.frame or 0)
-                        for v, obj in objects:
+                        for v, line in zip((v for v in res.vehicles if v.ok), lines, strict=True):
                             if v.track is not None:
                                 number = ids.setdefault(v.track, len(ids))
                                 tracking.setdefault(res.sequence, []).append(
-                                    (frame, number, kitti.format_tracking_line(frame, number, obj)))
+                                    (frame, number, kitti.tracking_line(frame, number, line)))
                     yield res
 
             def trailer() -> dict[str, Any]:

@@ -26,6 +26,7 @@ from toosicubix.formats.results import ImageResult, RenderedImage, RoadPlane, Ve
 from toosicubix.model import GroundOverride, GroundPlane, Image, Vehicle
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.pipeline import workers
+from toosicubix.pipeline.labels import kitti_lines
 from toosicubix.pipeline.road_normal import camera_key
 from toosicubix.pipeline.settings import BatchSettings, KeypointCatalogue
 from toosicubix.pipeline.vehicle import (
@@ -376,12 +377,13 @@ def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mappi
                   progress: Callable[[int], None] | None = None) -> Iterator[ImageResult]:
     """:func:`iter_fit_images` of every image of an indexed file (with the settings' ground override, each on its
     camera's estimated road, ``blocks`` as :func:`on_road` takes them), in ``settings.jobs`` processes, each image
-    read by the process that fits it. The results are the same as :func:`iter_fit_images` of
-    :func:`stream_images`' images, each with its results.json entry already written
-    (:class:`~toosicubix.formats.results.RenderedImage`); the main process only hands out each image's text and
-    takes its results, so that it does not limit how many processes a large batch can keep busy (reading an image
+    read by the process that fits it. The results are those of :func:`iter_fit_images` of :func:`stream_images`'
+    images as written (:class:`~toosicubix.formats.results.RenderedImage`): each image's results.json entry and
+    KITTI label lines, with its vehicles' summaries. The main process only hands out each image's text and takes
+    back what it writes, so that it does not limit how many processes a large batch can keep busy (reading an image
     and sending its vehicles to a worker cost the main process about a quarter of what fitting them costs the
-    worker, and encoding its entry some 0.2 ms a vehicle).
+    worker, encoding its entry some 0.2 ms a vehicle, and taking back every number of its fits, to write their
+    labels, some 0.1 ms).
 
     The workers get whole images, consecutive ones up to :func:`_chunk`'s number of vehicles at a time: for a file
     whose images are few and crowded, :func:`reads_in_workers` says to read them in the main process instead.
@@ -421,8 +423,9 @@ def _fit_file_chunk(context: tuple[BatchSettings, dict[tuple, GroundOverride]],
     settings, blocks = context
     images = [on_road(image, blocks) for group in groups for i, text in group
               for image in with_ground([image_from_schema(image_annotation(text), i)], settings.ground)]
-    # Each image's results.json entry written here too: the main process only copies it.
-    return [RenderedImage.of(r) for r in iter_fit_images(images, sum(len(im.vehicles) for im in images), settings)]
+    # Each image's results.json entry and label lines written here too: the main process only copies them.
+    return [RenderedImage.of(r, kitti_lines(r))
+            for r in iter_fit_images(images, sum(len(im.vehicles) for im in images), settings)]
 
 
 def add_next_clicks(images: list[Image], results: list[ImageResult], settings: BatchSettings) -> list[ImageResult]:

@@ -131,22 +131,24 @@ def levenberg_marquardt(refine, state: tuple[np.ndarray, ...], options):
 
 
 def _problem_arrays(problem) -> tuple:
-    """What the kernel takes of a :class:`.problem.Problem`, in its order (``A`` to ``high`` of its functions), made
-    once per problem (:meth:`.problem.Problem.kept`)."""
-    return problem.kept("compiled kernel arrays", _make_problem_arrays)
-
-
-def _make_problem_arrays(problem) -> tuple:
+    """What the kernel takes of a :class:`.problem.Problem`, in its order (``A`` to ``high`` of its functions): all
+    but the click weights made once per problem (:meth:`.problem.Problem.kept`) and handed on when only the weights
+    change (:data:`.problem.UNWEIGHTED_KEPT`)."""
+    head, tail = problem.kept("compiled kernel arrays", _make_problem_arrays)
     weights = problem.pixel_row_weights
+    return (*head, np.ones(1) if weights is None else _c(weights), weights is not None, *tail)
+
+
+def _make_problem_arrays(problem) -> tuple[tuple, tuple]:
+    """The kernel's arrays of a problem before and after its click weights (which they must not depend on)."""
     n_up = 0 if problem.upright_sigma is None else 3
     K = problem.K
     P = problem.parts.n_params
-    return (_c(problem.A), _c(problem.A_rows), _c(problem.uv),
-            np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], dtype=float), float(np.sqrt(problem.lambda_px)),
-            _c(problem.G), _c(problem.b), _c(problem.scale_rows_jacobian), bool(problem.scale_rows_see_t),
-            _c(problem.up), n_up, float(problem.upright_weight) if n_up else 0.0,
-            np.ones(1) if weights is None else _c(weights), weights is not None,
-            _c(problem.arrow_mid).reshape(-1, 3, P), _c(problem.arrow_low), _c(problem.arrow_high))
+    return ((_c(problem.A), _c(problem.A_rows), _c(problem.uv),
+             np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], dtype=float), float(np.sqrt(problem.lambda_px)),
+             _c(problem.G), _c(problem.b), _c(problem.scale_rows_jacobian), bool(problem.scale_rows_see_t),
+             _c(problem.up), n_up, float(problem.upright_weight) if n_up else 0.0),
+            (_c(problem.arrow_mid).reshape(-1, 3, P), _c(problem.arrow_low), _c(problem.arrow_high)))
 
 
 def _run(refine, state, options):

@@ -593,12 +593,20 @@ def _plausible_first(candidates: list[_Candidate], click_labels: tuple[str, ...]
     stops looking once ``wanted`` plausible ones are found."""
     plausible: list[_Candidate] = []
     implausible: list[_Candidate] = []
-    kept = np.zeros((0, 3, 3))
+    if not candidates:
+        return []
+    by_cost = sorted(candidates, key=lambda c: c.cost_px)
     min_trace = 1.0 + 2.0 * np.cos(min_angle)  # trace(R_a R_b^T) above this: closer than min_angle
-    for c in sorted(candidates, key=lambda c: c.cost_px):
-        if np.any(np.einsum("kij,ij->k", kept, c.R) > min_trace):
+    R = np.array([c.R for c in by_cost])  # (n, 3, 3)
+    # close[l][k]: candidate l within min_angle of candidate k. One einsum for every pair; each trace is summed as
+    # einsum("kij,ij->k") sums it against one rotation (the same nine-term loop), so the same pairs are close.
+    close = (np.einsum("kij,lij->lk", R, R) > min_trace).tolist()
+    kept: list[int] = []
+    for l, c in enumerate(by_cost):
+        row = close[l]
+        if any(row[k] for k in kept):
             continue
-        kept = np.concatenate([kept, c.R[None]])
+        kept.append(l)
         why = implausibility(click_labels, c.R, c.t, c.p[:3], max_tilt, up, click_faces)
         if why is None:
             plausible.append(c)

@@ -226,6 +226,18 @@ class Problem:
         """Whether any scale row depends on ``t`` (the ground contact)."""
         return bool(self.G[:, :3].any())
 
+    def with_click_weights(self, weights: np.ndarray | None) -> Problem:
+        """The problem with its pixel rows weighted by ``weights`` (N,) (None: unweighted): the same problem when
+        neither is weighted; else a new one that keeps what this one derived and the weights do not change
+        (:data:`UNWEIGHTED_KEPT`), as the robust loss's rounds reweigh a vehicle's clicks again and again."""
+        if weights is None and self.click_weights is None:
+            return self
+        new = replace(self, click_weights=None if weights is None else np.asarray(weights, dtype=float))
+        for key in UNWEIGHTED_KEPT:
+            if key in self.__dict__:
+                new.__dict__[key] = self.__dict__[key]
+        return new
+
     def kept(self, key: str, make: Callable[[Problem], T]) -> T:
         """``make(self)``, made once per problem and kept on it under ``key``, as ``functools.cached_property`` keeps
         its values (a problem never changes; ``dataclasses.replace`` makes a new one): for what a stage derives from a
@@ -398,6 +410,11 @@ class Problem:
         a, b = self.scale_terms(t, p)
         denom = float(a @ a)
         return float(a @ b) / denom if denom > 0.0 else 0.0
+
+
+#: What a problem derives (its cached properties, and :meth:`Problem.kept`'s keys) that does not depend on its click
+#: weights: :meth:`Problem.with_click_weights` hands them on. Anything derived from the weights must stay out.
+UNWEIGHTED_KEPT = ("scale_rows_jacobian", "scale_rows_see_t", "u_image_points", "compiled kernel arrays")
 
 
 def _arrow_zone(parts: PartsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,8 +15,6 @@ Both enter as a weight ``w_i`` on click ``i``'s two pixel rows (``Problem.click_
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from toosicubix.solver.lm import Loss
@@ -76,5 +74,6 @@ def robust_factors(residuals_px: np.ndarray, weights: np.ndarray | None, click_s
 
 
 def with_weights(problem: Problem, weights: np.ndarray | None) -> Problem:
-    """The problem with its pixel rows weighted by ``weights`` (N,) (None: unweighted)."""
-    return replace(problem, click_weights=None if weights is None else np.asarray(weights, dtype=float))
+    """The problem with its pixel rows weighted by ``weights`` (N,) (None: unweighted):
+    :meth:`.problem.Problem.with_click_weights`."""
+    return problem.with_click_weights(weights)
