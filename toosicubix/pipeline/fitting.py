@@ -211,7 +211,16 @@ def batch_run(n_vehicles: int, settings: BatchSettings, say: Callable[[str], Non
 
 
 def _chunk(n_vehicles: int, jobs: int) -> int:
-    """How many vehicles go to a worker at once: about four chunks per worker, at most 64 vehicles each."""
+    """How many vehicles go to a worker at once: about sixteen chunks per worker, at most 64 vehicles each. A pass
+    (the pilot's, the batch's) ends with its last chunks running while the other workers wait, about half a chunk
+    each: a sixteenth of a worker's share loses far less of the pass than a quarter did (benchmarks/decisions.md,
+    'What the workers send back')."""
+    return max(1, min(64, n_vehicles // (16 * jobs)))
+
+
+def _share(n_vehicles: int, jobs: int) -> int:
+    """A quarter of a worker's share of ``n_vehicles``, at least 1 and at most 64: how many vehicles one image may hold
+    for the workers to read the images (:func:`reads_in_workers`)."""
     return max(1, min(64, n_vehicles // (4 * jobs)))
 
 
@@ -399,8 +408,9 @@ def iter_fit_file(index: AnnotationIndex, settings: BatchSettings, blocks: Mappi
 
 def reads_in_workers(index: AnnotationIndex, jobs: int) -> bool:
     """Whether :func:`iter_fit_file` keeps ``jobs`` processes about as busy as :func:`iter_fit_images` would: no image
-    holds more than two workers' chunks of vehicles (:func:`_chunk`; it hands out vehicles, not images)."""
-    return jobs > 1 and max(index.image_vehicles, default=0) <= 2 * _chunk(index.vehicles, jobs)
+    holds more than half a worker's share of vehicles (twice :func:`_share`; the main process's reading hands out
+    vehicles, the workers' whole images)."""
+    return jobs > 1 and max(index.image_vehicles, default=0) <= 2 * _share(index.vehicles, jobs)
 
 
 def _image_groups(index: AnnotationIndex, chunk: int) -> Iterator[list[tuple[int, str]]]:
