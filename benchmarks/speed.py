@@ -25,6 +25,11 @@ Parts (``--parts``, comma-separated; the first three by default):
 6. ``memory``: peak memory of ``toosicubix fit --jobs 2`` against the batch size (``--memory-vehicles``, default
    1,000, 10,000 and 100,000; about 40 minutes at 100,000): the main process and the largest worker, each run in
    a fresh process, on annotation files made by replicating 1,000 simulated vehicles (images copied under new ids).
+7. ``paired``: parts 1 and 3 for a machine whose speed drifts within seconds (a shared one), with ``--against``: one
+   warm process per checkout, plus a second one of this checkout, fit the same chunks of ``--paired-chunk`` vehicles
+   in turn (the order alternating chunk by chunk), ``--rounds`` passes over the vehicles, so that a drift hits both
+   alike. Reports the ratio of the summed times (other / this) and the median of the chunk ratios, and the same for
+   this checkout against its second process: the harness's own noise, which a ratio must pass to mean anything.
 
 Parts 1-3 run in fresh worker processes (``--worker``, this file's code over either checkout's package), part 4 in
 fresh ``toosicubix`` processes, ``--rounds`` rounds each; with ``--against PATH`` (another checkout, e.g. ``git
@@ -35,6 +40,7 @@ Run from the repository root (parts 1-3, 3 rounds, against another checkout: abo
 
     python benchmarks/speed.py [--against ../base] [--rounds 3] [--json benchmarks/results/speed.json]
     python benchmarks/speed.py --parts memory --memory-vehicles 1000,100000
+    python benchmarks/speed.py --against ../base --rounds 3 --parts paired     # 3 min: parts 1 and 3, paired
 """
 
 from __future__ import annotations
@@ -182,6 +188,76 @@ def _worker(part: str, args: argparse.Namespace) -> None:
         result = apollocar3d_rate(args.data, args.jobs)
     result["package"] = str(Path(toosicubix.__file__).resolve().parents[1])
     print(json.dumps(result))
+
+
+def _paired_server(args: argparse.Namespace) -> None:
+    """Part 7's process over one checkout: warm, then fit the chunks it is told (``part first last`` a line) and say
+    how long each took."""
+    from toosicubix.pipeline.vehicle import fit_one
+    from toosicubix.solver.fit import SolverOptions
+    from toosicubix.web.session import NEXT_CLICKS
+
+    tasks = kitti_tasks(args.data)
+    options = SolverOptions()
+    extra = {"per-vehicle": {}, "refit": {"next_clicks": NEXT_CLICKS}}
+    for kwargs in extra.values():  # warm-up: imports, caches, the compiled solver
+        for task in tasks[:10]:
+            fit_one(*task, options, **kwargs)
+    print(json.dumps({"ready": len(tasks), "refit": min(args.refit_vehicles, len(tasks))}), flush=True)
+    for line in sys.stdin:
+        part, first, last = line.split()
+        start = time.perf_counter()
+        for task in tasks[int(first):int(last)]:
+            fit_one(*task, options, **extra[part])
+        print(f"{time.perf_counter() - start:.9f}", flush=True)
+
+
+def paired(args: argparse.Namespace, report: dict) -> None:
+    """Part 7 of the module docstring."""
+    trees = {"this": REPO, "against": args.against.resolve(), "this again": REPO}
+    servers = {}
+    for name, tree in trees.items():
+        command = [sys.executable, str(Path(__file__).resolve()), "--worker", "paired", "--data", str(args.data),
+                   "--refit-vehicles", str(args.refit_vehicles)]
+        servers[name] = subprocess.Popen(command, env={**os.environ, "PYTHONPATH": str(tree)}, stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, text=True)
+    try:
+        sizes = [json.loads(server.stdout.readline()) for server in servers.values()]
+
+        def run(name: str, part: str, first: int, last: int) -> float:
+            servers[name].stdin.write(f"{part} {first} {last}\n")
+            servers[name].stdin.flush()
+            return float(servers[name].stdout.readline())
+
+        out: dict = {"chunk": args.paired_chunk, "passes": args.rounds}
+        for part, n in (("per-vehicle", sizes[0]["ready"]), ("refit", sizes[0]["refit"])):
+            totals = {name: 0.0 for name in trees}
+            ratios: dict[str, list[float]] = {"against": [], "this again": []}
+            chunks = [(i, min(n, i + args.paired_chunk)) for i in range(0, n, args.paired_chunk)]
+            for k in range(args.rounds):
+                for c, (first, last) in enumerate(chunks):
+                    for other in ("against", "this again"):
+                        order = ("this", other) if (c + k) % 2 == 0 else (other, "this")
+                        t = {name: run(name, part, first, last) for name in order}
+                        totals["this"] += t["this"]
+                        totals[other] += t[other]
+                        ratios[other].append(t[other] / t["this"])
+            entry = {"vehicles": n, "seconds": totals}
+            for other in ratios:
+                entry[other] = {"ratio_of_sums": 2.0 * totals[other] / totals["this"],  # "this" ran twice per chunk
+                                "median_chunk_ratio": float(np.median(ratios[other]))}
+            out[part] = entry
+            against, again = entry["against"], entry["this again"]
+            print(f"paired, {part} ({n} vehicles, chunks of {args.paired_chunk}, {args.rounds} passes): against / this "
+                  f"{against['ratio_of_sums']:.3f} (chunk median {against['median_chunk_ratio']:.3f});"
+                  f" this again / this {again['ratio_of_sums']:.3f} (chunk median "
+                  f"{again['median_chunk_ratio']:.3f}, the harness's noise); > 1: this checkout is "
+                  f"faster", flush=True)
+    finally:
+        for server in servers.values():
+            server.stdin.close()
+            server.wait()
+    report["paired"] = out
 
 
 def _trees(args: argparse.Namespace) -> dict[str, Path]:
@@ -421,7 +497,7 @@ def memory(args: argparse.Namespace, report: dict) -> None:
                   flush=True)
 
 
-PARTS = ("per-vehicle", "apollocar3d", "refit", "whole", "throughput", "memory")
+PARTS = ("per-vehicle", "apollocar3d", "refit", "whole", "throughput", "memory", "paired")
 
 
 def main() -> None:
@@ -444,8 +520,12 @@ def main() -> None:
                              "fails at once; the batch's own memory without the solver's time)")
     parser.add_argument("--only", choices=["memory"], default=None,
                         help="memory: the same as --parts memory (the earlier spelling)")
-    parser.add_argument("--worker", choices=PARTS[:3], default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--paired-chunk", type=int, default=10, help="vehicles a chunk of the paired part")
+    parser.add_argument("--worker", choices=(*PARTS[:3], "paired"), default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.worker == "paired":
+        _paired_server(args)
+        return
     if args.worker is not None:
         _worker(args.worker, args)
         return
@@ -464,6 +544,10 @@ def main() -> None:
     interleaved(args, report)
     if "whole" in args.parts:
         whole(args, report)
+    if "paired" in args.parts:
+        if args.against is None:
+            sys.exit("the paired part compares two checkouts: give --against")
+        paired(args, report)
     if "throughput" in args.parts:
         throughput(args, report)
     if "memory" in args.parts:

@@ -104,11 +104,13 @@ def test_the_other_refusals_are_plain_and_keep_the_detail():
 
 
 def test_clicks_that_hardly_tie_the_vehicle_to_its_size_are_refused_in_plain_words():
-    """Three noisy clicks on a car seen from the side, fitted with the track solver's relaxed single-frame options:
-    every start collapses onto the camera and from typical part positions the distance is uncertain by far more
-    than COLLAPSED_MAX_DEPTH_REL (this path once raised a TypeError, the local flag shadowing the refusal). The
-    prior is a car's sizes under a prototype with free axles: a car's axle prior (rule 29) ties these two wheels to
-    its length, and the same clicks then place it."""
+    """Three noisy clicks on a car seen from the side (two wheels and a front edge), fitted with the track solver's
+    relaxed single-frame options under a prototype with free axles, hardly tie the vehicle to its size. Whether every
+    descent start then collapses onto the camera, and how uncertain the distance from typical part positions comes
+    out, turns on the last bits of the arithmetic (a nudge of 1e-7 px turns it either way, as does another machine's
+    BLAS), so the test takes forty scenes, each also nudged: those refused must be refused for that reason in plain
+    words (this path once raised a TypeError, the local flag shadowing the refusal), and some must be. A car's axle
+    prior (rule 29) ties the two wheels to its length: every one of the same clicks is then placed."""
     from dataclasses import replace
 
     from tests.scenes import random_scene
@@ -117,19 +119,27 @@ def test_clicks_that_hardly_tie_the_vehicle_to_its_size_are_refused_in_plain_wor
     from toosicubix.solver.fit import SolverOptions
     from toosicubix.solver.track import RELAXED
 
-    rng = np.random.default_rng(2)
-    scene = random_scene(rng, "side")
-    parts = [replace(p, uv=p.uv + rng.normal(0.0, 1.5, p.uv.shape)) for p in scene.parts[:3]]
     car = load_priors()["Car"]
-    options = replace(SolverOptions(), **RELAXED)
-    assert fit_vehicle(build_parts_model(parts), CAMERA, car, options).ok
     free_axles = SizePrior.from_mean_cov("Quadricycle", car.mean, car.cov)
-    fit = fit_vehicle(build_parts_model(parts), CAMERA, free_axles, options)
-    assert not fit.ok
-    assert fit.detail.startswith("degenerate clicks: every start collapsed onto the camera, and from typical part "
-                                 "positions the distance is uncertain by")
-    assert fit.reason.startswith("these clicks hardly tie the vehicle to its size, so its distance is uncertain by")
-    assert TECHNICAL.search(fit.reason) is None, fit.reason
+    options = replace(SolverOptions(), **RELAXED)
+    refused = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        scene = random_scene(rng, "side")
+        parts = [replace(p, uv=p.uv + rng.normal(0.0, 1.5, p.uv.shape)) for p in scene.parts[:3]]
+        for nudge in (0.0, 1e-7):
+            model = build_parts_model([replace(p, uv=p.uv + nudge) for p in parts])
+            assert fit_vehicle(model, CAMERA, car, options).ok, seed
+            fit = fit_vehicle(model, CAMERA, free_axles, options)
+            if fit.ok:
+                continue
+            refused += 1
+            assert fit.detail.startswith("degenerate clicks: every start collapsed onto the camera, and from typical "
+                                         "part positions the distance is "), (seed, fit.detail)
+            assert re.match(r"these clicks hardly tie the vehicle to its size, so its distance is (not determined|"
+                            r"uncertain by \d+%): click both wheels", fit.reason), fit.reason
+            assert TECHNICAL.search(fit.reason) is None, fit.reason
+    assert refused >= 2  # 7 of the 80 on the machine this was written on
 
 
 def test_a_car_s_axles_held_by_its_prior_are_not_the_clicks_to_fix():
