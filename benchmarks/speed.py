@@ -40,7 +40,7 @@ Run from the repository root (parts 1-3, 3 rounds, against another checkout: abo
 
     python benchmarks/speed.py [--against ../base] [--rounds 3] [--json benchmarks/results/speed.json]
     python benchmarks/speed.py --parts memory --memory-vehicles 1000,100000
-    python benchmarks/speed.py --against ../base --rounds 3 --parts paired     # 3 min: parts 1 and 3, paired
+    python benchmarks/speed.py --against ../base --rounds 3 --parts paired     # 2 min: parts 1 and 3, paired
 """
 
 from __future__ import annotations

@@ -166,7 +166,6 @@ _SMALL_OR_LARGE = """
 import sys
 from toosicubix.pipeline import fitting
 from toosicubix.pipeline.batch import fit_file
-from toosicubix.pipeline.labels import kitti_lines
 from toosicubix.pipeline.settings import BatchSettings
 if sys.argv[3] == "compiled":
     fitting.COMPILED_FROM_VEHICLES = 0  # the sample counts as a large batch

@@ -19,7 +19,7 @@ from toosicubix.model import GroundPlane
 from toosicubix.parts.linear import build_parts_model
 from toosicubix.solver import compiled, lm
 from toosicubix.solver.fit import SolverOptions, fit_vehicle
-from toosicubix.solver.problem import Problem
+from toosicubix.solver.problem import KERNEL_ARRAYS, Problem
 from toosicubix.solver.refine import RefineProblem
 from toosicubix.solver.robust import soft_weights, with_weights
 
@@ -163,6 +163,28 @@ def test_keypoint_weights_from_the_soft_term_are_the_same_to_the_last_bit():
     state = refine.start(R[None], (t + 0.3)[None], (d * 1.1)[None])
     mine = compiled._run(refine, state, lm.LMOptions())
     assert compiled._same(mine, _numpy_lm(refine, state, lm.LMOptions()))
+
+
+def test_reweighing_hands_on_the_kernel_arrays_and_only_the_weights_change():
+    """Problem.with_click_weights keeps what the weights do not change (the robust loss reweighs a vehicle up to five
+    times): the reweighed problem reuses its parent's kernel arrays, and its arrays equal a fresh problem's."""
+    rng = np.random.default_rng(11)
+    d, R, t = scene(rng)
+    model = build_parts_model(keypoint_parts(d, R, t))
+    problem = Problem.build(model, CAMERA, exact_prior(d), 0.1, 10.0)
+    assert with_weights(problem, None) is problem  # nothing weighed before or after: the same problem
+    compiled._problem_arrays(problem)
+    weights = soft_weights(problem, float(np.linalg.norm(t)), 1.0)
+    reweighed = with_weights(problem, weights)
+    fresh = with_weights(Problem.build(model, CAMERA, exact_prior(d), 0.1, 10.0), weights)
+
+    def unmade(_):
+        raise AssertionError("the kernel arrays were not kept under problem.KERNEL_ARRAYS")
+
+    assert reweighed.kept(KERNEL_ARRAYS, unmade) is problem.kept(KERNEL_ARRAYS, unmade)
+    for mine, theirs in zip(compiled._problem_arrays(reweighed), compiled._problem_arrays(fresh), strict=True):
+        assert np.array_equal(mine, theirs)
+    assert not np.array_equal(compiled._problem_arrays(reweighed)[12], compiled._problem_arrays(problem)[12])
 
 
 def test_warm_up_says_when_it_compiles(monkeypatch):

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from toosicubix.solver import lm
+from toosicubix.solver.problem import KERNEL_ARRAYS
 
 log = logging.getLogger(__name__)
 
@@ -134,7 +135,7 @@ def _problem_arrays(problem) -> tuple:
     """What the kernel takes of a :class:`.problem.Problem`, in its order (``A`` to ``high`` of its functions): all
     but the click weights made once per problem (:meth:`.problem.Problem.kept`) and handed on when only the weights
     change (:data:`.problem.UNWEIGHTED_KEPT`)."""
-    head, tail = problem.kept("compiled kernel arrays", _make_problem_arrays)
+    head, tail = problem.kept(KERNEL_ARRAYS, _make_problem_arrays)
     weights = problem.pixel_row_weights
     return (*head, np.ones(1) if weights is None else _c(weights), weights is not None, *tail)
 

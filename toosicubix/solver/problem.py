@@ -412,9 +412,12 @@ class Problem:
         return float(a @ b) / denom if denom > 0.0 else 0.0
 
 
+#: The :meth:`Problem.kept` key of the compiled kernel's arrays (:func:`toosicubix.solver.compiled._problem_arrays`),
+#: which leave the click weights out.
+KERNEL_ARRAYS = "compiled kernel arrays"
 #: What a problem derives (its cached properties, and :meth:`Problem.kept`'s keys) that does not depend on its click
 #: weights: :meth:`Problem.with_click_weights` hands them on. Anything derived from the weights must stay out.
-UNWEIGHTED_KEPT = ("scale_rows_jacobian", "scale_rows_see_t", "u_image_points", "compiled kernel arrays")
+UNWEIGHTED_KEPT = ("scale_rows_jacobian", "scale_rows_see_t", "u_image_points", KERNEL_ARRAYS)
 
 
 def _arrow_zone(parts: PartsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
