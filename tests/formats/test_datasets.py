@@ -73,6 +73,31 @@ def test_missing_or_empty_folder_is_an_input_error(tmp_path):
         KittiObjectFolder(tmp_path, strict=True)
 
 
+def test_the_other_kitti_layout_is_named_with_the_option_that_reads_it(tmp_path):
+    # An object folder given where tracking ground truth is expected, and the reverse (simulate's ground truth is an
+    # object folder even for tracking frames): the error says which layout the folder holds and what reads it.
+    _label(tmp_path / "object" / "label_2" / "000001.txt")
+    with pytest.raises(FormatError, match=r"found neither \(.*object holds label_2/, KITTI object ground truth: "
+                                          r"--kitti reads it\)"):
+        KittiTrackingFolder(tmp_path / "object")
+    _label(tmp_path / "tracking" / "training" / "label_02" / "0001.txt")
+    (tmp_path / "tracking" / "training" / "calib").mkdir()
+    with pytest.raises(FormatError, match=r"\(.*tracking holds label_02/, KITTI tracking ground truth: "
+                                          r"--kitti-tracking reads it\)"):
+        KittiObjectFolder(tmp_path / "tracking")
+    with pytest.raises(FormatError, match=r"tracking/label_2: expected a KITTI object folder with label_2/ and calib/ "
+                                          r"\(.*tracking holds label_02/"):
+        KittiObjectFolder(tmp_path / "tracking", strict=True)
+    with pytest.raises(FormatError, match=r"found neither$"):  # nothing KITTI there: no hint
+        KittiObjectFolder(_empty(tmp_path))
+
+
+def _empty(tmp_path):
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    return folder
+
+
 def test_tracking_frames_up_to_the_last_labelled_one(tmp_path):
     _label(tmp_path / "label_02" / "0001.txt", "0 1 Car 0 0 0 1 2 3 4 1.5 1.6 4 1 2 10\n"
                                                "2 1 Car 0 0 0 1 2 3 4 1.5 1.6 4 1 2 10\n")

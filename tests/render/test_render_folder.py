@@ -203,3 +203,25 @@ def test_a_ground_truth_that_contradicts_its_clicks_is_noted_by_its_id():
     assert ground_truth_note(replace(obj, keypoints_off_rays_m=0.3)) == "GT 1653: hides 4 of its 9 keypoints"
     assert ground_truth_note(replace(obj, keypoints_hidden=2, keypoints_off_rays_m=0.5)) == ""  # 0.5 m is not off
     assert ground_truth_note(replace(obj, keypoints=None, keypoints_hidden=None, keypoints_off_rays_m=None)) == ""
+
+
+def test_a_frame_is_found_in_its_sequence_folder_or_in_the_folder_of_sequences(tmp_path):
+    # --images may name the sequence's own folder of frames (KITTI's image_02/0001) or the folder of sequences
+    # (image_02); a frame's file is <frame as 6 digits>.png either way. Another folder's 000007.png is not taken.
+    from types import SimpleNamespace
+
+    from toosicubix.render.folder import find_image_file
+
+    (tmp_path / "clip").mkdir()
+    (tmp_path / "clip" / "000007.png").write_bytes(b"")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "000007.png").write_bytes(b"")
+    frame = SimpleNamespace(file=None, sequence="clip", frame=7, json_path="$.images[0]")
+    assert find_image_file(frame, "clip-7", None, tmp_path / "clip") == (tmp_path / "clip" / "000007.png", None)
+    assert find_image_file(frame, "clip-7", None, tmp_path) == (tmp_path / "clip" / "000007.png", None)
+    path, message = find_image_file(frame, "clip-7", None, tmp_path / "other")
+    assert path is None and "(looked for clip-7.png, clip-7.jpg, clip-7.jpeg, clip/000007.png)" in message
+    # From results.json alone (no annotation file), a KITTI tracking id names its sequence and frame.
+    (tmp_path / "0001").mkdir()
+    (tmp_path / "0001" / "000015.png").write_bytes(b"")
+    assert find_image_file(None, "0001_000015", None, tmp_path / "0001") == (tmp_path / "0001" / "000015.png", None)

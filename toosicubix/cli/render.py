@@ -19,9 +19,11 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.option("--annotations", "annotations", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="The annotation file [default: the one OUT/results.json names].")
 @click.option("--images", "images_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder of the images: DIR/<file>, DIR/<file name>, DIR/<image id>.png|.jpg or, for KITTI "
-                   "tracking ids, DIR/<seq>/<frame>.png [default: each image's `file`, relative to the annotation "
-                   "file]. Without an image the overlay is drawn on a blank canvas of the image's size.")
+              help="Folder of the images: DIR/<file>, DIR/<file name>, DIR/<image id>.png|.jpg or, for a frame "
+                   "of a sequence (or a KITTI tracking id), DIR/<seq>/<frame as 6 digits>.png, or DIR/<frame as 6 "
+                   "digits>.png when DIR is named as the sequence (KITTI's image_02/0001) [default: each image's "
+                   "`file`, relative to the annotation file]. Without an image the overlay is drawn on a blank "
+                   "canvas of the image's size.")
 @click.option("--only", type=click.Choice(["failed", "ambiguous", "uncertain", "misfit"]), default=None,
               help="Render only images with a failed vehicle, an ambiguous one, one whose yaw or depth sigma is "
                    "beyond `toosicubix validate`'s thresholds, or a misfit (results of `fit --misfit-level`).")

@@ -112,7 +112,8 @@ class KittiFolder:
             self.label_dir, self.calib_dir = self.root / self.labels, self.root / "calib"
             for folder in (self.label_dir, self.calib_dir):
                 if not folder.is_dir():
-                    raise FormatError(folder, f"expected a KITTI {self.kind} folder with {self.labels}/ and calib/")
+                    raise FormatError(folder, f"expected a KITTI {self.kind} folder with {self.labels}/ and calib/"
+                                              f"{self._other_layout()}")
             return
         _require_folder(self.root, self.dataset)
         self.label_dir, self.calib_dir = self._find()
@@ -126,7 +127,16 @@ class KittiFolder:
             calib = self.root.parent / "calib"
             return self.root, calib if calib.is_dir() else None
         raise FormatError(self.root, f"expected a KITTI {self.kind} root with {self.labels}/ (and calib/), or a "
-                                     f"folder of .txt label files; found neither")
+                                     f"folder of .txt label files; found neither{self._other_layout()}")
+
+    def _other_layout(self) -> str:
+        """' (ROOT holds label_02/, ...)' when the root holds the other KITTI layout's labels (tracking for object, and
+        the reverse), with the option that reads them; else ''."""
+        other = {"label_2": ("label_02", "tracking", "kitti-tracking"),
+                 "label_02": ("label_2", "object", "kitti")}.get(self.labels)
+        if other is None or not any((self.root / sub / other[0]).is_dir() for sub in (".", "training")):
+            return ""
+        return f" ({self.root} holds {other[0]}/, KITTI {other[1]} ground truth: --{other[2]} reads it)"
 
     def label_files(self) -> list[Path]:
         """Every label file, sorted by name."""

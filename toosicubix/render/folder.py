@@ -439,9 +439,10 @@ def find_image_file(image: Image | None, image_id: str, annotations_path: Path |
                     images_dir: Path | None) -> tuple[Path | None, str | None]:
     """The image file of an image, and where it was looked for when it is missing.
 
-    With ``images_dir``: ``DIR/<file>``, ``DIR/<file's name>``, ``DIR/<id>.png|.jpg`` and, for a KITTI
-    tracking id ``SSSS_FFFFFF``, ``DIR/SSSS/FFFFFF.png``. Else the image's ``file`` relative to the
-    annotation file.
+    With ``images_dir``: ``DIR/<file>``, ``DIR/<file's name>``, ``DIR/<id>.png|.jpg`` and, for a frame of a
+    sequence (its ``sequence`` and ``frame``, or a KITTI tracking id ``SSSS_FFFFFF``), ``DIR/SSSS/FFFFFF.png`` (DIR
+    the folder of sequences, as KITTI's ``image_02``) or, when DIR is named as the sequence, ``DIR/FFFFFF.png`` (the
+    sequence's own folder of frames). Else the image's ``file`` relative to the annotation file.
 
     Returns
     -------
@@ -454,8 +455,14 @@ def find_image_file(image: Image | None, image_id: str, annotations_path: Path |
             candidates += [images_dir / file, images_dir / Path(file).name]
         candidates += [images_dir / f"{image_id}{ext}" for ext in (".png", ".jpg", ".jpeg")]
         m = _TRACKING_ID.match(image_id)
-        if m:
-            candidates.append(images_dir / m.group(1) / f"{m.group(2)}.png")
+        if image is not None and image.sequence is not None and image.frame is not None:
+            sequence, frame = image.sequence, f"{image.frame:06d}"
+        else:
+            sequence, frame = (m.group(1), m.group(2)) if m else (None, None)
+        if sequence is not None:
+            candidates.append(images_dir / sequence / f"{frame}.png")
+            if images_dir.name == sequence:
+                candidates.append(images_dir / f"{frame}.png")
     elif file and annotations_path is not None:
         candidates.append(annotations_path.parent / file)
     if not candidates:
