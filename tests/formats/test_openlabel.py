@@ -200,3 +200,52 @@ def test_an_apollocar3d_keypoint_fit_exports_every_keypoint(tmp_path):
     assert kinds == {"keypoint", "plate"}
     assert sum(map(len, expected.values())) > 100
     assert {k: sorted(v) for k, v in written.items()} == {k: sorted(v) for k, v in expected.items()}
+
+
+# --- sequences: one object per track ------------------------------------------------------------------------------
+
+def _frame(image_id: str, frame: int | None, *vehicles: tuple[str, str | None, str | None]) -> FittedImage:
+    """An image of sequence 's' (``frame`` given) or on its own, its vehicles ``(id, track, pose_from)`` fitted."""
+    K = np.array([[700.0, 0.0, 640.0], [0.0, 700.0, 360.0], [0.0, 0.0, 1.0]])
+    t = np.array([1.0, 1.5, 10.0 + (frame or 0)])
+    fitted = [FittedVehicle(VehicleResult(vid, "ok", None, "Car", R_AHEAD, t, np.array([4.0, 1.8, 1.5]), track=track,
+                                          pose_from=pose_from), [])
+              for vid, track, pose_from in vehicles]
+    return FittedImage(image_id, None, (1280, 720), Camera(K), fitted, None if frame is None else "s", frame)
+
+
+def test_a_track_is_one_object_over_the_frames_that_hold_it():
+    # Tracks s-1 and s-2 in frames 3-5 of sequence 's', with an image on its own between frames 3 and 4 and s-2
+    # absent from frame 4: each track one object whose frame_intervals are the document's frames holding it, each
+    # frame's pose under the track's uid; the image on its own keeps its object per vehicle.
+    images = [_frame("s_3", 3, ("1", "s-1", "clicks"), ("2", "s-2", "box")), _frame("alone", None, ("a", None, None)),
+              _frame("s_4", 4, ("1", "s-1", "interpolated")),
+              _frame("s_5", 5, ("1", "s-1", "box"), ("7", "s-2", "clicks"))]
+    doc, warnings = openlabel_document(images)
+    assert warnings == []
+    jsonschema.Draft7Validator(SCHEMA).validate(doc)
+    from openlabel_checker.checkers import run_all
+
+    raw = json.dumps(doc)
+    assert [issue for outcome in run_all(doc, raw) for issue in outcome.issues] == []  # its semantic checks too
+    root = doc["openlabel"]
+    by_name = {o["name"]: uid for uid, o in root["objects"].items()}
+    assert set(by_name) == {"s-1", "s-2", "alone/a"}
+    assert root["objects"][by_name["s-1"]]["frame_intervals"] == [{"frame_start": 0, "frame_end": 0},
+                                                                  {"frame_start": 2, "frame_end": 3}]
+    assert root["objects"][by_name["s-2"]]["frame_intervals"] == [{"frame_start": 0, "frame_end": 0},
+                                                                  {"frame_start": 3, "frame_end": 3}]
+    assert root["frames"]["2"]["frame_properties"] == {"streams": {"camera1": {"uri": "s_4"}}, "sequence": "s",
+                                                       "frame": 4}
+    assert "sequence" not in root["frames"]["1"]["frame_properties"]
+    for f, image in enumerate(images):
+        for fv in image.vehicles:
+            uid = by_name[fv.result.track or f"{image.id}/{fv.result.id}"]
+            data = root["frames"][str(f)]["objects"][uid]["object_data"]
+            assert data["cuboid"][0]["val"] == cuboid_val(fv.result.R_cam_vehicle, fv.result.t_cam_vehicle,
+                                                         fv.result.dimensions)
+            text = {t["name"]: t["val"] for t in data["text"]}
+            if fv.result.track is None:
+                assert set(text) == {"status", "prototype"}
+            else:
+                assert text["vehicle"] == fv.result.id and text["pose_from"] == fv.result.pose_from

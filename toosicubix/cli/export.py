@@ -65,10 +65,11 @@ def _write(path: Path, text: str, warnings: list[str], quiet: bool) -> None:
 @out_option("The OpenLABEL JSON file to write.", "output", type=click.Path(dir_okay=False, path_type=Path),
             required=True)
 def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, output: Path) -> None:
-    """Write ASAM OpenLABEL 1.0.0: a frame per image, a camera stream with intrinsics_pinhole, each fitted
-    vehicle an object with a cuboid [x, y, z, qx, qy, qz, qw, dx, dy, dz] (box centre in the camera frame,
-    scalar-last quaternion of R_cam_vehicle, dimensions along X forward, Y left, Z up), its clicks as
-    point2d, its uncertainty, status and prototype as attributes.
+    """Write ASAM OpenLABEL 1.0.0: a frame per image (in file order; a sequence's frame with its sequence and
+    frame number), a camera stream with intrinsics_pinhole, each fitted vehicle an object with a cuboid [x, y, z,
+    qx, qy, qz, qw, dx, dy, dz] (box centre in the camera frame, scalar-last quaternion of R_cam_vehicle,
+    dimensions along X forward, Y left, Z up), its clicks as point2d, its uncertainty, status and prototype as
+    attributes. A track of a sequence is one object over the frames that hold it, a pose in each.
 
     \b
     Example:

@@ -31,13 +31,16 @@ class FittedVehicle:
 
 @dataclass(frozen=True)
 class FittedImage:
-    """One image: its file, size and camera (with distortion), and its vehicles in file order."""
+    """One image: its file, size and camera (with distortion), its vehicles in file order, and the sequence and frame
+    number it is a frame of (None for an image on its own)."""
 
     id: str
     file: str | None
     size: tuple[int, int] | None
     camera: Camera
     vehicles: list[FittedVehicle] = field(default_factory=list)
+    sequence: str | None = None
+    frame: int | None = None
 
 
 def load_fitted(out_dir: str | Path, annotations: str | Path | None = None) -> tuple[list[FittedImage], Path]:
@@ -96,5 +99,5 @@ def load_fitted(out_dir: str | Path, annotations: str | Path | None = None) -> t
             parts = [p.model_dump(mode="json") for p in v.parts]
             vehicles.append(FittedVehicle(v_result, parts, None if v.box2d is None else list(v.box2d)))
         images.append(FittedImage(im.id, im.file, None if im.size is None else (im.size[0], im.size[1]),
-                                  camera_from_schema(im.camera, im.size), vehicles))
+                                  camera_from_schema(im.camera, im.size), vehicles, im.sequence, im.frame))
     return images, annotations

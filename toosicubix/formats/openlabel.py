@@ -13,10 +13,15 @@ Layout::
                        "objects": {"0": {"object_data": {"cuboid": [...], "point2d": [...], "bbox": [...],
                                                          "text": [...]}}}}}}}
 
-- One frame per image, one stream (and sensor coordinate system) per distinct camera. Intrinsics are written
-  as ``camera_matrix_3x4`` and ``distortion_coeffs_1xN``, as the standard's own example does (its schema says
-  ``camera_matrix``; see FORMATS.md). For a KITTI ``P`` the matrix is ``[K | 0]``: the cuboids are in the
-  frame where ``K`` applies (camera 2), as in results.json.
+- One frame per image, in file order, one stream (and sensor coordinate system) per distinct camera. A frame of a
+  sequence has its ``sequence`` and ``frame`` number among its ``frame_properties``.
+- One object per vehicle of an image on its own, named ``<image id>/<vehicle id>``; one per track, named by the
+  track, over the frames that hold it (``frame_intervals``, gaps where the track is absent), each frame's
+  ``object_data`` with its pose there and the ``text`` entries ``vehicle`` (the frame's vehicle id) and
+  ``pose_from`` (``clicks``, ``box`` or ``interpolated``, as in results.json).
+- Intrinsics are written as ``camera_matrix_3x4`` and ``distortion_coeffs_1xN``, as the standard's own example
+  does (its schema says ``camera_matrix``; see FORMATS.md). For a KITTI ``P`` the matrix is ``[K | 0]``: the
+  cuboids are in the frame where ``K`` applies (camera 2), as in results.json.
 - ``cuboid.val`` = ``[x, y, z, qx, qy, qz, qw, dx, dy, dz]``: the box **centre** in the camera frame
   (x right, y down, z forward), ``t_cam_vehicle + R_cam_vehicle (0, 0, dz/2)``; the scalar-last unit
   quaternion of ``R_cam_vehicle`` (``qw >= 0``); the dimensions (length, width, height) along the vehicle's
@@ -161,6 +166,14 @@ def _clicks(parts: list[dict[str, Any]], cam: str, where: str, warnings: list[st
     return out
 
 
+def _extend(intervals: list[dict[str, int]], f: int) -> None:
+    """Add frame ``f`` (at or after every frame in them) to an object's ``frame_intervals``."""
+    if intervals[-1]["frame_end"] >= f - 1:
+        intervals[-1]["frame_end"] = max(intervals[-1]["frame_end"], f)
+    else:
+        intervals.append({"frame_start": f, "frame_end": f})
+
+
 def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[str, Any], list[str]]:
     """The OpenLABEL 1.0.0 document of fitted images, and warnings: clicks the flat vocabulary cannot name (per
     vehicle), part kinds without an OpenLABEL form (once per kind, with counts)."""
@@ -171,6 +184,7 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
     warnings: list[str] = []
     formless: Counter = Counter()  # kind -> parts left out
     formless_vehicles: Counter = Counter()  # kind -> vehicles with such parts
+    track_uid: dict[str, str] = {}  # track -> its object's uid
     for f, image in enumerate(images):
         key = _camera_key(image)
         if key not in stream_of:
@@ -180,9 +194,17 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
         frame_objects: dict[str, Any] = {}
         for fv in image.vehicles:
             v = fv.result
-            uid = str(len(objects))
-            objects[uid] = {"name": f"{image.id}/{v.id}", "type": v.prototype, "coordinate_system": cam,
-                            "frame_intervals": [{"frame_start": f, "frame_end": f}]}
+            if v.track is None:
+                uid = str(len(objects))
+                objects[uid] = {"name": f"{image.id}/{v.id}", "type": v.prototype, "coordinate_system": cam,
+                                "frame_intervals": [{"frame_start": f, "frame_end": f}]}
+            elif v.track not in track_uid:  # one object for the whole track, its frames added as they come
+                uid = track_uid[v.track] = str(len(objects))
+                objects[uid] = {"name": v.track, "type": v.prototype, "coordinate_system": cam,
+                                "frame_intervals": [{"frame_start": f, "frame_end": f}]}
+            else:
+                uid = track_uid[v.track]
+                _extend(objects[uid]["frame_intervals"], f)
             data: dict[str, Any] = {}
             if v.ok:
                 cuboid = {"name": "cuboid", "val": cuboid_val(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions),
@@ -201,11 +223,18 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
                 data["bbox"] = [{"name": "box2d", "val": [(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1],
                                  "coordinate_system": cam}]
             text = [{"name": "status", "val": v.status}, {"name": "prototype", "val": v.prototype}]
+            if v.track is not None:  # which vehicle of the frame it is, and what set its pose there
+                text.append({"name": "vehicle", "val": v.id})
+                if v.pose_from is not None:
+                    text.append({"name": "pose_from", "val": v.pose_from})
             if v.error:
                 text.append({"name": "error", "val": v.error})
             data["text"] = text
             frame_objects[uid] = {"object_data": data}
-        frame: dict[str, Any] = {"frame_properties": {"streams": {cam: {"uri": image.file or image.id}}}}
+        properties: dict[str, Any] = {"streams": {cam: {"uri": image.file or image.id}}}
+        if image.sequence is not None:  # frame_properties takes further properties (the schema's own words)
+            properties.update(sequence=image.sequence, frame=image.frame)
+        frame: dict[str, Any] = {"frame_properties": properties}
         if frame_objects:
             frame["objects"] = frame_objects
         frames[str(f)] = frame
