@@ -559,3 +559,25 @@ def test_any_mutation_imports_or_is_named(tmp_path, data):
         assert str(exc).startswith(str(path))
         return
     parse_annotations(doc)
+
+
+def test_review_export_of_one_video_numbers_its_images_by_frame():
+    # A video task's frames are matched by the id (CVAT cannot match 'images/frame_000012.PNG' to its frame by name),
+    # and a sequence's file holds only its frames with a vehicle: frames 3, 7 and 12 must say 3, 7 and 12. With an
+    # image on its own, or two sequences, ids stay the order in the file.
+    from toosicubix.camera import Camera
+    from toosicubix.formats.fitted import FittedImage
+
+    K = np.array(VIDEO_K)
+
+    def frame(number, sequence="clip"):
+        return FittedImage(f"{sequence}-{number}", f"images/frame_{number:06d}.PNG", (1242, 375), Camera(K), [],
+                           sequence, number)
+
+    def ids(images):
+        return [im.get("id") for im in ET.fromstring(review_xml(images)[0]).findall("image")]
+
+    assert ids([frame(3), frame(7), frame(12)]) == ["3", "7", "12"]
+    alone = FittedImage("alone", "alone.png", (1242, 375), Camera(K), [])
+    assert ids([frame(3), alone, frame(12)]) == ["0", "1", "2"]
+    assert ids([frame(3), frame(12, "other")]) == ["0", "1"]

@@ -93,17 +93,22 @@ def _fmt(uv: np.ndarray) -> str:
 def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[str, list[str]]:
     """The CVAT for images 1.1 document with every fitted cuboid, and the warnings.
 
-    Images need a ``file`` (CVAT matches by name) and a ``size``; ids are their order in the file.
+    Images need a ``file`` (CVAT matches by name) and a ``size``. Ids are their order in the file, or their frame
+    numbers when every image is a frame of one sequence (a video task's: CVAT cannot match a video's frames by
+    name, ``frame_000012`` against ``images/frame_000012.PNG``, and takes the id as the frame, ``match_dm_item``
+    in cvat/apps/dataset_manager/bindings.py; a sequence's file holds only the frames with a vehicle, so its order
+    is not the frame).
     """
     root = ET.Element("annotations")
     ET.SubElement(root, "version").text = "1.1"
     warnings: list[str] = []
+    one_video = bool(images) and len({image.sequence for image in images}) == 1 and images[0].sequence is not None
     for index, image in enumerate(images):
         name = image.file or image.id
         if _NOT_XML.search(name):
             warnings.append(f"image {image.id!r}: its file name {name!r} holds a character XML cannot carry: left out")
             continue
-        attrs = {"id": str(index), "name": name}
+        attrs = {"id": str(image.frame if one_video else index), "name": name}
         if image.size is not None:
             attrs.update(width=str(image.size[0]), height=str(image.size[1]))
         node = ET.SubElement(root, "image", attrs)
