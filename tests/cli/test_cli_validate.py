@@ -22,7 +22,7 @@ def test_validate_writes_nothing_and_exits_0_when_every_vehicle_passes(tmp_path,
     assert result.exit_code == 0, result.output
     assert _files(tmp_path) == before
     assert "6 vehicles: 6 well determined, 0 not, 0 failed" in result.output
-    assert "for clicks off by 1.5 px on parts 0.09 m off the cuboid model)" in result.output  # no keypoints here
+    assert "for clicks off by 1.5 px on parts 9 cm off the cuboid model)" in result.output  # no keypoints here
 
 
 def test_validate_exits_1_and_explains_the_vehicles_that_need_clicks(tmp_path, monkeypatch):

@@ -245,13 +245,13 @@ def test_validate_says_what_the_keypoints_sigmas_took():
                            click_labels=("keypoint-lamp-rear-left", "wheel-front-left"))
     checks = [VehicleCheck("im", "$.images[0].vehicles[0]", result, (), ())]
     plain = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks)
-    assert plain._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model and on top of "
+    assert plain._noise_phrase() == ("for clicks off by 0.95 px on parts 9 cm off the cuboid model and on top of "
                                      "each keypoint's learned spread")
     def pilot(soft_noise):
         return PilotFindings(SolverOptions(soft_noise=soft_noise), ClickNoise(0.95, "estimated", 0.95, 500.0, 50, 50))
 
     estimated = ValidationReport(Path("a.json"), 0.95, 0.09, Thresholds(), checks, pilot((0.686, 0.877)))
-    assert estimated._noise_phrase() == ("for clicks off by 0.95 px on parts 0.09 m off the cuboid model, keypoints "
+    assert estimated._noise_phrase() == ("for clicks off by 0.95 px on parts 9 cm off the cuboid model, keypoints "
                                          "and plates 0.686 px off on top of 0.88 x their learned spread (the batch's "
                                          "residuals)")
     keypoints_only = [VehicleCheck("im", "$.images[0].vehicles[0]", replace(result, click_labels=(

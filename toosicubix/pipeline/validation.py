@@ -240,11 +240,11 @@ class ValidationReport:
                          f"batch's residuals)")
             if not cuboid:
                 return f"for {keypoints}"
-            return (f"for clicks off by {self.click_sigma:.3g} px on parts {self.part_sigma:g} m off the cuboid model, "
+            return (f"for clicks off by {self.click_sigma:.3g} px on parts {100 * self.part_sigma:.2g} cm off the cuboid model, "
                     f"{keypoints}")
         where = []
         if cuboid:
-            where.append(f"on parts {self.part_sigma:g} m off the cuboid model")
+            where.append(f"on parts {100 * self.part_sigma:.2g} cm off the cuboid model")
         if soft:
             where.append("on top of each keypoint's learned spread")
         return " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
