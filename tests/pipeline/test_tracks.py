@@ -119,6 +119,27 @@ def test_tracks_off_fits_every_frame_alone(tracked_file, tmp_path):
     assert summary.ok == FRAMES + 3 and summary.tracks == 0  # the clicked frames and the car fitted alone
     reasons = {reason for _, vehicle, reason in summary.failed if vehicle == "1"}
     assert len(reasons) == 1 and "too few" in next(iter(reasons))
+    assert summary.failed_tracks == []  # fitted alone, its frames are not a track's
+
+
+def test_a_track_that_cannot_be_placed_is_said_once_with_its_frames(tracked_file, tmp_path):
+    # Without the clicked frames' clicks the track cannot be placed: fit says so in one line for its 21 frames, and
+    # the untracked car's failures (its clicks dropped on two frames) in one line each.
+    doc = json.loads(tracked_file.read_text())
+    for im in doc["images"]:
+        im["vehicles"][0]["parts"] = []
+    for im in doc["images"][:2]:
+        im["vehicles"][1]["parts"] = im["vehicles"][1]["parts"][:2]
+    path = tmp_path / "unclicked.json"
+    path.write_text(json.dumps(doc))
+    result = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    failed = [line for line in result.stderr.splitlines() if line.startswith("  failed: ")]
+    assert len(failed) == 3 and "more failed vehicles" not in result.stderr
+    assert failed[0].startswith("  failed: track 0003-car (21 frames, images frame-0 to frame-20): the track cannot "
+                                "be placed: no frame has clicks")
+    assert failed[1].startswith("  failed: image frame-0 vehicle 2: ")
+    assert failed[2].startswith("  failed: image frame-1 vehicle 2: ")
 
 
 def test_fit_says_how_the_tracks_frames_were_determined(tracked_file, tmp_path):

@@ -111,8 +111,13 @@ def fit_command(annotations: Path, out_dir: Path, settings: Any, next_clicks: in
             click.echo(f"misfits: {summary.misfits} of {summary.ok} fitted vehicles failed the chi-square test of "
                        "their residuals; their sigmas are widened (results.json: residual_test and a 'misfit' "
                        "warning; `toosicubix render --only misfit` draws their images)", err=True)
-        for image_id, vehicle_id, reason in summary.failed[:20]:
+        said = 0  # failed vehicles said, a track's frames with it: at most 20 lines, tracks first
+        for track in summary.failed_tracks[:20]:
+            click.echo(f"  failed: {track.describe()}", err=True)
+            said += track.frames
+        for image_id, vehicle_id, reason in summary.failed[:20 - min(20, len(summary.failed_tracks))]:
             click.echo(f"  failed: image {image_id} vehicle {vehicle_id}: {reason}", err=True)
-        if summary.n_failed > 20:
-            click.echo(f"  ... and {summary.n_failed - 20} more failed vehicles (see results.json)", err=True)
+            said += 1
+        if summary.n_failed > said:
+            click.echo(f"  ... and {summary.n_failed - said} more failed vehicles (see results.json)", err=True)
     sys.exit(EXIT_SOME_FAILED if summary.n_failed else EXIT_OK)

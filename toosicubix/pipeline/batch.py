@@ -53,12 +53,34 @@ from toosicubix.pipeline.pilot import PilotFindings, estimated_grounds, on_estim
 from toosicubix.pipeline.settings import BatchSettings
 from toosicubix.pipeline.tracks import fit_tracks
 
-__all__ = ["LABEL_DIR", "BatchSummary", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",
+__all__ = ["LABEL_DIR", "BatchSummary", "FailedTrack", "OutputFolderError", "fit_file", "fitted_batch", "kitti_lines",
            "pilot_and_fits", "write_outputs"]
 
 
 #: How many failed vehicles a :class:`BatchSummary` lists (a batch's memory must not grow with its size).
 FAILED_KEPT = 1000
+#: How many distinct reasons of one failed track's frames are told apart (:class:`FailedTrack`).
+REASONS_KEPT = 100
+
+
+@dataclass
+class FailedTrack:
+    """A track's failed frames, for the summary (the reason of each frame is in results.json)."""
+
+    track: str
+    frames: int  # how many of its frames failed
+    first_image: str  # the image of its first failed frame (file order) and of its last
+    last_image: str
+    reason: str  # its first failed frame's reason
+    other_reasons: int  # how many other reasons its other failed frames give
+
+    def describe(self) -> str:
+        """``track T (N frames, images A to B): reason``, as ``fit`` says it."""
+        where = (f"image {self.first_image}" if self.frames == 1 else
+                 f"{self.frames} frames, images {self.first_image} to {self.last_image}")
+        others = (f" (and {self.other_reasons} other reason{'s' if self.other_reasons > 1 else ''} on other frames: "
+                  "results.json)" if self.other_reasons else "")
+        return f"track {self.track} ({where}): {self.reason}{others}"
 
 
 @dataclass(frozen=True)
@@ -68,7 +90,8 @@ class BatchSummary:
     images: int
     vehicles: int
     ok: int
-    failed: list[tuple[str, str, str]]  # (image id, vehicle id, reason), the first FAILED_KEPT in file order
+    # (image id, vehicle id, reason) of failed vehicles without a track, the first FAILED_KEPT in file order
+    failed: list[tuple[str, str, str]]
     out_dir: Path
     scale_from: dict[str, int] = field(default_factory=dict)  # cue -> vehicles whose scale it set
     pilot: PilotFindings | None = None  # the click noise and road normals the batch was fitted with, and whence
@@ -77,6 +100,7 @@ class BatchSummary:
     tracks: int = 0  # tracks fitted as tracks
     pose_from: dict[str, int] = field(default_factory=dict)  # tracked frames fitted, by what their pose came from
     jobs: int = 1  # the processes it was fitted in (``--jobs auto`` resolved)
+    failed_tracks: list[FailedTrack] = field(default_factory=list)  # tracks with failed frames, the first FAILED_KEPT
 
     @property
     def n_failed(self) -> int:
@@ -269,6 +293,8 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
     tracks: set[str] = set()
     pose_from: dict[str, int] = {}
     implausible: list[tuple[str, str, str]] = []
+    failed_tracks: dict[str, FailedTrack] = {}
+    reasons: dict[str, set[str]] = {}  # each failed track's distinct reasons (bounded)
 
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
@@ -279,7 +305,17 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
             if v.ok and v.implausible is not None and len(implausible) < FAILED_KEPT:
                 swapped = any(w.startswith("left and right look swapped") for w in v.warnings)
                 implausible.append((im.id, v.id, "left and right look swapped" if swapped else v.implausible))
-            if not v.ok:
+            if not v.ok and v.track is not None:  # a track's frames fail alike: one entry for the track
+                entry = failed_tracks.get(v.track)
+                if entry is None and len(failed_tracks) < FAILED_KEPT:
+                    failed_tracks[v.track] = FailedTrack(v.track, 1, im.id, im.id, v.error or "", 0)
+                    reasons[v.track] = {v.error or ""}
+                elif entry is not None:
+                    entry.frames, entry.last_image = entry.frames + 1, im.id
+                    if len(reasons[v.track]) < REASONS_KEPT:
+                        reasons[v.track].add(v.error or "")
+                        entry.other_reasons = len(reasons[v.track]) - 1
+            elif not v.ok:
                 if len(failed) < FAILED_KEPT:
                     failed.append((im.id, v.id, v.error or ""))
             else:
@@ -291,7 +327,8 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
     return BatchSummary(images=summary["images"], vehicles=summary["vehicles"], ok=summary["ok"], failed=failed,
                         out_dir=out_dir, scale_from=scale_from, pilot=pilot,
                         misfits=misfits[0] if options.misfit_level is not None else None, tracks=len(tracks),
-                        pose_from=pose_from, implausible=implausible, jobs=settings.jobs)
+                        pose_from=pose_from, implausible=implausible, jobs=settings.jobs,
+                        failed_tracks=list(failed_tracks.values()))
 
 
 def _sha256(path: Path) -> str:

@@ -240,8 +240,8 @@ class ValidationReport:
                          f"batch's residuals)")
             if not cuboid:
                 return f"for {keypoints}"
-            return (f"for clicks off by {self.click_sigma:.3g} px on parts {100 * self.part_sigma:.2g} cm off the cuboid model, "
-                    f"{keypoints}")
+            return (f"for clicks off by {self.click_sigma:.3g} px on parts {100 * self.part_sigma:.2g} cm off the "
+                    f"cuboid model, {keypoints}")
         where = []
         if cuboid:
             where.append(f"on parts {100 * self.part_sigma:.2g} cm off the cuboid model")
