@@ -224,11 +224,12 @@ def test_yaw_only_labels_without_calib_are_compared_in_camera_0(tmp_path):
     (out / "label_2").mkdir(parents=True)
     (out / "label_2" / "000001.txt").write_text((gt_root / "label_2" / "000001.txt").read_text())
     result = evaluate_folder(out, "kitti", gt_root)
-    assert len(result.matched) == 4 and all(r.metrics.e_t == 0.0 for r in result.matched)
+    # The pedestrian is scored with the cars: the predictions have one.
+    assert len(result.matched) == 5 and all(r.metrics.e_t == 0.0 for r in result.matched)
+    assert sorted(r.cls for r in result.matched).count("Pedestrian") == 1 and result.unmatched_pred == ()
     assert "compared in camera 0" in result.warnings[0]
-    # Its DontCare line is a failed prediction, not a silent drop; the pedestrian is unmatched.
+    # Its DontCare line is a failed prediction, not a silent drop.
     assert [f.cls for f in result.failed_pred] == ["DontCare"]
-    assert [u.cls for u in result.unmatched_pred] == ["Pedestrian"]
 
 
 # --- KITTI tracking and Cityscapes ---------------------------------------------------------------------------------

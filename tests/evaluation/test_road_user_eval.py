@@ -51,6 +51,20 @@ def test_a_prediction_is_paired_within_its_family_only(tmp_path):
     assert sorted(u.cls for u in result.unmatched_gt) == ["Car", "Pedestrian"]
 
 
+def test_the_classes_the_fit_has_are_scored_unless_others_are_named(tmp_path):
+    """Without classes, the source's vehicles and every class fitted (a batch's pedestrians with its cars); with
+    classes that leave the pedestrian out, its prediction is unmatched for that reason, not for want of a box."""
+    gt = _ground_truth(tmp_path / "gt", [CAR, PERSON, CYCLIST])
+    out = write_results(tmp_path / "out", {"000001": [kitti_pose(CAR), kitti_pose(PERSON)]}, K_KITTI, T2, KITTI_SIZE)
+    result = evaluate_folder(out, "kitti", gt)
+    assert result.settings["classes"] == ["Car", "Van", "Truck", "Pedestrian"]
+    assert sorted(m.cls for m in result.matched) == ["Car", "Pedestrian"] and result.gt_excluded == {"Cyclist": 1}
+    only_cars = evaluate_folder(out, "kitti", gt, EvalOptions(classes=("Car",)))
+    (person,) = only_cars.unmatched_pred
+    assert person.cls == "Pedestrian" and person.reason == ("its class, Pedestrian, is not among the ground-truth "
+                                                            "classes scored")
+
+
 def test_each_class_is_scored_with_its_heading_error(tmp_path):
     """Exact car and cyclist, a pedestrian turned by 20 degrees about its up axis: the class rows say so."""
     gt = _ground_truth(tmp_path / "gt", [CAR, PERSON, CYCLIST])

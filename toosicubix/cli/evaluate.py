@@ -27,7 +27,8 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
               help="2D box IoU a prediction and a ground-truth object need to be paired. Example: --min-iou 0.3")
 @click.option("--classes", default=None,
               help="Comma-separated ground-truth classes to score, case-insensitive [default: Car,Van,Truck for "
-                   "KITTI; car,truck,bus,caravan,trailer,train for Cityscapes]. Example: --classes Car,Van")
+                   "KITTI; car,truck,bus,caravan,trailer,train for Cityscapes; and every other class the fit has, "
+                   "e.g. Pedestrian]. Example: --classes Car,Van")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the summary, every matched object and the unmatched ones as JSON. "
                    "Example: --json eval.json")

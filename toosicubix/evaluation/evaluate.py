@@ -41,7 +41,8 @@ class EvalOptions:
     Attributes
     ----------
     min_iou : 2D box IoU a pair needs to be matched, in [0, 1] (default 0.5)
-    classes : ground-truth classes scored (case-insensitive); None for the source's defaults
+    classes : ground-truth classes scored (case-insensitive); None for the source's defaults and every other class
+        the predictions have a fitted object of (a batch's pedestrians are scored with its cars)
     """
 
     min_iou: float = 0.5
@@ -105,7 +106,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
     options = options or EvalOptions()
     if not 0.0 <= options.min_iou <= 1.0:
         raise EvaluationInputError(f"min_iou: expected a 2D IoU in [0, 1], got {options.min_iou}")
-    classes = options.classes if options.classes is not None else ground_truth.default_classes
+    classes = options.classes if options.classes is not None else default_classes(ground_truth, predictions)
     wanted = {c.lower() for c in classes}
     notes = _Notes()
     missing: list[str] = []
@@ -146,7 +147,7 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
         for family in families:
             _pair(pred_image, [p for p in pred_image.objects if p.ok and p.family == family],
                   [g for g in scored_gt if family_of(g.cls) == family], gt_offset, pred_offset, options, matched,
-                  unmatched_pred, unmatched_gt)
+                  unmatched_pred, unmatched_gt, wanted)
     if missing:
         more = f" (and {len(missing) - _MAX_LISTED} more)" if len(missing) > _MAX_LISTED else ""
         raise EvaluationInputError(
@@ -172,9 +173,10 @@ def evaluate(predictions: Predictions, ground_truth: GroundTruthSource,
 
 def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObject], gt_offset: np.ndarray,
           pred_offset: np.ndarray, options: EvalOptions, matched: list[MatchedObject],
-          unmatched_pred: list[UnscoredObject], unmatched_gt: list[UnscoredObject]) -> None:
+          unmatched_pred: list[UnscoredObject], unmatched_gt: list[UnscoredObject], wanted: set[str]) -> None:
     """Match one image's predictions ``preds`` and ground truth ``scored_gt`` (one family of road users) by 2D box
-    IoU, appending the pairs with their metrics and the objects left without a partner."""
+    IoU, appending the pairs with their metrics and the objects left without a partner (a prediction of a class
+    not ``wanted`` had none to be paired with, and is said to be so)."""
     pred_boxes = np.array([p.box2d for p in preds]).reshape(-1, 4)
     gt_boxes = np.array([g.box2d for g in scored_gt]).reshape(-1, 4)
     matching = match_boxes(pred_boxes, gt_boxes, options.min_iou)
@@ -199,7 +201,9 @@ def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObje
     reason = f"no ground-truth partner with 2D IoU >= {options.min_iou:g}"
     unmatched_pred.extend(
         UnscoredObject(pred_image.id, preds[i].id, preds[i].cls, preds[i].box2d,
-                       float(ious[i].max()) if ious.shape[1] else 0.0, reason, preds[i].source)
+                       float(ious[i].max()) if ious.shape[1] else 0.0,
+                       reason if preds[i].cls.lower() in wanted else
+                       f"its class, {preds[i].cls}, is not among the ground-truth classes scored", preds[i].source)
         for i in matching.unmatched_pred
     )
     reason = f"no prediction with 2D IoU >= {options.min_iou:g}"
@@ -208,6 +212,15 @@ def _pair(pred_image: PredImage, preds: list[PredObject], scored_gt: list[GtObje
                        float(ious[:, j].max()) if ious.shape[0] else 0.0, reason, scored_gt[j].source)
         for j in matching.unmatched_gt
     )
+
+
+def default_classes(ground_truth: GroundTruthSource, predictions: Predictions) -> tuple[str, ...]:
+    """The classes scored when none are given: the ground-truth source's defaults (the paper's vehicles), then
+    every other class the predictions have a fitted object of, in order of name."""
+    defaults = tuple(ground_truth.default_classes)
+    known = {c.lower() for c in defaults}
+    fitted = sorted({p.cls for im in predictions.images for p in im.objects if p.ok and p.cls.lower() not in known})
+    return defaults + tuple(fitted)
 
 
 def _failure_reason(p: PredObject) -> str:
