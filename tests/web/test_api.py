@@ -602,3 +602,45 @@ def test_road_users_are_drawn_in_their_class_s_colours_as_render_draws_them(serv
     assert status == 200 and doc["colour"] == CLASSES["Cyclist"].palette[0]
     status, doc = client.request("POST", "/api/fit", {"image": 0, "vehicle": {"id": "c", "prototype": "Car"}})
     assert status == 200 and doc["colour"] is None
+
+
+def test_a_pedestrian_is_clicked_on_its_class_keypoints_without_a_mapping(served, tmp_path):
+    """A road user with keypoints of its own (COCO's 17 for a pedestrian) is clicked on them on the page, with no
+    --mapping: the session lists each such prototype's keypoints, a click named one takes its class's typical place,
+    a name the class has not is refused naming the class's keypoints, the clicks fit the person, the file keeps them
+    as `fit` reads them, and left and right swap by name."""
+    from tests.web.synthetic import CAMERA
+    from toosicubix.geometry import R_cam_vehicle_from_ypr
+    from toosicubix.vocabulary import CLASSES
+
+    client, _ = served
+    status, session = client.request("GET", "/api/session")
+    assert status == 200 and session["class_keypoints"]["Pedestrian"][:3] == ["nose", "left_eye", "right_eye"]
+    assert "Car" not in session["class_keypoints"]
+    status, doc = client.edit({"op": "add_vehicle", "prototype": "Pedestrian"})
+    assert status == 200, doc
+    person = doc["vehicle"]
+    status, doc = client.edit({"op": "add_click", "vehicle": person, "kind": "keypoint", "name": "wheel",
+                               "uv": [[600.0, 200.0]]})
+    assert status == 400 and doc["error"].startswith("name: keypoint 'wheel' is not a keypoint of a Pedestrian "
+                                                     "(its keypoints: nose, left_eye,")
+    # A person 1.75 m tall, 9 m ahead, facing the camera's left: every keypoint at its class's typical place.
+    keypoints = CLASSES["Pedestrian"].keypoints
+    dims, R, t = np.array([0.8, 0.66, 1.75]), R_cam_vehicle_from_ypr(0.4), np.array([0.5, 1.65, 9.0])
+    for name, k in keypoints.items():
+        uv = CAMERA.project((R @ (np.array(k.at) * dims) + t)[None])[0]
+        status, doc = client.edit({"op": "add_click", "vehicle": person, "kind": "keypoint", "name": name,
+                                   "uv": [uv.tolist()]})
+        assert status == 200, doc
+    fit = doc["vehicles"][0]["fit"]
+    assert fit["status"] == "ok", fit
+    # Exact clicks at the typical places: the pose comes back within the prior's pull on the scale.
+    assert np.rad2deg(geodesic_angle(np.array(fit["R_cam_vehicle"]), R)) < 1.0
+    assert abs(fit["t_cam_vehicle"][2] / t[2] - 1) < 0.05
+    (saved,) = load_images(tmp_path / "annotations.json")[0].vehicles
+    assert [(p.kind, p.name) for p in saved.parts] == [("keypoint", n) for n in keypoints]
+    assert list(saved.parts[1].at) == list(keypoints["left_eye"].at)
+    status, doc = client.edit({"op": "swap_sides", "vehicle": person})
+    assert status == 200 and doc["swapped"] == 16 and doc["unpaired"] == []  # every keypoint but the nose
+    names = [p["name"] for p in doc["vehicles"][0]["parts"]]
+    assert names[:3] == ["nose", "right_eye", "left_eye"]

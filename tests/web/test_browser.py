@@ -894,3 +894,46 @@ def test_a_newcomer_clicks_a_car_sees_its_cuboid_and_the_swapped_sides_banner(pa
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_a_pedestrian_is_offered_its_keypoints_not_a_car_s_parts(page, scene, tmp_path: Path):
+    """A newcomer who picks the Pedestrian prototype sees COCO's person keypoints to name clicks with, not the car's
+    diagram and parts (whose keys say so instead of naming a wheel on a person); the named clicks fit the person."""
+    from tests.web.synthetic import CAMERA
+    from toosicubix.geometry import R_cam_vehicle_from_ypr
+    from toosicubix.vocabulary import CLASSES
+
+    out = tmp_path / "annotations.json"
+    session = make_session(scene, out)
+    server = serve_in_thread(session)
+    try:
+        _open_zoomed_in(page, server.url)
+        assert page.locator("#palette-section").is_visible() and not page.locator("#keypoint-section").is_visible()
+        page.select_option("#prototype", "Pedestrian")
+        assert page.locator("#keypoint-section").is_visible()
+        assert page.locator("#keypoint-section h2").inner_text() == "Keypoints of a Pedestrian"
+        assert not page.locator("#palette-section").is_visible() and not page.locator("#parts-section").is_visible()
+        page.keyboard.press("1")
+        assert "a Pedestrian is clicked on its keypoints" in page.locator("#message").inner_text()
+        # A person 1.75 m tall 8 m ahead, beside the car: nine keypoints from head to ankles, each named first.
+        dims, R, t = np.array([0.8, 0.66, 1.75]), R_cam_vehicle_from_ypr(0.4), np.array([1.5, 1.65, 8.0])
+        names = ("nose", "left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_knee", "right_knee",
+                 "left_ankle", "right_ankle")
+        revision = 0
+        for name in names:
+            uv = CAMERA.project((R @ (np.array(CLASSES["Pedestrian"].keypoints[name].at) * dims) + t)[None])[0]
+            page.fill("#keypoint-filter", name.replace("_", " "))
+            page.press("#keypoint-filter", "Enter")
+            assert f"next click: {name} (you chose the name first)" in page.locator("#message").inner_text()
+            page.mouse.click(*_screen(page, uv.tolist()))
+            revision += 1 + (revision == 0)  # the first click adds the vehicle too
+            _wait_revision(page, revision)
+        (person,) = load_images(out)[0].vehicles
+        assert person.prototype == "Pedestrian" and [(p.kind, p.name) for p in person.parts] == [
+            ("keypoint", n) for n in names]
+        fit = session.image_view(0)["vehicles"][0]["fit"]
+        # Clicks within 0.17 px of exact at zoom 3, the size prior pulling the scale: 0.42 deg here.
+        assert fit["status"] == "ok" and np.rad2deg(geodesic_angle(np.array(fit["R_cam_vehicle"]), R)) < 1.0
+    finally:
+        server.shutdown()
+        server.server_close()

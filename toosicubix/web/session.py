@@ -76,6 +76,7 @@ from toosicubix.jsonfile import read_json
 from toosicubix.model import GroundBlock, GroundOverride, GroundPlane, Image, Part, Vehicle
 from toosicubix.parts.linear import TypicalKeypoint
 from toosicubix.parts.mirror import mirrored
+from toosicubix.parts.road_users import class_keypoints, keypoint_class
 from toosicubix.pipeline.click_noise import PILOT_VEHICLES
 from toosicubix.pipeline.fitting import check_prototypes
 from toosicubix.pipeline.road_normal import MIN_VEHICLES, camera_key
@@ -475,16 +476,27 @@ class Session:
                 + sum(len(d.get("vehicles") or []) for d in self._others))
 
     def _keypoints(self, prototype: str) -> dict[str, TypicalKeypoint] | None:
-        """The mapping's keypoints on a vehicle of ``prototype`` (name -> place, faces and clicked share); None
-        without one."""
+        """The keypoints a vehicle of ``prototype`` is clicked on (name -> place, faces and clicked share): its
+        class's own (a pedestrian's COCO keypoints, :func:`~toosicubix.parts.road_users.class_keypoints`), else the
+        mapping's; None for a prototype of the cuboid vocabulary without a mapping."""
+        own = class_keypoints(prototype)
+        if own:
+            return own
         return None if self.mapping is None else self.mapping.keypoint_candidates(prototype)
 
     def _keypoint_extra(self, prototype: str, name: str, visible: Any = None) -> dict[str, Any] | None:
-        """A mapping keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of
-        ``prototype``; None when the mapping does not have it."""
-        if self.mapping is None or not isinstance(name, str):
+        """A keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of ``prototype``: its
+        class's keypoint, else the mapping's; None when neither has it (a class with keypoints of its own takes no
+        mapping's)."""
+        if not isinstance(name, str):
             return None
-        position = self.mapping.keypoint_positions(prototype).get(name)
+        own = keypoint_class(prototype)
+        if own is not None:
+            position = own.keypoints.get(name)
+        elif self.mapping is not None:
+            position = self.mapping.keypoint_positions(prototype).get(name)
+        else:
+            position = None
         if position is None:
             return None
         extra: dict[str, Any] = {"at": list(position.at), "spread": list(position.spread)}
@@ -894,6 +906,9 @@ class Session:
                                for k in vocabulary.KINDS.values() if not k.known},
                 "mapping": None if self.mapping is None else self.mapping.name,
                 "keypoints": [] if self.mapping is None else list(self.mapping.keypoint_positions(self.prototype)),
+                # The prototypes clicked on keypoints of their own class (a pedestrian's), with those keypoints.
+                "class_keypoints": {name: list(c.keypoints) for name in sorted(self.priors)
+                                    if (c := keypoint_class(name)) is not None},
                 "thresholds": self.thresholds.to_json(),
             }
 
@@ -1223,7 +1238,7 @@ class Session:
             self._check_not_clicked(v, kind, name)
             v.parts.append(ClickedPart(kind, name, uv, extra=extra))
         else:
-            self._check_page_made(kind, name)
+            self._check_page_made(kind, name, v.prototype)
             kind, name = checked_kind_name(kind, name)
             uv = checked_pixels(r.get("uv"), len(vocabulary.KINDS[kind].clicks), "uv", size)
             self._check_room(v, len(uv))
@@ -1265,7 +1280,7 @@ class Session:
             other = "" if self.mapping is None else f", or name it a keypoint of {self.mapping.name}"
             raise ApiError(f"name: this {part.kind}'s typical position is its name's ({part.name!r}); delete it and "
                            f"import the clicks again to rename it{other}")
-        self._check_page_made(r.get("kind"), r.get("name"))
+        self._check_page_made(r.get("kind"), r.get("name"), v.prototype)
         kind, name = checked_kind_name(r.get("kind"), r.get("name"))
         if len(vocabulary.KINDS[kind].clicks) != len(part.uv):
             raise ApiError(f"kind: a {kind} annotation has {len(vocabulary.KINDS[kind].clicks)} clicks, this one "
@@ -1317,9 +1332,9 @@ class Session:
 
     def _op_swap_sides(self, image: ImageState, r: dict) -> dict[str, Any]:
         """Swap the vehicle's left and right in its named clicks (:func:`toosicubix.parts.mirror.mirrored`: the
-        ``-left`` and ``-right`` parts, the two clicks of a pair, ``leftward`` and ``rightward``; a mapping's
-        keypoint becomes the keypoint at its mirror place, :meth:`_mirror_keypoint`), as the person's own names.
-        Unnamed clicks stay, and so does a keypoint with no keypoint of the mapping at its mirror place. How many
+        ``-left`` and ``-right`` parts, the two clicks of a pair, ``leftward`` and ``rightward``; a keypoint of the
+        vehicle's class or of the mapping becomes the keypoint at its mirror place, :meth:`_mirror_keypoint`), as
+        the person's own names. Unnamed clicks stay, and so does a keypoint with none at its mirror place. How many
         clicks changed, and those keypoints."""
         v = self._vehicle(image, r)
         named = [(k, p) for k, p in enumerate(v.parts) if p.named]
@@ -1330,7 +1345,7 @@ class Session:
         changed, unpaired = 0, []
         for (_, part), swapped in zip(named, mirrored(model), strict=True):
             name, uv, extra = swapped.name, swapped.uv.tolist(), part.extra
-            if part.kind == "keypoint" and self.mapping is not None:
+            if part.kind == "keypoint" and self._keypoints(v.prototype) is not None:
                 name = self._mirror_keypoint(v.prototype, part.name)
                 if name is None:  # no keypoint of the mapping there: left as it is, and said
                     unpaired.append(part.name)
@@ -1349,9 +1364,10 @@ class Session:
         return {"swapped": changed, "unpaired": unpaired}
 
     def _mirror_keypoint(self, prototype: str, name: str) -> str | None:
-        """The mapping's keypoint at the mirror place of keypoint ``name`` (its typical place with Y negated: the
-        nearest keypoint, within :data:`MIRROR_TOLERANCE`), or None when the mapping has none there."""
-        positions = self.mapping.keypoint_positions(prototype) if self.mapping is not None else {}
+        """The keypoint (of the vehicle's class, else the mapping's) at the mirror place of keypoint ``name`` (its
+        typical place with Y negated: the nearest keypoint, within :data:`MIRROR_TOLERANCE`), or None when there is
+        none there."""
+        positions = self._keypoints(prototype) or {}
         if name not in positions:
             return None
         at = np.asarray(positions[name].at, dtype=float) * np.array([1.0, -1.0, 1.0])
@@ -1448,14 +1464,18 @@ class Session:
             raise ApiError(f"part: expected an index 0 to {len(v.parts) - 1} of vehicle {v.id}'s parts, got {shown(k)}")
         return v.parts[k]
 
-    def _check_page_made(self, kind: Any, name: Any) -> None:
-        """A kind whose annotations need a typical position (keypoints, plates: from a mapping) is made on the
-        page only for the given mapping's keypoints (the caller's case): anything else of such a kind is refused
-        (ApiError); other kinds, known or not, pass
+    def _check_page_made(self, kind: Any, name: Any, prototype: str) -> None:
+        """A kind whose annotations need a typical position (keypoints, plates: from a class or a mapping) is made
+        on the page only for the keypoints of the vehicle's class or of the given mapping (the caller's case):
+        anything else of such a kind is refused (ApiError); other kinds, known or not, pass
         (:func:`~toosicubix.web.request_fields.checked_kind_name` checks them)."""
         entry = vocabulary.KINDS.get(kind) if isinstance(kind, str) else None
         if entry is None or not any(key == "at" for key, _ in entry.fields_extra):
             return
+        own = keypoint_class(prototype)
+        if own is not None:
+            raise ApiError(f"name: {kind} {shown(name)} is not a keypoint of a {prototype} (its keypoints: "
+                           f"{', '.join(own.keypoints)})")
         if self.mapping is None:
             raise ApiError(f"kind: a {kind} annotation needs its typical position on the vehicle, which comes from a "
                            "keypoint mapping: start the page with --mapping (e.g. apollocar3d-66) to click keypoints")

@@ -74,15 +74,11 @@ async function start() {
     select.appendChild(option);
   }
   select.value = doc.prototype;
-  if (doc.keypoints.length) {
-    $("keypoint-section").hidden = false;
-    $("mapping-name").textContent = doc.mapping;
-    $("keypoint-filter").addEventListener("input", buildPalette);
-    $("keypoint-filter").addEventListener("keydown", (e) => {  // Enter: name the next click the first match
-      const first = $("keypoints").querySelector("button");
-      if (e.key === "Enter" && first) { e.target.blur(); arm(["keypoint", first.dataset.name]); }
-    });
-  }
+  $("keypoint-filter").addEventListener("input", buildPalette);
+  $("keypoint-filter").addEventListener("keydown", (e) => {  // Enter: name the next click the first match
+    const first = $("keypoints").querySelector("button");
+    if (e.key === "Enter" && first) { e.target.blur(); arm(["keypoint", first.dataset.name]); }
+  });
   buildPalette();
   // A reload opens where the person was (this tab's last image of this file), else on the first image.
   const saved = sessionStorage.getItem(placeKey());  // null, or the index as text
@@ -253,6 +249,17 @@ async function edit(change, retryable = false) {
 
 function currentVehicle() {
   return state.view && state.view.vehicles.find((v) => v.id === state.vehicle);
+}
+
+// The prototype the palette is for: the selected vehicle's, else the one a new vehicle gets.
+function palettePrototype() {
+  const v = currentVehicle();
+  return v ? v.prototype : $("prototype").value;
+}
+
+// The keypoints of that prototype's own class (a pedestrian's COCO keypoints), or null for the cuboid parts.
+function classKeypoints() {
+  return (state.session.class_keypoints || {})[palettePrototype()] || null;
 }
 
 function currentPrediction() {
@@ -455,7 +462,14 @@ function buildPalette() {
   for (const [key, [kind, name]] of Object.entries(HOTKEYS)) keys[`${kind} ${name}`] = key;
   const v = currentVehicle();
   const clicked = new Set(v ? v.parts.map((p) => `${p.kind} ${p.name}`) : []);
-  for (const [kind, entry] of Object.entries(state.session.vocabulary)) {
+  // A road user with keypoints of its own (a pedestrian) is clicked on those: no cuboid parts, no car diagram.
+  const own = classKeypoints();
+  const keypoints = own || state.session.keypoints;
+  $("parts-section").hidden = $("palette-section").hidden = own !== null;
+  $("keypoint-section").hidden = !keypoints.length;
+  $("mapping-name").textContent = own ? `a ${palettePrototype()}` : state.session.mapping || "";
+  $("keypoint-filter").placeholder = `filter, e.g. ${own ? own[own.length - 1].replaceAll("_", " ") : "left rear light"}`;
+  for (const [kind, entry] of own ? [] : Object.entries(state.session.vocabulary)) {
     for (const name of entry.names) {
       const button = document.createElement("button");
       const key = keys[`${kind} ${name}`];
@@ -465,11 +479,11 @@ function buildPalette() {
       palette.appendChild(paletteButton(button, kind, name, clicked));
     }
   }
-  // The mapping's keypoints (--mapping), those whose name holds every word of the filter.
+  // The class's or the mapping's (--mapping) keypoints, those whose name holds every word of the filter.
   const list = $("keypoints");
   list.textContent = "";
   const words = $("keypoint-filter").value.toLowerCase().split(/[\s_]+/).filter(Boolean);
-  for (const name of state.session.keypoints) {
+  for (const name of keypoints) {
     if (!words.every((w) => name.toLowerCase().includes(w))) continue;
     const button = document.createElement("button");
     button.textContent = name.replaceAll("_", " ");
@@ -614,8 +628,10 @@ function panels() {
     const why = few ? `${count(named, "named click")} cannot place a cuboid yet; click at least ${few[1]} more ` +
       few[2] : (f.error === "out_of_time" ? f.error_detail : f.error) || "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + ". A fit needs about five named " +
-      "clicks: the wheels where they touch the road, the body's vertical edges, the front or rear lamps and badge.");
+      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + (classKeypoints() ?
+      `. A fit needs about five named keypoints spread over the ${escapeHtml(v.prototype.toLowerCase())}, from ` +
+      "top to bottom (choose each under Keypoints)." : ". A fit needs about five named clicks: the wheels where " +
+      "they touch the road, the body's vertical edges, the front or rear lamps and badge."));
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
       (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
@@ -687,8 +703,10 @@ function nextClick(v) {
       "click first instead.";
     el.className = "armed";
   } else {
-    el.textContent = "Next click: click first, the page names it from where it is (or asks you). Or press a " +
-      "part's key first to name it yourself.";
+    el.textContent = classKeypoints() ? "Next click: choose its keypoint under Keypoints first, then click it; or " +
+      "click first, and the page names it once the clicks fit (else it asks you)." :
+      "Next click: click first, the page names it from where it is (or asks you). Or press a part's key first " +
+      "to name it yourself.";
     el.className = "";
   }
 }
@@ -1167,7 +1185,9 @@ document.addEventListener("keydown", async (e) => {
   if (key === "Enter" && e.target.tagName === "BUTTON") return;  // the focused button's own click, not a confirm too
   if ((e.ctrlKey || e.metaKey) && key === "z") { e.preventDefault(); await undo(); return; }
   if (e.ctrlKey || e.metaKey || e.altKey) return;
-  if (HOTKEYS[key]) arm(HOTKEYS[key]);
+  if (HOTKEYS[key] && classKeypoints()) {  // a pedestrian has no wheel: its parts are its keypoints
+    say(`a ${palettePrototype()} is clicked on its keypoints: choose one under Keypoints`, true);
+  } else if (HOTKEYS[key]) arm(HOTKEYS[key]);
   else if (key === "Escape") { state.mode = "click"; setNaming(null); arm(null); }
   else if (key === "s") await swapSides();
   else if (key === "r") startRename(state.selectedPart);
@@ -1221,6 +1241,7 @@ $("undo").onclick = undo;
 $("prototype").onchange = async () => {
   const v = currentVehicle();
   if (v) await edit({ op: "set_vehicle", vehicle: v.id, prototype: $("prototype").value });
+  buildPalette();  // a pedestrian's keypoints, or the cuboid parts
 };
 window.addEventListener("resize", resized);
 new ResizeObserver(resized).observe($("view"));
