@@ -227,6 +227,10 @@ KINDS, PROTOTYPE_GROUPS = _load()
 #: Every class of road user with a vocabulary or heading of its own, by name, in the file's order.
 CLASSES: dict[str, RoadUserClass] = _load_classes()
 _CLASS_OF_PROTOTYPE = {p.casefold(): c for c in CLASSES.values() for p in (c.name, *c.prototypes)}
+#: The keypoint names of the classes clicked on keypoints of their own (a pedestrian's COCO keypoints, a cyclist's
+#: wheels and rider, a cone's tip and base, a barrier's ends).
+ROAD_USER_KEYPOINTS: frozenset[str] = frozenset(k for c in CLASSES.values() if c.vocabulary == "keypoints"
+                                                for k in c.keypoints)
 #: The family of the ground-truth classes that are no prototype (KITTI's and Cityscapes' type names), lower case.
 _FAMILY_OF_TYPE = {"person_sitting": "person", "person": "person", "pedestrian": "person", "cyclist": "two-wheeler",
                    "bicycle": "two-wheeler", "motorcycle": "two-wheeler", "traffic_cone": "cone",

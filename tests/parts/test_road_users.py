@@ -182,3 +182,19 @@ def test_a_pedestrian_is_offered_its_own_keypoints_to_click_next():
     result = fit_one(Vehicle("1", "Pedestrian", None, parts, "$"), CAMERA, prior, SolverOptions(), next_clicks=3)
     names = [s["name"] for s in result.next_clicks]
     assert names and set(names) <= {"left_elbow", "left_wrist"}
+
+
+def test_a_road_user_s_sentences_name_no_car_part():
+    """What sets a pedestrian's yaw, size and scale is said as for a car, but the advice never sends the person to a
+    wheel centre, a lamp, a mirror or a licence plate (its next clicks say which keypoint to click)."""
+    prior = load_priors()["Pedestrian"]
+    t = np.array([1.5, 1.6, 12.0])
+    parts = tuple(p for p in _clicks("Pedestrian", R_cam_vehicle_from_ypr(0.7), t, prior.mean)
+                  if p.name in ("nose", "left_shoulder", "right_shoulder", "left_hip", "left_ankle"))
+    result = fit_one(Vehicle("1", "Pedestrian", None, parts, "$"), CAMERA, prior, SolverOptions())
+    sentences = result.observability.sentences
+    assert any(s.startswith("yaw ") and "set by the size prior" in s for s in sentences), sentences
+    assert any(s.startswith("scale set by the size prior") and s.endswith("or known dimensions pins it better")
+               for s in sentences), sentences
+    for word in ("wheel", "lamp", "mirror", "glass", "plate", "tyre", "door"):
+        assert not any(word in s for s in sentences), (word, sentences)

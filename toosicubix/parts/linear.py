@@ -45,7 +45,15 @@ from typing import NamedTuple
 import numpy as np
 
 from toosicubix.model import Part
-from toosicubix.vocabulary import KINDS, class_keypoint_faces, click, click_labels, entry, faces_of_click
+from toosicubix.vocabulary import (
+    KINDS,
+    ROAD_USER_KEYPOINTS,
+    class_keypoint_faces,
+    click,
+    click_labels,
+    entry,
+    faces_of_click,
+)
 
 DX, DY, DZ = 0, 1, 2
 #: Degrees of freedom of a cuboid: rotation 3, translation 3, dimensions 3.
@@ -133,6 +141,12 @@ class PartsModel:
     def keypoints_only(self) -> bool:
         """Every click is a keypoint or a plate end (at a typical position), none a cuboid part or an arrow."""
         return self.n_clicks > 0 and all(click(label).kind in ("keypoint", "plate") for label in self.click_labels)
+
+    @property
+    def road_user(self) -> bool:
+        """Every click is a keypoint of a road user's own vocabulary (:data:`~toosicubix.vocabulary.
+        ROAD_USER_KEYPOINTS`: a pedestrian's COCO keypoints): a car's wheels and lamps are no advice for it."""
+        return self.keypoints_only and all(click(label).name in ROAD_USER_KEYPOINTS for label in self.click_labels)
 
     @property
     def arrow_tails(self) -> tuple[int, ...]:

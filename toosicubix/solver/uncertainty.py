@@ -440,14 +440,19 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
     full, clicks_only = _information_variances(data, C, gradients)
     ratios, status = _status(full, clicks_only)
     keypoints_only, upright = problem.parts.keypoints_only, problem.upright_sigma is not None
-    end = one_end(problem.parts, p, R, t)
+    road_user = problem.parts.road_user
+    end = None if road_user else one_end(problem.parts, p, R, t)
 
     def sentences() -> tuple[str, ...]:
         said = _advised(status, keypoints_only, upright, end)
         sources: dict[str, tuple[str, ...]] = {}
         advice: dict[str, str] = {}
         together: dict[str, str] = {}
-        if said:  # what sets them and what to click: only for the quantities a sentence advises on
+        if said and road_user:  # what sets them; what to click is its next clicks' (the advice below speaks of a
+            # vehicle's wheels, lamps and glass)
+            sources = _setters(data, J_c, _cue_groups(problem, len(J_c)), {q: gradients[q] for q in said},
+                               {q: full[q] for q in said})
+        elif said:  # what sets them and what to click: only for the quantities a sentence advises on
             clicked = _clicked(problem, R, t, p, click_sigma)
             to_click = {name: _advice(name, clicked, keypoints_only) for name in said}
             follows = {name: () if to_click[name] else _follows(name, data, C, gradients, full, status)
@@ -468,7 +473,7 @@ def analyse(problem: Problem, R: np.ndarray, t: np.ndarray, p: np.ndarray, click
             for q, lead in together.items():
                 advice[q] = advice[lead]
         return observability_sentences(status, scale_from, keypoints_only, upright, tuple(problem.row_cues), end,
-                                       sources, advice, together)
+                                       sources, advice, together, road_user)
 
     return u, Observability(ratios, status, sentences)
 
@@ -833,7 +838,7 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
                             end: tuple[str, str | None] | None = None,
                             sources: dict[str, tuple[str, ...]] | None = None,
                             advice: dict[str, str] | None = None,
-                            together: dict[str, str] | None = None) -> tuple[str, ...]:
+                            together: dict[str, str] | None = None, road_user: bool = False) -> tuple[str, ...]:
     """Plain sentences, one per quantity the clicks do not fix (``status`` as :attr:`Observability.status`), and
     one on the scale (``scale_from``, the cue that sets it). ``keypoints_only``: every click is a keypoint (or plate)
     at a typical position, and the advice names keypoints. ``upright``: the vehicle stands upright on a road (a
@@ -845,9 +850,11 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
     ``sources``: per quantity, the cue groups that set it (:func:`_setters`; the size prior when not given), named
     in its sentence. ``advice``: per quantity, what to click that the vehicle lacks, or what limits it when it has
     every such click (:func:`_advice`, :func:`_limit`; every requirement when not given). ``together``: a quantity
-    -> the one whose sentence also says it (:func:`_together`: the clicks fix the two only together)."""
+    -> the one whose sentence also says it (:func:`_together`: the clicks fix the two only together).
+    ``road_user``: every click is a keypoint of a road user's own vocabulary (:attr:`~toosicubix.parts.linear.
+    PartsModel.road_user`): the sentences name what sets each quantity, and no vehicle part to click."""
     out = []
-    hints = _KEYPOINT_HINTS if keypoints_only else _HINTS
+    hints = {} if road_user else _KEYPOINT_HINTS if keypoints_only else _HINTS
     on_road = _on_road(status, upright)
     if on_road:
         out.append(f"{' and '.join(on_road)} set by the road (the vehicle stands upright on it)")
@@ -859,15 +866,15 @@ def observability_sentences(status: dict[str, str], scale_from: str | None, keyp
         if name in on_road or name in on_one_end or name in together:
             continue
         both = [name, *(q for q, lead in together.items() if lead == name)]
-        source, what = _source(_setting(both, sources)), (advice or {}).get(name) or hints[name]
-        said = " and ".join(both)
+        source, what = _source(_setting(both, sources)), (advice or {}).get(name) or hints.get(name)
+        said, then = " and ".join(both), f": {what}" if what else ""
         if status[name] == "cues only" or any(status[q] == "cues only" for q in both[1:]):
-            out.append(f"{said} set by {source}, not by the clicks: {what}")
+            out.append(f"{said} set by {source}, not by the clicks{then}")
         elif status[name] == "mostly cues":
-            out.append(f"{said} mostly set by {source}: {what}")
+            out.append(f"{said} mostly set by {source}{then}")
     if scale_from:
         source = {"size prior": "the size prior", "ground contact": "the camera height"}.get(scale_from, scale_from)
-        out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues)}")
+        out.append(f"scale set by {source} (no click fixes it){_scale_hint(scale_from, scale_cues, road_user)}")
     return tuple(out)
 
 
@@ -880,16 +887,18 @@ def _far_end_sentence(end: str, side: str | None) -> str:
             f"toward the far end, the {far}, {along} ({example}, or a corner of a {far} door)")
 
 
-def _scale_hint(scale_from: str, scale_cues: tuple[str, ...]) -> str:
+def _scale_hint(scale_from: str, scale_cues: tuple[str, ...], road_user: bool = False) -> str:
     """What would pin a scale the size prior sets: the cues the vehicle lacks (a ground block's camera height, a
-    known size); when it has them all, that they weigh less than the prior here."""
+    known size: a road user's known dimensions only); when it has them all, that they weigh less than the prior
+    here."""
     if scale_from != "size prior":
         return ""
     lacking = []
     if "ground contact" not in scale_cues:
         lacking.append("a ground block (the camera height)")
     if not any(cue.startswith(("length ", "known ", "plate")) for cue in scale_cues):
-        lacking.append("a known size (licence plate, wheelbase, tyre, known dimensions)")
+        lacking.append("known dimensions" if road_user else
+                       "a known size (licence plate, wheelbase, tyre, known dimensions)")
     if lacking:
         return f": {' or '.join(lacking)} pins it better"
     return ": the camera height and the known sizes given weigh less than it at this distance"
