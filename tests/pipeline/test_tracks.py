@@ -140,6 +140,13 @@ def test_a_track_that_cannot_be_placed_is_said_once_with_its_frames(tracked_file
                                 "be placed: no frame has clicks")
     assert failed[1].startswith("  failed: image frame-0 vehicle 2: ")
     assert failed[2].startswith("  failed: image frame-1 vehicle 2: ")
+    # validate says it in one paragraph too, with the first and last frames' JSON paths.
+    checked = CliRunner().invoke(main, ["validate", str(path)])
+    paragraphs = checked.stdout.split("\n\n")
+    assert sum("0003-car" in block for block in paragraphs) == 1, checked.stdout
+    (track,) = [block for block in paragraphs if "0003-car" in block]
+    assert track.startswith("track 0003-car (Car): 21 frames failed, image frame-0 vehicle 1 ($.images[0].vehicles[0]) "
+                            "to image frame-20 vehicle 1 ($.images[20].vehicles[0]): the track cannot be placed")
 
 
 def test_fit_says_how_the_tracks_frames_were_determined(tracked_file, tmp_path):

@@ -208,8 +208,20 @@ class ValidationReport:
 
     def text(self, show_all: bool = False) -> str:
         """A report for people: one paragraph per vehicle that is not well determined (every vehicle with
-        ``show_all``), then a summary line."""
-        blocks = [describe(v) for v in self.vehicles if show_all or not v.well_determined]
+        ``show_all``; the frames of a track that failed for one reason, one paragraph), then a summary line."""
+        shown = [v for v in self.vehicles if show_all or not v.well_determined]
+        failed_tracks: dict[tuple[str, str | None], list[VehicleCheck]] = {}
+        order: list[VehicleCheck | tuple[str, str | None]] = []
+        for v in shown:
+            if not v.result.ok and v.result.track is not None:
+                key = (v.result.track, v.result.error)
+                if key not in failed_tracks:
+                    order.append(key)
+                failed_tracks.setdefault(key, []).append(v)
+            else:
+                order.append(v)
+        blocks = [describe(item) if isinstance(item, VehicleCheck) else describe_failed_track(failed_tracks[item])
+                  for item in order]
         s = self.summary()
         t = self.thresholds
         tail = (f"{self.source}: {s['vehicles']} vehicles: {s['well_determined']} well determined, "
@@ -248,6 +260,16 @@ class ValidationReport:
         if soft:
             where.append("on top of each keypoint's learned spread")
         return " ".join([f"for clicks off by {self.click_sigma:.3g} px", " and ".join(where)]).strip()
+
+
+def describe_failed_track(checks: list[VehicleCheck]) -> str:
+    """The paragraph of a track's frames that failed for one reason (its first and last frame named with their JSON
+    paths); one frame's is :func:`describe`'s."""
+    if len(checks) == 1:
+        return describe(checks[0])
+    first, last, r = checks[0], checks[-1], checks[0].result
+    return (f"track {r.track} ({r.prototype}): {len(checks)} frames failed, image {first.image_id} vehicle {r.id} "
+            f"({first.json_path}) to image {last.image_id} vehicle {last.result.id} ({last.json_path}): {r.error}")
 
 
 def describe(check: VehicleCheck) -> str:
