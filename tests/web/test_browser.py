@@ -915,18 +915,22 @@ def test_a_pedestrian_is_offered_its_keypoints_not_a_car_s_parts(page, scene, tm
         assert not page.locator("#palette-section").is_visible() and not page.locator("#parts-section").is_visible()
         page.keyboard.press("1")
         assert "a Pedestrian is clicked on its keypoints" in page.locator("#message").inner_text()
+        page.keyboard.press("n")
+        _wait_revision(page, 1)
+        hint = page.locator("#fit").inner_text()
+        assert "A fit needs about 5 of its 17 keypoints, spread over the pedestrian" in hint
         # A person 1.75 m tall 8 m ahead, beside the car: nine keypoints from head to ankles, each named first.
         dims, R, t = np.array([0.8, 0.66, 1.75]), R_cam_vehicle_from_ypr(0.4), np.array([1.5, 1.65, 8.0])
         names = ("nose", "left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_knee", "right_knee",
                  "left_ankle", "right_ankle")
-        revision = 0
+        revision = 1
         for name in names:
             uv = CAMERA.project((R @ (np.array(CLASSES["Pedestrian"].keypoints[name].at) * dims) + t)[None])[0]
             page.fill("#keypoint-filter", name.replace("_", " "))
             page.press("#keypoint-filter", "Enter")
             assert f"next click: {name} (you chose the name first)" in page.locator("#message").inner_text()
             page.mouse.click(*_screen(page, uv.tolist()))
-            revision += 1 + (revision == 0)  # the first click adds the vehicle too
+            revision += 1
             _wait_revision(page, revision)
         (person,) = load_images(out)[0].vehicles
         assert person.prototype == "Pedestrian" and [(p.kind, p.name) for p in person.parts] == [

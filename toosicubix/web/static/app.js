@@ -629,9 +629,10 @@ function panels() {
       few[2] : (f.error === "out_of_time" ? f.error_detail : f.error) || "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
       "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + (classKeypoints() ?
-      `. A fit needs about five named keypoints spread over the ${escapeHtml(v.prototype.toLowerCase())}, from ` +
-      "top to bottom (choose each under Keypoints)." : ". A fit needs about five named clicks: the wheels where " +
-      "they touch the road, the body's vertical edges, the front or rear lamps and badge."));
+      `. A fit needs about ${Math.min(5, classKeypoints().length)} of its ${classKeypoints().length} keypoints, ` +
+      `spread over the ${escapeHtml(v.prototype.toLowerCase())} (choose each under Keypoints).` :
+      ". A fit needs about five named clicks: the wheels where they touch the road, the body's vertical edges, " +
+      "the front or rear lamps and badge."));
   } else {
     const verdict = f.implausible ? `<span class="bad">implausible</span>: ${escapeHtml(f.implausible)}` +
       (f.likely_cause === "swapped" ? " (left and right look swapped: s swaps them)" : "")
