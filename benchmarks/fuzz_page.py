@@ -5,7 +5,8 @@ One server per worker, started by :meth:`PageTarget.prepare` as the command a pe
 on the synthetic sequence of ``tests/web/synthetic.py``, its 11 frames, ``--sequence``, so track fits, predictions
 and their confirmations are reached too), its fits bounded as shipped. Each case is one request built from the state
 the server last answered (its revision, the vehicles, parts and predictions of an image): an edit of each op with
-real clicks of the synthetic vehicle, a preview (``/api/fit``), a save, a reload, a view; most of them then mutated
+real clicks of the synthetic vehicle (and, on a fifth of the vehicles added, pedestrians named by COCO's keypoints,
+which the page offers that prototype), a preview (``/api/fit``), a save, a reload, a view; most of them then mutated
 (a value anywhere in the body replaced by a hostile one, :data:`fuzz_targets.HOSTILE`, a key dropped or added, a
 number scaled far out, the revision made stale), or sent malformed (not JSON, not UTF-8, nested deep, another
 content type or origin). The client waits at most :data:`CLIENT_TIMEOUT` seconds and sends at most
@@ -37,6 +38,10 @@ from typing import Any
 from fuzz_targets import HOSTILE, TARGETS, Target, nodes, set_at
 
 REPO = Path(__file__).resolve().parents[1]
+#: A pedestrian's keypoints (COCO's), which the page offers a vehicle of that prototype (a fifth of the added ones).
+PERSON = ("nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder", "left_elbow",
+          "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
+          "right_ankle")
 
 #: The issue's bound: every request answered within a second.
 ANSWER_BOUND = 1.0
@@ -161,13 +166,19 @@ class PageTarget(Target):
                 {"kind": k, "part": n, **({"xy": uv[0]} if len(uv) == 1 else {"xy": uv})} for k, n, uv in chosen]}
             return "preview", "POST", "/api/fit", {"image": index, "vehicle": vehicle}
         change: dict[str, Any]
+        person = v is not None and v.get("prototype") == "Pedestrian"  # clicked on its class's keypoints
         if v is None or roll < 0.22:
             change = {"op": "add_vehicle"}
+            if rng.random() < 0.2:
+                change["prototype"] = "Pedestrian"
             if rng.random() < 0.5:
                 x, y = rng.uniform(0, 1000), rng.uniform(0, 300)
                 change["box2d"] = [x, y, x + rng.uniform(5, 240), y + rng.uniform(5, 75)]
             if view["predictions"] and rng.random() < 0.3:
                 change["track"] = rng.choice(view["predictions"])["track"]
+        elif roll < 0.55 and person:
+            change = {"op": "add_click", "vehicle": v["id"], "kind": "keypoint", "name": rng.choice(PERSON),
+                      "uv": [[rng.uniform(500, 700), rng.uniform(150, 350)]]}
         elif roll < 0.55:
             kind, name, uv = rng.choice(parts)
             change = {"op": "add_click", "vehicle": v["id"], "uv": [[x + rng.gauss(0, 1), y + rng.gauss(0, 1)]
@@ -184,7 +195,7 @@ class PageTarget(Target):
             change = {"op": "move_click", "vehicle": v["id"], "part": part, "click": 0,
                       "uv": [x + rng.gauss(0, 3) for x in v["parts"][part]["uv"][0]]}
         elif roll < 0.67 and v["parts"]:
-            kind, name, _ = rng.choice(parts)
+            kind, name, _ = ("keypoint", rng.choice(PERSON), None) if person else rng.choice(parts)
             change = {"op": "rename", "vehicle": v["id"], "part": rng.randrange(len(v["parts"])), "kind": kind,
                       "name": name}
         elif roll < 0.71 and v["parts"]:
@@ -192,7 +203,7 @@ class PageTarget(Target):
         elif roll < 0.76:
             change = {"op": "set_vehicle", "vehicle": v["id"]}
             change[rng.choice(["box2d", "done", "prototype"])] = rng.choice(
-                [[100.0, 100.0, 300.0, 200.0], True, False, "Car", None])
+                [[100.0, 100.0, 300.0, 200.0], True, False, "Car", "Pedestrian", None])
         elif roll < 0.79:
             change = {"op": "swap_sides", "vehicle": v["id"]}
         elif roll < 0.83:

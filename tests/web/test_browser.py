@@ -923,13 +923,27 @@ def test_a_pedestrian_is_offered_its_keypoints_not_a_car_s_parts(page, scene, tm
         dims, R, t = np.array([0.8, 0.66, 1.75]), R_cam_vehicle_from_ypr(0.4), np.array([1.5, 1.65, 8.0])
         names = ("nose", "left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_knee", "right_knee",
                  "left_ankle", "right_ankle")
-        revision = 1
-        for name in names:
-            uv = CAMERA.project((R @ (np.array(CLASSES["Pedestrian"].keypoints[name].at) * dims) + t)[None])[0]
+
+        def pixel(name: str) -> list[float]:
+            at = np.array(CLASSES["Pedestrian"].keypoints[name].at)
+            return CAMERA.project((R @ (at * dims) + t)[None])[0].tolist()
+
+        # A first click without a name waits (the page names a road user's clicks once its named ones fit) and is
+        # named from the keypoints' filter box.
+        page.mouse.click(*_screen(page, pixel(names[0])))
+        _wait_revision(page, 2)
+        assert ("which keypoint is click 1? The page names a Pedestrian's clicks once its named ones fit: choose it "
+                "under Keypoints") in page.locator("#message").inner_text()
+        page.fill("#keypoint-filter", names[0])
+        page.press("#keypoint-filter", "Enter")
+        revision = 3
+        _wait_revision(page, revision)
+        for name in names[1:]:
+            uv = pixel(name)
             page.fill("#keypoint-filter", name.replace("_", " "))
             page.press("#keypoint-filter", "Enter")
             assert f"next click: {name} (you chose the name first)" in page.locator("#message").inner_text()
-            page.mouse.click(*_screen(page, uv.tolist()))
+            page.mouse.click(*_screen(page, uv))
             revision += 1
             _wait_revision(page, revision)
         (person,) = load_images(out)[0].vehicles

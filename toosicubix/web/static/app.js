@@ -185,9 +185,19 @@ function namingPrompt(v, k) {
     return `which part is click ${clickNumber(k)}? It is far from every part of the fitted vehicle (off the ` +
       "vehicle, or a name given wrong): choose below if it is one, or press Delete";
   }
+  if (classKeypoints() && !first) {  // a road user's clicks are named by the page only once its named ones fit
+    return `which keypoint is click ${clickNumber(k)}? The page names a ${v.prototype}'s clicks once its named ` +
+      "ones fit: choose it under Keypoints";
+  }
   return `which part is click ${clickNumber(k)}? ` + (first && first.probability > 0.3 ?
     "The page is not sure: choose below, or press its key" :
     "Nothing places the vehicle yet (a box or a named click would): choose below, or press its key");
+}
+
+// How a click is named by hand: a part's key or the palette, or a road user's keypoints.
+function howToName() {
+  return classKeypoints() ? "choose its keypoint below or under Keypoints" :
+    "press a part's key, or choose below or in the palette";
 }
 
 function header() {
@@ -409,7 +419,7 @@ function startRename(part) {
   state.selectedPart = part;
   state.armed = null;
   setNaming(part, true);
-  say(`rename click ${clickNumber(part)}: press a part's key, or choose below or in the palette (Esc: keep its name)`);
+  say(`rename click ${clickNumber(part)}: ${howToName()} (Esc: keep its name)`);
   buildPalette();
   render();
 }
@@ -696,7 +706,7 @@ function nextClick(v) {
   const el = $("next-click");
   if (state.naming !== null && v && v.parts[state.naming]) {
     el.textContent = (state.renaming ? `Renaming click ${clickNumber(state.naming)}` :
-      `Naming click ${clickNumber(state.naming)}`) + ": press a part's key, or choose below or in the palette. " +
+      `Naming click ${clickNumber(state.naming)}`) + `: ${howToName()}. ` +
       (state.renaming ? "Esc: keep its name." : "Esc: name the next click instead.");
     el.className = "naming";
   } else if (state.armed) {
@@ -727,7 +737,7 @@ function choices(v) {
     (offered.length ? "; or: " : "; r renames it") :
     `Click ${clickNumber(k)} may be` + (offered.length && offered[0].far ?
       " (far from every part of the fitted vehicle; the nearest, by the naming model's odds): " : ": ") +
-    (offered.length ? "" : "any name of the palette");
+    (offered.length ? "" : classKeypoints() ? "any of its keypoints (under Keypoints)" : "any name of the palette");
   el.appendChild(head);
   for (const c of offered) {
     const button = document.createElement("button");
