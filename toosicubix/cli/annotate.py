@@ -88,7 +88,8 @@ def annotate_command(images: tuple[Path, ...], cameras_path: Path | None, out: P
     change; two pages on one file never lose a click (a change made on a stale page is refused and re-applied
     after a reload). With --mapping, the page offers that mapping's keypoints too (a filter box above them),
     names unnamed clicks among them (the most probable visible one, given its spread and how often people click
-    it) and suggests them as the next clicks.
+    it) and suggests them as the next clicks. A road user with keypoints of its own (the Pedestrian prototype:
+    COCO's 17; Cyclist, Traffic cone, ...) is clicked on those, which the page offers in place of a car's parts.
 
     With --sequence, the images are the frames of one video and vehicles are tracks across them (saved with their
     sequence, frame and track, so `fit` fits each track as one vehicle): `[` `]` step through the frames, and each
