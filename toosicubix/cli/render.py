@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from toosicubix.cli.options import BadInput, GroundTruth, ProgressBar, ground_truth_options
+from toosicubix.cli.options import BadInput, Finite, GroundTruth, ProgressBar, ground_truth_options
 from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 
 
@@ -33,10 +33,16 @@ from toosicubix.formats.results import DEFAULT_OUTPUT_DIR
 @click.option("--no-birds-eye", is_flag=True, help="Leave out the bird's-eye view beside each overlay.")
 @click.option("--png-compression", type=click.IntRange(0, 9), default=1, show_default=True,
               help="zlib level of the PNG files: 1 is fast, 9 gives the smallest files (about half as large).")
+@click.option("--video", is_flag=True,
+              help="Also write each sequence's rendered frames as one video, <sequence>.mp4 beside the PNGs (MPEG-4, "
+                   "in frame order at --frame-rate; a frame missing between two shows the one before, for up to "
+                   "5 s).")
+@click.option("--frame-rate", type=Finite(min=0.0, max=1000.0, min_open=True), default=10.0, show_default=True,
+              help="Frames per second of the videos, as `fit --frame-rate` (KITTI's 10).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar, warnings or summary on stderr.")
 def render_command(out: Path, render_dir: Path | None, annotations: Path | None, images_dir: Path | None,
                    only: str | None, ground_truth: GroundTruth | None, next_clicks: bool, no_birds_eye: bool,
-                   png_compression: int, quiet: bool) -> None:
+                   png_compression: int, video: bool, frame_rate: float, quiet: bool) -> None:
     """Draw every fit of OUT (a `toosicubix fit` folder) over its image: one PNG per image.
 
     Each fitted cuboid's 12 edges are projected with the camera's lens distortion and cut where they pass
@@ -50,7 +56,8 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
     Frames of a sequence (a fit with tracks): a tracked vehicle keeps its track's colour in every frame, its
     label ends with its track and how this frame's pose was determined (clicks, box or interp.), and the
     bird's-eye view draws each of the frame's tracks over all the sequence's frames: its positions relative to
-    the camera, a dot per frame, clicked frames ringed, this frame's a larger dot.
+    the camera, a dot per frame, clicked frames ringed, this frame's a larger dot. With --video, each sequence's
+    frames also become one video to play.
 
     Images come from each image's `file` relative to the annotation file, or from --images; a missing image, or
     one that cannot be decoded, gets a warning naming it and a blank canvas. Sizes are bounded: an image file whose
@@ -64,12 +71,13 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
     Example:
       toosicubix fit samples/annotations.json && toosicubix render
       toosicubix render runs/kitti-out --images data/kitti/image_2 --kitti data/kitti --only uncertain
+      toosicubix render tracks-out --images data/kitti_tracking/image_02 --video
     """
     from toosicubix.render.folder import RenderOptions, render_folder
     from toosicubix.render.overlay import OverlayOptions
 
     options = RenderOptions(overlay=OverlayOptions(birds_eye=not no_birds_eye, next_clicks=next_clicks), only=only,
-                            png_compression=png_compression)
+                            png_compression=png_compression, video=video, frame_rate=frame_rate)
     gt = (ground_truth.kind, ground_truth.root) if ground_truth else None
     bar = ProgressBar(quiet, label="rendering")
     try:
@@ -88,3 +96,5 @@ def render_command(out: Path, render_dir: Path | None, annotations: Path | None,
         blank += f", {len(summary.refused)} left out (too large to draw even scaled)" if summary.refused else ""
         skipped = f" ({summary.skipped} left out by --only {only})" if only else ""
         click.echo(f"rendered {len(summary.written)} images{blank} -> {summary.out_dir}{skipped}", err=True)
+        if summary.videos:
+            click.echo(f"videos: {', '.join(p.name for p in summary.videos)} in {summary.out_dir}", err=True)

@@ -89,11 +89,15 @@ class RenderOptions:
     overlay : what each overlay shows
     only : one of :data:`ONLY_CHOICES`, or None for every image
     png_compression : zlib level 0-9 of the written PNGs
+    video : also write each sequence's rendered frames as ``<sequence>.mp4`` (:mod:`toosicubix.render.video`)
+    frame_rate : frames per second of those videos (the sequences' own, as ``fit --frame-rate``)
     """
 
     overlay: OverlayOptions = field(default_factory=OverlayOptions)
     only: str | None = None
     png_compression: int = PNG_COMPRESSION
+    video: bool = False
+    frame_rate: float = 10.0
 
 
 @dataclass
@@ -108,6 +112,7 @@ class RenderSummary:
     skipped : images left out by ``only``
     warnings : one line each (missing image files, images without ground truth, a changed annotation file)
     out_dir : where the PNGs went
+    videos : the sequences' videos (``RenderOptions.video``)
     """
 
     written: list[Path] = field(default_factory=list)
@@ -116,6 +121,7 @@ class RenderSummary:
     skipped: int = 0
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
+    videos: list[Path] = field(default_factory=list)
 
 
 def encode_png(image_bgr: np.ndarray, compression: int = PNG_COMPRESSION) -> bytes:
@@ -733,6 +739,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
     summary.skipped = len(results) - len(chosen)
     if on_start is not None:
         on_start(len(chosen))
+    frames: dict[str, list[tuple[int, Path]]] = {}  # each sequence's rendered frames, for its video
     for result in chosen:
         image = images.get(result.id)
         if image is None:
@@ -776,8 +783,19 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
         target = out / f"{result.id}.png"
         atomic_write_bytes(target, encode_png(picture, options.png_compression), clean=False)
         summary.written.append(target)
+        if result.sequence is not None and result.frame is not None:
+            frames.setdefault(result.sequence, []).append((result.frame, target))
         if progress is not None:
             progress(1)
+    if options.video:
+        if not frames:
+            summary.warnings.insert(0, "--video: no rendered image is a frame of a sequence (its `sequence` and "
+                                       "`frame`): no video written")
+        else:
+            from toosicubix.render.video import write_videos
+
+            videos = write_videos(frames, out, options.frame_rate)
+            summary.videos, summary.warnings = videos.written, videos.warnings + summary.warnings  # said first
     return summary
 
 
