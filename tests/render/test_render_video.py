@@ -49,6 +49,9 @@ def test_frames_in_order_gaps_held_and_odd_sides_padded(tmp_path):
     # Each frame's mean grey within the codec's loss and the one black pixel row and column of padding.
     np.testing.assert_allclose(means, [v * 33 * 21 / (34 * 22) for v in expected], atol=3.0)
     assert not list(tmp_path.glob(".*.tmp"))  # written whole, then moved in
+    first = (tmp_path / "clip.mp4").read_bytes()
+    write_videos({"clip": frames}, tmp_path, 2.0)
+    assert (tmp_path / "clip.mp4").read_bytes() == first  # as render's PNGs: the same bytes again
 
 
 def test_a_frame_of_another_size_is_scaled_and_said(tmp_path):
