@@ -92,3 +92,16 @@ def test_render_video_of_a_fitted_sequence(tmp_path):
     assert runner.invoke(main, ["fit", str(alone), "-o", str(tmp_path / "alone-out")]).exit_code == 0
     result = runner.invoke(main, ["render", str(tmp_path / "alone-out"), "--video"])
     assert result.exit_code == 0 and "--video: no rendered image is a frame of a sequence" in result.stderr
+
+
+def test_frames_beyond_the_codec_s_side_are_scaled_down(tmp_path, monkeypatch):
+    # MPEG-4 Part 2 takes at most 8190 px a side (a 13-bit size); here the bound is lowered to 20 so that the test
+    # draws small frames: 50 x 30 frames become a 20 x 12 video, said once.
+    import toosicubix.render.video as video
+
+    monkeypatch.setattr(video, "MAX_SIDE", 20)
+    frames = [(n, _png(tmp_path / f"{n}.png", 50, 30, 90)) for n in range(3)]
+    summary = write_videos({"big": frames}, tmp_path, 10.0)
+    assert summary.warnings == ["sequence big: its frames are 50x30 pixels, more than MPEG-4 takes a side (20): its "
+                                "video is scaled by 0.4"]
+    assert _read(tmp_path / "big.mp4")[:3] == (3, 10.0, (20, 12))

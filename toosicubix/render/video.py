@@ -23,6 +23,8 @@ from toosicubix.formats.atomic import atomic_write
 #: The longest stretch of missing frames shown as the frame before it, seconds; a longer gap is cut short.
 MAX_HOLD_S = 5.0
 FOURCC = "mp4v"
+#: The longest side MPEG-4 Part 2 takes (13 bits, even): a larger frame is scaled down to it.
+MAX_SIDE = 8190
 
 
 @dataclass
@@ -60,12 +62,17 @@ def _encode(shown: list[tuple[int, Path]], staged: Path, frame_rate: float, sequ
     if first is None:
         return f"{shown[0][1]} cannot be read"
     height, width = first.shape[:2]
+    if max(height, width) > MAX_SIDE:  # beyond the codec: the video is drawn smaller
+        shrink = MAX_SIDE / max(height, width)
+        warnings.append(f"sequence {sequence}: its frames are {width}x{height} pixels, more than MPEG-4 takes a "
+                        f"side ({MAX_SIDE}): its video is scaled by {shrink:.3g}")
+        height, width = max(1, int(height * shrink)), max(1, int(width * shrink))
     # The codec's 4:2:0 chroma needs even sides: an odd one is padded by a black pixel rather than cropped.
     pad_bottom, pad_right = height % 2, width % 2
     writer = cv2.VideoWriter(str(staged), cv2.VideoWriter_fourcc(*FOURCC), frame_rate,
                              (width + pad_right, height + pad_bottom))
     if not writer.isOpened():
-        return f"this OpenCV cannot write {FOURCC} video (built without FFmpeg)"
+        return f"OpenCV could not open a {FOURCC} writer for {width}x{height} frames here (built without FFmpeg?)"
     longest = max(1, round(MAX_HOLD_S * frame_rate))
     scaled, cut = 0, 0
     try:
@@ -75,8 +82,8 @@ def _encode(shown: list[tuple[int, Path]], staged: Path, frame_rate: float, sequ
             if picture is None:
                 return f"{path} cannot be read"
             if picture.shape[:2] != (height, width):
+                scaled += picture.shape[:2] != first.shape[:2]  # another size than the first (not the codec's bound)
                 picture = cv2.resize(picture, (width, height), interpolation=cv2.INTER_AREA)
-                scaled += 1
             if pad_bottom or pad_right:
                 picture = cv2.copyMakeBorder(picture, 0, pad_bottom, 0, pad_right, cv2.BORDER_CONSTANT, value=0)
             if previous is not None:
