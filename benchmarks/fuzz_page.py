@@ -37,11 +37,10 @@ from typing import Any
 
 from fuzz_targets import HOSTILE, TARGETS, Target, nodes, set_at
 
+# A pedestrian's keypoints, which the page offers a vehicle of that prototype (a fifth of the added ones).
+from toosicubix.parts.road_users import COCO_PERSON_KEYPOINTS as PERSON
+
 REPO = Path(__file__).resolve().parents[1]
-#: A pedestrian's keypoints (COCO's), which the page offers a vehicle of that prototype (a fifth of the added ones).
-PERSON = ("nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder", "left_elbow",
-          "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
-          "right_ankle")
 
 #: The issue's bound: every request answered within a second.
 ANSWER_BOUND = 1.0

@@ -167,9 +167,9 @@ def _clicks(parts: list[dict[str, Any]], cam: str, where: str, warnings: list[st
 
 
 def _extend(intervals: list[dict[str, int]], f: int) -> None:
-    """Add frame ``f`` (at or after every frame in them) to an object's ``frame_intervals``."""
-    if intervals[-1]["frame_end"] >= f - 1:
-        intervals[-1]["frame_end"] = max(intervals[-1]["frame_end"], f)
+    """Add frame ``f`` (after every frame in them: a track is in a frame once) to an object's ``frame_intervals``."""
+    if intervals[-1]["frame_end"] == f - 1:
+        intervals[-1]["frame_end"] = f
     else:
         intervals.append({"frame_start": f, "frame_end": f})
 
@@ -194,17 +194,15 @@ def openlabel_document(images: list[FittedImage], name: str = "") -> tuple[dict[
         frame_objects: dict[str, Any] = {}
         for fv in image.vehicles:
             v = fv.result
-            if v.track is None:
-                uid = str(len(objects))
-                objects[uid] = {"name": f"{image.id}/{v.id}", "type": v.prototype, "coordinate_system": cam,
-                                "frame_intervals": [{"frame_start": f, "frame_end": f}]}
-            elif v.track not in track_uid:  # one object for the whole track, its frames added as they come
-                uid = track_uid[v.track] = str(len(objects))
-                objects[uid] = {"name": v.track, "type": v.prototype, "coordinate_system": cam,
-                                "frame_intervals": [{"frame_start": f, "frame_end": f}]}
-            else:
+            if v.track in track_uid:  # one object for the whole track, its frames added as they come
                 uid = track_uid[v.track]
                 _extend(objects[uid]["frame_intervals"], f)
+            else:
+                uid = str(len(objects))
+                objects[uid] = {"name": v.track or f"{image.id}/{v.id}", "type": v.prototype,
+                                "coordinate_system": cam, "frame_intervals": [{"frame_start": f, "frame_end": f}]}
+                if v.track is not None:
+                    track_uid[v.track] = uid
             data: dict[str, Any] = {}
             if v.ok:
                 cuboid = {"name": "cuboid", "val": cuboid_val(v.R_cam_vehicle, v.t_cam_vehicle, v.dimensions),

@@ -71,8 +71,23 @@ class FailedTrack:
     frames: int  # how many of its frames failed
     first_image: str  # the image of its first failed frame (file order) and of its last
     last_image: str
-    reason: str  # its first failed frame's reason
-    other_reasons: int  # how many other reasons its other failed frames give
+    reasons: list[str]  # its frames' distinct reasons, the first frame's first; at most REASONS_KEPT
+
+    @property
+    def reason(self) -> str:
+        """Its first failed frame's reason."""
+        return self.reasons[0]
+
+    @property
+    def other_reasons(self) -> int:
+        """How many other reasons its other failed frames give (counted up to :data:`REASONS_KEPT` in all)."""
+        return len(self.reasons) - 1
+
+    def add(self, image_id: str, reason: str) -> None:
+        """Count another failed frame, in image ``image_id``, for ``reason``."""
+        self.frames, self.last_image = self.frames + 1, image_id
+        if reason not in self.reasons and len(self.reasons) < REASONS_KEPT:
+            self.reasons.append(reason)
 
     def describe(self) -> str:
         """``track T (N frames, images A to B): reason``, as ``fit`` says it."""
@@ -294,7 +309,6 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
     pose_from: dict[str, int] = {}
     implausible: list[tuple[str, str, str]] = []
     failed_tracks: dict[str, FailedTrack] = {}
-    reasons: dict[str, set[str]] = {}  # each failed track's distinct reasons (bounded)
 
     def tally(im: ImageResult) -> None:
         for v in im.vehicles:
@@ -306,15 +320,10 @@ def _fit_indexed(annotations: Path, index: AnnotationIndex, out_dir: Path, setti
                 swapped = any(w.startswith("left and right look swapped") for w in v.warnings)
                 implausible.append((im.id, v.id, "left and right look swapped" if swapped else v.implausible))
             if not v.ok and v.track is not None:  # a track's frames fail alike: one entry for the track
-                entry = failed_tracks.get(v.track)
-                if entry is None and len(failed_tracks) < FAILED_KEPT:
-                    failed_tracks[v.track] = FailedTrack(v.track, 1, im.id, im.id, v.error or "", 0)
-                    reasons[v.track] = {v.error or ""}
-                elif entry is not None:
-                    entry.frames, entry.last_image = entry.frames + 1, im.id
-                    if len(reasons[v.track]) < REASONS_KEPT:
-                        reasons[v.track].add(v.error or "")
-                        entry.other_reasons = len(reasons[v.track]) - 1
+                if v.track in failed_tracks:
+                    failed_tracks[v.track].add(im.id, v.error or "")
+                elif len(failed_tracks) < FAILED_KEPT:
+                    failed_tracks[v.track] = FailedTrack(v.track, 1, im.id, im.id, [v.error or ""])
             elif not v.ok:
                 if len(failed) < FAILED_KEPT:
                     failed.append((im.id, v.id, v.error or ""))

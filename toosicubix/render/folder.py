@@ -783,7 +783,7 @@ def render_folder(fit_dir: str | Path, out_dir: str | Path | None = None, annota
         target = out / f"{result.id}.png"
         atomic_write_bytes(target, encode_png(picture, options.png_compression), clean=False)
         summary.written.append(target)
-        if result.sequence is not None and result.frame is not None:
+        if options.video and result.sequence is not None and result.frame is not None:
             frames.setdefault(result.sequence, []).append((result.frame, target))
         if progress is not None:
             progress(1)

@@ -488,18 +488,11 @@ class Session:
         """A keypoint's fields (``at``, ``spread``; ``visible`` kept when given) on a vehicle of ``prototype``: its
         class's keypoint, else the mapping's; None when neither has it (a class with keypoints of its own takes no
         mapping's)."""
-        if not isinstance(name, str):
-            return None
-        own = keypoint_class(prototype)
-        if own is not None:
-            position = own.keypoints.get(name)
-        elif self.mapping is not None:
-            position = self.mapping.keypoint_positions(prototype).get(name)
-        else:
-            position = None
+        keypoints = self._keypoints(prototype) if isinstance(name, str) else None
+        position = None if keypoints is None else keypoints.get(name)
         if position is None:
             return None
-        extra: dict[str, Any] = {"at": list(position.at), "spread": list(position.spread)}
+        extra: dict[str, Any] = {"at": [float(x) for x in position.at], "spread": [float(x) for x in position.spread]}
         if visible is not None:
             extra["visible"] = visible
         return extra
@@ -1333,7 +1326,7 @@ class Session:
     def _op_swap_sides(self, image: ImageState, r: dict) -> dict[str, Any]:
         """Swap the vehicle's left and right in its named clicks (:func:`toosicubix.parts.mirror.mirrored`: the
         ``-left`` and ``-right`` parts, the two clicks of a pair, ``leftward`` and ``rightward``; a keypoint of the
-        vehicle's class or of the mapping becomes the keypoint at its mirror place, :meth:`_mirror_keypoint`), as
+        vehicle's class or of the mapping becomes the keypoint at its mirror place, :func:`_mirror_keypoint`), as
         the person's own names. Unnamed clicks stay, and so does a keypoint with none at its mirror place. How many
         clicks changed, and those keypoints."""
         v = self._vehicle(image, r)
@@ -1343,10 +1336,11 @@ class Session:
         model = tuple(Part(p.kind, p.name, np.asarray(p.uv, dtype=float), f"parts[{k}]", p.known,
                            **p.model_fields()) for k, p in named)
         changed, unpaired = 0, []
+        keypoints = self._keypoints(v.prototype)
         for (_, part), swapped in zip(named, mirrored(model), strict=True):
             name, uv, extra = swapped.name, swapped.uv.tolist(), part.extra
-            if part.kind == "keypoint" and self._keypoints(v.prototype) is not None:
-                name = self._mirror_keypoint(v.prototype, part.name)
+            if part.kind == "keypoint" and keypoints is not None:
+                name = _mirror_keypoint(keypoints, part.name)
                 if name is None:  # no keypoint of the mapping there: left as it is, and said
                     unpaired.append(part.name)
                     name = part.name
@@ -1362,18 +1356,6 @@ class Session:
             raise ApiError(f"swapping left and right would name two clicks {', '.join(twice)}; rename them one by "
                            "one instead")
         return {"swapped": changed, "unpaired": unpaired}
-
-    def _mirror_keypoint(self, prototype: str, name: str) -> str | None:
-        """The keypoint (of the vehicle's class, else the mapping's) at the mirror place of keypoint ``name`` (its
-        typical place with Y negated: the nearest keypoint, within :data:`MIRROR_TOLERANCE`), or None when there is
-        none there."""
-        positions = self._keypoints(prototype) or {}
-        if name not in positions:
-            return None
-        at = np.asarray(positions[name].at, dtype=float) * np.array([1.0, -1.0, 1.0])
-        distance, nearest = min((float(np.linalg.norm(np.asarray(p.at, dtype=float) - at)), k)
-                                for k, p in positions.items())
-        return nearest if distance <= MIRROR_TOLERANCE else None
 
     def _op_confirm_prediction(self, image: ImageState, r: dict) -> dict[str, Any]:
         track = r.get("track")
@@ -1503,6 +1485,18 @@ class Session:
 
 
 _OPS = {name.removeprefix("_op_"): fn for name, fn in vars(Session).items() if name.startswith("_op_")}
+
+
+def _mirror_keypoint(keypoints: dict[str, TypicalKeypoint], name: str) -> str | None:
+    """The keypoint of ``keypoints`` (a vehicle's class's, else the mapping's: :meth:`Session._keypoints`) at the
+    mirror place of keypoint ``name`` (its typical place with Y negated: the nearest keypoint, within
+    :data:`MIRROR_TOLERANCE`), or None when there is none there."""
+    if name not in keypoints:
+        return None
+    at = np.asarray(keypoints[name].at, dtype=float) * np.array([1.0, -1.0, 1.0])
+    distance, nearest = min((float(np.linalg.norm(np.asarray(k.at, dtype=float) - at)), n)
+                            for n, k in keypoints.items())
+    return nearest if distance <= MIRROR_TOLERANCE else None
 
 
 def _road_grounds(blocks: dict[tuple, GroundOverride] | None) -> dict[tuple, GroundPlane]:

@@ -631,6 +631,7 @@ function panels() {
   $("prototype").value = v.prototype;
   const f = v.fit;
   if (f.status !== "ok") {
+    const own = classKeypoints();  // a road user's own keypoints, or null
     const named = v.parts.length - v.unnamed;
     const waiting = v.unnamed ? `${count(v.unnamed, "click")} waiting for a name (choose under Naming)` : "";
     // The fit's "too few clicks" counts points (a pair's two): said here in the page's count, named clicks.
@@ -638,8 +639,8 @@ function panels() {
     const why = few ? `${count(named, "named click")} cannot place a cuboid yet; click at least ${few[1]} more ` +
       few[2] : (f.error === "out_of_time" ? f.error_detail : f.error) || "";
     fit.innerHTML = '<span class="bad">not fitted yet</span>: ' + (named ? (waiting ? `${waiting}; with the named ` +
-      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + (classKeypoints() ?
-      `. A fit needs about ${Math.min(5, classKeypoints().length)} of its ${classKeypoints().length} keypoints, ` +
+      "ones: " : "") + escapeHtml(why) : (waiting || "no click yet") + (own ?
+      `. A fit needs about ${Math.min(5, own.length)} of its ${own.length} keypoints, ` +
       `spread over the ${escapeHtml(v.prototype.toLowerCase())} (choose each under Keypoints).` :
       ". A fit needs about five named clicks: the wheels where they touch the road, the body's vertical edges, " +
       "the front or rear lamps and badge."));
