@@ -233,6 +233,18 @@ def test_help_texts_have_examples():
     assert "toosicubix eval --kitti" in run("--help").output
 
 
+def test_help_shows_no_empty_range():
+    """A number option without bounds shows none: click's range text would read ``[x<=None]``."""
+    from toosicubix.cli import main
+
+    commands = [[name] for name in main.commands]
+    commands += [[name, sub] for name, group in main.commands.items() for sub in getattr(group, "commands", {})]
+    for command in commands:
+        result = run(*command, "--help")
+        assert result.exit_code == 0, command
+        assert "None]" not in result.output and "=None" not in result.output, command
+
+
 def test_schema_command_prints_the_schema():
     result = run("schema")
     assert result.exit_code == 0

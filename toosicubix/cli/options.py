@@ -40,6 +40,10 @@ class Finite(click.FloatRange):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return number
 
+    def _describe_range(self) -> str:
+        """Without bounds there is no range to show (click's would print ``[x<=None]`` in ``--help``)."""
+        return "" if self.min is None and self.max is None else super()._describe_range()
+
 
 class BadInput(InputError, click.ClickException):
     """A bad input file or option value found by the CLI itself: printed as is, exit code 2."""
