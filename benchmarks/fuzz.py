@@ -24,7 +24,9 @@ left mixed or refused by the next run (the second half of item 7).
 
 The surfaces after issue 13 (issue 34, item 2) are targets (:mod:`fuzz_targets`): ``import coco``, ``import cvat``,
 ``import label-studio``, ``learn-parts`` and mapping files, ``eval --apollocar3d``, ``export openlabel`` and ``export
-cvat``, ``render``. ``--targets`` picks them (``all``: every one; ``fit``: the trials above) and ``--cases N`` shares
+cvat``, ``render``; and sequences (``tracks``: a file of frames with tracks through ``fit``, ``validate`` and
+``render --video``, or its fit's results through ``export openlabel``, ``export cvat`` and ``render --video``).
+``--targets`` picks them (``all``: every one; ``fit``: the trials above) and ``--cases N`` shares
 N cases among the chosen ones. Each case's command runs in a forked child (:func:`run_isolated`), which gives its peak
 memory (the child's maximum resident set, the worker's pages it touches included) and a hang bound that needs no
 signal in the command's own process; the child may not map more than ``--address-limit`` GB (a runaway allocation

@@ -700,9 +700,137 @@ class RenderTarget(SampleFitTarget):
                                                     str(pictures), "-q"], pictures)]
 
 
+#: A synthetic KITTI tracking sequence for :class:`TracksTarget`: (track id, type, h, w, l, first frame, last frame,
+#: the bottom centre (x, y, z) in metres and rotation_y at the first frame, and their change a frame).
+SYNTHETIC_TRACKS = ((0, "Car", 1.5, 1.7, 4.2, 0, 15, (-3.0, 1.65, 12.0, -1.45), (0.0, 0.0, 0.6, 0.004)),
+                    (1, "Van", 2.1, 1.9, 5.0, 0, 15, (-9.0, 1.65, 26.0, 0.05), (1.1, 0.0, 0.0, 0.0)),
+                    (2, "Car", 1.45, 1.75, 4.4, 3, 14, (4.5, 1.7, 15.0, 1.9), (0.0, 0.0, 0.0, 0.0)))
+P_TRACKING = np.array([[720.0, 0.0, 621.0, 0.0], [0.0, 720.0, 187.5, 0.0], [0.0, 0.0, 1.0, 0.0]])
+
+
+def synthetic_tracking(root: Path, sequence: str = "0007") -> Path:
+    """A KITTI tracking root (``label_02/<sequence>.txt``, ``calib/<sequence>.txt``) of :data:`SYNTHETIC_TRACKS`:
+    made here, so that the fuzz needs no dataset."""
+    lines = []
+    for track, kind, h, w, l, first, last, start, step in SYNTHETIC_TRACKS:
+        for frame in range(first, last + 1):
+            x, y, z, ry = (a + b * (frame - first) for a, b in zip(start, step, strict=True))
+            c, s_ = np.cos(ry), np.sin(ry)
+            corners = np.array([[x + c * dx * l / 2 + s_ * dz * w / 2, y - dy * h, z - s_ * dx * l / 2 + c * dz * w / 2]
+                                for dx in (-1, 1) for dz in (-1, 1) for dy in (0, 1)])
+            uvw = np.c_[corners, np.ones(8)] @ P_TRACKING.T
+            u, v = uvw[:, 0] / uvw[:, 2], uvw[:, 1] / uvw[:, 2]
+            box = (max(u.min(), 0.0), max(v.min(), 0.0), min(u.max(), 1241.0), min(v.max(), 374.0))
+            alpha = ry - np.arctan2(x, z)
+            lines.append(f"{frame} {track} {kind} 0 0 {alpha:.6f} " + " ".join(f"{b:.2f}" for b in box)
+                         + f" {h:.6f} {w:.6f} {l:.6f} {x:.6f} {y:.6f} {z:.6f} {ry:.6f}")
+    (root / "label_02").mkdir(parents=True, exist_ok=True)
+    (root / "calib").mkdir(exist_ok=True)
+    lines.sort(key=lambda line: (int(line.split()[0]), int(line.split()[1])))
+    (root / "label_02" / f"{sequence}.txt").write_text("\n".join(lines) + "\n")
+    P = " ".join(f"{v:.6e}" for v in P_TRACKING.ravel())
+    (root / "calib" / f"{sequence}.txt").write_text(
+        "".join(f"P{k}: {P}\n" for k in range(4)) + "R_rect: 1 0 0 0 1 0 0 0 1\n"
+        "Tr_velo_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\nTr_imu_velo: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    return root
+
+
+class TracksTarget(Target):
+    """Sequences (issue 32) and what reads their fits: a file of frames with tracks (simulated on
+    :func:`synthetic_tracking`, clicks on every fifth frame, boxes on every frame) mutated, then ``fit`` and
+    ``validate``; or its fit's results.json mutated where a sequence lives (``track``, ``pose_from``, ``sequence``,
+    ``frame``, ``track_ids``), then ``export openlabel``, ``export cvat`` and ``render --video``."""
+
+    name = "tracks"
+
+    def prepare(self, work: Path) -> None:
+        from click.testing import CliRunner
+
+        from toosicubix.cli import main
+
+        super().prepare(work)
+        root = synthetic_tracking(work / "kitti_tracking")
+        self.annotations = work / "tracks.json"
+        result = CliRunner().invoke(main, ["simulate", "--kitti-tracking", str(root), "--tracks", "--keyframes", "5",
+                                           "-o", str(self.annotations)], catch_exceptions=False)
+        if result.exit_code != 0:
+            raise RuntimeError(f"simulate --tracks failed: {result.output}")
+        self.doc = json.loads(self.annotations.read_text())
+        self.fit = work / "tracks_fit"
+        fit_in_process(self.annotations, self.fit)
+        self.results = json.loads((self.fit / "results.json").read_text())
+
+    def case(self, index: int, seed: int, folder: Path) -> tuple[str, list[Command]]:
+        rng = self.rng(index, seed)
+        if rng.random() < 0.5:
+            annotations = folder / "annotations.json"
+            if rng.random() < 0.5:
+                doc, kind = self._sequence_mutation(copy.deepcopy(self.doc), rng)
+                annotations.write_bytes(json_bytes(doc, rng))
+            else:
+                kind = mutated_json_file(self.doc, rng, annotations, ("sequence", "frame", "track", "box2d", "xy"))
+            out = folder / "fit"
+            return kind, [Command("fit", ["fit", str(annotations), "-o", str(out), "-q", "--jobs", "1"], out),
+                          Command("validate", ["validate", str(annotations), "-q"]),
+                          Command("render --video", ["render", str(out), "--video", "-o", str(folder / "pictures"),
+                                                     "-q"], folder / "pictures")]
+        out = folder / "fit"
+        shutil.copytree(self.fit, out)
+        kind = "results-" + mutated_json_file(self.results, rng, out / "results.json",
+                                              ("track", "pose_from", "sequence", "frame", "track_ids", "id"))
+        return kind, [Command("export openlabel", ["export", "openlabel", str(out), "-o", str(folder / "l.json"),
+                                                   "-q"], folder / "l.json"),
+                      Command("export cvat", ["export", "cvat", str(out), "-o", str(folder / "r.xml"), "-q"],
+                              folder / "r.xml"),
+                      Command("render --video", ["render", str(out), "--video", "-o", str(folder / "pictures"), "-q"],
+                              folder / "pictures")]
+
+    @staticmethod
+    def _sequence_mutation(doc: dict[str, Any], rng: random.Random) -> tuple[dict[str, Any], str]:
+        """A change a sequence's file may plausibly carry: frames far apart or out of order, a track moved, clicks
+        taken off a track, boxes outside the image or turned inside out."""
+        images = doc["images"]
+        vehicles = [v for im in images for v in im["vehicles"]]
+        kind = rng.choice(["frame-far", "frame-negative", "frame-shuffle", "frame-same", "track-moved",
+                           "track-unclicked", "box-outside", "box-inverted", "sequence-split", "track-prototype"])
+        if kind == "frame-far":
+            rng.choice(images)["frame"] = rng.choice([10**6, 2**31 - 1, 2**53, 10**12])
+        elif kind == "frame-negative":
+            rng.choice(images)["frame"] = rng.choice([-1, -(2**31)])
+        elif kind == "frame-shuffle":
+            frames = [im["frame"] for im in images]
+            rng.shuffle(frames)
+            for im, frame in zip(images, frames, strict=True):
+                im["frame"] = frame
+            rng.shuffle(images)
+        elif kind == "frame-same":
+            a, b = rng.sample(images, 2)
+            a["frame"] = b["frame"]
+        elif kind == "track-moved":
+            rng.choice(vehicles)["track"] = rng.choice([v["track"] for v in vehicles])
+        elif kind == "track-unclicked":
+            track = rng.choice(vehicles)["track"]
+            for v in vehicles:
+                if v["track"] == track:
+                    v["parts"] = []
+        elif kind in ("box-outside", "box-inverted"):
+            for v in rng.sample(vehicles, max(1, len(vehicles) // 3)):
+                x1, y1, x2, y2 = v.get("box2d") or [10.0, 10.0, 50.0, 40.0]
+                v["box2d"] = ([x1 + 5000, y1 - 3000, x2 + 9000, y2 + 1e6] if kind == "box-outside"
+                              else [x2, y2, x1, y1])
+        elif kind == "sequence-split":
+            for im in rng.sample(images, len(images) // 2):
+                im["sequence"] = "0008"
+        else:
+            v = rng.choice(vehicles)
+            v["prototype"] = "Van" if v.get("prototype") == "Car" else "Car"
+        return doc, f"sequence:{kind}"
+
+
 #: Every target by name, in the order a run takes them.
 TARGETS: dict[str, type[Target]] = {t.name: t for t in (CocoTarget, CvatTarget, LabelStudioTarget, LearnPartsTarget,
-                                                         EvalApolloTarget, ExportTarget, RenderTarget)}
+                                                         EvalApolloTarget, ExportTarget, RenderTarget,
+                                                         TracksTarget)}
 
 # The page's JSON API: requests to a live server per worker, in a module of its own, which imports this one and adds
 # its target to TARGETS (whichever of the two is imported first).

@@ -72,3 +72,30 @@ def test_quick_targets_make_cases_that_end_cleanly(harness, tmp_path, name):
             assert "traceback" not in record and "non_finite" not in record, record
             assert record["exit"] == 0 or record["output"].startswith("Error: "), record
     assert len(kinds) >= 2  # different mutations
+
+
+def test_tracks_target_fits_its_sequence_and_its_cases_end_cleanly(harness, tmp_path):
+    """The sequence the tracks target mutates is one ``fit`` places whole (3 tracks over 16 frames, each track one
+    size), so that a mutation's effect is the mutation's; a few of its cases end with exit 0, 1 or 2 and no
+    traceback, the fit cases and the results cases both."""
+    fuzz, targets = harness
+    target = targets.TARGETS["tracks"]()
+    (tmp_path / "base").mkdir()
+    target.prepare(tmp_path / "base")
+    vehicles = [v for image in target.results["images"] for v in image["vehicles"]]
+    assert len(target.results["images"]) == 16 and len(vehicles) == 44
+    assert all(v["status"] == "ok" for v in vehicles)
+    sizes = {}
+    for v in vehicles:
+        sizes.setdefault(v["track"], set()).add(tuple(v["dimensions"]))
+    assert len(sizes) == 3 and all(len(s) == 1 for s in sizes.values())
+    labels = {}
+    for index in range(6):
+        folder = tmp_path / f"c{index}"
+        folder.mkdir()
+        for record in target.run_case(index, 0, folder, 60, fuzz.run_isolated):
+            labels.setdefault(record["command"], set()).add(record["exit"])
+            assert record["exit"] in (0, 1, 2) and not record["hang"], record
+            assert "traceback" not in record and "non_finite" not in record, record
+            assert record["exit"] != 2 or record["output"].startswith("Error: "), record
+    assert {"fit", "render --video"} <= set(labels) and {"export openlabel", "export cvat"} & set(labels)
