@@ -23,6 +23,7 @@ from tests.formats.tool_fixtures import (
     sample_fit,
     write_json,
 )
+from tests.pipeline.test_tracks import FRAMES, tracked_file  # noqa: F401  (the fixture: a tracked car, 21 frames)
 from toosicubix.annotations.convert import document_json, images_from_schema
 from toosicubix.annotations.schema import parse_annotations
 from toosicubix.annotations.stream import index_annotations
@@ -581,3 +582,39 @@ def test_review_export_of_one_video_numbers_its_images_by_frame():
     alone = FittedImage("alone", "alone.png", (1242, 375), Camera(K), [])
     assert ids([frame(3), alone, frame(12)]) == ["0", "1", "2"]
     assert ids([frame(3), frame(12, "other")]) == ["0", "1"]
+
+
+def test_review_export_of_one_video_makes_each_track_a_cvat_track(tracked_file, tmp_path):  # noqa: F811
+    """In a file of one sequence a tracked vehicle is one CVAT object: a track of its cuboid's polylines and one of
+    its front's polygons, a keyframe on each frame that holds it, in frame order whatever the file's order, and
+    ``outside`` from the frame after each run of frames (a gap, its end) but never past the file's last frame;
+    an untracked vehicle's shapes stay on its image."""
+    from toosicubix.pipeline.batch import fit_file
+
+    path = tmp_path / "gap.json"
+    doc = json.loads(tracked_file.read_text())
+    gap = {7, 8}  # the tracked car leaves the view on frames 7 and 8, and the file lists the frames backwards
+    for image in doc["images"]:
+        if image["frame"] in gap:
+            image["vehicles"] = [v for v in image["vehicles"] if "track" not in v]
+    doc["images"].reverse()
+    path.write_text(json.dumps(doc))
+    fit_file(path, tmp_path / "out")
+    images, _ = load_fitted(tmp_path / "out")
+    root = ET.fromstring(review_xml(images)[0])
+    tracks = root.findall("track")
+    assert [(t.get("id"), t.get("label")) for t in tracks] == [("0", "toosicubix-cuboid"), ("1", "toosicubix-front")]
+    for track, tag in zip(tracks, ("polyline", "polygon"), strict=True):
+        shapes = [s for s in track if s.tag != "attribute"]
+        assert {s.tag for s in shapes} == {tag} and all(s.get("keyframe") == "1" for s in shapes)
+        held = [int(s.get("frame")) for s in shapes if s.get("outside") == "0"]
+        outside = [int(s.get("frame")) for s in shapes if s.get("outside") == "1"]
+        assert held == [f for f in range(FRAMES) if f not in gap] and outside == [7]
+        values = {a.get("name"): a.text for a in shapes[0].findall("attribute")}
+        assert values["vehicle_id"] == "1" and (tag == "polygon" or values["status"] == "ok")
+    # The untracked car: a polyline and a polygon on each of the 21 images, ids their frame numbers.
+    on_images = root.findall("image")
+    assert sorted(int(im.get("id")) for im in on_images) == list(range(FRAMES))
+    assert all([s.tag for s in im] == ["polyline", "polygon"] for im in on_images)
+    assert all(s.find("attribute").text == "2" for im in on_images for s in im)
+

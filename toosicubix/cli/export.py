@@ -89,12 +89,13 @@ def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, out
 
 @export_group.command("cvat")
 @_common
-@out_option("The CVAT for images 1.1 XML file to write.", "output", type=click.Path(dir_okay=False, path_type=Path),
+@out_option("The CVAT 1.1 XML file to write.", "output", type=click.Path(dir_okay=False, path_type=Path),
             required=True)
 def cvat_command(out: Path, annotations_path: Path | None, quiet: bool, output: Path) -> None:
-    """Write the fitted cuboids projected into each image as CVAT for images 1.1 shapes (a polyline over the
-    12 edges, a polygon on the front face), for CVAT to import into the task that holds the clicks (upload
-    annotations, format CVAT 1.1). The task needs the review labels of `toosicubix template cvat`.
+    """Write the fitted cuboids projected into each image as CVAT 1.1 shapes (a polyline over the 12 edges, a
+    polygon on the front face), for CVAT to import into the task that holds the clicks (upload annotations,
+    format CVAT 1.1). The task needs the review labels of `toosicubix template cvat`. In a file of one sequence
+    (a video task) each track is one CVAT track over its frames.
 
     \b
     Example:

@@ -1,4 +1,4 @@
-"""Fitted cuboids as CVAT for images 1.1 review shapes, for CVAT to import into the task that holds the clicks.
+"""Fitted cuboids as CVAT 1.1 review shapes, for CVAT to import into the task that holds the clicks.
 
 Each fitted vehicle becomes a ``polyline`` over the 12 edges of its cuboid (label
 :data:`~toosicubix.formats.templates.CUBOID_LABEL`) and a ``polygon`` on its front face (``FRONT_LABEL``),
@@ -6,7 +6,8 @@ projected with the image's camera including lens distortion (edges are sampled, 
 bends them). Both carry the vehicle id; the polyline also its status. CVAT's own ``cuboid`` shape is a 2D
 pseudo-cuboid with no 3D meaning, so it is not used. Images are matched by ``name``: the annotation file's
 ``file``, which the CVAT importer sets to CVAT's image name. The template's review labels must be in the task
-(``toosicubix template cvat`` adds them).
+(``toosicubix template cvat`` adds them). In a file of one sequence each track is a CVAT track, one object
+over its frames.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
 
     Returns
     -------
-    (shapes, warnings) : shapes are ``{"id", "status", "polyline", "front"}``
+    (shapes, warnings) : shapes are ``{"id", "status", "track", "polyline", "front"}``
     """
     samples = samples_per_edge if image.camera.has_distortion else 1
     radius = trusted_radius(image.camera, image.size)
@@ -78,7 +79,7 @@ def projected_shapes(image: FittedImage, samples_per_edge: int = 8) -> tuple[lis
                             f"+-{MAX_WRITTEN_PIXEL:.0f} pixels (t_cam_vehicle {np.round(v.t_cam_vehicle, 3).tolist()}):"
                             " left out")
             continue
-        shapes.append({"id": v.id, "status": v.status, "polyline": polyline, "front": front})
+        shapes.append({"id": v.id, "status": v.status, "track": v.track, "polyline": polyline, "front": front})
     return shapes, warnings
 
 
@@ -90,19 +91,52 @@ def _fmt(uv: np.ndarray) -> str:
     return ";".join(f"{u:.2f},{v:.2f}" for u, v in uv)
 
 
+def _shape(parent: ET.Element, tag: str, label: str | None, points: np.ndarray, attributes: dict[str, str],
+           frame: dict[str, str] | None = None) -> None:
+    """One review shape: an image's (``label`` and ``source``) or a track's on one frame (``frame``: its number,
+    ``keyframe`` and ``outside``)."""
+    head = {"label": label, "source": "auto"} if frame is None else frame
+    node = ET.SubElement(parent, tag, {**head, "occluded": "0", "points": _fmt(points), "z_order": "0"})
+    for name, value in attributes.items():
+        ET.SubElement(node, "attribute", {"name": name}).text = value
+
+
+def _tracks(root: ET.Element, tracked: dict[str, list[tuple[int, dict]]], last_frame: int) -> None:
+    """Each track as two CVAT tracks (its cuboid's polyline, its front's polygon), a keyframe on every frame that
+    holds it; ``outside`` from the frame after each run of frames, within the file's frames (CVAT carries a track's
+    last shape on to later frames, and interpolates across a gap, unless told the object left the view)."""
+    number = 0
+    for runs in tracked.values():
+        runs = sorted(runs, key=lambda run: run[0])
+        for label, tag, key in ((CUBOID_LABEL, "polyline", "polyline"), (FRONT_LABEL, "polygon", "front")):
+            node = ET.SubElement(root, "track", {"id": str(number), "label": label, "source": "auto"})
+            number += 1
+            for i, (frame, shape) in enumerate(runs):
+                attributes = {"vehicle_id": shape["id"]} | ({"status": shape["status"]} if tag == "polyline" else {})
+                _shape(node, tag, None, shape[key], attributes, {"frame": str(frame), "keyframe": "1", "outside": "0"})
+                following = runs[i + 1][0] if i + 1 < len(runs) else None
+                if frame < last_frame and following != frame + 1:
+                    _shape(node, tag, None, shape[key], attributes,
+                           {"frame": str(frame + 1), "keyframe": "1", "outside": "1"})
+
+
 def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[str, list[str]]:
-    """The CVAT for images 1.1 document with every fitted cuboid, and the warnings.
+    """The CVAT 1.1 document with every fitted cuboid, and the warnings.
 
     Images need a ``file`` (CVAT matches by name) and a ``size``. Ids are their order in the file, or their frame
     numbers when every image is a frame of one sequence (a video task's: CVAT cannot match a video's frames by
     name, ``frame_000012`` against ``images/frame_000012.PNG``, and takes the id as the frame, ``match_dm_item``
     in cvat/apps/dataset_manager/bindings.py; a sequence's file holds only the frames with a vehicle, so its order
-    is not the frame).
+    is not the frame). There a tracked vehicle's shapes go into ``<track>`` elements (:func:`_tracks`), one CVAT
+    object over its frames, as CVAT's importer reads a task's tracks (``load_anno`` in
+    cvat/apps/dataset_manager/formats/cvat.py takes ``<image>`` and ``<track>`` elements from one file); the
+    others' stay on their images.
     """
     root = ET.Element("annotations")
     ET.SubElement(root, "version").text = "1.1"
     warnings: list[str] = []
     one_video = bool(images) and len({image.sequence for image in images}) == 1 and images[0].sequence is not None
+    tracked: dict[str, list[tuple[int, dict]]] = {}  # track -> (frame, shape) of each frame that draws it
     for index, image in enumerate(images):
         name = image.file or image.id
         if _NOT_XML.search(name):
@@ -119,12 +153,13 @@ def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[st
                 warnings.append(f"image {image.id!r}, vehicle {shape['id']!r}: its id holds a character XML cannot "
                                 "carry: left out")
                 continue
-            line = ET.SubElement(node, "polyline", {"label": CUBOID_LABEL, "source": "auto", "occluded": "0",
-                                                    "points": _fmt(shape["polyline"]), "z_order": "0"})
-            ET.SubElement(line, "attribute", {"name": "vehicle_id"}).text = shape["id"]
-            ET.SubElement(line, "attribute", {"name": "status"}).text = shape["status"]
-            face = ET.SubElement(node, "polygon", {"label": FRONT_LABEL, "source": "auto", "occluded": "0",
-                                                   "points": _fmt(shape["front"]), "z_order": "0"})
-            ET.SubElement(face, "attribute", {"name": "vehicle_id"}).text = shape["id"]
+            if one_video and shape["track"] is not None:
+                tracked.setdefault(shape["track"], []).append((image.frame, shape))
+                continue
+            _shape(node, "polyline", CUBOID_LABEL, shape["polyline"], {"vehicle_id": shape["id"],
+                                                                       "status": shape["status"]})
+            _shape(node, "polygon", FRONT_LABEL, shape["front"], {"vehicle_id": shape["id"]})
+    if tracked:
+        _tracks(root, tracked, max(image.frame for image in images))
     ET.indent(root, "  ")
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n", warnings
