@@ -67,6 +67,20 @@ def test_results_file_round_trips(fitted, tmp_path):
     assert dumps(results_to_json(read, {"generator": "test"})) == path.read_text()
 
 
+@pytest.mark.parametrize("key, value", [("id", "../../etc/passwd"), ("id", "/tmp/x"), ("id", "a/b"),
+                                        ("id", ".hidden"), ("sequence", "../seq"), ("sequence", 3)])
+def test_an_image_id_or_sequence_that_is_no_file_name_is_refused(fitted, tmp_path, key, value):
+    """Image ids and sequence names name the files render writes (<id>.png, <sequence>.mp4): one that climbs out of
+    the folder, or that the annotation file would refuse, is refused with its JSON path, as the annotation file's
+    own rule states it."""
+    doc = results_to_json(fitted, {"generator": "test"})
+    doc["images"][1][key] = value
+    path = tmp_path / "results.json"
+    path.write_text(dumps(doc))
+    with pytest.raises(FormatError, match=rf"\$\.images\[1\]\.{key}: expected an? .* \(it names a file\)"):
+        read_results(path)
+
+
 def test_keys_of_a_fitted_vehicle_keep_results_json_order(fitted):
     v = next(v for im in fitted for v in im.vehicles if v.ok)
     keys = list(v.to_json())
