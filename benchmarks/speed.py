@@ -18,7 +18,8 @@ Parts (``--parts``, comma-separated; the first three by default):
    compiled solver where the batch is large enough, the pilot, the fits, the output): ``toosicubix --help``,
    ``toosicubix fit`` on the bundled sample (6 vehicles) and on the first ``--whole-vehicles`` (306) vehicles of part
    1's test split at 1 px, at ``fit``'s defaults (``--jobs auto``); median seconds over ``--rounds`` rounds, each
-   checkout in turn with ``--against``.
+   checkout in turn with ``--against``. Python's bytecode is cached as an install leaves it (an untimed first run of
+   each case fills the cache), whatever ``PYTHONDONTWRITEBYTECODE`` says.
 5. ``throughput``: the command line with ``--jobs 1`` and ``--jobs 2`` on ``--throughput-vehicles`` vehicles
    (wall time, process start included), whether the outputs are byte-identical, and the peak memory of
    ``--jobs 1`` on 1,000 and 10,000 vehicles.
@@ -362,10 +363,10 @@ def whole(args: argparse.Namespace, report: dict) -> None:
             for case, command in cases.items():
                 for name in (list(trees) if k % 2 == 0 else list(trees)[::-1]):
                     extra = ["-o", str(folder / f"out-{name}")] if command[0] == "fit" else []
+                    if k == 0:  # untimed: fills the bytecode cache, as an install or a first run does
+                        _toosicubix(command + extra, folder, _user_env(trees[name], folder / f"pyc-{name}"))
                     start = time.perf_counter()
-                    subprocess.run([sys.executable, "-m", "toosicubix", *command, *extra], cwd=folder,
-                                   env={**os.environ, "PYTHONPATH": str(trees[name])}, stdout=subprocess.DEVNULL,
-                                   stderr=subprocess.DEVNULL, check=False)
+                    _toosicubix(command + extra, folder, _user_env(trees[name], folder / f"pyc-{name}"))
                     runs[case][name].append(time.perf_counter() - start)
         same = all(filecmp.cmp(a, folder / "out-against" / a.relative_to(folder / "out-this"), shallow=False)
                    for a in (folder / "out-this").rglob("*") if a.is_file()) if "against" in trees else None
@@ -383,6 +384,19 @@ def whole(args: argparse.Namespace, report: dict) -> None:
     if same is not None:
         print(f"whole: the last fit's folders identical: {same}", flush=True)
     report["whole"] = out
+
+
+def _user_env(tree: Path, pycache: Path) -> dict[str, str]:
+    """A child's environment as a user's install gives it: ``tree``'s package, and Python's bytecode cached (``pip
+    install`` compiles it; an editable install writes it at the first import). Some machines set
+    ``PYTHONDONTWRITEBYTECODE``, which would make every process compile the package's source again (0.1-0.3 s)."""
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, "PYTHONPATH": str(tree), "PYTHONPYCACHEPREFIX": str(pycache)}
+
+
+def _toosicubix(arguments: list[str], folder: Path, env: dict[str, str]) -> None:
+    subprocess.run([sys.executable, "-m", "toosicubix", *arguments], cwd=folder, env=env, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL, check=False)
 
 
 def annotation_file(data: Path, n: int, folder: Path) -> Path:
