@@ -4,6 +4,7 @@ export."""
 import json
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -562,33 +563,41 @@ def test_any_mutation_imports_or_is_named(tmp_path, data):
     parse_annotations(doc)
 
 
-def test_review_export_of_one_video_numbers_its_images_by_frame():
-    # A video task's frames are matched by the id (CVAT cannot match 'images/frame_000012.PNG' to its frame by name),
-    # and a sequence's file holds only its frames with a vehicle: frames 3, 7 and 12 must say 3, 7 and 12. With an
-    # image on its own, or two sequences, ids stay the order in the file.
+def test_review_export_numbers_images_by_frame_or_puts_a_cvat_video_into_tracks():
+    # A CVAT video task's frames (one sequence, files named as CVAT names its frames) have no <image>: CVAT reads an
+    # image id as a frame counted from the task's start by its step, which the file does not know; the vehicles go
+    # into tracks (the next test). Other frames of one sequence are numbered by frame: a sequence's file holds only
+    # its frames with a vehicle, and where CVAT cannot match the name it takes the id as the frame. Images of their
+    # own, or of two sequences, are numbered in file order.
     from toosicubix.camera import Camera
     from toosicubix.formats.fitted import FittedImage
 
     K = np.array(VIDEO_K)
 
-    def frame(number, sequence="clip"):
-        return FittedImage(f"{sequence}-{number}", f"images/frame_{number:06d}.PNG", (1242, 375), Camera(K), [],
-                           sequence, number)
+    def frame(number, sequence="clip", file="images/frame_{:06d}.PNG"):
+        return FittedImage(f"{sequence}-{number}", file.format(number), (1242, 375), Camera(K), [], sequence, number)
 
     def ids(images):
         return [im.get("id") for im in ET.fromstring(review_xml(images)[0]).findall("image")]
 
-    assert ids([frame(3), frame(7), frame(12)]) == ["3", "7", "12"]
+    assert ids([frame(3), frame(7), frame(12)]) == []
+    assert ids([frame(3, file="{:06d}.png"), frame(7, file="{:06d}.png"), frame(12, file="{:06d}.png")]) == [
+        "3", "7", "12"]
+    assert ids([frame(3), frame(7, file="{:06d}.png")]) == ["3", "7"]
     alone = FittedImage("alone", "alone.png", (1242, 375), Camera(K), [])
     assert ids([frame(3), alone, frame(12)]) == ["0", "1", "2"]
     assert ids([frame(3), frame(12, "other")]) == ["0", "1"]
 
 
-def test_review_export_of_one_video_makes_each_track_a_cvat_track(tracked_file, tmp_path):  # noqa: F811
-    """In a file of one sequence a tracked vehicle is one CVAT object: a track of its cuboid's polylines and one of
-    its front's polygons, a keyframe on each frame that holds it, in frame order whatever the file's order, and
+@pytest.mark.parametrize("step", [1, 5])
+def test_review_export_of_one_video_makes_each_track_a_cvat_track(tracked_file, tmp_path, step):  # noqa: F811
+    """In a file of a CVAT video task's frames a tracked vehicle is one CVAT object: a track of its cuboid's
+    polylines and one of its front's polygons, a keyframe on each frame that holds it, in frame order whatever the
+    file's order, and
     ``outside`` from the frame after each run of frames (a gap, its end) but never past the file's last frame;
-    an untracked vehicle's shapes stay on its image."""
+    an untracked vehicle is a track of one frame on each of its frames. With a frame step (a CVAT task of every
+    fifth frame numbers them 0, 5, 10, ...), the frame after is the next of the step: CVAT refuses a frame its step
+    skips."""
     from toosicubix.pipeline.batch import fit_file
 
     path = tmp_path / "gap.json"
@@ -597,24 +606,35 @@ def test_review_export_of_one_video_makes_each_track_a_cvat_track(tracked_file, 
     for image in doc["images"]:
         if image["frame"] in gap:
             image["vehicles"] = [v for v in image["vehicles"] if "track" not in v]
+        image["frame"] *= step
+        image["file"] = f"images/frame_{image['frame']:06d}.PNG"  # as import cvat names a video task's frames
     doc["images"].reverse()
     path.write_text(json.dumps(doc))
     fit_file(path, tmp_path / "out")
     images, _ = load_fitted(tmp_path / "out")
+    # Frames named otherwise (an image task matches them by name, and numbers them its own way): <image>s, as before.
+    other = [replace(image, file=f"{image.frame:06d}.png") for image in images]
+    elsewhere = ET.fromstring(review_xml(other)[0])
+    assert elsewhere.findall("track") == [] and len(elsewhere.findall("image")) == FRAMES
     root = ET.fromstring(review_xml(images)[0])
+    assert root.findall("image") == []
     tracks = root.findall("track")
-    assert [(t.get("id"), t.get("label")) for t in tracks] == [("0", "toosicubix-cuboid"), ("1", "toosicubix-front")]
-    for track, tag in zip(tracks, ("polyline", "polygon"), strict=True):
+    # The tracked car first (frame 0; its two tracks), then the untracked car's 21 frames, each two one-frame tracks.
+    assert [t.get("id") for t in tracks] == [str(k) for k in range(2 + 2 * FRAMES)]
+    assert [t.get("label") for t in tracks] == ["toosicubix-cuboid", "toosicubix-front"] * (1 + FRAMES)
+    for track, tag in zip(tracks[:2], ("polyline", "polygon"), strict=True):
         shapes = [s for s in track if s.tag != "attribute"]
         assert {s.tag for s in shapes} == {tag} and all(s.get("keyframe") == "1" for s in shapes)
         held = [int(s.get("frame")) for s in shapes if s.get("outside") == "0"]
         outside = [int(s.get("frame")) for s in shapes if s.get("outside") == "1"]
-        assert held == [f for f in range(FRAMES) if f not in gap] and outside == [7]
+        assert held == [step * f for f in range(FRAMES) if f not in gap] and outside == [7 * step]
         values = {a.get("name"): a.text for a in shapes[0].findall("attribute")}
         assert values["vehicle_id"] == "1" and (tag == "polygon" or values["status"] == "ok")
-    # The untracked car: a polyline and a polygon on each of the 21 images, ids their frame numbers.
-    on_images = root.findall("image")
-    assert sorted(int(im.get("id")) for im in on_images) == list(range(FRAMES))
-    assert all([s.tag for s in im] == ["polyline", "polygon"] for im in on_images)
-    assert all(s.find("attribute").text == "2" for im in on_images for s in im)
+    # The untracked car: on each frame a polyline track and a polygon track of one keyframe, outside on the next
+    # frame of the step but after the last frame, as CVAT writes a shape in its video format.
+    for k, f in enumerate(range(FRAMES)):
+        for track, tag in zip(tracks[2 + 2 * k: 4 + 2 * k], ("polyline", "polygon"), strict=True):
+            shapes = [(s.tag, s.get("frame"), s.get("outside"), s.find("attribute").text) for s in track]
+            assert shapes == [(tag, str(step * f), "0", "2")] + ([(tag, str(step * (f + 1)), "1", "2")]
+                                                                 if f < FRAMES - 1 else [])
 

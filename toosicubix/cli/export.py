@@ -94,8 +94,8 @@ def openlabel_command(out: Path, annotations_path: Path | None, quiet: bool, out
 def cvat_command(out: Path, annotations_path: Path | None, quiet: bool, output: Path) -> None:
     """Write the fitted cuboids projected into each image as CVAT 1.1 shapes (a polyline over the 12 edges, a
     polygon on the front face), for CVAT to import into the task that holds the clicks (upload annotations,
-    format CVAT 1.1). The task needs the review labels of `toosicubix template cvat`. In a file of one sequence
-    (a video task) each track is one CVAT track over its frames.
+    format CVAT 1.1). The task needs the review labels of `toosicubix template cvat`. In a file of a CVAT video
+    task's frames (`import cvat`) each track is one CVAT track over its frames.
 
     \b
     Example:

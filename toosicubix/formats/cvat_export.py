@@ -6,15 +6,17 @@ projected with the image's camera including lens distortion (edges are sampled, 
 bends them). Both carry the vehicle id; the polyline also its status. CVAT's own ``cuboid`` shape is a 2D
 pseudo-cuboid with no 3D meaning, so it is not used. Images are matched by ``name``: the annotation file's
 ``file``, which the CVAT importer sets to CVAT's image name. The template's review labels must be in the task
-(``toosicubix template cvat`` adds them). In a file of one sequence each track is a CVAT track, one object
-over its frames.
+(``toosicubix template cvat`` adds them). In a file of a CVAT video task's frames the shapes are CVAT tracks: a
+tracked vehicle one object over its frames.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 import re
 import xml.etree.ElementTree as ET
+from pathlib import PurePosixPath
 
 import numpy as np
 
@@ -101,12 +103,21 @@ def _shape(parent: ET.Element, tag: str, label: str | None, points: np.ndarray, 
         ET.SubElement(node, "attribute", {"name": name}).text = value
 
 
-def _tracks(root: ET.Element, tracked: dict[str, list[tuple[int, dict]]], last_frame: int) -> None:
-    """Each track as two CVAT tracks (its cuboid's polyline, its front's polygon), a keyframe on every frame that
-    holds it; ``outside`` from the frame after each run of frames, within the file's frames (CVAT carries a track's
-    last shape on to later frames, and interpolates across a gap, unless told the object left the view)."""
+def _tracks(root: ET.Element, tracked: dict[tuple[str, ...], list[tuple[int, dict]]], frames: list[int]) -> None:
+    """Each track (or untracked vehicle) as two CVAT tracks (its cuboid's polyline, its front's polygon), in the
+    order of their first frames, a keyframe on every frame that holds it; ``outside`` from the frame after each run
+    of frames, within the file's frames (CVAT carries a track's last shape on to later frames, and interpolates
+    across a gap, unless told the object left the view).
+
+    The frame after ``f`` is ``f + step``, ``step`` the greatest common divisor of the gaps between the file's
+    ``frames``: a task with a frame step (CVAT's ``frame_filter``, e.g. ``step=5``) numbers its frames in the
+    video's frames, and CVAT refuses a frame its step skips (``rel_frame_id``); the file's frames are all the
+    task's start plus multiples of its step, so this step is a multiple of the task's and ``f + step`` a frame of
+    the task. A file of every frame has step 1."""
+    step = math.gcd(*(b - a for a, b in itertools.pairwise(sorted(set(frames))))) or 1
+    last_frame = max(frames)
     number = 0
-    for runs in tracked.values():
+    for runs in sorted(tracked.values(), key=lambda runs: min(frame for frame, _ in runs)):
         runs = sorted(runs, key=lambda run: run[0])
         for label, tag, key in ((CUBOID_LABEL, "polyline", "polyline"), (FRONT_LABEL, "polygon", "front")):
             node = ET.SubElement(root, "track", {"id": str(number), "label": label, "source": "auto"})
@@ -115,37 +126,45 @@ def _tracks(root: ET.Element, tracked: dict[str, list[tuple[int, dict]]], last_f
                 attributes = {"vehicle_id": shape["id"]} | ({"status": shape["status"]} if tag == "polyline" else {})
                 _shape(node, tag, None, shape[key], attributes, {"frame": str(frame), "keyframe": "1", "outside": "0"})
                 following = runs[i + 1][0] if i + 1 < len(runs) else None
-                if frame < last_frame and following != frame + 1:
+                if frame < last_frame and following != frame + step:
                     _shape(node, tag, None, shape[key], attributes,
-                           {"frame": str(frame + 1), "keyframe": "1", "outside": "1"})
+                           {"frame": str(frame + step), "keyframe": "1", "outside": "1"})
 
 
 def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[str, list[str]]:
     """The CVAT 1.1 document with every fitted cuboid, and the warnings.
 
-    Images need a ``file`` (CVAT matches by name) and a ``size``. Ids are their order in the file, or their frame
-    numbers when every image is a frame of one sequence (a video task's: CVAT cannot match a video's frames by
-    name, ``frame_000012`` against ``images/frame_000012.PNG``, and takes the id as the frame, ``match_dm_item``
-    in cvat/apps/dataset_manager/bindings.py; a sequence's file holds only the frames with a vehicle, so its order
-    is not the frame). There a tracked vehicle's shapes go into ``<track>`` elements (:func:`_tracks`), one CVAT
-    object over its frames, as CVAT's importer reads a task's tracks (``load_anno`` in
-    cvat/apps/dataset_manager/formats/cvat.py takes ``<image>`` and ``<track>`` elements from one file); the
-    others' stay on their images.
+    Images need a ``file`` (CVAT matches by name) and a ``size``; each is an ``<image>`` with its vehicles' shapes,
+    its id its order in the file, or its frame number when every image is a frame of one sequence (where CVAT
+    cannot match a name, it takes the id as the frame: ``match_dm_item`` in cvat/apps/dataset_manager/bindings.py).
+
+    A file of a CVAT video task's frames (one sequence, every image's file CVAT's name for its frame,
+    ``frame_<N:06d>``, as ``import cvat`` names them) has no ``<image>``: every vehicle is in ``<track>`` elements
+    (:func:`_tracks`), a tracked one over its frames, any other on its one frame (as CVAT writes a shape in its
+    video format), in the video's frame numbers, which is how CVAT exports and reads a track's frames (``load_anno``
+    in cvat/apps/dataset_manager/formats/cvat.py; it keeps only keyframes). An image id would be a frame counted
+    from the task's start by its frame step, which the file does not know. Frames of other names keep their
+    ``<image>``s: an image task matches them by name, and its frame numbers need not be the sequence's.
     """
     root = ET.Element("annotations")
     ET.SubElement(root, "version").text = "1.1"
     warnings: list[str] = []
     one_video = bool(images) and len({image.sequence for image in images}) == 1 and images[0].sequence is not None
-    tracked: dict[str, list[tuple[int, dict]]] = {}  # track -> (frame, shape) of each frame that draws it
+    cvat_video = one_video and all(PurePosixPath(image.file or "").stem == f"frame_{image.frame:06d}"
+                                   for image in images)
+    tracked: dict[tuple[str, ...], list[tuple[int, dict]]] = {}  # track or vehicle -> (frame, shape) of its frames
     for index, image in enumerate(images):
-        name = image.file or image.id
-        if _NOT_XML.search(name):
-            warnings.append(f"image {image.id!r}: its file name {name!r} holds a character XML cannot carry: left out")
-            continue
-        attrs = {"id": str(image.frame if one_video else index), "name": name}
-        if image.size is not None:
-            attrs.update(width=str(image.size[0]), height=str(image.size[1]))
-        node = ET.SubElement(root, "image", attrs)
+        node = None
+        if not cvat_video:
+            name = image.file or image.id
+            if _NOT_XML.search(name):
+                warnings.append(f"image {image.id!r}: its file name {name!r} holds a character XML cannot carry: "
+                                "left out")
+                continue
+            attrs = {"id": str(image.frame if one_video else index), "name": name}
+            if image.size is not None:
+                attrs.update(width=str(image.size[0]), height=str(image.size[1]))
+            node = ET.SubElement(root, "image", attrs)
         shapes, image_warnings = projected_shapes(image, samples_per_edge)
         warnings += image_warnings
         for shape in shapes:
@@ -153,13 +172,14 @@ def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[st
                 warnings.append(f"image {image.id!r}, vehicle {shape['id']!r}: its id holds a character XML cannot "
                                 "carry: left out")
                 continue
-            if one_video and shape["track"] is not None:
-                tracked.setdefault(shape["track"], []).append((image.frame, shape))
+            if node is None:
+                key = ("track", shape["track"]) if shape["track"] is not None else ("vehicle", image.id, shape["id"])
+                tracked.setdefault(key, []).append((image.frame, shape))
                 continue
             _shape(node, "polyline", CUBOID_LABEL, shape["polyline"], {"vehicle_id": shape["id"],
                                                                        "status": shape["status"]})
             _shape(node, "polygon", FRONT_LABEL, shape["front"], {"vehicle_id": shape["id"]})
     if tracked:
-        _tracks(root, tracked, max(image.frame for image in images))
+        _tracks(root, tracked, [image.frame for image in images])
     ET.indent(root, "  ")
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n", warnings
