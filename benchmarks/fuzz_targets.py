@@ -737,7 +737,8 @@ def synthetic_tracking(root: Path, sequence: str = "0007") -> Path:
 
 class TracksTarget(Target):
     """Sequences (issue 32) and what reads their fits: a file of frames with tracks (simulated on
-    :func:`synthetic_tracking`, clicks on every fifth frame, boxes on every frame) mutated, then ``fit`` and
+    :func:`synthetic_tracking`, clicks on every fifth frame, boxes on every frame; its frames named as ``import
+    cvat`` names a video task's, so that ``export cvat`` writes CVAT tracks) mutated, then ``fit`` and
     ``validate``; or its fit's results.json mutated where a sequence lives (``track``, ``pose_from``, ``sequence``,
     ``frame``, ``track_ids``), then ``export openlabel``, ``export cvat`` and ``render --video``."""
 
@@ -756,6 +757,9 @@ class TracksTarget(Target):
         if result.exit_code != 0:
             raise RuntimeError(f"simulate --tracks failed: {result.output}")
         self.doc = json.loads(self.annotations.read_text())
+        for image in self.doc["images"]:  # named as import cvat names a CVAT video task's frames: export cvat's tracks
+            image["file"] = f"images/frame_{image['frame']:06d}.PNG"
+        self.annotations.write_text(json.dumps(self.doc))
         self.fit = work / "tracks_fit"
         fit_in_process(self.annotations, self.fit)
         self.results = json.loads((self.fit / "results.json").read_text())
