@@ -712,18 +712,20 @@ def synthetic_tracking(root: Path, sequence: str = "0007") -> Path:
     """A KITTI tracking root (``label_02/<sequence>.txt``, ``calib/<sequence>.txt``) of :data:`SYNTHETIC_TRACKS`:
     made here, so that the fuzz needs no dataset."""
     lines = []
-    for track, kind, h, w, l, first, last, start, step in SYNTHETIC_TRACKS:
+    for track, kind, h, w, length, first, last, start, step in SYNTHETIC_TRACKS:
         for frame in range(first, last + 1):
             x, y, z, ry = (a + b * (frame - first) for a, b in zip(start, step, strict=True))
-            c, s_ = np.cos(ry), np.sin(ry)
-            corners = np.array([[x + c * dx * l / 2 + s_ * dz * w / 2, y - dy * h, z - s_ * dx * l / 2 + c * dz * w / 2]
+            c, s = np.cos(ry), np.sin(ry)
+            # KITTI's box: bottom centre (x, y, z), y down, rotation_y about y; its 8 corners in camera 2
+            corners = np.array([[x + c * dx * length / 2 + s * dz * w / 2, y - dy * h,
+                                 z - s * dx * length / 2 + c * dz * w / 2]
                                 for dx in (-1, 1) for dz in (-1, 1) for dy in (0, 1)])
             uvw = np.c_[corners, np.ones(8)] @ P_TRACKING.T
             u, v = uvw[:, 0] / uvw[:, 2], uvw[:, 1] / uvw[:, 2]
             box = (max(u.min(), 0.0), max(v.min(), 0.0), min(u.max(), 1241.0), min(v.max(), 374.0))
             alpha = ry - np.arctan2(x, z)
             lines.append(f"{frame} {track} {kind} 0 0 {alpha:.6f} " + " ".join(f"{b:.2f}" for b in box)
-                         + f" {h:.6f} {w:.6f} {l:.6f} {x:.6f} {y:.6f} {z:.6f} {ry:.6f}")
+                         + f" {h:.6f} {w:.6f} {length:.6f} {x:.6f} {y:.6f} {z:.6f} {ry:.6f}")
     (root / "label_02").mkdir(parents=True, exist_ok=True)
     (root / "calib").mkdir(exist_ok=True)
     lines.sort(key=lambda line: (int(line.split()[0]), int(line.split()[1])))
