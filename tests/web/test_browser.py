@@ -713,6 +713,9 @@ def test_confirm_and_box_predictions_of_a_sequence_in_the_browser(page, tmp_path
         assert page.evaluate("state.drawn") == [{"track": "0003-1", "vehicle": None, "style": "dashed"}]
         assert page.evaluate("state.prediction") == "0003-1"  # a frame opens on its first prediction
         assert page.locator("#tracks").inner_text() == "0003-1 predicted"
+        # Held from the one placed frame, it stands where that frame put it: the box comes first in what it says.
+        hint = page.locator("#fit").inner_text()
+        assert "held where frame 0 placed it: if it has moved since, b draws its box" in hint
         page.screenshot(path=str(tmp_path / "predicted.png"))
         if os.environ.get("TOOSICUBIX_SCREENSHOT"):  # to look at: where to copy the screenshot
             shutil.copy(tmp_path / "predicted.png", os.environ["TOOSICUBIX_SCREENSHOT"])

@@ -591,8 +591,7 @@ function panels() {
   for (const p of state.view ? state.view.predictions : []) {  // tracks carried to this frame, not on it yet
     const li = document.createElement("li");
     const [before, after] = p.from_frames;
-    const from = p.source === "interpolated" ? `between frames ${before} and ${after}`
-      : `held from frame ${before !== null ? before : after}`;
+    const from = heldFrom(p) === null ? `between frames ${before} and ${after}` : `held from frame ${heldFrom(p)}`;
     li.innerHTML = `<span class="swatch dashed" style="border-color:${trackColour(p.track)}"></span>` +
       `${escapeHtml(p.track)} ${escapeHtml(p.prototype)}: ` +
       (p.fit.status === "ok" ? `predicted, ${from}` : `cannot be predicted: ${escapeHtml(p.fit.error || "")}`);
@@ -618,8 +617,7 @@ function panels() {
   clicks.textContent = "";
   const p = currentPrediction();
   if (p) {
-    fit.innerHTML = `<span class="predicted">predicted: track ${escapeHtml(p.track)}</span> ` +
-      "(Enter confirms it, b draws its box, a click starts its parts, x dismisses it on this frame)" +
+    fit.innerHTML = `<span class="predicted">predicted: track ${escapeHtml(p.track)}</span> ` + predictionHint(p) +
       (p.fit.status === "ok" ? fitTable(p.fit) : `<br>${escapeHtml(p.fit.error || "")}`);
     return;
   }
@@ -1081,6 +1079,21 @@ function drawCuboid(f, fill, frontColour, colour, width, dash) {
   }
 }
 
+function heldFrom(p) {
+  // The placed frame a prediction stands where it stood (no frame on either side to interpolate between), or null.
+  const [before, after] = p.from_frames;
+  return p.source === "interpolated" ? null : (before !== null ? before : after);
+}
+
+function predictionHint(p) {
+  // What the keys do on a prediction. One held from a single side has no motion to follow: it stands where the
+  // track was placed, which is wrong for a vehicle that moved since, so the box comes first there.
+  const held = heldFrom(p);
+  return held === null ? "(Enter confirms it, b draws its box, a click starts its parts, x dismisses it on this frame)"
+    : `(held where frame ${held} placed it: if it has moved since, b draws its box or a click starts its parts; ` +
+      "Enter confirms it as drawn, x dismisses it on this frame)";
+}
+
 function drawPrediction(p, selected) {
   const f = p.fit;
   if (f.status !== "ok" || !f.corners_uv) return;
@@ -1089,8 +1102,8 @@ function drawPrediction(p, selected) {
   ctx.globalAlpha = selected ? 1 : 0.75;
   drawCuboid(f, selected ? "rgba(255, 80, 80, 0.12)" : "rgba(255, 80, 80, 0.06)", "#ff8a80", colour,
     () => (selected ? 2.5 : 1.5), [7, 5]);
-  label(topCorner(c), `${p.track} predicted` + (selected ? ": Enter confirms, x dismisses" : ""), colour,
-    { always: selected });
+  const keys = heldFrom(p) === null ? ": Enter confirms, x dismisses" : ": b boxes it if it moved, Enter confirms";
+  label(topCorner(c), `${p.track} predicted` + (selected ? keys : ""), colour, { always: selected });
   ctx.globalAlpha = 1;
   state.drawn.push({ track: p.track, vehicle: null, style: "dashed" });
 }
