@@ -48,6 +48,9 @@ MIN_SIGMA_METRES = 1e-4
 #: most file systems allow 255 bytes per name; this leaves room for both. Vehicle ids and prototypes have
 #: the same bound so that messages and results stay readable.
 MAX_ID_LENGTH = 128
+#: What names a file: image ids and sequence names (``label_2/<image id>.txt``, ``label_02/<sequence>.txt``, and what
+#: ``render`` writes, ``<image id>.png``, ``<sequence>.mp4``): no character that could climb out of a folder.
+FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$"
 #: The largest frame number of a sequence (KITTI's longest sequence has 1,106 frames; 10^6 is a day at 10 Hz).
 MAX_FRAME = 1_000_000
 #: The most digits an integer id may have: 18 digits fit a signed 64-bit integer (COCO files written by C, Java
@@ -271,6 +274,22 @@ def identifier(value: Any, file: str | Path | None, where: Where, *, what: str =
             and not any(unicodedata.category(c) in _BAD_ID_CATEGORIES for c in value):
         return value
     raise _fail(file, where, label, expected, shown(value))
+
+
+def file_name(value: Any, file: str | Path | None, where: Where, *, what: str = "a name",
+              label: str | None = None) -> str:
+    """An image id or a sequence name as the annotation file has them (:data:`FILE_NAME_PATTERN`, at most
+    :data:`MAX_ID_LENGTH` characters), for a reader of a file another program may have written (results.json).
+
+    Raises
+    ------
+    FieldError
+        Not a string, too long, or holding another character (``../../etc/passwd``).
+    """
+    if isinstance(value, str) and len(value) <= MAX_ID_LENGTH and re.fullmatch(FILE_NAME_PATTERN, value):
+        return value
+    raise _fail(file, where, label, f"{what} as the annotation file has it (it names a file): letters, digits, '_', "
+                f"'.', '-', first a letter or digit, at most {MAX_ID_LENGTH} characters", shown(value))
 
 
 def numeric_key(value: Any, file: str | Path | None, where: Where, *, what: str = "an id",

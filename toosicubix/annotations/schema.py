@@ -26,7 +26,14 @@ from pydantic import (
 
 from toosicubix import vocabulary
 from toosicubix.errors import InputFileError
-from toosicubix.fields import MAX_FRAME, MAX_ID_LENGTH, MAX_METRES, MAX_PIXEL, MIN_SIGMA_METRES
+from toosicubix.fields import (
+    FILE_NAME_PATTERN,
+    MAX_FRAME,
+    MAX_ID_LENGTH,
+    MAX_METRES,
+    MAX_PIXEL,
+    MIN_SIGMA_METRES,
+)
 from toosicubix.jsonfile import read_json
 from toosicubix.vocabulary import DIMENSION_AXES
 
@@ -44,8 +51,6 @@ MAX_CLICKS_PER_VEHICLE = 128
 FOCAL_RANGE_PX = (1.0, 1e6)
 #: The largest camera offset ``|K^-1 P[:, 3]|`` (metres) a ``P`` may hold (KITTI's: 0.06 m).
 MAX_CAMERA_OFFSET = 100.0
-#: What names a file: image ids and sequence names (``label_2/<image id>.txt``, ``label_02/<sequence>.txt``).
-FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$"
 
 
 

@@ -93,11 +93,9 @@ def _fmt(uv: np.ndarray) -> str:
     return ";".join(f"{u:.2f},{v:.2f}" for u, v in uv)
 
 
-def _shape(parent: ET.Element, tag: str, label: str | None, points: np.ndarray, attributes: dict[str, str],
-           frame: dict[str, str] | None = None) -> None:
-    """One review shape: an image's (``label`` and ``source``) or a track's on one frame (``frame``: its number,
-    ``keyframe`` and ``outside``)."""
-    head = {"label": label, "source": "auto"} if frame is None else frame
+def _shape(parent: ET.Element, tag: str, head: dict[str, str], points: np.ndarray, attributes: dict[str, str]) -> None:
+    """One review shape: ``head`` is an image's shape's label and source, or a track's shape's frame number,
+    keyframe and outside flags."""
     node = ET.SubElement(parent, tag, {**head, "occluded": "0", "points": _fmt(points), "z_order": "0"})
     for name, value in attributes.items():
         ET.SubElement(node, "attribute", {"name": name}).text = value
@@ -124,11 +122,11 @@ def _tracks(root: ET.Element, tracked: dict[tuple[str, ...], list[tuple[int, dic
             number += 1
             for i, (frame, shape) in enumerate(runs):
                 attributes = {"vehicle_id": shape["id"]} | ({"status": shape["status"]} if tag == "polyline" else {})
-                _shape(node, tag, None, shape[key], attributes, {"frame": str(frame), "keyframe": "1", "outside": "0"})
+                _shape(node, tag, {"frame": str(frame), "keyframe": "1", "outside": "0"}, shape[key], attributes)
                 following = runs[i + 1][0] if i + 1 < len(runs) else None
                 if frame < last_frame and following != frame + step:
-                    _shape(node, tag, None, shape[key], attributes,
-                           {"frame": str(frame + step), "keyframe": "1", "outside": "1"})
+                    _shape(node, tag, {"frame": str(frame + step), "keyframe": "1", "outside": "1"}, shape[key],
+                           attributes)
 
 
 def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[str, list[str]]:
@@ -176,9 +174,10 @@ def review_xml(images: list[FittedImage], samples_per_edge: int = 8) -> tuple[st
                 key = ("track", shape["track"]) if shape["track"] is not None else ("vehicle", image.id, shape["id"])
                 tracked.setdefault(key, []).append((image.frame, shape))
                 continue
-            _shape(node, "polyline", CUBOID_LABEL, shape["polyline"], {"vehicle_id": shape["id"],
-                                                                       "status": shape["status"]})
-            _shape(node, "polygon", FRONT_LABEL, shape["front"], {"vehicle_id": shape["id"]})
+            _shape(node, "polyline", {"label": CUBOID_LABEL, "source": "auto"}, shape["polyline"],
+                   {"vehicle_id": shape["id"], "status": shape["status"]})
+            _shape(node, "polygon", {"label": FRONT_LABEL, "source": "auto"}, shape["front"],
+                   {"vehicle_id": shape["id"]})
     if tracked:
         _tracks(root, tracked, [image.frame for image in images])
     ET.indent(root, "  ")

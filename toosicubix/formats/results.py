@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -24,7 +23,7 @@ from typing import IO, Any
 import numpy as np
 
 from toosicubix import fields as field_rules
-from toosicubix.annotations.schema import FILE_NAME_PATTERN, MAX_CAMERA_OFFSET, check_intrinsics
+from toosicubix.annotations.schema import MAX_CAMERA_OFFSET, check_intrinsics
 from toosicubix.errors import FormatError
 from toosicubix.fields import shown
 from toosicubix.formats.json_text import dumps_indented
@@ -704,27 +703,18 @@ def read_results(path: str | Path) -> list[ImageResult]:
                     for k, side in enumerate(size)]
         vehicles = [VehicleResult.from_json(v, path, f"{where}.vehicles[{j}]")
                     for j, v in enumerate(json_field(im, "vehicles", list, path, where))]
-        image_id = _file_name(json_field(im, "id", str, path, where), path, f"{where}.id", "an image id")
+        image_id = field_rules.file_name(json_field(im, "id", str, path, where), path, f"{where}.id",
+                                         what="an image id")
         sequence = im.get("sequence")
         images.append(ImageResult(
             id=image_id, K=K, t_cam_rect=t_cam_rect,
             image_size=tuple(size) if size else None, vehicles=vehicles,  # type: ignore[arg-type]
             ground=_road_plane(im.get("ground")),
-            sequence=None if sequence is None else _file_name(sequence, path, f"{where}.sequence", "a sequence name"),
+            sequence=None if sequence is None else field_rules.file_name(sequence, path, f"{where}.sequence",
+                                                                         what="a sequence name"),
             frame=im["frame"] if isinstance(im.get("frame"), int) and not isinstance(im.get("frame"), bool) else None,
         ))
     return images
-
-
-def _file_name(value: Any, path: Path, where: str, what: str) -> str:
-    """An image id or a sequence name as the annotation file allows it (:data:`FILE_NAME_PATTERN`): they name the
-    files ``render`` and ``fit`` write (``<image id>.png``, ``<sequence>.mp4``), so no other character may climb out
-    of the folder (``../../etc/passwd``)."""
-    if isinstance(value, str) and len(value) <= field_rules.MAX_ID_LENGTH and re.fullmatch(FILE_NAME_PATTERN, value):
-        return value
-    raise FormatError(path, f"{where}: expected {what} as the annotation file has it (it names a file): letters, "
-                            f"digits, '_', '.', '-', first a letter or digit, at most {field_rules.MAX_ID_LENGTH} "
-                            f"characters; got {shown(value)}")
 
 
 def _road_plane(value: Any) -> RoadPlane | None:

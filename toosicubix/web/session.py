@@ -67,7 +67,7 @@ from toosicubix.annotations.mapping import MappingFile
 from toosicubix.annotations.schema import MAX_CLICKS_PER_VEHICLE, MAX_ID_LENGTH, parse_annotations
 from toosicubix.camera import Camera
 from toosicubix.errors import FormatError, InputFileError
-from toosicubix.fields import shown
+from toosicubix.fields import FILE_NAME_PATTERN, file_name, passes, shown
 from toosicubix.formats.atomic import atomic_write_texts
 from toosicubix.formats.cameras import load_cameras as load_camera_table
 from toosicubix.formats.results import VehicleResult
@@ -108,8 +108,6 @@ from toosicubix.web.worker import DeadlineWorker, OutOfTime, WorkerDied
 UNDO_DEPTH = 500
 #: How many parts to suggest as targets on the image.
 TARGETS = 5
-#: What an image id may be (the annotation file's pattern): the file stem of each image.
-_IMAGE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 #: How many names the page offers for a click it did not name (or instead of the name it gave).
 CHOICES = 5
 #: How far (fractions of the dimensions) a mapping's keypoint may lie from another's mirror place to be its mirror
@@ -379,7 +377,7 @@ class Session:
         self._lock = threading.RLock()
         self._fits: dict[str, dict[str, Any]] = {}
         ids = [Path(p).stem for p in image_paths]
-        bad = [str(p) for p in image_paths if not _IMAGE_ID.match(Path(p).stem)]
+        bad = [str(p) for p in image_paths if not re.fullmatch(FILE_NAME_PATTERN, Path(p).stem)]
         if bad:
             raise ApiError(f"image file names must make valid image ids (letters, digits, '_', '.', '-', the first a "
                            f"letter or digit; the id is the file stem): {', '.join(bad)}")
@@ -393,7 +391,7 @@ class Session:
         self.frames_from_names: bool | None = None
         self._new_frames: dict[str, int] = {}
         if sequence is not None:
-            if not isinstance(sequence, str) or not _IMAGE_ID.match(sequence) or len(sequence) > MAX_ID_LENGTH:
+            if not passes(file_name, sequence):
                 raise ApiError(f"sequence: expected a name of letters, digits, '_', '.', '-' (the first a letter or "
                                f"digit, at most {MAX_ID_LENGTH} characters: it names a file), got {shown(sequence)}")
             numbers, self.frames_from_names = frame_numbers([p.name for p in self._paths])

@@ -591,7 +591,8 @@ function panels() {
   for (const p of state.view ? state.view.predictions : []) {  // tracks carried to this frame, not on it yet
     const li = document.createElement("li");
     const [before, after] = p.from_frames;
-    const from = heldFrom(p) === null ? `between frames ${before} and ${after}` : `held from frame ${heldFrom(p)}`;
+    const held = heldFrom(p);
+    const from = held === null ? `between frames ${before} and ${after}` : `held from frame ${held}`;
     li.innerHTML = `<span class="swatch dashed" style="border-color:${trackColour(p.track)}"></span>` +
       `${escapeHtml(p.track)} ${escapeHtml(p.prototype)}: ` +
       (p.fit.status === "ok" ? `predicted, ${from}` : `cannot be predicted: ${escapeHtml(p.fit.error || "")}`);
