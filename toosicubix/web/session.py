@@ -1339,7 +1339,7 @@ class Session:
             name, uv, extra = swapped.name, swapped.uv.tolist(), part.extra
             if part.kind == "keypoint" and keypoints is not None:
                 name = _mirror_keypoint(keypoints, part.name)
-                if name is None:  # no keypoint of the mapping there: left as it is, and said
+                if name is None:  # no keypoint of its class or mapping there: left as it is, and said
                     unpaired.append(part.name)
                     name = part.name
                 elif name != part.name:
